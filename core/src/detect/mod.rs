@@ -1,0 +1,305 @@
+//! Marker detection: grey frame in, decoded markers with sub-pixel corners out.
+//!
+//! ## Pipeline (one function per step, see the submodules)
+//! 1. [`threshold`]: binarise against a local (tile min/max) threshold, so shadows and
+//!    brightness gradients across the frame do not matter; pixels without local contrast are
+//!    never "dark". The paper's variant ([`Method::Paper`]) instead normalises, blurs, takes
+//!    3x3 gradients and marks strong edges.
+//! 2. [`contour`]: scan the binary image for boundaries and follow each one (Moore
+//!    neighbour tracing, iterative, bounded by a per-frame step budget).
+//! 3. [`quad`]: simplify each contour with Douglas-Peucker and keep convex four-corner shapes
+//!    with sane edges and angles.
+//! 4. [`refine`]: move each edge onto the image's intensity edge with sub-pixel precision
+//!    (line fits to gradient peaks) and intersect neighbouring edges for the corners.
+//! 5. [`decode`]: map the family's cell grid through the corner homography, sample each cell
+//!    centre, threshold against black/white levels learnt from the marker's own border and
+//!    margin, and look the code up in all four rotations with bounded error correction.
+//! 6. De-duplicate: the same marker found twice (two contours, two families) is kept once,
+//!    with the fewest corrected bits and then the largest decision margin.
+//!
+//! ## Memory
+//! Frame-sized work memory is lent by the caller as [`Buffers`] (sized by
+//! [`buffer_sizes`]), so firmware places it where it wants and the host sizes it per image.
+//! Everything else is inside [`Detector`] with capacities set by the constants below.
+//!
+//! | buffer | size | QVGA (320x240) | VGA (640x480) |
+//! |---|---|---|---|
+//! | `bitmap`: 1 bit per pixel, dark/edge | ceil(w/32) * h words | 9,600 B | 38,400 B |
+//! | `visited`: 1 bit per pixel, traced boundaries | same | 9,600 B | 38,400 B |
+//! | `tiles`: min and max per 4x4 tile | 2 * ceil(w/4) * ceil(h/4) B | 9,600 B | 38,400 B |
+//! | `Detector` (contour of [`MAX_CONTOUR_POINTS`], detections, candidates) | fixed | ~20 KiB | ~20 KiB |
+//! | total | | ~49 KiB (budget 64 KiB) | ~135 KiB (budget 160 KiB) |
+
+mod contour;
+mod decode;
+mod quad;
+mod refine;
+mod threshold;
+
+use crate::family::Family;
+use crate::geometry::Point;
+use crate::image::GrayImage;
+
+/// Most markers reported per frame.
+pub const MAX_DETECTIONS: usize = 64;
+/// Most families searched at once.
+pub const MAX_FAMILIES: usize = 8;
+/// Longest boundary (in pixels) that is kept as a candidate; longer ones are followed (so they
+/// are not traced again) but not stored. 4096 covers a marker filling a VGA frame.
+pub const MAX_CONTOUR_POINTS: usize = 4096;
+/// Side of the square tiles of the local threshold, in pixels.
+pub const TILE: usize = 4;
+
+/// Sizes of the caller-provided buffers for a frame size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BufferSizes {
+    /// `u32` words of `bitmap` and of `visited` each.
+    pub bitmap_words: usize,
+    /// Bytes of `tiles`.
+    pub tile_bytes: usize,
+}
+
+/// Buffer sizes for a `width` x `height` frame.
+pub const fn buffer_sizes(width: usize, height: usize) -> BufferSizes {
+    BufferSizes {
+        bitmap_words: width.div_ceil(32) * height,
+        tile_bytes: 2 * width.div_ceil(TILE) * height.div_ceil(TILE),
+    }
+}
+
+/// Frame-sized work memory lent to [`Detector::detect`].
+#[derive(Debug)]
+pub struct Buffers<'a> {
+    /// One bit per pixel: dark (or edge) pixels.
+    pub bitmap: &'a mut [u32],
+    /// One bit per pixel: boundary pixels already followed.
+    pub visited: &'a mut [u32],
+    /// Per-tile statistics and scratch rows.
+    pub tiles: &'a mut [u8],
+}
+
+/// Owned work memory for frames up to a fixed size; see [`QvgaWorkspace`], [`VgaWorkspace`].
+#[derive(Debug)]
+pub struct Workspace<const BITMAP_WORDS: usize, const TILE_BYTES: usize> {
+    bitmap: [u32; BITMAP_WORDS],
+    visited: [u32; BITMAP_WORDS],
+    tiles: [u8; TILE_BYTES],
+}
+
+impl<const BITMAP_WORDS: usize, const TILE_BYTES: usize> Workspace<BITMAP_WORDS, TILE_BYTES> {
+    /// Zeroed work memory (a `const fn`, so it can initialise a `static`).
+    pub const fn new() -> Self {
+        Workspace {
+            bitmap: [0; BITMAP_WORDS],
+            visited: [0; BITMAP_WORDS],
+            tiles: [0; TILE_BYTES],
+        }
+    }
+
+    /// Lends the memory to the detector.
+    pub fn buffers(&mut self) -> Buffers<'_> {
+        Buffers {
+            bitmap: &mut self.bitmap,
+            visited: &mut self.visited,
+            tiles: &mut self.tiles,
+        }
+    }
+}
+
+impl<const BITMAP_WORDS: usize, const TILE_BYTES: usize> Default
+    for Workspace<BITMAP_WORDS, TILE_BYTES>
+{
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Work memory for frames up to 320x240.
+pub type QvgaWorkspace =
+    Workspace<{ buffer_sizes(320, 240).bitmap_words }, { buffer_sizes(320, 240).tile_bytes }>;
+/// Work memory for frames up to 640x480.
+pub type VgaWorkspace =
+    Workspace<{ buffer_sizes(640, 480).bitmap_words }, { buffer_sizes(640, 480).tile_bytes }>;
+
+/// Which pipeline to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Method {
+    /// touchdown's detector: local threshold, sub-pixel edges, learnt cell threshold,
+    /// error-correcting decode.
+    Robust,
+    /// The paper's pipeline (section 2.2), kept to reproduce its tables: normalise, Gaussian
+    /// blur, 3x3 gradients, contours, Douglas-Peucker, perspective sampling of the cells,
+    /// binarisation at the patch mean, exact template comparison.
+    Paper,
+}
+
+/// Detector settings. [`DetectorConfig::default`] is what the firmware and CLI use.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DetectorConfig {
+    /// Pipeline variant.
+    pub method: Method,
+    /// Smallest local contrast (max - min grey level in a 12x12 neighbourhood) for a pixel
+    /// to be classified; flat regions are never dark.
+    pub min_contrast: u8,
+    /// Smallest accepted marker edge, in pixels.
+    pub min_edge_px: f32,
+    /// Upper bound on corrected bits (each family's own bound applies too).
+    pub max_hamming: u8,
+    /// Refine edges to sub-pixel precision.
+    pub refine_edges: bool,
+    /// Smallest decision margin (0..1: mean distance of the data cells from the threshold,
+    /// relative to half the black/white contrast) for a detection to be reported.
+    pub min_decision_margin: f32,
+    /// Contour-following steps allowed per frame, per pixel of the frame: bounds the time on
+    /// adversarial frames. When exhausted, detection stops and [`DetectStats::truncated`] is
+    /// set.
+    pub trace_budget_per_pixel: u8,
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        DetectorConfig {
+            method: Method::Robust,
+            min_contrast: 20,
+            min_edge_px: 7.0,
+            max_hamming: u8::MAX,
+            refine_edges: true,
+            min_decision_margin: 0.25,
+            trace_budget_per_pixel: 4,
+        }
+    }
+}
+
+impl DetectorConfig {
+    /// The paper's method with its fixed choices.
+    pub fn paper() -> Self {
+        DetectorConfig {
+            method: Method::Paper,
+            max_hamming: 0,
+            refine_edges: false,
+            min_decision_margin: 0.0,
+            ..DetectorConfig::default()
+        }
+    }
+}
+
+/// One decoded marker.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Detection {
+    /// Index of the family in the slice given to [`Detector::detect`].
+    pub family: u8,
+    /// Marker id within the family.
+    pub id: u16,
+    /// Number of bits the decode corrected.
+    pub hamming: u8,
+    /// Outer corners of the black border: top-left, top-right, bottom-right, bottom-left of
+    /// the marker's canonical image, in pixels ((0, 0) = centre of the top-left pixel).
+    pub corners: [Point; 4],
+    /// Image of the marker centre.
+    pub center: Point,
+    /// 0..1: how clearly the data cells were black or white (1 = at the learnt levels).
+    pub decision_margin: f32,
+    /// Black-to-white contrast of the marker, grey levels.
+    pub contrast: f32,
+}
+
+/// Counters of the last frame, for logs and benchmarks.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DetectStats {
+    /// Boundaries followed.
+    pub contours: u32,
+    /// Boundaries that simplified to a convex quad.
+    pub quads: u32,
+    /// Quads whose border sampled as a valid black ring for some family.
+    pub bordered: u32,
+    /// Quads decoded to an id (before de-duplication).
+    pub decoded: u32,
+    /// Contour-following steps spent.
+    pub trace_steps: u32,
+    /// The step budget ran out, or a fixed capacity filled: some of the frame was not searched.
+    pub truncated: bool,
+}
+
+/// Why a frame could not be searched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DetectError {
+    /// The buffers are smaller than [`buffer_sizes`] of the frame.
+    BuffersTooSmall,
+    /// No family, or more than [`MAX_FAMILIES`].
+    BadFamilyCount,
+    /// A family's tables are inconsistent ([`Family::validate`]).
+    BadFamily,
+}
+
+/// The marker detector. Holds the settings, the fixed-capacity candidate storage and the
+/// results of the last frame.
+#[derive(Debug)]
+pub struct Detector {
+    config: DetectorConfig,
+    contour: [contour::Pixel; MAX_CONTOUR_POINTS],
+    detections: heapless::Vec<Detection, MAX_DETECTIONS>,
+    stats: DetectStats,
+}
+
+impl Detector {
+    /// A detector with the given settings.
+    pub fn new(config: DetectorConfig) -> Self {
+        Detector {
+            config,
+            contour: [contour::Pixel::default(); MAX_CONTOUR_POINTS],
+            detections: heapless::Vec::new(),
+            stats: DetectStats::default(),
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &DetectorConfig {
+        &self.config
+    }
+
+    /// Changes the settings (takes effect on the next frame).
+    pub fn set_config(&mut self, config: DetectorConfig) {
+        self.config = config;
+    }
+
+    /// Counters of the last frame.
+    pub fn stats(&self) -> &DetectStats {
+        &self.stats
+    }
+
+    /// The detections of the last frame.
+    pub fn detections(&self) -> &[Detection] {
+        &self.detections
+    }
+
+    /// Searches `image` for markers of `families`; the result stays readable through
+    /// [`Detector::detections`] until the next call.
+    pub fn detect(
+        &mut self,
+        image: &GrayImage<'_>,
+        families: &[&Family<'_>],
+        buffers: &mut Buffers<'_>,
+    ) -> Result<&[Detection], DetectError> {
+        self.detections.clear();
+        self.stats = DetectStats::default();
+        if families.is_empty() || families.len() > MAX_FAMILIES {
+            return Err(DetectError::BadFamilyCount);
+        }
+        if families.iter().any(|f| f.validate().is_err()) {
+            return Err(DetectError::BadFamily);
+        }
+        let sizes = buffer_sizes(image.width(), image.height());
+        if buffers.bitmap.len() < sizes.bitmap_words
+            || buffers.visited.len() < sizes.bitmap_words
+            || buffers.tiles.len() < sizes.tile_bytes
+        {
+            return Err(DetectError::BuffersTooSmall);
+        }
+        Ok(&self.detections)
+    }
+}

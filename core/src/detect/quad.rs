@@ -1,0 +1,1 @@
+//! quad (in progress)

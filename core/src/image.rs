@@ -1,0 +1,176 @@
+//! Borrowed 8-bit grey frames.
+//!
+//! The camera delivers luminance bytes into a buffer the firmware owns; the host decodes files
+//! into a `Vec`. Both hand the detector a [`GrayImage`], a checked view that never copies.
+//! Rows may be padded (`stride >= width`) so a DCMI buffer with line padding or a crop of a
+//! larger frame can be used in place.
+
+/// Largest accepted width or height, in pixels. Coordinates are kept in `u16` inside the
+/// detector; 8192 leaves room for the 2x up-sampled corner lattice.
+pub const MAX_DIMENSION: usize = 8192;
+
+/// Why a byte slice cannot be viewed as an image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImageError {
+    /// Width or height is zero or above [`MAX_DIMENSION`].
+    BadDimensions,
+    /// `stride` is smaller than `width`.
+    BadStride,
+    /// The slice is shorter than `stride * (height - 1) + width` bytes.
+    TooShort,
+}
+
+/// A read-only grey image: `height` rows of `width` bytes, `stride` bytes apart.
+#[derive(Debug, Clone, Copy)]
+pub struct GrayImage<'a> {
+    data: &'a [u8],
+    width: usize,
+    height: usize,
+    stride: usize,
+}
+
+impl<'a> GrayImage<'a> {
+    /// A tightly packed image (`stride == width`).
+    pub fn new(data: &'a [u8], width: usize, height: usize) -> Result<Self, ImageError> {
+        Self::with_stride(data, width, height, width)
+    }
+
+    /// An image whose rows start `stride` bytes apart.
+    pub fn with_stride(
+        data: &'a [u8],
+        width: usize,
+        height: usize,
+        stride: usize,
+    ) -> Result<Self, ImageError> {
+        if width == 0 || height == 0 || width > MAX_DIMENSION || height > MAX_DIMENSION {
+            return Err(ImageError::BadDimensions);
+        }
+        if stride < width {
+            return Err(ImageError::BadStride);
+        }
+        let needed = stride
+            .checked_mul(height - 1)
+            .and_then(|n| n.checked_add(width))
+            .ok_or(ImageError::TooShort)?;
+        if data.len() < needed {
+            return Err(ImageError::TooShort);
+        }
+        Ok(GrayImage {
+            data,
+            width,
+            height,
+            stride,
+        })
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// Bytes between the starts of two rows.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// Row `y` (exactly `width` bytes), or an empty slice outside the image.
+    pub fn row(&self, y: usize) -> &'a [u8] {
+        if y >= self.height {
+            return &[];
+        }
+        let start = y * self.stride;
+        self.data.get(start..start + self.width).unwrap_or(&[])
+    }
+
+    /// The pixel at (x, y), clamped to the nearest pixel inside the image.
+    #[inline]
+    pub fn pixel_clamped(&self, x: isize, y: isize) -> u8 {
+        let xc = x.clamp(0, self.width as isize - 1) as usize;
+        let yc = y.clamp(0, self.height as isize - 1) as usize;
+        self.data.get(yc * self.stride + xc).copied().unwrap_or(0)
+    }
+
+    /// Bilinear interpolation at a sub-pixel position (pixel centres at integers); positions
+    /// outside the image read the nearest edge pixel.
+    #[inline]
+    pub fn sample(&self, x: f32, y: f32) -> f32 {
+        if !(x.is_finite() && y.is_finite()) {
+            return 0.0;
+        }
+        let xf = floor(x);
+        let yf = floor(y);
+        let fx = x - xf;
+        let fy = y - yf;
+        // Clamp before converting so huge values cannot overflow the cast.
+        let xi = xf.clamp(-2.0, self.width as f32 + 1.0) as isize;
+        let yi = yf.clamp(-2.0, self.height as f32 + 1.0) as isize;
+        let p00 = self.pixel_clamped(xi, yi) as f32;
+        let p10 = self.pixel_clamped(xi + 1, yi) as f32;
+        let p01 = self.pixel_clamped(xi, yi + 1) as f32;
+        let p11 = self.pixel_clamped(xi + 1, yi + 1) as f32;
+        let top = p00 + (p10 - p00) * fx;
+        let bottom = p01 + (p11 - p01) * fx;
+        top + (bottom - top) * fy
+    }
+}
+
+/// `floor` for f32 without std (exact for |x| < 2^23, the range pixels live in).
+#[inline]
+pub(crate) fn floor(x: f32) -> f32 {
+    if !(x.abs() < 8_388_608.0) {
+        return x;
+    }
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejects_bad_shapes() {
+        let data = [0u8; 12];
+        assert_eq!(GrayImage::new(&data, 0, 3).err(), Some(ImageError::BadDimensions));
+        assert_eq!(GrayImage::new(&data, 4, 4).err(), Some(ImageError::TooShort));
+        assert_eq!(
+            GrayImage::with_stride(&data, 4, 2, 3).err(),
+            Some(ImageError::BadStride)
+        );
+        // stride 5, 3 rows: needs 5 * 2 + 4 = 14 bytes.
+        assert_eq!(
+            GrayImage::with_stride(&data, 4, 3, 5).err(),
+            Some(ImageError::TooShort)
+        );
+        assert!(GrayImage::with_stride(&data, 4, 2, 6).is_ok());
+    }
+
+    #[test]
+    fn bilinear_sampling_and_clamping() {
+        let data = [0u8, 100, 200, 50];
+        let img = GrayImage::new(&data, 2, 2).unwrap();
+        assert_eq!(img.sample(0.0, 0.0), 0.0);
+        assert_eq!(img.sample(0.5, 0.0), 50.0);
+        assert_eq!(img.sample(0.5, 0.5), 87.5);
+        assert_eq!(img.sample(-10.0, 1.0), 200.0);
+        assert_eq!(img.sample(f32::NAN, 0.0), 0.0);
+        assert_eq!(img.sample(1e30, -1e30), 100.0);
+    }
+
+    #[test]
+    fn floor_matches_definition() {
+        for &(x, f) in &[(1.5f32, 1.0f32), (-1.5, -2.0), (-0.0, 0.0), (3.0, 3.0), (-3.0, -3.0)] {
+            assert_eq!(floor(x), f);
+        }
+    }
+}

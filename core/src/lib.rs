@@ -1,0 +1,30 @@
+//! # touchdown-core
+//!
+//! Everything of the touchdown landing aid that does not touch hardware: finding fiducial
+//! markers in a grey frame, the marker families, and (as they land) pose, the landing pad,
+//! filters and the MAVLink companion logic.
+//!
+//! The crate is `no_std`, allocates nothing and contains no `unsafe`. All working memory is
+//! either owned by a struct with capacities fixed by named constants, or lent by the caller,
+//! so the firmware can place every buffer in the RAM it chooses and the host can size buffers
+//! to the image it reads. No function panics on any input: bad input is an error value.
+//!
+//! The data path is one straight line:
+//! frame ([`image::GrayImage`]) -> candidates ([`detect`]) -> decoded markers
+//! ([`detect::Detection`]) -> pose -> filter -> messages.
+//!
+//! Conventions (the project's contract, see `README.md`): pixel (0, 0) is the centre of the
+//! top-left pixel, x right, y down; marker corners are the outer corners of the black border,
+//! ordered top-left, top-right, bottom-right, bottom-left of the marker's canonical image.
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing)
+)]
+
+pub mod detect;
+pub mod family;
+pub mod geometry;
+pub mod image;

@@ -1,0 +1,1 @@
+//! Host-side support for touchdown: image files, the command-line tool and test helpers.
