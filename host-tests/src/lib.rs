@@ -1,1 +1,8 @@
-//! Host-side support for touchdown: image files, the command-line tool and test helpers.
+//! Host-side support for touchdown: image files, owned work memory, marker families from
+//! files, the command-line tool's pieces, and the test renderer.
+//!
+//! Everything algorithmic lives in `touchdown-core`; this crate only does what needs `std`
+//! (files, allocation, formatting) and calls the core exactly as the firmware does.
+
+pub mod image_io;
+pub mod workspace;
