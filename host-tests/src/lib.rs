@@ -6,3 +6,6 @@
 
 pub mod image_io;
 pub mod workspace;
+pub mod cli;
+pub mod families;
+pub mod render;

@@ -1,0 +1,1 @@
+//! The `touchdown` command-line tool (subcommands; in progress).

@@ -1,0 +1,1 @@
+//! Marker families by name or from family files (in progress).

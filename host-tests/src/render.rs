@@ -1,0 +1,1 @@
+//! A small perspective renderer of markers for tests (in progress).
