@@ -3,6 +3,10 @@
 //! A homography maps marker-plane coordinates to pixels. With only four correspondences the
 //! direct linear transform is an exact 8x8 solve; it is done on coordinates normalised to
 //! zero mean and unit scale (Hartley) so f32 keeps its precision on a 1920-pixel image.
+//!
+//! Indexing here is into fixed-size arrays by loop counters bounded by those sizes; no index
+//! comes from input data, so the checked-indexing lint is relaxed for this module only.
+#![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
 /// A point in pixels (or any plane), f32.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -12,6 +16,12 @@ pub struct Point {
     pub x: f32,
     /// y (down, in pixels)
     pub y: f32,
+}
+
+/// Element `k mod 4` of a four-element array (corners, edges): in range by construction.
+#[inline]
+pub fn cyclic<T: Copy + Default>(items: &[T; 4], k: usize) -> T {
+    items.get(k % 4).copied().unwrap_or_default()
 }
 
 impl Point {
@@ -24,7 +34,7 @@ impl Point {
     pub fn distance(self, other: Point) -> f32 {
         let dx = self.x - other.x;
         let dy = self.y - other.y;
-        micromath::F32Ext::sqrt(dx * dx + dy * dy)
+        libm::sqrtf(dx * dx + dy * dy)
     }
 }
 

@@ -141,8 +141,14 @@ mod tests {
     #[test]
     fn rejects_bad_shapes() {
         let data = [0u8; 12];
-        assert_eq!(GrayImage::new(&data, 0, 3).err(), Some(ImageError::BadDimensions));
-        assert_eq!(GrayImage::new(&data, 4, 4).err(), Some(ImageError::TooShort));
+        assert_eq!(
+            GrayImage::new(&data, 0, 3).err(),
+            Some(ImageError::BadDimensions)
+        );
+        assert_eq!(
+            GrayImage::new(&data, 4, 4).err(),
+            Some(ImageError::TooShort)
+        );
         assert_eq!(
             GrayImage::with_stride(&data, 4, 2, 3).err(),
             Some(ImageError::BadStride)
@@ -169,7 +175,13 @@ mod tests {
 
     #[test]
     fn floor_matches_definition() {
-        for &(x, f) in &[(1.5f32, 1.0f32), (-1.5, -2.0), (-0.0, 0.0), (3.0, 3.0), (-3.0, -3.0)] {
+        for &(x, f) in &[
+            (1.5f32, 1.0f32),
+            (-1.5, -2.0),
+            (-0.0, 0.0),
+            (3.0, 3.0),
+            (-3.0, -3.0),
+        ] {
             assert_eq!(floor(x), f);
         }
     }

@@ -1,1 +1,412 @@
-//! decode (in progress)
+//! Step 5: reading the cells and looking the code up.
+//!
+//! The quad's corners give the homography from the family's cell grid (grid units, the
+//! detected square at [`Family::quad_offset`]) to the image. Each cell is read at its
+//! centre (bilinear; for cells of 4 pixels or more, the mean of 3x3 points around it so a
+//! single noisy pixel cannot flip it).
+//!
+//! The black/white decision is learnt from the marker itself, not from the frame: the border
+//! ring is known black, and the ring next to it on the detected side (the margin outside a
+//! normal marker, the white ring inside a reversed one) is known white. A plane
+//! `a + b*u + c*v` fitted to each gives the black and the white level anywhere on the marker,
+//! so a shadow edge or a brightness gradient across the marker moves the threshold with it.
+//! A candidate whose border is not black or whose margin is not white is dropped before any
+//! look-up, which is what keeps random quads from ever reaching the code table.
+//!
+//! The paper's variant reads each cell as the mean over its whole area ("resized to 8x8"),
+//! thresholds at the mean of all cells, and accepts only an exact match of border and code.
+
+use super::DetectorConfig;
+use crate::family::{CellRole, Decoded, Family, MAX_GRID};
+use crate::geometry::cyclic;
+use crate::geometry::{Homography, Point};
+use crate::image::GrayImage;
+
+/// Border cells allowed to read white, as a fraction of the ring (glare, a speck of dirt).
+const BORDER_ERROR_FRACTION: f32 = 0.125;
+/// Margin cells allowed to read dark (a tight print margin, a neighbouring object).
+const MARGIN_ERROR_FRACTION: f32 = 0.25;
+/// Cells at least this many pixels wide are read as the mean of 3x3 points.
+const MULTI_SAMPLE_CELL_PX: f32 = 4.0;
+/// Weight of the Laplacian that sharpens the sampled cell grid before thresholding.
+const DECODE_SHARPENING: f32 = 0.25;
+
+/// A decoded marker before de-duplication.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Read {
+    pub decoded: Decoded,
+    pub corners: [Point; 4],
+    pub center: Point,
+    pub margin: f32,
+    pub contrast: f32,
+}
+
+/// Least-squares plane `a + b*u + c*v` through samples; falls back to the mean.
+#[derive(Default)]
+struct PlaneFit {
+    n: f32,
+    su: f32,
+    sv: f32,
+    suu: f32,
+    suv: f32,
+    svv: f32,
+    sz: f32,
+    suz: f32,
+    svz: f32,
+}
+
+impl PlaneFit {
+    fn add(&mut self, u: f32, v: f32, z: f32) {
+        self.n += 1.0;
+        self.su += u;
+        self.sv += v;
+        self.suu += u * u;
+        self.suv += u * v;
+        self.svv += v * v;
+        self.sz += z;
+        self.suz += u * z;
+        self.svz += v * z;
+    }
+
+    fn mean(&self) -> f32 {
+        if self.n > 0.0 {
+            self.sz / self.n
+        } else {
+            0.0
+        }
+    }
+
+    /// Coefficients (a, b, c).
+    fn solve(&self) -> (f32, f32, f32) {
+        let m = [
+            [self.n, self.su, self.sv],
+            [self.su, self.suu, self.suv],
+            [self.sv, self.suv, self.svv],
+        ];
+        let r = [self.sz, self.suz, self.svz];
+        let det = |m: &[[f32; 3]; 3]| {
+            m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+                - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+                + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+        };
+        let d = det(&m);
+        if !(d.abs() > 1e-6 * (1.0 + self.n * self.n * self.n)) {
+            return (self.mean(), 0.0, 0.0);
+        }
+        let mut out = [0.0f32; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            let mut mk = m;
+            for (row, &rv) in mk.iter_mut().zip(r.iter()) {
+                if let Some(cell) = row.get_mut(k) {
+                    *cell = rv;
+                }
+            }
+            *o = det(&mk) / d;
+        }
+        if out.iter().all(|c| c.is_finite()) {
+            (out[0], out[1], out[2])
+        } else {
+            (self.mean(), 0.0, 0.0)
+        }
+    }
+}
+
+/// Reads a cell centred at grid point (u, v).
+#[inline]
+fn read_cell(image: &GrayImage<'_>, h: &Homography, u: f32, v: f32, multi: bool) -> Option<f32> {
+    if !multi {
+        let p = h.map(u, v)?;
+        return Some(image.sample(p.x, p.y));
+    }
+    let mut acc = 0.0;
+    for du in [-0.22f32, 0.0, 0.22] {
+        for dv in [-0.22f32, 0.0, 0.22] {
+            let p = h.map(u + du, v + dv)?;
+            acc += image.sample(p.x, p.y);
+        }
+    }
+    Some(acc / 9.0)
+}
+
+/// Reads a cell as the mean over its area (4x4 points), the paper's "resize".
+fn read_cell_area(image: &GrayImage<'_>, h: &Homography, u0: f32, v0: f32) -> Option<f32> {
+    let mut acc = 0.0;
+    for i in 0..4 {
+        for j in 0..4 {
+            let p = h.map(u0 + (i as f32 + 0.5) / 4.0, v0 + (j as f32 + 0.5) / 4.0)?;
+            acc += image.sample(p.x, p.y);
+        }
+    }
+    Some(acc / 16.0)
+}
+
+/// The homography from the family grid to the image for a clockwise quad whose first corner
+/// is taken as the grid's top-left.
+pub(crate) fn grid_homography(family: &Family<'_>, quad: &[Point; 4]) -> Option<Homography> {
+    let o = family.quad_offset() as f32;
+    let q = family.quad_cells() as f32;
+    let plane = [
+        Point::new(o, o),
+        Point::new(o + q, o),
+        Point::new(o + q, o + q),
+        Point::new(o, o + q),
+    ];
+    Homography::from_4_points(&plane, quad)
+}
+
+/// Corners, centre and the rotation applied: `out[j] = outer_border_corner[(j + k) % 4]`.
+fn oriented_corners(
+    family: &Family<'_>,
+    h: &Homography,
+    rotation: u8,
+) -> Option<([Point; 4], Point)> {
+    let n = family.grid as f32;
+    let b = family.border_ring as f32;
+    let outer = [
+        h.map(b, b)?,
+        h.map(n - b, b)?,
+        h.map(n - b, n - b)?,
+        h.map(b, n - b)?,
+    ];
+    let k = rotation as usize;
+    let corners = [
+        cyclic(&outer, k),
+        cyclic(&outer, k + 1),
+        cyclic(&outer, k + 2),
+        cyclic(&outer, k + 3),
+    ];
+    Some((corners, h.map(0.5 * n, 0.5 * n)?))
+}
+
+/// Decodes a candidate with touchdown's method.
+pub(crate) fn decode_robust(
+    image: &GrayImage<'_>,
+    family: &Family<'_>,
+    quad: &[Point; 4],
+    config: &DetectorConfig,
+) -> Option<Read> {
+    let h = grid_homography(family, quad)?;
+    let n = family.grid as usize;
+    let b = family.border_ring as isize;
+    let reversed = family.reversed();
+    let cell_px =
+        quad[0].distance(quad[1]).min(quad[1].distance(quad[2])) / family.quad_cells() as f32;
+    let multi = cell_px >= MULTI_SAMPLE_CELL_PX;
+
+    // Learn the black level from the border ring and the white level from the reference ring
+    // (outside the border for normal families, even beyond the drawn grid; inside otherwise).
+    let white_ring = if reversed { b + 1 } else { b - 1 };
+    let mut black = PlaneFit::default();
+    let mut white = PlaneFit::default();
+    let mut values = [0.0f32; MAX_GRID * MAX_GRID];
+    for_ring(n, b, |r, c| {
+        let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
+        if let Some(z) = read_cell(image, &h, u, v, multi) {
+            black.add(u, v, z);
+            if let Some(slot) = values.get_mut(r as usize * n + c as usize) {
+                *slot = z;
+            }
+        }
+    });
+    let mut white_samples = [0.0f32; 4 * MAX_GRID + 4];
+    let mut white_count = 0usize;
+    for_ring(n, white_ring, |r, c| {
+        let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
+        if let Some(z) = read_cell(image, &h, u, v, multi) {
+            white.add(u, v, z);
+            if let Some(slot) = white_samples.get_mut(white_count) {
+                *slot = z;
+                white_count += 1;
+            }
+        }
+    });
+    let (ba, bb, bc) = black.solve();
+    let (wa, wb, wc) = white.solve();
+    let threshold = |u: f32, v: f32| 0.5 * ((ba + bb * u + bc * v) + (wa + wb * u + wc * v));
+    let contrast = white.mean() - black.mean();
+    if !(contrast >= config.min_contrast as f32 * 0.5) {
+        return None;
+    }
+
+    // The border must read black and the reference ring white.
+    let mut border_errors = 0usize;
+    let mut border_cells = 0usize;
+    for_ring(n, b, |r, c| {
+        border_cells += 1;
+        let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
+        if values
+            .get(r as usize * n + c as usize)
+            .copied()
+            .unwrap_or(0.0)
+            > threshold(u, v)
+        {
+            border_errors += 1;
+        }
+    });
+    if border_errors as f32 > BORDER_ERROR_FRACTION * border_cells as f32 {
+        return None;
+    }
+    let mut margin_errors = 0usize;
+    let mut k = 0usize;
+    for_ring(n, white_ring, |r, c| {
+        let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
+        if white_samples.get(k).copied().unwrap_or(0.0) < threshold(u, v) {
+            margin_errors += 1;
+        }
+        k += 1;
+    });
+    if margin_errors as f32 > MARGIN_ERROR_FRACTION * white_count.max(1) as f32 {
+        return None;
+    }
+
+    // Data cells, sharpened against their neighbours: at one or two pixels per cell the
+    // optics and the sampling spread each cell into the next, and a small Laplacian term
+    // undoes part of that (AprilTag 3's decode_sharpening does the same).
+    for r in 0..n {
+        for c in 0..n {
+            if family.role(r, c) == CellRole::Data {
+                let z = read_cell(image, &h, c as f32 + 0.5, r as f32 + 0.5, multi)?;
+                if let Some(slot) = values.get_mut(r * n + c) {
+                    *slot = z;
+                }
+            }
+        }
+    }
+    let value_at = |r: isize, c: isize, own: f32| -> f32 {
+        if r < 0 || c < 0 || r >= n as isize || c >= n as isize {
+            return own;
+        }
+        let (ru, cu) = (r as usize, c as usize);
+        match family.role(ru, cu) {
+            CellRole::Quiet => {
+                // Quiet cells are not stored: the white ring next to the border is, as samples.
+                white.mean()
+            }
+            _ => values.get(ru * n + cu).copied().unwrap_or(own),
+        }
+    };
+    let mut cells = [false; MAX_GRID * MAX_GRID];
+    let mut margin_sum = 0.0f32;
+    let mut data_count = 0usize;
+    for r in 0..n {
+        for c in 0..n {
+            if family.role(r, c) != CellRole::Data {
+                continue;
+            }
+            let own = values.get(r * n + c).copied().unwrap_or(0.0);
+            let (ri, ci) = (r as isize, c as isize);
+            let neighbours = value_at(ri - 1, ci, own)
+                + value_at(ri + 1, ci, own)
+                + value_at(ri, ci - 1, own)
+                + value_at(ri, ci + 1, own);
+            let z = own + DECODE_SHARPENING * (4.0 * own - neighbours);
+            let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
+            let t = threshold(u, v);
+            if let Some(cell) = cells.get_mut(r * n + c) {
+                *cell = z > t;
+            }
+            margin_sum += ((z - t).abs() / (0.5 * contrast)).min(1.0);
+            data_count += 1;
+        }
+    }
+    let margin = margin_sum / data_count.max(1) as f32;
+    if margin < config.min_decision_margin {
+        return None;
+    }
+    let readings = family.codes_of_grid(cells.get(..n * n)?);
+    let decoded = family.decode(&readings, config.max_hamming)?;
+    let (corners, center) = oriented_corners(family, &h, decoded.rotation)?;
+    Some(Read {
+        decoded,
+        corners,
+        center,
+        margin,
+        contrast,
+    })
+}
+
+/// Decodes a candidate with the paper's method (normal families only).
+pub(crate) fn decode_paper(
+    image: &GrayImage<'_>,
+    family: &Family<'_>,
+    quad: &[Point; 4],
+) -> Option<Read> {
+    if family.reversed() {
+        return None;
+    }
+    let h = grid_homography(family, quad)?;
+    let n = family.grid as usize;
+    let b = family.border_ring as usize;
+    let mut values = [0.0f32; MAX_GRID * MAX_GRID];
+    let mut sum = 0.0f32;
+    let mut count = 0usize;
+    for r in b..n - b {
+        for c in b..n - b {
+            let z = read_cell_area(image, &h, c as f32, r as f32)?;
+            if let Some(slot) = values.get_mut(r * n + c) {
+                *slot = z;
+            }
+            sum += z;
+            count += 1;
+        }
+    }
+    let level = sum / count.max(1) as f32;
+    let mut cells = [false; MAX_GRID * MAX_GRID];
+    let (mut dark_sum, mut dark_n, mut light_sum, mut light_n) = (0.0f32, 0usize, 0.0f32, 0usize);
+    for r in b..n - b {
+        for c in b..n - b {
+            let z = values.get(r * n + c).copied().unwrap_or(0.0);
+            let white = z > level;
+            if family.role(r, c) == CellRole::Border && white {
+                return None; // the template's border must match exactly
+            }
+            if let Some(cell) = cells.get_mut(r * n + c) {
+                *cell = white;
+            }
+            if white {
+                light_sum += z;
+                light_n += 1;
+            } else {
+                dark_sum += z;
+                dark_n += 1;
+            }
+        }
+    }
+    let readings = family.codes_of_grid(cells.get(..n * n)?);
+    let decoded = family.decode(&readings, 0)?;
+    let (corners, center) = oriented_corners(family, &h, decoded.rotation)?;
+    let contrast = light_sum / light_n.max(1) as f32 - dark_sum / dark_n.max(1) as f32;
+    Some(Read {
+        decoded,
+        corners,
+        center,
+        margin: 1.0,
+        contrast,
+    })
+}
+
+/// Calls `f(row, col)` for every cell of ring `ring` of an `n x n` grid; the ring may lie
+/// outside the grid (ring -1 is the row of cells just outside it).
+fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
+    let lo = ring;
+    let hi = n as isize - 1 - ring;
+    if hi < lo {
+        return;
+    }
+    if hi == lo {
+        f(lo, lo);
+        return;
+    }
+    for c in lo..=hi {
+        f(lo, c);
+    }
+    for r in lo + 1..=hi {
+        f(r, hi);
+    }
+    for c in (lo..hi).rev() {
+        f(hi, c);
+    }
+    for r in (lo + 1..hi).rev() {
+        f(r, lo);
+    }
+}

@@ -37,6 +37,7 @@ mod refine;
 mod threshold;
 
 use crate::family::Family;
+use crate::geometry::cyclic;
 use crate::geometry::Point;
 use crate::image::GrayImage;
 
@@ -293,13 +294,188 @@ impl Detector {
         if families.iter().any(|f| f.validate().is_err()) {
             return Err(DetectError::BadFamily);
         }
-        let sizes = buffer_sizes(image.width(), image.height());
-        if buffers.bitmap.len() < sizes.bitmap_words
-            || buffers.visited.len() < sizes.bitmap_words
-            || buffers.tiles.len() < sizes.tile_bytes
-        {
+        let (width, height) = (image.width(), image.height());
+        let sizes = buffer_sizes(width, height);
+        let wpr = threshold::words_per_row(width);
+        let words = wpr * height;
+        let (Some(bitmap), Some(visited), Some(tiles)) = (
+            buffers.bitmap.get_mut(..words),
+            buffers.visited.get_mut(..words),
+            buffers.tiles.get_mut(..sizes.tile_bytes),
+        ) else {
             return Err(DetectError::BuffersTooSmall);
+        };
+        let Detector {
+            config,
+            contour,
+            detections,
+            stats,
+        } = self;
+        match config.method {
+            Method::Robust => threshold::local_threshold(image, config.min_contrast, bitmap, tiles),
+            Method::Paper => threshold::paper_edges(image, bitmap, tiles),
         }
-        Ok(&self.detections)
+        visited.fill(0);
+        let candidates = Candidates {
+            image,
+            families,
+            config,
+            max_quad_cells: families
+                .iter()
+                .map(|f| f.quad_cells())
+                .max()
+                .unwrap_or(1)
+                .max(1),
+        };
+        let bitmap: &[u32] = bitmap;
+        let budget = (config.trace_budget_per_pixel as u64 * (width * height) as u64)
+            .min(u32::MAX as u64) as u32;
+        let mut tracer = contour::Tracer {
+            bitmap,
+            visited,
+            width,
+            height,
+            words_per_row: wpr,
+            budget,
+            steps: 0,
+        };
+        'scan: for (y, row) in bitmap.chunks(wpr).enumerate() {
+            let mut left_word = 0u32;
+            for (k, &dark) in row.iter().enumerate() {
+                loop {
+                    let seen = tracer.visited.get(y * wpr + k).copied().unwrap_or(u32::MAX);
+                    let starts = contour::start_bits(dark, left_word, seen);
+                    if starts == 0 {
+                        break;
+                    }
+                    let x = k * 32 + starts.trailing_zeros() as usize;
+                    stats.contours += 1;
+                    match tracer.trace(x, y, contour) {
+                        contour::Trace::Closed(len) => {
+                            if let Some(boundary) = contour.get(..len) {
+                                candidates.process(boundary, detections, stats);
+                            }
+                        }
+                        contour::Trace::TooLong => {}
+                        contour::Trace::OutOfBudget => {
+                            stats.truncated = true;
+                            break 'scan;
+                        }
+                    }
+                }
+                left_word = dark;
+            }
+        }
+        stats.trace_steps = tracer.steps;
+        Ok(detections)
     }
+}
+
+/// What every candidate of a frame is checked against.
+struct Candidates<'f, 'i, 'a> {
+    image: &'f GrayImage<'i>,
+    families: &'f [&'f Family<'a>],
+    config: &'f DetectorConfig,
+    /// Cells across the largest detected square among the families: bounds how far an edge
+    /// may be moved without reaching the next edge inside the marker.
+    max_quad_cells: usize,
+}
+
+impl Candidates<'_, '_, '_> {
+    /// Quad fit, refinement and decoding of one closed boundary.
+    fn process(
+        &self,
+        boundary: &[contour::Pixel],
+        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+        stats: &mut DetectStats,
+    ) {
+        let config = self.config;
+        let Some(quad) = quad::fit_quad(boundary, config.min_edge_px) else {
+            return;
+        };
+        stats.quads += 1;
+        let paper = config.method == Method::Paper;
+        if (paper && quad.hole) || !self.families.iter().any(|f| f.reversed() == quad.hole) {
+            return;
+        }
+        let corners = if paper {
+            quad.corners
+        } else if config.refine_edges {
+            let c = &quad.corners;
+            let shortest = (0..4)
+                .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
+                .fold(f32::MAX, f32::min);
+            let radius = (0.5 * shortest / self.max_quad_cells as f32).clamp(0.75, 4.0);
+            refine::refine_corners(self.image, &quad, radius)
+        } else {
+            refine::half_pixel_adjusted(&quad)
+        };
+        if !quad::check_shape(&corners, 0.8 * config.min_edge_px) {
+            return;
+        }
+        let mut bordered = false;
+        for (index, family) in self.families.iter().enumerate() {
+            if family.reversed() != quad.hole {
+                continue;
+            }
+            let read = if paper {
+                decode::decode_paper(self.image, family, &corners)
+            } else {
+                decode::decode_robust(self.image, family, &corners, config)
+            };
+            let Some(read) = read else {
+                continue;
+            };
+            bordered = true;
+            stats.decoded += 1;
+            let detection = Detection {
+                family: index as u8,
+                id: read.decoded.id,
+                hamming: read.decoded.hamming,
+                corners: read.corners,
+                center: read.center,
+                decision_margin: read.margin,
+                contrast: read.contrast,
+            };
+            if !insert_unique(detections, detection) {
+                stats.truncated = true;
+            }
+        }
+        if bordered {
+            stats.bordered += 1;
+        }
+    }
+}
+
+/// Mean edge length of a detection, pixels.
+fn edge_length(d: &Detection) -> f32 {
+    let c = &d.corners;
+    (0..4)
+        .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
+        .sum::<f32>()
+        * 0.25
+}
+
+/// Adds a detection unless the same physical marker is already there; of two, the one with
+/// fewer corrected bits, then the larger decision margin, is kept. Two detections are the
+/// same marker when their centres nearly coincide and their sizes agree (a small marker
+/// printed inside a large one is a different marker). Returns false when full.
+fn insert_unique(
+    detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+    new: Detection,
+) -> bool {
+    let size = edge_length(&new);
+    for existing in detections.iter_mut() {
+        let other = edge_length(existing);
+        let ratio = size.max(other) / size.min(other).max(1e-3);
+        if new.center.distance(existing.center) < 0.25 * size.min(other) && ratio < 1.5 {
+            let better =
+                (new.hamming, -new.decision_margin) < (existing.hamming, -existing.decision_margin);
+            if better {
+                *existing = new;
+            }
+            return true;
+        }
+    }
+    detections.push(new).is_ok()
 }

@@ -1,1 +1,188 @@
-//! refine (in progress)
+//! Step 4: sub-pixel edges and corners.
+//!
+//! The quad from the boundary sits on pixel centres and its corners are where the pixel
+//! outline happened to bend, which can be a pixel or two off on a blurred corner. The image
+//! itself knows better: along each edge, at evenly spaced points away from the corners, the
+//! grey-level profile across the edge is read (bilinear, half-pixel steps) and the position
+//! where it crosses the middle between its dark and light levels is the edge point (for a
+//! blurred step, symmetric blur keeps that point on the true edge). A weighted total least
+//! squares line through those points is the edge, and neighbouring edges intersect at the
+//! corners. Corners that move implausibly far are rejected and the coarse quad is kept,
+//! moved half a pixel outwards onto the pixel boundary.
+
+use super::quad::Quad;
+use crate::geometry::cyclic;
+use crate::geometry::Point;
+use crate::image::GrayImage;
+
+/// Most edge points per edge.
+const MAX_SAMPLES: usize = 64;
+/// Profile half-length in half-pixel steps is `radius * 2`; the profile holds at most this.
+const MAX_PROFILE: usize = 2 * 2 * 4 + 2;
+/// Smallest dark-to-light difference (grey levels) for a profile to count.
+const MIN_STEP: f32 = 6.0;
+
+/// A fitted line: a point on it and its unit direction.
+#[derive(Debug, Clone, Copy, Default)]
+struct Line {
+    p: Point,
+    d: Point,
+}
+
+fn intersect(a: &Line, b: &Line) -> Option<Point> {
+    let den = a.d.x * b.d.y - a.d.y * b.d.x;
+    if den.abs() < 1e-4 {
+        return None;
+    }
+    let s = ((b.p.x - a.p.x) * b.d.y - (b.p.y - a.p.y) * b.d.x) / den;
+    let q = Point::new(a.p.x + s * a.d.x, a.p.y + s * a.d.y);
+    (q.x.is_finite() && q.y.is_finite()).then_some(q)
+}
+
+/// Unit outward normal of the edge a -> b of a clockwise (on screen) polygon.
+fn outward_normal(a: Point, b: Point) -> Option<Point> {
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    let len = libm::sqrtf(dx * dx + dy * dy);
+    (len > 1e-3).then(|| Point::new(dy / len, -dx / len))
+}
+
+/// Where along `n` from `p` the profile crosses its mid-level going from dark to light
+/// (light outside for an outer boundary, inside for a hole), and the profile's contrast.
+fn edge_point(
+    image: &GrayImage<'_>,
+    p: Point,
+    n: Point,
+    sign: f32,
+    radius: f32,
+) -> Option<(Point, f32)> {
+    let steps = ((radius * 2.0) as usize).clamp(2, (MAX_PROFILE - 2) / 2);
+    let count = 2 * steps + 1;
+    let centre = 0.5 * sign; // the pixel-centre boundary lies half a pixel off the edge
+    let mut v = [0.0f32; MAX_PROFILE];
+    let mut lo = f32::MAX;
+    let mut hi = f32::MIN;
+    for (j, slot) in v.iter_mut().enumerate().take(count) {
+        let o = centre + (j as f32 - steps as f32) * 0.5;
+        // Orient every profile dark -> light so one search serves both polarities.
+        let s = sign * image.sample(p.x + o * n.x, p.y + o * n.y);
+        *slot = s;
+        lo = lo.min(s);
+        hi = hi.max(s);
+    }
+    if hi - lo < MIN_STEP {
+        return None;
+    }
+    let level = 0.5 * (lo + hi);
+    // The steepest rise, then the mid-level crossing nearest to it.
+    let mut peak = (f32::MIN, 0usize);
+    for j in 0..count - 1 {
+        let g = v.get(j + 1).copied().unwrap_or(0.0) - v.get(j).copied().unwrap_or(0.0);
+        if g > peak.0 {
+            peak = (g, j);
+        }
+    }
+    for delta in 0..count {
+        for j in [peak.1.wrapping_sub(delta), peak.1 + delta] {
+            let (Some(&a), Some(&b)) = (v.get(j), v.get(j.wrapping_add(1))) else {
+                continue;
+            };
+            if a <= level && b > level {
+                let frac = (level - a) / (b - a);
+                let o = centre + (j as f32 + frac - steps as f32) * 0.5;
+                return Some((Point::new(p.x + o * n.x, p.y + o * n.y), hi - lo));
+            }
+        }
+    }
+    None
+}
+
+/// Weighted total least squares line through points.
+fn fit_line(points: &[(Point, f32)]) -> Option<Line> {
+    let wsum: f32 = points.iter().map(|(_, w)| w).sum();
+    if points.len() < 3 || !(wsum > 0.0) {
+        return None;
+    }
+    let mx = points.iter().map(|(p, w)| p.x * w).sum::<f32>() / wsum;
+    let my = points.iter().map(|(p, w)| p.y * w).sum::<f32>() / wsum;
+    let (mut sxx, mut sxy, mut syy) = (0.0f32, 0.0f32, 0.0f32);
+    for (p, w) in points {
+        let (dx, dy) = (p.x - mx, p.y - my);
+        sxx += w * dx * dx;
+        sxy += w * dx * dy;
+        syy += w * dy * dy;
+    }
+    // Principal eigenvector of [[sxx, sxy], [sxy, syy]].
+    let half = 0.5 * (sxx - syy);
+    let l1 = 0.5 * (sxx + syy) + libm::sqrtf(half * half + sxy * sxy);
+    let (ax, ay) = (sxy, l1 - sxx);
+    let (bx, by) = (l1 - syy, sxy);
+    let (dx, dy) = if ax * ax + ay * ay > bx * bx + by * by {
+        (ax, ay)
+    } else {
+        (bx, by)
+    };
+    let len = libm::sqrtf(dx * dx + dy * dy);
+    (len > 1e-9).then(|| Line {
+        p: Point::new(mx, my),
+        d: Point::new(dx / len, dy / len),
+    })
+}
+
+/// The quad moved half a pixel outwards (inwards for a hole) onto the pixel boundary.
+pub(crate) fn half_pixel_adjusted(quad: &Quad) -> [Point; 4] {
+    let sign = if quad.hole { -0.5 } else { 0.5 };
+    let c = &quad.corners;
+    let mut out = *c;
+    for (k, slot) in out.iter_mut().enumerate() {
+        let prev = outward_normal(cyclic(c, k + 3), cyclic(c, k)).unwrap_or_default();
+        let next = outward_normal(cyclic(c, k), cyclic(c, k + 1)).unwrap_or_default();
+        *slot = Point::new(
+            cyclic(c, k).x + sign * (prev.x + next.x),
+            cyclic(c, k).y + sign * (prev.y + next.y),
+        );
+    }
+    out
+}
+
+/// Sub-pixel corners of `quad`. `radius` (pixels) bounds how far an edge may move, and must
+/// stay below a cell so the search never reaches the next edge inside the marker.
+pub(crate) fn refine_corners(image: &GrayImage<'_>, quad: &Quad, radius: f32) -> [Point; 4] {
+    let fallback = half_pixel_adjusted(quad);
+    let c = &quad.corners;
+    let sign = if quad.hole { -1.0 } else { 1.0 };
+    let mut lines = [Line::default(); 4];
+    for (k, slot) in lines.iter_mut().enumerate() {
+        let (a, b) = (cyclic(c, k), cyclic(c, k + 1));
+        let Some(n) = outward_normal(a, b) else {
+            return fallback;
+        };
+        let len = a.distance(b);
+        // One point per pixel of edge: on small, steep markers every point counts.
+        let count = (len as usize).clamp(3, MAX_SAMPLES);
+        let skip = ((radius + 1.0) / len).clamp(0.04, 0.3);
+        let mut points: heapless::Vec<(Point, f32), MAX_SAMPLES> = heapless::Vec::new();
+        for i in 0..count {
+            let s = skip + (1.0 - 2.0 * skip) * (i as f32 + 0.5) / count as f32;
+            let p = Point::new(a.x + s * (b.x - a.x), a.y + s * (b.y - a.y));
+            if let Some(found) = edge_point(image, p, n, sign, radius) {
+                let _ = points.push(found);
+            }
+        }
+        match fit_line(&points) {
+            Some(line) => *slot = line,
+            None => return fallback,
+        }
+    }
+    let mut out = [Point::default(); 4];
+    for (k, slot) in out.iter_mut().enumerate() {
+        let Some(q) = intersect(&cyclic(&lines, k + 3), &cyclic(&lines, k)) else {
+            return fallback;
+        };
+        let limit = (0.15 * cyclic(c, k).distance(cyclic(c, k + 1))).max(2.5);
+        if q.distance(cyclic(c, k)) > limit {
+            return fallback;
+        }
+        *slot = q;
+    }
+    out
+}

@@ -99,7 +99,8 @@ impl<'a> Family<'a> {
     pub fn ring(&self, row: usize, col: usize) -> usize {
         let n = self.grid as usize;
         let r = row.min(col);
-        let r2 = (n.saturating_sub(1).saturating_sub(row)).min(n.saturating_sub(1).saturating_sub(col));
+        let r2 =
+            (n.saturating_sub(1).saturating_sub(row)).min(n.saturating_sub(1).saturating_sub(col));
         r.min(r2)
     }
 
@@ -220,7 +221,12 @@ impl<'a> Family<'a> {
                 }
             }
         }
-        self.codes_of_grid(&cells[..n * n])[(rotation & 3) as usize]
+        // A grid above MAX_GRID (only possible for a hand-built, invalid Family) reads as 0.
+        let cells = cells.get(..n * n).unwrap_or(&[]);
+        self.codes_of_grid(cells)
+            .get((rotation & 3) as usize)
+            .copied()
+            .unwrap_or(0)
     }
 
     /// Finds the id whose code is nearest to one of the four readings, within
@@ -312,7 +318,10 @@ impl<'a> Family<'a> {
             }
             let mut previous: Option<u64> = None;
             for &id in self.sorted_ids {
-                let code = *self.codes.get(id as usize).ok_or(FamilyErrorKind::BadIndex)?;
+                let code = *self
+                    .codes
+                    .get(id as usize)
+                    .ok_or(FamilyErrorKind::BadIndex)?;
                 if previous.is_some_and(|p| p >= code) {
                     return Err(FamilyErrorKind::BadIndex);
                 }

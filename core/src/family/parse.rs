@@ -140,7 +140,9 @@ pub fn parse_family<'t>(
             match (words.next(), words.next(), words.next()) {
                 (Some("family"), Some(value), None) => name = value,
                 (Some("cells"), Some(value), None) => {
-                    let n: usize = value.parse().map_err(|_| err(line_no, FamilyErrorKind::BadHeader))?;
+                    let n: usize = value
+                        .parse()
+                        .map_err(|_| err(line_no, FamilyErrorKind::BadHeader))?;
                     if !(3..=MAX_GRID).contains(&n) {
                         return Err(err(line_no, FamilyErrorKind::BadGrid));
                     }
@@ -150,7 +152,9 @@ pub fn parse_family<'t>(
                     grid = Some(n);
                 }
                 (Some("min_hamming"), Some(value), None) => {
-                    let d: u8 = value.parse().map_err(|_| err(line_no, FamilyErrorKind::BadHeader))?;
+                    let d: u8 = value
+                        .parse()
+                        .map_err(|_| err(line_no, FamilyErrorKind::BadHeader))?;
                     min_hamming = Some(d);
                 }
                 _ => {}
@@ -195,7 +199,9 @@ pub fn parse_family<'t>(
     let border = (0..n / 2)
         .find(|&r| all_black.get(r).copied().unwrap_or(false) && n - 2 * r > 2)
         .ok_or(err(0, FamilyErrorKind::NoBorder))?;
-    let quiet = (0..border).take_while(|&r| all_white.get(r).copied().unwrap_or(false)).count();
+    let quiet = (0..border)
+        .take_while(|&r| all_white.get(r).copied().unwrap_or(false))
+        .count();
     let reversed = quiet < border;
     if reversed && !all_white.get(border + 1).copied().unwrap_or(false) {
         return Err(err(0, FamilyErrorKind::NoInnerWhiteRing));
@@ -259,7 +265,9 @@ impl<'t> FamilyHeader<'t> {
     where
         't: 'b,
     {
-        let codes = codes.get(..self.count).ok_or(err(0, FamilyErrorKind::TooManyCodes))?;
+        let codes = codes
+            .get(..self.count)
+            .ok_or(err(0, FamilyErrorKind::TooManyCodes))?;
         let ids = sorted_ids
             .get_mut(..self.count)
             .ok_or(err(0, FamilyErrorKind::TooManyCodes))?;
@@ -302,14 +310,29 @@ mod tests {
     fn parses_layout_and_bits() {
         let mut codes = [0u64; 4];
         let h = parse_family(TWO_4X4, "x", &mut codes).unwrap();
-        assert_eq!((h.name, h.grid, h.quiet_rings, h.border_ring, h.bits, h.count), ("mini", 8, 1, 1, 16, 2));
+        assert_eq!(
+            (
+                h.name,
+                h.grid,
+                h.quiet_rings,
+                h.border_ring,
+                h.bits,
+                h.count
+            ),
+            ("mini", 8, 1, 1, 16, 2)
+        );
         // Row 2 of code 0 is 10101101 -> data cells (cols 2..6) 1011; row 3: 10010101 -> 0101...
         assert_eq!(codes[0] >> 12, 0b1011);
         let mut ids = [0u16; 4];
         let f = h.into_family(&codes, &mut ids).unwrap();
         assert!(f.min_hamming >= 1);
         for id in 0..2 {
-            let readings = [f.rotate_code(f.codes[id], 0), f.rotate_code(f.codes[id], 1), 0, 0];
+            let readings = [
+                f.rotate_code(f.codes[id], 0),
+                f.rotate_code(f.codes[id], 1),
+                0,
+                0,
+            ];
             assert_eq!(f.decode(&readings, 0).map(|d| d.id), Some(id as u16));
         }
     }
@@ -333,27 +356,55 @@ mod tests {
     #[test]
     fn one_line_custom_marker() {
         // A paper-style 8x8 design: black border ring 0, 6x6 data inside, no header.
-        let text = "00000000\n".repeat(0) + "0000000001100110011111100100001001011010011001100100001000000000";
+        let text = "00000000\n".repeat(0)
+            + "0000000001100110011111100100001001011010011001100100001000000000";
         let mut codes = [0u64; 1];
         let h = parse_family(&text, "custom", &mut codes).unwrap();
-        assert_eq!((h.grid, h.quiet_rings, h.border_ring, h.bits), (8, 0, 0, 36));
+        assert_eq!(
+            (h.grid, h.quiet_rings, h.border_ring, h.bits),
+            (8, 0, 0, 36)
+        );
     }
 
     #[test]
     fn errors_name_the_line() {
         let mut codes = [0u64; 4];
         let bad = "# cells 8\n1111111110000001\n";
-        assert_eq!(parse_family(bad, "x", &mut codes).unwrap_err(), FamilyError { line: 2, kind: FamilyErrorKind::BadLength });
+        assert_eq!(
+            parse_family(bad, "x", &mut codes).unwrap_err(),
+            FamilyError {
+                line: 2,
+                kind: FamilyErrorKind::BadLength
+            }
+        );
         let bad = "# cells 3\n1x1101111\n";
-        assert_eq!(parse_family(bad, "x", &mut codes).unwrap_err().kind, FamilyErrorKind::BadCharacter);
-        assert_eq!(parse_family("", "x", &mut codes).unwrap_err().kind, FamilyErrorKind::NoCodes);
+        assert_eq!(
+            parse_family(bad, "x", &mut codes).unwrap_err().kind,
+            FamilyErrorKind::BadCharacter
+        );
+        assert_eq!(
+            parse_family("", "x", &mut codes).unwrap_err().kind,
+            FamilyErrorKind::NoCodes
+        );
         let no_border = "101010101\n";
-        assert_eq!(parse_family(no_border, "x", &mut codes).unwrap_err().kind, FamilyErrorKind::NoBorder);
+        assert_eq!(
+            parse_family(no_border, "x", &mut codes).unwrap_err().kind,
+            FamilyErrorKind::NoBorder
+        );
         let mut tiny = [0u64; 1];
-        assert_eq!(parse_family(TWO_4X4, "x", &mut tiny).unwrap_err(), FamilyError { line: 4, kind: FamilyErrorKind::TooManyCodes });
+        assert_eq!(
+            parse_family(TWO_4X4, "x", &mut tiny).unwrap_err(),
+            FamilyError {
+                line: 4,
+                kind: FamilyErrorKind::TooManyCodes
+            }
+        );
         let dup = "0000000001100110011111100100001001011010011001100100001000000000\n".repeat(2);
         let h = parse_family(&dup, "x", &mut codes).unwrap();
         let mut ids = [0u16; 4];
-        assert_eq!(h.into_family(&codes, &mut ids).unwrap_err().kind, FamilyErrorKind::DuplicateCode);
+        assert_eq!(
+            h.into_family(&codes, &mut ids).unwrap_err().kind,
+            FamilyErrorKind::DuplicateCode
+        );
     }
 }
