@@ -233,7 +233,7 @@ pub enum DetectError {
     BuffersTooSmall,
     /// No family, or more than [`MAX_FAMILIES`].
     BadFamilyCount,
-    /// A family's tables are inconsistent ([`Family::validate`]).
+    /// A family's layout is inconsistent ([`Family::check_layout`]).
     BadFamily,
 }
 
@@ -291,7 +291,7 @@ impl Detector {
         if families.is_empty() || families.len() > MAX_FAMILIES {
             return Err(DetectError::BadFamilyCount);
         }
-        if families.iter().any(|f| f.validate().is_err()) {
+        if families.iter().any(|f| f.check_layout().is_err()) {
             return Err(DetectError::BadFamily);
         }
         let (width, height) = (image.width(), image.height());
@@ -395,7 +395,18 @@ impl Candidates<'_, '_, '_> {
         };
         stats.quads += 1;
         let paper = config.method == Method::Paper;
-        if (paper && quad.hole) || !self.families.iter().any(|f| f.reversed() == quad.hole) {
+        // The paper traces every contour of its edge map, outer and hole alike (OpenCV's
+        // findContours); the edge band around a marker's outline leaves a hole just inside
+        // it. Our binarisation knows polarity: a hole is a light region, which only the
+        // reversed families are detected by.
+        let wanted = |f: &Family<'_>| {
+            if paper {
+                !f.reversed()
+            } else {
+                f.reversed() == quad.hole
+            }
+        };
+        if !self.families.iter().any(|f| wanted(f)) {
             return;
         }
         let corners = if paper {
@@ -415,7 +426,7 @@ impl Candidates<'_, '_, '_> {
         }
         let mut bordered = false;
         for (index, family) in self.families.iter().enumerate() {
-            if family.reversed() != quad.hole {
+            if !wanted(family) {
                 continue;
             }
             let read = if paper {
@@ -478,4 +489,53 @@ fn insert_unique(
         }
     }
     detections.push(new).is_ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Issue 2's budget: work memory beyond the frame, 64 KiB at QVGA and 160 KiB at VGA.
+    #[test]
+    fn working_memory_fits_the_budget() {
+        let detector = core::mem::size_of::<Detector>();
+        let qvga = core::mem::size_of::<QvgaWorkspace>() + detector;
+        let vga = core::mem::size_of::<VgaWorkspace>() + detector;
+        assert!(qvga <= 64 * 1024, "QVGA work memory {qvga} B");
+        assert!(vga <= 160 * 1024, "VGA work memory {vga} B");
+    }
+
+    #[test]
+    fn bad_calls_are_errors() {
+        let pixels = [0u8; 64 * 48];
+        let image = GrayImage::new(&pixels, 64, 48).unwrap();
+        let mut ws = QvgaWorkspace::new();
+        let mut detector = Detector::new(DetectorConfig::default());
+        let family = crate::family::tables::by_name("tag36h11").unwrap();
+        assert_eq!(
+            detector.detect(&image, &[], &mut ws.buffers()).err(),
+            Some(DetectError::BadFamilyCount)
+        );
+        let mut small = Buffers {
+            bitmap: &mut [0u32; 4],
+            visited: &mut [0u32; 4],
+            tiles: &mut [0u8; 4],
+        };
+        assert_eq!(
+            detector.detect(&image, &[family], &mut small).err(),
+            Some(DetectError::BuffersTooSmall)
+        );
+        let mut broken = *family;
+        broken.max_correction = 9;
+        assert_eq!(
+            detector.detect(&image, &[&broken], &mut ws.buffers()).err(),
+            Some(DetectError::BadFamily)
+        );
+        assert_eq!(
+            detector
+                .detect(&image, &[family], &mut ws.buffers())
+                .map(|d| d.len()),
+            Ok(0)
+        );
+    }
 }

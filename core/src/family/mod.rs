@@ -288,27 +288,11 @@ impl<'a> Family<'a> {
     /// Checks that the fields agree with each other: the layout has the declared number of
     /// data bits, every code fits in them, and the index is a sorted permutation.
     pub fn validate(&self) -> Result<(), FamilyErrorKind> {
-        let n = self.grid as usize;
-        if !(3..=MAX_GRID).contains(&n) || self.border_ring as usize >= n / 2 {
-            return Err(FamilyErrorKind::BadGrid);
-        }
-        if self.quiet_rings > self.border_ring {
-            return Err(FamilyErrorKind::NoBorder);
-        }
-        let mut bits = 0usize;
-        for r in 0..n {
-            for c in 0..n {
-                if self.role(r, c) == CellRole::Data {
-                    bits += 1;
-                }
-            }
-        }
-        if bits != self.bits as usize || bits > MAX_BITS || bits == 0 {
-            return Err(FamilyErrorKind::TooManyBits);
-        }
+        self.check_layout()?;
         if self.codes.is_empty() || self.codes.len() > u16::MAX as usize {
             return Err(FamilyErrorKind::NoCodes);
         }
+        let bits = self.bits as usize;
         if bits < 64 && self.codes.iter().any(|&c| c >> bits != 0) {
             return Err(FamilyErrorKind::BadCode);
         }
@@ -328,8 +312,37 @@ impl<'a> Family<'a> {
                 previous = Some(code);
             }
         }
+        Ok(())
+    }
+
+    /// The O(grid^2) part of [`Family::validate`]: the layout, the bit count and the
+    /// correction bound agree. The detector checks this on every frame; the per-code checks
+    /// belong where a family is built (bad codes cannot make decoding panic, only miss).
+    pub fn check_layout(&self) -> Result<(), FamilyErrorKind> {
+        let n = self.grid as usize;
+        if !(3..=MAX_GRID).contains(&n) || self.border_ring as usize >= n / 2 {
+            return Err(FamilyErrorKind::BadGrid);
+        }
+        if self.quiet_rings > self.border_ring {
+            return Err(FamilyErrorKind::NoBorder);
+        }
+        let mut bits = 0usize;
+        for r in 0..n {
+            for c in 0..n {
+                if self.role(r, c) == CellRole::Data {
+                    bits += 1;
+                }
+            }
+        }
+        if bits != self.bits as usize || bits > MAX_BITS || bits == 0 {
+            return Err(FamilyErrorKind::TooManyBits);
+        }
         if self.max_correction as u32 > (self.min_hamming as u32).saturating_sub(1) / 2 {
             return Err(FamilyErrorKind::BadCorrection);
+        }
+        // Ids are u16: a larger table would report wrapped ids.
+        if self.codes.is_empty() || self.codes.len() > u16::MAX as usize {
+            return Err(FamilyErrorKind::NoCodes);
         }
         Ok(())
     }
