@@ -11,7 +11,8 @@
 //!
 //! The data path is one straight line:
 //! frame ([`image::GrayImage`]) -> candidates ([`detect`]) -> decoded markers
-//! ([`detect::Detection`]) -> pose -> filter -> messages.
+//! ([`detect::Detection`]) -> pose ([`pose`], with the [`camera`] model and the [`pad`]
+//! layout) -> filter ([`filter`]) -> vehicle frames ([`frames`]) -> messages.
 //!
 //! Conventions (the project's contract, see `README.md`): pixel (0, 0) is the centre of the
 //! top-left pixel, x right, y down; marker corners are the outer corners of the black border,
@@ -31,7 +32,12 @@
     )
 )]
 
+pub mod camera;
 pub mod detect;
 pub mod family;
+pub mod filter;
+pub mod frames;
 pub mod geometry;
 pub mod image;
+pub mod pad;
+pub mod pose;

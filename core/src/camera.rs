@@ -1,0 +1,1 @@
+//! Camera model: pinhole intrinsics and Brown-Conrady distortion (in progress, issue 3).

@@ -1,0 +1,1 @@
+//! Filters that smooth the pad position over time (in progress, issue 3).

@@ -1,0 +1,1 @@
+//! Vehicle attitude and MAVLink frames (in progress, issue 3).

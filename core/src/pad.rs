@@ -1,0 +1,1 @@
+//! Landing pad layouts (in progress, issue 3).

@@ -1,0 +1,1 @@
+//! Marker and pad pose from corners (in progress, issue 3).
