@@ -64,7 +64,11 @@ pub fn load_gray(path: &Path) -> Result<GrayFrame, ImageLoadError> {
         .map_err(|e| fail(format!("not a readable PNG, PGM or JPEG image ({e})")))?;
     let luma = decoded.to_luma8();
     let (width, height) = (luma.width() as usize, luma.height() as usize);
-    if width == 0 || height == 0 || width > touchdown_core::image::MAX_DIMENSION || height > touchdown_core::image::MAX_DIMENSION {
+    if width == 0
+        || height == 0
+        || width > touchdown_core::image::MAX_DIMENSION
+        || height > touchdown_core::image::MAX_DIMENSION
+    {
         return Err(fail(format!("unsupported size {width}x{height}")));
     }
     Ok(GrayFrame {

@@ -4,8 +4,8 @@
 //! Everything algorithmic lives in `touchdown-core`; this crate only does what needs `std`
 //! (files, allocation, formatting) and calls the core exactly as the firmware does.
 
-pub mod image_io;
-pub mod workspace;
 pub mod cli;
 pub mod families;
+pub mod image_io;
 pub mod render;
+pub mod workspace;

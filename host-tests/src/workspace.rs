@@ -1,7 +1,7 @@
 //! Heap-allocated detector work memory sized to any frame (the firmware uses the fixed
 //! `QvgaWorkspace` / `VgaWorkspace` of the core instead).
 
-use touchdown_core::detect::{buffer_sizes, Buffers, Detection, DetectError, Detector};
+use touchdown_core::detect::{buffer_sizes, Buffers, DetectError, Detection, Detector};
 use touchdown_core::family::Family;
 use touchdown_core::image::GrayImage;
 
@@ -44,6 +44,8 @@ impl HostWorkspace {
         families: &[&Family<'_>],
     ) -> Result<Vec<Detection>, DetectError> {
         let mut buffers = self.buffers(image.width(), image.height());
-        detector.detect(image, families, &mut buffers).map(|d| d.to_vec())
+        detector
+            .detect(image, families, &mut buffers)
+            .map(|d| d.to_vec())
     }
 }

@@ -410,7 +410,9 @@ impl Candidates<'_, '_, '_> {
             return;
         }
         let corners = if paper {
-            quad.corners
+            // The edge map's outline runs along the outside of the gradient band around the
+            // marker's edge (its holes along the inside): step back onto the edge itself.
+            refine::offset_quad(&quad, -threshold::PAPER_EDGE_BAND_HALF_WIDTH)
         } else if config.refine_edges {
             let c = &quad.corners;
             let shortest = (0..4)

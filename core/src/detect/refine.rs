@@ -128,20 +128,32 @@ fn fit_line(points: &[(Point, f32)]) -> Option<Line> {
     })
 }
 
-/// The quad moved half a pixel outwards (inwards for a hole) onto the pixel boundary.
-pub(crate) fn half_pixel_adjusted(quad: &Quad) -> [Point; 4] {
-    let sign = if quad.hole { -0.5 } else { 0.5 };
+/// The quad with every edge moved `distance` pixels outwards (inwards for a hole, whose
+/// boundary pixels lie outside the light region); corners move to keep the edges' directions.
+pub(crate) fn offset_quad(quad: &Quad, distance: f32) -> [Point; 4] {
+    let sign = if quad.hole { -distance } else { distance };
     let c = &quad.corners;
     let mut out = *c;
     for (k, slot) in out.iter_mut().enumerate() {
         let prev = outward_normal(cyclic(c, k + 3), cyclic(c, k)).unwrap_or_default();
         let next = outward_normal(cyclic(c, k), cyclic(c, k + 1)).unwrap_or_default();
-        *slot = Point::new(
-            cyclic(c, k).x + sign * (prev.x + next.x),
-            cyclic(c, k).y + sign * (prev.y + next.y),
-        );
+        // The corner moves along the bisector so that both edges move by `distance`.
+        let (bx, by) = (prev.x + next.x, prev.y + next.y);
+        let cos_half_sq = 0.25 * (bx * bx + by * by);
+        let scale = if cos_half_sq > 0.05 {
+            sign / (2.0 * cos_half_sq)
+        } else {
+            sign
+        };
+        *slot = Point::new(cyclic(c, k).x + scale * bx, cyclic(c, k).y + scale * by);
     }
     out
+}
+
+/// The quad moved half a pixel outwards (inwards for a hole) from the boundary pixel
+/// centres onto the pixel boundary.
+pub(crate) fn half_pixel_adjusted(quad: &Quad) -> [Point; 4] {
+    offset_quad(quad, 0.5)
 }
 
 /// Sub-pixel corners of `quad`. `radius` (pixels) bounds how far an edge may move, and must

@@ -149,6 +149,10 @@ fn spread(grid: &mut [u8], tw: usize, th: usize, pick: fn(u8, u8) -> u8) {
 /// which a pixel is an edge in the paper's variant.
 pub(crate) const PAPER_EDGE_LEVEL: i32 = 160;
 
+/// How far, in pixels, the outermost edge pixels of a sharp step lie from the step after the
+/// 5x5 blur and the 3x3 gradient at [`PAPER_EDGE_LEVEL`] (measured on rendered markers).
+pub(crate) const PAPER_EDGE_BAND_HALF_WIDTH: f32 = 1.5;
+
 /// The paper's binarisation: normalise, 5x5 Gaussian blur, 3x3 Sobel, fixed edge level.
 /// `scratch` holds at least `3 * width` bytes (three blurred rows).
 pub(crate) fn paper_edges(image: &GrayImage<'_>, bitmap: &mut [u32], scratch: &mut [u8]) {

@@ -1,1 +1,0 @@
-//! The `touchdown` command-line tool (subcommands; in progress).

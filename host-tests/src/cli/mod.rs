@@ -1,0 +1,114 @@
+//! The `touchdown` command-line tool: argument parsing and the subcommands.
+//!
+//! Every failure the user can cause (a bad option, an unreadable file) is reported as one
+//! line on stderr, prefixed `error: ` like clap's own messages, with exit status 2; nothing
+//! here panics on user input. The binary (`src/bin/touchdown.rs`) only calls [`main`].
+
+pub mod camera;
+pub mod detect;
+
+use std::fmt;
+use std::io::{self, Write};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// The exit status for a bad option or an unreadable input (the contract's "2").
+pub const EXIT_FAILURE: u8 = 2;
+
+/// touchdown: fiducial-marker landing aid (host tools).
+#[derive(Debug, Parser)]
+#[command(
+    name = "touchdown",
+    version,
+    about = "touchdown: find landing-pad fiducial markers in images (host tools)",
+    long_about = "touchdown: find landing-pad fiducial markers in images (host tools).\n\n\
+                  The same detector runs on the drone's camera board; these tools run it on \
+                  image files.\nSee `touchdown detect --help` for families, the corner \
+                  convention and the JSON format."
+)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Find markers in images and print their ids and corners.
+    #[command(long_about = detect::LONG_HELP)]
+    Detect(detect::DetectArgs),
+}
+
+/// A failure reported as one line on stderr with exit status 2.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CliError(pub String);
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Messages are built from file names and library errors that might carry newlines;
+        // the contract promises one line.
+        f.write_str(&self.0.replace(['\n', '\r'], " "))
+    }
+}
+
+impl std::error::Error for CliError {}
+
+impl CliError {
+    /// An error from anything displayable.
+    pub fn new(message: impl fmt::Display) -> Self {
+        CliError(message.to_string())
+    }
+}
+
+/// How a run ended, when it got to run at all.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// Everything was processed.
+    Success,
+    /// Some inputs failed; each was already reported on stderr.
+    PartialFailure,
+}
+
+/// Runs a parsed command line, writing results to `out` and per-file problems to `err`.
+pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome, CliError> {
+    match cli.command {
+        Command::Detect(args) => detect::run(&args, out, err),
+    }
+}
+
+/// The binary's entry point: parse (clap exits 2 on usage errors, 0 for `--help`), run,
+/// and turn the result into the exit status.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let stdout = io::stdout();
+    let stderr = io::stderr();
+    let mut out = stdout.lock();
+    let mut err = stderr.lock();
+    match run(cli, &mut out, &mut err) {
+        Ok(Outcome::Success) => ExitCode::SUCCESS,
+        Ok(Outcome::PartialFailure) => ExitCode::from(EXIT_FAILURE),
+        Err(error) => {
+            // Nothing more can be done if stderr itself is gone.
+            let _ = writeln!(err, "error: {error}");
+            ExitCode::from(EXIT_FAILURE)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn command_line_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn errors_are_one_line() {
+        assert_eq!(CliError::new("a\nb").to_string(), "a b");
+    }
+}
