@@ -526,7 +526,12 @@ def hex_width(bits: int) -> int:
     return max(1, (bits + 3) // 4)
 
 
-def rust_table(fam: Family, ident: str, crate_path: str, header_doc: list[str]) -> str:
+def rust_table(
+    fam: Family, ident: str, crate_path: str, header_doc: list[str], prefix_of: "Family | None" = None
+) -> str:
+    """One family's table. With `prefix_of`, the family's codes are the first codes of that
+    larger family (OpenCV's smaller ArUco dictionaries are prefixes of the 1000-code ones), so
+    they are borrowed from its table instead of being stored twice."""
     codes = [int(c) for c in fam.codes]
     order = sorted(range(len(codes)), key=lambda i: codes[i])
     w = hex_width(fam.layout.bits)
@@ -547,22 +552,49 @@ def rust_table(fam: Family, ident: str, crate_path: str, header_doc: list[str]) 
         f"    bits: {fam.layout.bits},",
         f"    min_hamming: {fam.min_hamming},",
         f"    max_correction: {fam.max_correction},",
-        "    codes: &CODES,",
+        "    codes: CODES,"
+        if prefix_of is not None
+        else "    codes: &CODES,",
         "    sorted_ids: &SORTED,",
         "};",
         "",
-        "/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).",
-        "#[rustfmt::skip]",
-        f"static CODES: [u64; {n}] = [",
     ]
-    per_line = max(1, min(8, 96 // (w + 4)))
-    for start in range(0, n, per_line):
-        out.append("    " + " ".join(f"0x{c:0{w}x}," for c in codes[start : start + per_line]))
-    out += ["];", "", "/// Ids sorted by code.", f"static SORTED: [u16; {n}] = ["]
+    if prefix_of is not None:
+        out += [
+            f"/// The codes, indexed by id: the first {n} codes of `{prefix_of.name}`.",
+            f"const CODES: &[u64] = super::{prefix_of.module}::CODES.split_at({n}).0;",
+        ]
+    else:
+        out += [
+            "/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).",
+            "#[rustfmt::skip]",
+            f"pub(crate) static CODES: [u64; {n}] = [",
+        ]
+        per_line = max(1, min(8, 96 // (w + 4)))
+        for start in range(0, n, per_line):
+            out.append("    " + " ".join(f"0x{c:0{w}x}," for c in codes[start : start + per_line]))
+        out += ["];"]
+    out += ["", "/// Ids sorted by code.", f"static SORTED: [u16; {n}] = ["]
     for start in range(0, n, 12):
         out.append("    " + " ".join(f"{i}," for i in order[start : start + 12]))
     out += ["];", ""]
     return "\n".join(out)
+
+
+def same_layout(a: Layout, b: Layout) -> bool:
+    return (a.grid, a.quiet_rings, a.border_ring, a.data_cells) == (b.grid, b.quiet_rings, b.border_ring, b.data_cells)
+
+
+def prefix_parent(fam: Family, families: list[Family]) -> "Family | None":
+    """The largest family with the same layout whose first codes are exactly `fam`'s."""
+    best = None
+    for other in families:
+        if other is fam or len(other.codes) <= len(fam.codes) or not same_layout(other.layout, fam.layout):
+            continue
+        if [int(c) for c in other.codes[: len(fam.codes)]] == [int(c) for c in fam.codes]:
+            if best is None or len(other.codes) > len(best.codes):
+                best = other
+    return best
 
 
 def family_doc(fam: Family, command: str) -> list[str]:
@@ -900,7 +932,7 @@ def shipped(args) -> int:
     source_dir = display_path(fam_dir)
     outputs: dict[Path, str] = {}
     for f in families:
-        text = rust_table(f, f.ident, "crate", family_doc(f, command))
+        text = rust_table(f, f.ident, "crate", family_doc(f, command), prefix_parent(f, families))
         outputs[out_dir / f"{f.module}.rs"] = text
     outputs[out_dir / "mod.rs"] = rust_mod(families, command, source_dir)
 

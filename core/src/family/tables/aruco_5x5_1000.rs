@@ -23,7 +23,7 @@ pub static ARUCO_5X5_1000: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 1000] = [
+pub(crate) static CODES: [u64; 1000] = [
     0x145b2bc, 0x01c06e6, 0x1af0edd, 0x10395f7, 0x1aeb524, 0x1d4082d, 0x0d3d7ec, 0x0e2146b,
     0x10d6132, 0x1313fa5, 0x13cee03, 0x1a2dac0, 0x1e62b11, 0x05e7166, 0x1fcfca8, 0x051e37f,
     0x097a758, 0x0bea26f, 0x0f64dc4, 0x1061de8, 0x12dda75, 0x150e440, 0x16b0ca1, 0x0ba12de,

@@ -17,21 +17,12 @@ pub static ARUCO_5X5_50: Family<'static> = Family {
     bits: 25,
     min_hamming: 8,
     max_correction: 0,
-    codes: &CODES,
+    codes: CODES,
     sorted_ids: &SORTED,
 };
 
-/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
-#[rustfmt::skip]
-static CODES: [u64; 50] = [
-    0x145b2bc, 0x01c06e6, 0x1af0edd, 0x10395f7, 0x1aeb524, 0x1d4082d, 0x0d3d7ec, 0x0e2146b,
-    0x10d6132, 0x1313fa5, 0x13cee03, 0x1a2dac0, 0x1e62b11, 0x05e7166, 0x1fcfca8, 0x051e37f,
-    0x097a758, 0x0bea26f, 0x0f64dc4, 0x1061de8, 0x12dda75, 0x150e440, 0x16b0ca1, 0x0ba12de,
-    0x19cd023, 0x1a59972, 0x1c3ce8b, 0x0224246, 0x03b9672, 0x024223b, 0x027376e, 0x0368873,
-    0x040d0ce, 0x04aaac8, 0x04643ba, 0x07a6fea, 0x0998aac, 0x082d101, 0x09aad1d, 0x0863c72,
-    0x0ad2825, 0x0a52f9e, 0x0d849f7, 0x0c309d9, 0x0da7e31, 0x0e9627a, 0x0e9b997, 0x0f94806,
-    0x0f59125, 0x0f6b7d7,
-];
+/// The codes, indexed by id: the first 50 codes of `aruco_5x5_1000`.
+const CODES: &[u64] = super::aruco_5x5_1000::CODES.split_at(50).0;
 
 /// Ids sorted by code.
 static SORTED: [u16; 50] = [

@@ -23,7 +23,7 @@ pub static ARUCO_6X6_1000: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 1000] = [
+pub(crate) static CODES: [u64; 1000] = [
     0x1e3dd82a6, 0x0efba3891, 0x15907eacd, 0xc91b3069e, 0xd607d6e15, 0xd8e8e0e68, 0x4268b41f5,
     0x88a50f29a, 0x307d524fd, 0x3c2f34b3c, 0x45dfc74e3, 0x48d85b257, 0x710558fc6, 0x86dcfad07,
     0x8d72a93f6, 0xa2b89dcde, 0x09fd1e9c4, 0x154dbd18f, 0x300a310e2, 0x4807efafd, 0x56df11db6,

@@ -17,22 +17,12 @@ pub static ARUCO_6X6_50: Family<'static> = Family {
     bits: 36,
     min_hamming: 13,
     max_correction: 3,
-    codes: &CODES,
+    codes: CODES,
     sorted_ids: &SORTED,
 };
 
-/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
-#[rustfmt::skip]
-static CODES: [u64; 50] = [
-    0x1e3dd82a6, 0x0efba3891, 0x15907eacd, 0xc91b3069e, 0xd607d6e15, 0xd8e8e0e68, 0x4268b41f5,
-    0x88a50f29a, 0x307d524fd, 0x3c2f34b3c, 0x45dfc74e3, 0x48d85b257, 0x710558fc6, 0x86dcfad07,
-    0x8d72a93f6, 0xa2b89dcde, 0x09fd1e9c4, 0x154dbd18f, 0x300a310e2, 0x4807efafd, 0x56df11db6,
-    0x66883274c, 0x76e8cb781, 0x9a53d9cf3, 0xa9cb84024, 0xc67549490, 0xc1d288941, 0xe7480852b,
-    0xea2fca848, 0xe963b77b1, 0xfa36652af, 0x065bff7bd, 0x0541d72d6, 0x0cf7246a2, 0x1338a39eb,
-    0x15a893e74, 0x3a417ee9e, 0x4f11e26c0, 0x530db6d20, 0x589bfae34, 0x6409e8a0b, 0x60537a891,
-    0x6159069ba, 0x6bff78d7b, 0x70ad96a4f, 0x75846f71a, 0x7a95192fc, 0x8609760aa, 0x8a2d44c3f,
-    0x93eb78b14,
-];
+/// The codes, indexed by id: the first 50 codes of `aruco_6x6_1000`.
+const CODES: &[u64] = super::aruco_6x6_1000::CODES.split_at(50).0;
 
 /// Ids sorted by code.
 static SORTED: [u16; 50] = [

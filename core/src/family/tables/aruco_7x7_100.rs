@@ -17,34 +17,12 @@ pub static ARUCO_7X7_100: Family<'static> = Family {
     bits: 49,
     min_hamming: 18,
     max_correction: 7,
-    codes: &CODES,
+    codes: CODES,
     sorted_ids: &SORTED,
 };
 
-/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
-#[rustfmt::skip]
-static CODES: [u64; 100] = [
-    0x1bab8d94b9415, 0x1c837e27c8156, 0x13d545758ba4f, 0x14cce0b6fd298, 0x18d78f62664ac,
-    0x0b1002846b3dc, 0x1a6d77cdea890, 0x07942db1117b6, 0x1120e3ead2d3c, 0x176cb631adc7e,
-    0x1ea01a305e921, 0x0044ce170a834, 0x0a9e6d72e91e1, 0x13c49108c4733, 0x17bfe64d79397,
-    0x19c220b60b52f, 0x1a7e0c2e43f16, 0x003c33d9d91db, 0x04d979854e0f1, 0x070fa9aec8226,
-    0x0752095d3c3d3, 0x08da908f679ba, 0x091254fbd3c57, 0x0bced87c93150, 0x0e945bdf45f11,
-    0x128bbc45026b2, 0x136252ac9db47, 0x143a9285b05f0, 0x176f1cc62d9a1, 0x1976bbb97b630,
-    0x1a7cbdd6f0666, 0x1e528467fa339, 0x1fbada33e77cd, 0x0748c49dd09dd, 0x0c430fc48761e,
-    0x0159a86df3b86, 0x01c81a9871c04, 0x0293fb340c448, 0x03345c234cbda, 0x056a104fc3668,
-    0x052d271253f46, 0x059eea9b7e8ad, 0x06bd27f3c6cf8, 0x07ee957b07be7, 0x089a053e9fe80,
-    0x09081c90855ea, 0x0be3226d06804, 0x0bd64e4807abb, 0x0df36483e2b84, 0x0e555f24151c7,
-    0x0f310ea770c6d, 0x0f7ce275cf2a3, 0x10ad48d92b3c0, 0x11c7fdde5b2a3, 0x15a719a42e6cf,
-    0x1626e4a61727f, 0x1758701a4a3b6, 0x182eadaba314d, 0x19cc3a6fdca22, 0x1a4b9306dbab7,
-    0x1a0d523d3df9d, 0x093c9c71b52b5, 0x0a5a33e503f66, 0x004315e30e741, 0x00b809670a2ee,
-    0x01eb15243133e, 0x01f9d4a888834, 0x02bdda6e629b1, 0x02de3c5f88b3d, 0x03cbc988276e6,
-    0x03f84a4cd90ed, 0x04e422dec633f, 0x04f36f51237b8, 0x05c186096d4d8, 0x05f53c4f3cc56,
-    0x0599fa6052627, 0x062a6060425cd, 0x060f0e6b5fa53, 0x06fc486594f41, 0x098169f15fea8,
-    0x09db571949243, 0x099b5ba2b30dc, 0x0acf6ab764ac1, 0x0a92eebe25396, 0x0a931199a0944,
-    0x0bcdd4950ef52, 0x0c608a2eec764, 0x0d3c474f0e9c9, 0x0da2fc494a039, 0x0e07d01c59762,
-    0x0eea0b5162857, 0x104c9c256492f, 0x107fb4fa3e38a, 0x1277ad69ac0fb, 0x129b14b84f5db,
-    0x129ef7a341e9f, 0x131e3547d29f0, 0x15315bf18ae50, 0x1621c6dbe827e, 0x173d438c9c4d6,
-];
+/// The codes, indexed by id: the first 100 codes of `aruco_7x7_1000`.
+const CODES: &[u64] = super::aruco_7x7_1000::CODES.split_at(100).0;
 
 /// Ids sorted by code.
 static SORTED: [u16; 100] = [

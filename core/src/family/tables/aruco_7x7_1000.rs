@@ -23,7 +23,7 @@ pub static ARUCO_7X7_1000: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 1000] = [
+pub(crate) static CODES: [u64; 1000] = [
     0x1bab8d94b9415, 0x1c837e27c8156, 0x13d545758ba4f, 0x14cce0b6fd298, 0x18d78f62664ac,
     0x0b1002846b3dc, 0x1a6d77cdea890, 0x07942db1117b6, 0x1120e3ead2d3c, 0x176cb631adc7e,
     0x1ea01a305e921, 0x0044ce170a834, 0x0a9e6d72e91e1, 0x13c49108c4733, 0x17bfe64d79397,

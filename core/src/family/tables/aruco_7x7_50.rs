@@ -17,24 +17,12 @@ pub static ARUCO_7X7_50: Family<'static> = Family {
     bits: 49,
     min_hamming: 19,
     max_correction: 7,
-    codes: &CODES,
+    codes: CODES,
     sorted_ids: &SORTED,
 };
 
-/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
-#[rustfmt::skip]
-static CODES: [u64; 50] = [
-    0x1bab8d94b9415, 0x1c837e27c8156, 0x13d545758ba4f, 0x14cce0b6fd298, 0x18d78f62664ac,
-    0x0b1002846b3dc, 0x1a6d77cdea890, 0x07942db1117b6, 0x1120e3ead2d3c, 0x176cb631adc7e,
-    0x1ea01a305e921, 0x0044ce170a834, 0x0a9e6d72e91e1, 0x13c49108c4733, 0x17bfe64d79397,
-    0x19c220b60b52f, 0x1a7e0c2e43f16, 0x003c33d9d91db, 0x04d979854e0f1, 0x070fa9aec8226,
-    0x0752095d3c3d3, 0x08da908f679ba, 0x091254fbd3c57, 0x0bced87c93150, 0x0e945bdf45f11,
-    0x128bbc45026b2, 0x136252ac9db47, 0x143a9285b05f0, 0x176f1cc62d9a1, 0x1976bbb97b630,
-    0x1a7cbdd6f0666, 0x1e528467fa339, 0x1fbada33e77cd, 0x0748c49dd09dd, 0x0c430fc48761e,
-    0x0159a86df3b86, 0x01c81a9871c04, 0x0293fb340c448, 0x03345c234cbda, 0x056a104fc3668,
-    0x052d271253f46, 0x059eea9b7e8ad, 0x06bd27f3c6cf8, 0x07ee957b07be7, 0x089a053e9fe80,
-    0x09081c90855ea, 0x0be3226d06804, 0x0bd64e4807abb, 0x0df36483e2b84, 0x0e555f24151c7,
-];
+/// The codes, indexed by id: the first 50 codes of `aruco_7x7_1000`.
+const CODES: &[u64] = super::aruco_7x7_1000::CODES.split_at(50).0;
 
 /// Ids sorted by code.
 static SORTED: [u16; 50] = [

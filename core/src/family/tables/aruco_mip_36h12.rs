@@ -23,7 +23,7 @@ pub static ARUCO_MIP_36H12: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 250] = [
+pub(crate) static CODES: [u64; 250] = [
     0xd2b63a09d, 0x6001134e5, 0x1206fbe72, 0xff8ad6cb4, 0x85da9bc49, 0xb461afe9c, 0x6db51fe13,
     0x5248c541f, 0x008f34503, 0x8ea462ece, 0xeac2be76d, 0x1af615c44, 0xb48a49f27, 0x2e4e1283b,
     0x78b1f2fa8, 0x27d34f57e, 0x89222fff1, 0x4c1669406, 0xbf49b3511, 0xdc191cd5d, 0x11d7c3f85,

@@ -23,7 +23,7 @@ pub static ARUCO_ORIGINAL: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 1024] = [
+pub(crate) static CODES: [u64; 1024] = [
     0x1084210, 0x1084217, 0x1084209, 0x108420e, 0x10842f0, 0x10842f7, 0x10842e9, 0x10842ee,
     0x1084130, 0x1084137, 0x1084129, 0x108412e, 0x10841d0, 0x10841d7, 0x10841c9, 0x10841ce,
     0x1085e10, 0x1085e17, 0x1085e09, 0x1085e0e, 0x1085ef0, 0x1085ef7, 0x1085ee9, 0x1085eee,

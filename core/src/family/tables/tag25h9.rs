@@ -23,7 +23,7 @@ pub static TAG25H9: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 35] = [
+pub(crate) static CODES: [u64; 35] = [
     0x155cbf1, 0x1e4d1b6, 0x17b0b68, 0x1eac9cd, 0x12e14ce, 0x03548bb, 0x07757e6, 0x1065dab,
     0x1baa2e7, 0x0dea688, 0x081d927, 0x051b241, 0x0dbc8ae, 0x1e50e19, 0x15819d2, 0x16d8282,
     0x163e035, 0x09d9b81, 0x173eec4, 0x0ae3a09, 0x05f7c51, 0x1a137fc, 0x0dc9562, 0x1802e45,

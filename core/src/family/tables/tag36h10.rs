@@ -23,7 +23,7 @@ pub static TAG36H10: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 2320] = [
+pub(crate) static CODES: [u64; 2320] = [
     0x1ca92a687, 0x20521ac4c, 0x27a3fb7d6, 0x2b4cebd9b, 0x3647bceea, 0x39f0ad4af, 0x3d999da74,
     0x44eb7e5fe, 0x538f3fd12, 0x5738302d7, 0x65dbf19eb, 0x70d6c2b3a, 0x7f7a8424e, 0x832374813,
     0x86cc64dd8, 0x8a755539d, 0x9570264ec, 0x991916ab1, 0xa06af763b, 0xab65c878a, 0xb2b7a9314,

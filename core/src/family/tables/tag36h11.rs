@@ -23,7 +23,7 @@ pub static TAG36H11: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 587] = [
+pub(crate) static CODES: [u64; 587] = [
     0xd5d628584, 0xd97f18b49, 0xdd280910e, 0xe479e9c98, 0xebcbca822, 0xf31dab3ac, 0x056a5d085,
     0x10652e1d4, 0x22b1dfead, 0x265ad0472, 0x34fe91b86, 0x3ff962cd5, 0x43a25329a, 0x474b4385f,
     0x4e9d243e9, 0x5246149ae, 0x5997f5538, 0x683bb6c4c, 0x6be4a7211, 0x7e3158eea, 0x81da494af,

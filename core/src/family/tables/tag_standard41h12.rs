@@ -23,7 +23,7 @@ pub static TAG_STANDARD41H12: Family<'static> = Family {
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).
 #[rustfmt::skip]
-static CODES: [u64; 2115] = [
+pub(crate) static CODES: [u64; 2115] = [
     0x1bc2788b1a4, 0x1bd275f46b9, 0x1bdf6a6eaa8, 0x1bef0f1e5b1, 0x1bf580d0360, 0x1becadeb87e,
     0x1bfcaab9f6f, 0x1be6d745176, 0x1bfbd84f667, 0x1bebfdb08fa, 0x1bf176a2feb, 0x1c000b7a3f2,
     0x1c180c14ce3, 0x1c072eff1ed, 0x1c1f3b2160c, 0x1c05d40b815, 0x1c14d9d9f04, 0x1c238c50a91,
