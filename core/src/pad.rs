@@ -1,1 +1,324 @@
-//! Landing pad layouts (in progress, issue 3).
+//! Landing pad layouts: which markers a pad carries, how large, and where.
+//!
+//! The pad frame (contract): origin at the landing point, x right, y up, z up out of the pad
+//! (a marker-style frame, so a single-marker pad's frame is its marker's frame). Each
+//! [`PadMarker`] places a marker's own frame in it: centre at `(x, y, 0)`, turned by
+//! `yaw_deg` about the pad z axis. A marker-frame point `p` is at `Rz(yaw) p + (x, y, 0)`
+//! on the pad.
+//!
+//! A layout is a fixed-capacity array ([`MAX_PAD_MARKERS`]) built by a `const fn`, so the
+//! firmware holds its pad in a `const`/`static` ([`designs`]) while the host builds one from
+//! a `pad.toml` file (markers borrow their family names from the caller). Markers refer to
+//! their family by name, matched against [`Family::name`](crate::family::Family) of the
+//! families the detector ran with.
+//!
+//! Why nested pads: one marker is only usable while its image is between about 14 pixels
+//! (decodable) and most of the frame (fully visible). For a 70 degree lens that is a factor
+//! of ~27 in altitude; a landing from 40 m to 0.3 m spans 130, so a pad needs markers of
+//! several sizes. See [`designs`] and `pads/*.toml` for the arithmetic.
+
+/// Most markers on a pad.
+pub const MAX_PAD_MARKERS: usize = 16;
+
+/// One marker on the pad.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PadMarker<'a> {
+    /// Family name (`tag36h11`, `aruco_6x6_250`, or a user family's name).
+    pub family: &'a str,
+    /// Id within the family.
+    pub id: u16,
+    /// Edge of the outer black border, metres.
+    pub size: f32,
+    /// Marker centre in the pad frame, metres.
+    pub x: f32,
+    /// Marker centre in the pad frame, metres.
+    pub y: f32,
+    /// Rotation of the marker about the pad z axis, degrees (counter-clockwise seen from
+    /// above).
+    pub yaw_deg: f32,
+}
+
+impl PadMarker<'_> {
+    /// A placeholder for unused slots.
+    const EMPTY: PadMarker<'static> = PadMarker {
+        family: "",
+        id: 0,
+        size: 0.0,
+        x: 0.0,
+        y: 0.0,
+        yaw_deg: 0.0,
+    };
+
+    /// A marker-frame point in the pad frame.
+    pub fn to_pad(&self, p: &nalgebra::Vector3<f32>) -> nalgebra::Vector3<f32> {
+        let yaw = self.yaw_deg.to_radians();
+        let (s, c) = (libm::sinf(yaw), libm::cosf(yaw));
+        nalgebra::Vector3::new(c * p.x - s * p.y + self.x, s * p.x + c * p.y + self.y, p.z)
+    }
+}
+
+/// Why a layout is refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PadError {
+    /// No marker.
+    Empty,
+    /// More than [`MAX_PAD_MARKERS`] markers.
+    TooManyMarkers,
+    /// Marker `index` has a size that is not finite and positive.
+    BadSize {
+        /// Position in the list.
+        index: u8,
+    },
+    /// Marker `index` has a non-finite position or yaw.
+    BadPlacement {
+        /// Position in the list.
+        index: u8,
+    },
+    /// Marker `index` has an empty family name.
+    NoFamily {
+        /// Position in the list.
+        index: u8,
+    },
+    /// Marker `index` repeats the family and id of an earlier one (a detection could not be
+    /// attributed).
+    Duplicate {
+        /// Position in the list.
+        index: u8,
+    },
+}
+
+/// A pad: a name and up to [`MAX_PAD_MARKERS`] markers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PadLayout<'a> {
+    name: &'a str,
+    markers: [PadMarker<'a>; MAX_PAD_MARKERS],
+    len: usize,
+}
+
+/// `a == b` for strings, ASCII case ignored, usable in `const fn`.
+const fn same_name(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut rest = (a, b);
+    while let ([x, xs @ ..], [y, ys @ ..]) = rest {
+        if !x.eq_ignore_ascii_case(y) {
+            return false;
+        }
+        rest = (xs, ys);
+    }
+    true
+}
+
+impl<'a> PadLayout<'a> {
+    /// A checked layout (a `const fn`: a firmware pad is checked at compile time by
+    /// matching on the result in a `const`).
+    pub const fn new(name: &'a str, markers: &[PadMarker<'a>]) -> Result<Self, PadError> {
+        if markers.is_empty() {
+            return Err(PadError::Empty);
+        }
+        if markers.len() > MAX_PAD_MARKERS {
+            return Err(PadError::TooManyMarkers);
+        }
+        let mut out = [PadMarker::EMPTY; MAX_PAD_MARKERS];
+        let mut len = 0;
+        let mut rest = markers;
+        while let [m, tail @ ..] = rest {
+            let index = len as u8;
+            if !(m.size.is_finite() && m.size > 0.0) {
+                return Err(PadError::BadSize { index });
+            }
+            if !(m.x.is_finite() && m.y.is_finite() && m.yaw_deg.is_finite()) {
+                return Err(PadError::BadPlacement { index });
+            }
+            if m.family.is_empty() {
+                return Err(PadError::NoFamily { index });
+            }
+            let mut earlier = markers;
+            let mut k = 0;
+            while let [e, etail @ ..] = earlier {
+                if k >= len {
+                    break;
+                }
+                if e.id == m.id && same_name(e.family, m.family) {
+                    return Err(PadError::Duplicate { index });
+                }
+                earlier = etail;
+                k += 1;
+            }
+            out = place(out, len, *m);
+            len += 1;
+            rest = tail;
+        }
+        Ok(PadLayout {
+            name,
+            markers: out,
+            len,
+        })
+    }
+
+    /// The pad's name.
+    pub fn name(&self) -> &'a str {
+        self.name
+    }
+
+    /// The markers.
+    pub fn markers(&self) -> &[PadMarker<'a>] {
+        self.markers.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The layout marker of a family name and id.
+    pub fn find(&self, family: &str, id: u16) -> Option<&PadMarker<'a>> {
+        self.markers()
+            .iter()
+            .find(|m| m.id == id && same_name(m.family, family))
+    }
+}
+
+/// `array` with element `index` replaced (`const fn`; out-of-range indices change nothing).
+const fn place<'a>(
+    mut array: [PadMarker<'a>; MAX_PAD_MARKERS],
+    index: usize,
+    marker: PadMarker<'a>,
+) -> [PadMarker<'a>; MAX_PAD_MARKERS] {
+    let mut k = 0;
+    let mut slots: &mut [PadMarker<'a>] = &mut array;
+    while let [slot, rest @ ..] = slots {
+        if k == index {
+            *slot = marker;
+        }
+        slots = rest;
+        k += 1;
+    }
+    array
+}
+
+/// Unwraps a layout in a `const` context: an invalid layout becomes the empty one (which a
+/// test then catches), so no panic path exists.
+const fn or_empty(layout: Result<PadLayout<'static>, PadError>) -> PadLayout<'static> {
+    match layout {
+        Ok(l) => l,
+        Err(_) => PadLayout {
+            name: "",
+            markers: [PadMarker::EMPTY; MAX_PAD_MARKERS],
+            len: 0,
+        },
+    }
+}
+
+/// The shipped pad designs; identical to `pads/*.toml` (a host test compares them).
+///
+/// Coverage arithmetic, for a 640x480 camera with a 70 degree horizontal field of view
+/// (`f = 320 / tan 35deg = 457 px`), looking straight down from altitude `h` above the
+/// landing point: a marker of edge `s` is `457 s / h` pixels wide. It is decodable down to
+/// about 14 px, so up to `h = 32.6 s`; it must stay within 80 % of the frame height
+/// (384 px), so down to `h = 1.19 s`; and an off-centre marker must lie entirely in view,
+/// `|offset| + s/2 <= 0.525 h` along the frame's short (vertical) side.
+pub mod designs {
+    use super::{or_empty, PadLayout, PadMarker};
+
+    const fn m(family: &'static str, id: u16, size: f32, x: f32, y: f32) -> PadMarker<'static> {
+        PadMarker {
+            family,
+            id,
+            size,
+            x,
+            y,
+            yaw_deg: 0.0,
+        }
+    }
+
+    /// The paper's setup: one aruco_6x6_250 marker (the paper's 8x8-cell markers), 1 m,
+    /// centred on the landing point. Usable from 32.6 m down to 1.2 m.
+    pub const PAPER_SINGLE: PadLayout<'static> = or_empty(PadLayout::new(
+        "paper-single",
+        &[m("aruco_6x6_250", 0, 1.0, 0.0, 0.0)],
+    ));
+
+    /// touchdown's nested pad (tag36h11): a 1.25 m marker for altitude, four 0.40 m markers
+    /// around the landing point for the middle range, a 0.16 m marker on the landing point
+    /// for the last metre. At least one marker is fully in view and at least 14 px wide from
+    /// 40.8 m down to 0.19 m:
+    ///
+    /// | marker | size | centre | decodable up to | fully in view down to |
+    /// |---|---|---|---|---|
+    /// | id 0 | 1.25 m | (0, 1.40) | 40.8 m | 3.9 m (offset) |
+    /// | ids 1-4 | 0.40 m | (+-0.35, +-0.35) | 13.0 m | 1.05 m (offset) |
+    /// | id 5 | 0.16 m | (0, 0) | 5.2 m | 0.19 m (80 % of frame) |
+    pub const NESTED: PadLayout<'static> = or_empty(PadLayout::new(
+        "nested",
+        &[
+            m("tag36h11", 0, 1.25, 0.0, 1.4),
+            m("tag36h11", 1, 0.40, -0.35, 0.35),
+            m("tag36h11", 2, 0.40, 0.35, 0.35),
+            m("tag36h11", 3, 0.40, 0.35, -0.35),
+            m("tag36h11", 4, 0.40, -0.35, -0.35),
+            m("tag36h11", 5, 0.16, 0.0, 0.0),
+        ],
+    ));
+
+    /// Every shipped design.
+    pub const ALL: [&PadLayout<'static>; 2] = [&PAPER_SINGLE, &NESTED];
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_designs_are_valid() {
+        assert_eq!(designs::PAPER_SINGLE.markers().len(), 1);
+        assert_eq!(designs::NESTED.markers().len(), 6);
+        assert_eq!(designs::NESTED.name(), "nested");
+        assert!(designs::NESTED.find("TAG36H11", 5).is_some());
+        assert!(designs::NESTED.find("tag36h11", 6).is_none());
+    }
+
+    #[test]
+    fn bad_layouts_are_refused() {
+        let ok = PadMarker {
+            family: "tag36h11",
+            id: 1,
+            size: 0.2,
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        };
+        assert_eq!(PadLayout::new("x", &[]), Err(PadError::Empty));
+        assert_eq!(
+            PadLayout::new("x", &[ok; MAX_PAD_MARKERS + 1]),
+            Err(PadError::TooManyMarkers)
+        );
+        assert_eq!(
+            PadLayout::new("x", &[ok, ok]),
+            Err(PadError::Duplicate { index: 1 })
+        );
+        let bad = PadMarker { size: -1.0, ..ok };
+        assert_eq!(
+            PadLayout::new("x", &[bad]),
+            Err(PadError::BadSize { index: 0 })
+        );
+        let bad = PadMarker { x: f32::NAN, ..ok };
+        assert_eq!(
+            PadLayout::new("x", &[bad]),
+            Err(PadError::BadPlacement { index: 0 })
+        );
+    }
+
+    #[test]
+    fn yaw_places_marker_points() {
+        let m = PadMarker {
+            family: "f",
+            id: 0,
+            size: 1.0,
+            x: 1.0,
+            y: 2.0,
+            yaw_deg: 90.0,
+        };
+        let p = m.to_pad(&nalgebra::Vector3::new(1.0, 0.0, 0.0));
+        assert!((p.x - 1.0).abs() < 1e-6 && (p.y - 3.0).abs() < 1e-6);
+    }
+}

@@ -5,6 +5,7 @@
 //! (files, allocation, formatting) and calls the core exactly as the firmware does.
 
 pub mod cli;
+pub mod config;
 pub mod families;
 pub mod image_io;
 pub mod render;

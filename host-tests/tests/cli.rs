@@ -240,7 +240,7 @@ fn family_file_is_accepted() {
 }
 
 #[test]
-fn camera_options_are_checked_then_refused_until_pose_lands() {
+fn camera_options_are_checked_and_give_the_pose() {
     let image = scratch("camera-blank.pgm");
     save_pgm(&image, &GrayFrame::filled(16, 16, 255)).expect("write");
     let camera = scratch("CAMERA.toml");
@@ -269,7 +269,56 @@ fn camera_options_are_checked_then_refused_until_pose_lands() {
         "0.2",
         path_str(&image),
     ]);
-    assert_fails_with_one_line(&output, &["not implemented"]);
+    assert_eq!(
+        exit_code(&output),
+        Some(0),
+        "a valid camera file is accepted"
+    );
+
+    // A marker seen straight on: 100 px across at focal length 640 px, so a 0.2 m marker is
+    // 1.28 m away along the optical axis, in front of the image centre.
+    let rendered = touchdown_host::render::render_marker(
+        tables::by_name("tag36h11").expect("shipped"),
+        3,
+        &touchdown_host::render::Placement::new(319.5, 239.5, 100.0),
+        &touchdown_host::render::FrameOptions::sized(640, 480),
+    )
+    .expect("render");
+    let marker = scratch("camera-marker.png");
+    save_png(&marker, &rendered.0).expect("write");
+    std::fs::write(
+        &camera,
+        "width = 640\nheight = 480\nfx = 640.0\nfy = 640.0\ncx = 319.5\ncy = 239.5\n",
+    )
+    .expect("write");
+    let output = touchdown(&[
+        "detect",
+        "--json",
+        "--family",
+        "tag36h11",
+        "--camera",
+        path_str(&camera),
+        "--tag-size",
+        "0.2",
+        path_str(&marker),
+    ]);
+    assert_eq!(exit_code(&output), Some(0));
+    let json: Value = serde_json::from_slice(&output.stdout).expect("one JSON line");
+    let pose = &json["detections"][0]["pose"];
+    let t: Vec<f64> = pose["t"]
+        .as_array()
+        .expect("t")
+        .iter()
+        .filter_map(Value::as_f64)
+        .collect();
+    assert_eq!(t.len(), 3);
+    assert!(t[0].abs() < 0.01 && t[1].abs() < 0.01, "centred: {t:?}");
+    assert!((t[2] - 1.28).abs() < 0.01, "distance: {t:?}");
+    assert_eq!(pose["R"].as_array().map(Vec::len), Some(9));
+    assert!(
+        pose["reprojection_px"].as_f64().is_some_and(|e| e < 0.5),
+        "{pose}"
+    );
 
     let output = touchdown(&["detect", "--camera", path_str(&camera), path_str(&image)]);
     assert_fails_with_one_line(&output, &["--tag-size"]);

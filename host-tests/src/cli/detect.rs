@@ -10,8 +10,10 @@ use std::time::Instant;
 
 use clap::{Args, ValueEnum};
 use serde::{Deserialize, Serialize};
+use touchdown_core::camera::CameraModel;
 use touchdown_core::detect::{DetectError, Detection, Detector, DetectorConfig, MAX_FAMILIES};
 use touchdown_core::family::Family;
+use touchdown_core::pose::{marker_pose, PoseMethod};
 
 use super::camera::Camera;
 use super::{CliError, Outcome};
@@ -45,9 +47,19 @@ Output: one line per marker and a summary. With --json, one JSON object per imag
 per line:
   {\"image\": \"a.png\", \"width\": 640, \"height\": 480, \"time_ms\": 1.23,
    \"detections\": [{\"family\": \"tag36h11\", \"id\": 7, \"hamming\": 0,
-                   \"corners\": [[x,y],[x,y],[x,y],[x,y]]}]}
-time_ms is the detection time only (not image decoding); hamming is the number of bits
-the decoder corrected.
+                   \"corners\": [[x,y],[x,y],[x,y],[x,y]],
+                   \"pose\": {\"R\": [r00,r01,r02,r10,...,r22], \"t\": [x,y,z],
+                            \"reprojection_px\": 0.12}}]}
+time_ms is the detection (and pose) time only (not image decoding); hamming is the number
+of bits the decoder corrected.
+
+Poses: with --camera CAMERA.toml and --tag-size M (every marker is taken to be M metres
+across its outer black border), each marker gets \"pose\": R (row-major) and t map
+marker-frame points into the camera frame, X_cam = R X_marker + t (marker frame: x right,
+y up, z out of the printed face; camera frame: x right, y down, z forward; metres), and the
+RMS reprojection error of the corners in pixels. Corners are undistorted with the camera's
+Brown-Conrady coefficients; the pose is IPPE's better planar solution refined by
+Levenberg-Marquardt.
 
 Exit status: 0 when every image was read (even with no marker found); 2 when an image could
 not be read (one line per file on stderr; the other images are still processed) or an option
@@ -136,6 +148,32 @@ pub struct DetectionReport {
     /// Outer black-border corners: top-left, top-right, bottom-right, bottom-left of the
     /// canonical image, pixels, (0, 0) = centre of the top-left pixel.
     pub corners: [[f32; 2]; 4],
+    /// The marker's pose, with `--camera` and `--tag-size` only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<PoseReport>,
+}
+
+/// The `"pose"` of a detection (the contract's keys).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseReport {
+    /// Rotation marker frame -> camera frame, row-major.
+    #[serde(rename = "R")]
+    pub rotation: [f32; 9],
+    /// Marker centre in the camera frame, metres.
+    pub t: [f32; 3],
+    /// RMS reprojection error of the four corners, pixels.
+    pub reprojection_px: f32,
+}
+
+/// The pose of one detection, or `None` when no pose explains its corners.
+fn pose_report(detection: &Detection, camera: &CameraModel, size: f32) -> Option<PoseReport> {
+    let found = marker_pose(&detection.corners, size, camera, PoseMethod::Ippe).ok()?;
+    let pose = found.best.pose;
+    Some(PoseReport {
+        rotation: pose.rotation_row_major(),
+        t: [pose.translation.x, pose.translation.y, pose.translation.z],
+        reprojection_px: found.best.reprojection_rms_px,
+    })
 }
 
 /// Counts for the closing summary line.
@@ -160,7 +198,7 @@ pub fn run(
             selected.len()
         )));
     }
-    check_pose_options(args)?;
+    let pose_setup = check_pose_options(args)?;
 
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
@@ -184,9 +222,38 @@ pub fn run(
         let searched = detector
             .detect(&view, &family_refs, &mut buffers)
             .map(|_| ());
+        let poses: Vec<Option<PoseReport>> = match &pose_setup {
+            Some((camera, size)) if searched.is_ok() => detector
+                .detections()
+                .iter()
+                .map(|d| pose_report(d, camera, *size))
+                .collect(),
+            _ => Vec::new(),
+        };
         let elapsed = started.elapsed().as_secs_f64();
         searched.map_err(|e| CliError(format!("{}: {}", path.display(), describe(e))))?;
         let detections = detector.detections();
+        if let Some((camera, _)) = &pose_setup {
+            if (camera.width as usize, camera.height as usize) != (frame.width, frame.height) {
+                let _ = writeln!(
+                    err,
+                    "warning: {}: image is {}x{} but the camera file is for {}x{}; poses use the camera file as given",
+                    path.display(),
+                    frame.width,
+                    frame.height,
+                    camera.width,
+                    camera.height
+                );
+            }
+            let failed = poses.iter().filter(|p| p.is_none()).count();
+            if failed > 0 {
+                let _ = writeln!(
+                    err,
+                    "warning: {}: no pose for {failed} marker(s) (degenerate corners or outside the lens model)",
+                    path.display()
+                );
+            }
+        }
         totals.images += 1;
         totals.markers += detections.len();
         totals.detect_seconds += elapsed;
@@ -205,6 +272,7 @@ pub fn run(
                 elapsed,
                 detections,
                 &selected,
+                &poses,
             );
             write_json_line(out, &report)
         } else {
@@ -216,6 +284,7 @@ pub fn run(
                 elapsed,
                 detections,
                 &selected,
+                &poses,
             )
         };
         match written {
@@ -241,23 +310,29 @@ pub fn run(
     })
 }
 
-/// `--camera` and `--tag-size` go together. They are checked in full (so a bad camera file is
-/// reported as such) and then refused, because pose output is not implemented yet: silently
-/// printing detections without the requested poses would mislead scripts.
-fn check_pose_options(args: &DetectArgs) -> Result<(), CliError> {
+/// `--camera` and `--tag-size` go together; the camera file is checked in full (so a bad
+/// camera file is reported as such). Returns the camera and the marker size for poses.
+fn check_pose_options(args: &DetectArgs) -> Result<Option<(CameraModel, f32)>, CliError> {
     match (&args.camera, args.tag_size) {
-        (None, None) => Ok(()),
+        (None, None) => Ok(None),
         (Some(_), None) => Err(CliError::new(
             "--camera needs --tag-size (the marker's black-border edge in metres) for poses",
         )),
         (None, Some(_)) => Err(CliError::new(
             "--tag-size needs --camera CAMERA.toml for poses",
         )),
-        (Some(path), Some(_)) => {
-            Camera::load(path).map_err(CliError::new)?;
-            Err(CliError::new(
-                "pose output (--camera with --tag-size) is not implemented yet; run without them for detections only",
-            ))
+        (Some(path), Some(size)) => {
+            let camera = Camera::load(path).map_err(CliError::new)?;
+            let k = camera.distortion_coefficients();
+            let model = CameraModel::new(
+                camera.width,
+                camera.height,
+                (camera.fx as f32, camera.fy as f32),
+                (camera.cx as f32, camera.cy as f32),
+                k.map(|v| v as f32),
+            )
+            .map_err(|e| CliError(format!("{}: unusable camera: {e:?}", path.display())))?;
+            Ok(Some((model, size as f32)))
         }
     }
 }
@@ -287,6 +362,7 @@ pub fn image_report(
     seconds: f64,
     detections: &[Detection],
     selected: &[SelectedFamily],
+    poses: &[Option<PoseReport>],
 ) -> ImageReport {
     ImageReport {
         image: path.to_string_lossy().into_owned(),
@@ -296,11 +372,13 @@ pub fn image_report(
         time_ms: (seconds * 1e6).round() / 1e3,
         detections: detections
             .iter()
-            .map(|d| DetectionReport {
+            .enumerate()
+            .map(|(k, d)| DetectionReport {
                 family: family_name(selected, d).to_string(),
                 id: d.id,
                 hamming: d.hamming,
                 corners: d.corners.map(|p| [p.x, p.y]),
+                pose: poses.get(k).copied().flatten(),
             })
             .collect(),
     }
@@ -313,6 +391,8 @@ fn write_json_line(out: &mut dyn Write, report: &ImageReport) -> io::Result<()> 
     out.flush()
 }
 
+// One line per marker needs the image facts, the markers and their poses side by side.
+#[allow(clippy::too_many_arguments)]
 fn write_text(
     out: &mut dyn Write,
     path: &Path,
@@ -321,6 +401,7 @@ fn write_text(
     seconds: f64,
     detections: &[Detection],
     selected: &[SelectedFamily],
+    poses: &[Option<PoseReport>],
 ) -> io::Result<()> {
     let image = path.display();
     if detections.is_empty() {
@@ -330,9 +411,9 @@ fn write_text(
             seconds * 1e3
         )?;
     }
-    for d in detections {
+    for (k, d) in detections.iter().enumerate() {
         let [a, b, c, e] = d.corners;
-        writeln!(
+        write!(
             out,
             "{image}: {} id {} hamming {} corners ({:.2}, {:.2}) ({:.2}, {:.2}) ({:.2}, {:.2}) ({:.2}, {:.2}) margin {:.2}",
             family_name(selected, d),
@@ -341,6 +422,15 @@ fn write_text(
             a.x, a.y, b.x, b.y, c.x, c.y, e.x, e.y,
             d.decision_margin,
         )?;
+        if let Some(pose) = poses.get(k).copied().flatten() {
+            let [x, y, z] = pose.t;
+            write!(
+                out,
+                " t ({x:.4}, {y:.4}, {z:.4}) m reprojection {:.2} px",
+                pose.reprojection_px
+            )?;
+        }
+        writeln!(out)?;
     }
     out.flush()
 }
