@@ -15,7 +15,6 @@ use touchdown_core::detect::{DetectError, Detection, Detector, DetectorConfig, M
 use touchdown_core::family::Family;
 use touchdown_core::pose::{marker_pose, PoseMethod};
 
-use super::camera::Camera;
 use super::{CliError, Outcome};
 use crate::families::{self, SelectedFamily};
 use crate::image_io::load_gray;
@@ -322,16 +321,7 @@ fn check_pose_options(args: &DetectArgs) -> Result<Option<(CameraModel, f32)>, C
             "--tag-size needs --camera CAMERA.toml for poses",
         )),
         (Some(path), Some(size)) => {
-            let camera = Camera::load(path).map_err(CliError::new)?;
-            let k = camera.distortion_coefficients();
-            let model = CameraModel::new(
-                camera.width,
-                camera.height,
-                (camera.fx as f32, camera.fy as f32),
-                (camera.cx as f32, camera.cy as f32),
-                k.map(|v| v as f32),
-            )
-            .map_err(|e| CliError(format!("{}: unusable camera: {e:?}", path.display())))?;
+            let model = crate::config::load_camera(path).map_err(CliError::new)?;
             Ok(Some((model, size as f32)))
         }
     }

@@ -4,7 +4,6 @@
 //! line on stderr, prefixed `error: ` like clap's own messages, with exit status 2; nothing
 //! here panics on user input. The binary (`src/bin/touchdown.rs`) only calls [`main`].
 
-pub mod camera;
 pub mod detect;
 
 use std::fmt;
