@@ -178,13 +178,36 @@ fn oriented_corners(
     Some((corners, h.map(0.5 * n, 0.5 * n)?))
 }
 
-/// Decodes a candidate with touchdown's method.
-pub(crate) fn decode_robust(
+/// What a candidate's cells read as under one cell layout, before any code look-up: families
+/// that share a layout (tag36h11 and aruco_6x6_250, say) share this work.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct GridRead {
+    h: Homography,
+    readings: [u64; 4],
+    margin: f32,
+    contrast: f32,
+}
+
+/// Looks a read grid up in `family` (which must have the layout it was read with).
+pub(crate) fn lookup(family: &Family<'_>, grid: &GridRead, max_hamming: u8) -> Option<Read> {
+    let decoded = family.decode(&grid.readings, max_hamming)?;
+    let (corners, center) = oriented_corners(family, &grid.h, decoded.rotation)?;
+    Some(Read {
+        decoded,
+        corners,
+        center,
+        margin: grid.margin,
+        contrast: grid.contrast,
+    })
+}
+
+/// Reads a candidate's cells with touchdown's method, using `family`'s layout.
+pub(crate) fn read_robust(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     quad: &[Point; 4],
     config: &DetectorConfig,
-) -> Option<Read> {
+) -> Option<GridRead> {
     let h = grid_homography(family, quad)?;
     let n = family.grid as usize;
     let b = family.border_ring as isize;
@@ -313,24 +336,21 @@ pub(crate) fn decode_robust(
     if margin < config.min_decision_margin {
         return None;
     }
-    let readings = family.codes_of_grid(cells.get(..n * n)?);
-    let decoded = family.decode(&readings, config.max_hamming)?;
-    let (corners, center) = oriented_corners(family, &h, decoded.rotation)?;
-    Some(Read {
-        decoded,
-        corners,
-        center,
+    Some(GridRead {
+        h,
+        readings: family.codes_of_grid(cells.get(..n * n)?),
         margin,
         contrast,
     })
 }
 
-/// Decodes a candidate with the paper's method (normal families only).
-pub(crate) fn decode_paper(
+/// Reads a candidate's cells with the paper's method (normal families only); the look-up
+/// must then be exact (`max_hamming` 0).
+pub(crate) fn read_paper(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     quad: &[Point; 4],
-) -> Option<Read> {
+) -> Option<GridRead> {
     if family.reversed() {
         return None;
     }
@@ -372,16 +392,11 @@ pub(crate) fn decode_paper(
             }
         }
     }
-    let readings = family.codes_of_grid(cells.get(..n * n)?);
-    let decoded = family.decode(&readings, 0)?;
-    let (corners, center) = oriented_corners(family, &h, decoded.rotation)?;
-    let contrast = light_sum / light_n.max(1) as f32 - dark_sum / dark_n.max(1) as f32;
-    Some(Read {
-        decoded,
-        corners,
-        center,
+    Some(GridRead {
+        h,
+        readings: family.codes_of_grid(cells.get(..n * n)?),
         margin: 1.0,
-        contrast,
+        contrast: light_sum / light_n.max(1) as f32 - dark_sum / dark_n.max(1) as f32,
     })
 }
 

@@ -215,7 +215,8 @@ pub struct DetectStats {
     pub contours: u32,
     /// Boundaries that simplified to a convex quad.
     pub quads: u32,
-    /// Quads whose border sampled as a valid black ring for some family.
+    /// Quads whose cells read as a valid marker grid (black border, white margin, clear
+    /// cells) for some family's layout, before the code look-up.
     pub bordered: u32,
     /// Quads decoded to an id (before de-duplication).
     pub decoded: u32,
@@ -427,19 +428,33 @@ impl Candidates<'_, '_, '_> {
             return;
         }
         let mut bordered = false;
+        // The last layout read and its result: consecutive families with the same layout
+        // (the default tag36h11 + aruco_6x6_250 pair) sample and threshold the cells once.
+        let mut last: Option<(&Family<'_>, Option<decode::GridRead>)> = None;
         for (index, family) in self.families.iter().enumerate() {
             if !wanted(family) {
                 continue;
             }
-            let read = if paper {
-                decode::decode_paper(self.image, family, &corners)
-            } else {
-                decode::decode_robust(self.image, family, &corners, config)
+            let grid = match last {
+                Some((seen, grid)) if seen.same_layout(family) => grid,
+                _ => {
+                    let grid = if paper {
+                        decode::read_paper(self.image, family, &corners)
+                    } else {
+                        decode::read_robust(self.image, family, &corners, config)
+                    };
+                    last = Some((family, grid));
+                    grid
+                }
             };
-            let Some(read) = read else {
+            let Some(grid) = grid else {
                 continue;
             };
             bordered = true;
+            let max_hamming = if paper { 0 } else { config.max_hamming };
+            let Some(read) = decode::lookup(family, &grid, max_hamming) else {
+                continue;
+            };
             stats.decoded += 1;
             let detection = Detection {
                 family: index as u8,

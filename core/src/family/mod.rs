@@ -89,6 +89,13 @@ pub struct Decoded {
 }
 
 impl<'a> Family<'a> {
+    /// Whether two families read the same cells the same way (same grid, rings and bits), so
+    /// one sampled grid serves both.
+    pub fn same_layout(&self, other: &Family<'_>) -> bool {
+        (self.grid, self.quiet_rings, self.border_ring, self.bits)
+            == (other.grid, other.quiet_rings, other.border_ring, other.bits)
+    }
+
     /// True when the data lies outside the border ring (tagStandard41h12 style).
     pub fn reversed(&self) -> bool {
         self.quiet_rings < self.border_ring
