@@ -100,6 +100,30 @@ impl<'a> GrayImage<'a> {
     /// outside the image read the nearest edge pixel.
     #[inline]
     pub fn sample(&self, x: f32, y: f32) -> f32 {
+        // Fast path: the 2x2 neighbourhood lies inside the image (NaN fails the comparisons).
+        if x >= 0.0 && y >= 0.0 && x < (self.width - 1) as f32 && y < (self.height - 1) as f32 {
+            let (xi, yi) = (x as usize, y as usize); // truncation is floor for x, y >= 0
+            let (fx, fy) = (x - xi as f32, y - yi as f32);
+            let top = yi * self.stride + xi;
+            let bottom = top + self.stride;
+            if let (Some(&[p00, p10]), Some(&[p01, p11])) = (
+                self.data
+                    .get(top..top + 2)
+                    .and_then(|s| <&[u8; 2]>::try_from(s).ok()),
+                self.data
+                    .get(bottom..bottom + 2)
+                    .and_then(|s| <&[u8; 2]>::try_from(s).ok()),
+            ) {
+                let upper = p00 as f32 + (p10 as f32 - p00 as f32) * fx;
+                let lower = p01 as f32 + (p11 as f32 - p01 as f32) * fx;
+                return upper + (lower - upper) * fy;
+            }
+        }
+        self.sample_clamped(x, y)
+    }
+
+    /// [`GrayImage::sample`] near or beyond the border: reads the nearest edge pixels.
+    fn sample_clamped(&self, x: f32, y: f32) -> f32 {
         if !(x.is_finite() && y.is_finite()) {
             return 0.0;
         }
@@ -171,6 +195,20 @@ mod tests {
         assert_eq!(img.sample(-10.0, 1.0), 200.0);
         assert_eq!(img.sample(f32::NAN, 0.0), 0.0);
         assert_eq!(img.sample(1e30, -1e30), 100.0);
+    }
+
+    #[test]
+    fn fast_and_clamped_sampling_agree_inside() {
+        let data: [u8; 20] = core::array::from_fn(|k| (k * 37 % 251) as u8);
+        let img = GrayImage::with_stride(&data, 4, 4, 5).unwrap();
+        for i in 0..=30 {
+            for j in 0..=30 {
+                let (x, y) = (i as f32 * 0.1, j as f32 * 0.1);
+                let fast = img.sample(x, y);
+                let slow = img.sample_clamped(x, y);
+                assert!((fast - slow).abs() < 1e-3, "({x}, {y}): {fast} vs {slow}");
+            }
+        }
     }
 
     #[test]
