@@ -33,6 +33,7 @@
 )]
 
 pub mod camera;
+pub mod companion;
 pub mod detect;
 pub mod family;
 pub mod filter;

@@ -6,7 +6,10 @@
 
 pub mod cli;
 pub mod config;
+pub mod eval;
 pub mod families;
 pub mod image_io;
+pub mod recording;
 pub mod render;
+pub mod sim;
 pub mod workspace;

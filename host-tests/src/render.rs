@@ -27,9 +27,9 @@
 //! [`score_frame`] compares a detector's output with the truth: found markers, corner errors,
 //! and every detection that is not a rendered marker (a wrong id is never acceptable).
 //!
-//! The landing simulator (issue 4) grows from here: lens distortion goes into
-//! [`PinholeCamera`] (projection and its inverse), exposure and motion blur into the image
-//! formation steps, and a textured ground plane becomes one more posed plane.
+//! The landing simulator ([`crate::sim`]) renders whole flights with the same sampling
+//! pattern, marker patterns ([`MarkerPattern`]), blur, noise and texture lattice, adding lens
+//! distortion, a ground plane in metres, motion blur and a sensor model.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -40,7 +40,7 @@ use touchdown_core::geometry::Point;
 use crate::image_io::GrayFrame;
 
 /// A 3x3 matrix, row-major rows.
-type Mat3 = [[f64; 3]; 3];
+pub(crate) type Mat3 = [[f64; 3]; 3];
 
 /// An ideal pinhole camera (no distortion yet). Pixel coordinates follow the project
 /// convention: (0, 0) is the centre of the top-left pixel, x right, y down.
@@ -225,6 +225,11 @@ impl MarkerPattern {
     /// Cells per side.
     pub fn grid(&self) -> usize {
         self.grid
+    }
+
+    /// Index (from the outside) of the ring whose outer edge is the marker edge.
+    pub fn border_ring(&self) -> usize {
+        self.border_ring
     }
 
     /// Cells per side of the square the size and corners refer to.
@@ -759,7 +764,7 @@ fn paper_bbox(
 }
 
 /// Separable Gaussian blur, edges replicated.
-fn gaussian_blur(buffer: &mut [f32], w: usize, h: usize, sigma: f64) {
+pub(crate) fn gaussian_blur(buffer: &mut [f32], w: usize, h: usize, sigma: f64) {
     let radius = (4.0 * sigma).ceil().max(1.0) as isize;
     let mut kernel: Vec<f32> = (-radius..=radius)
         .map(|k| (-(k * k) as f64 / (2.0 * sigma * sigma)).exp() as f32)
@@ -800,12 +805,12 @@ fn quantise(v: f32) -> u8 {
 
 /// Standard normal deviates by the Box-Muller transform, two per pair of uniforms.
 #[derive(Default)]
-struct NormalPairs {
+pub(crate) struct NormalPairs {
     spare: Option<f64>,
 }
 
 impl NormalPairs {
-    fn next(&mut self, rng: &mut ChaCha8Rng) -> f64 {
+    pub(crate) fn next(&mut self, rng: &mut ChaCha8Rng) -> f64 {
         if let Some(v) = self.spare.take() {
             return v;
         }
@@ -858,21 +863,25 @@ impl ValueNoise {
         v
     }
 
-    /// A hash of (seed, octave, lattice point) mapped to [-1, 1] (splitmix64 finaliser).
     fn lattice(&self, octave: u64, a: i64, b: i64) -> f64 {
-        let mut z = self
-            .seed
-            .wrapping_add(octave.wrapping_mul(0x9e37_79b9_7f4a_7c15))
-            .wrapping_add((a as u64).wrapping_mul(0xbf58_476d_1ce4_e5b9))
-            .wrapping_add((b as u64).wrapping_mul(0x94d0_49bb_1331_11eb));
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        lattice_hash(self.seed, octave, a, b)
     }
 }
 
-fn mul3(a: &Mat3, b: &Mat3) -> Mat3 {
+/// A hash of (seed, octave, lattice point) mapped to [-1, 1] (splitmix64 finaliser); the
+/// simulator's ground textures use the same lattice.
+pub(crate) fn lattice_hash(seed: u64, octave: u64, a: i64, b: i64) -> f64 {
+    let mut z = seed
+        .wrapping_add(octave.wrapping_mul(0x9e37_79b9_7f4a_7c15))
+        .wrapping_add((a as u64).wrapping_mul(0xbf58_476d_1ce4_e5b9))
+        .wrapping_add((b as u64).wrapping_mul(0x94d0_49bb_1331_11eb));
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+}
+
+pub(crate) fn mul3(a: &Mat3, b: &Mat3) -> Mat3 {
     let mut c = [[0.0; 3]; 3];
     for (r, row) in c.iter_mut().enumerate() {
         for (k, out) in row.iter_mut().enumerate() {
@@ -882,7 +891,7 @@ fn mul3(a: &Mat3, b: &Mat3) -> Mat3 {
     c
 }
 
-fn invert3(m: &Mat3) -> Option<Mat3> {
+pub(crate) fn invert3(m: &Mat3) -> Option<Mat3> {
     let cof =
         |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
     let adj = [
@@ -899,7 +908,7 @@ fn invert3(m: &Mat3) -> Option<Mat3> {
 
 /// Applies a homography; `None` at or behind the horizon (w <= 0: the plane point is not in
 /// front of the camera, or the pixel's ray misses the plane's front side).
-fn apply(m: &Mat3, x: f64, y: f64) -> Option<(f64, f64)> {
+pub(crate) fn apply(m: &Mat3, x: f64, y: f64) -> Option<(f64, f64)> {
     let w = m[2][0] * x + m[2][1] * y + m[2][2];
     if w.is_nan() || w <= 1e-12 {
         return None;

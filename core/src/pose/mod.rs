@@ -26,9 +26,11 @@
 
 pub mod homography_decomposition;
 pub mod ippe;
+pub mod level;
 pub mod pad_pose;
 pub mod refine;
 
+pub use level::level_pad_fix;
 pub use pad_pose::{pad_pose, pad_pose_with_prediction, PadFix, PIXEL_NOISE_FLOOR_PX};
 
 use crate::camera::CameraModel;

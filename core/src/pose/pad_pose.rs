@@ -92,6 +92,29 @@ fn marker_to_pad(marker: &PadMarker<'_>) -> Pose {
     }
 }
 
+/// The layout marker a detection shows, with its index in the layout, if any.
+fn layout_marker_index<'l>(
+    layout: &'l PadLayout<'l>,
+    families: &[&Family<'_>],
+    detection: &Detection,
+) -> Option<(usize, &'l PadMarker<'l>)> {
+    let family = families.get(detection.family as usize)?;
+    layout
+        .markers()
+        .iter()
+        .enumerate()
+        .find(|(_, m)| m.id == detection.id && m.family.eq_ignore_ascii_case(family.name))
+}
+
+/// The layout marker a detection shows, if any.
+pub(crate) fn layout_marker<'l>(
+    layout: &'l PadLayout<'l>,
+    families: &[&Family<'_>],
+    detection: &Detection,
+) -> Option<&'l PadMarker<'l>> {
+    layout_marker_index(layout, families, detection).map(|(_, m)| m)
+}
+
 /// Twice the signed area of a quadrilateral (shoelace), pixels squared.
 fn quad_area(corners: &[Point; 4]) -> f32 {
     let mut twice = 0.0;
@@ -135,15 +158,7 @@ pub fn pad_pose_with_prediction(
     let mut anchor: Option<(&PadMarker<'_>, [Point; 4], f32)> = None;
 
     for detection in detections {
-        let Some(family) = families.get(detection.family as usize) else {
-            continue;
-        };
-        let Some((index, marker)) = layout
-            .markers()
-            .iter()
-            .enumerate()
-            .find(|(_, m)| m.id == detection.id && m.family.eq_ignore_ascii_case(family.name))
-        else {
+        let Some((index, marker)) = layout_marker_index(layout, families, detection) else {
             continue;
         };
         match used.get_mut(index) {

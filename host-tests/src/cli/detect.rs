@@ -479,7 +479,9 @@ mod tests {
             "b.pgm",
         ])
         .unwrap();
-        let crate::cli::Command::Detect(args) = cli.command;
+        let crate::cli::Command::Detect(args) = cli.command else {
+            panic!("parsed as another subcommand");
+        };
         assert_eq!(args.families, ["tag36h11", "x.txt"]);
         assert!(args.json);
         assert_eq!(args.images.len(), 2);

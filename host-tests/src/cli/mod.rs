@@ -4,7 +4,10 @@
 //! line on stderr, prefixed `error: ` like clap's own messages, with exit status 2; nothing
 //! here panics on user input. The binary (`src/bin/touchdown.rs`) only calls [`main`].
 
+pub mod companion;
 pub mod detect;
+pub mod pad;
+pub mod simulate;
 
 use std::fmt;
 use std::io::{self, Write};
@@ -38,6 +41,14 @@ pub enum Command {
     /// Find markers in images and print their ids and corners.
     #[command(long_about = detect::LONG_HELP)]
     Detect(detect::DetectArgs),
+    /// Render a simulated flight over a landing pad into a recording.
+    #[command(long_about = simulate::LONG_HELP)]
+    Simulate(simulate::SimulateArgs),
+    /// Write a printable landing pad (SVG at true size) and its pad.toml.
+    #[command(long_about = pad::LONG_HELP)]
+    Pad(pad::PadArgs),
+    /// Run the board's MAVLink companion logic on a recording against a UDP endpoint (SITL).
+    Companion(companion::CompanionArgs),
 }
 
 /// A failure reported as one line on stderr with exit status 2.
@@ -74,6 +85,9 @@ pub enum Outcome {
 pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome, CliError> {
     match cli.command {
         Command::Detect(args) => detect::run(&args, out, err),
+        Command::Simulate(args) => simulate::run(&args, out, err),
+        Command::Pad(args) => pad::run(&args, out, err),
+        Command::Companion(args) => companion::run(&args, out, err),
     }
 }
 

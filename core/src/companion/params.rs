@@ -1,0 +1,436 @@
+//! The board's MAVLink parameters: a fixed table, range-checked, exportable for flash.
+//!
+//! Users tune the board from Mission Planner or QGroundControl through the MAVLink parameter
+//! protocol (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE); the
+//! [`super::Companion`] speaks the protocol, this module holds the values.
+//!
+//! Every parameter is sent as `MAV_PARAM_TYPE_REAL32`, integers included. The protocol has two
+//! incompatible encodings for integer parameters (ArduPilot's C cast, PX4's bytewise copy) and
+//! a ground station picks one from the autopilot's capabilities, which a companion does not
+//! announce; a float holding an integral value reads the same in both. Integer parameters
+//! refuse non-integral values.
+//!
+//! A rejected PARAM_SET (unknown name, out of range, not finite, not integral) changes nothing
+//! and is answered with the **old** value, which is how a ground station learns that the write
+//! failed.
+//!
+//! Persistence is the firmware's job: [`ParamSet::export`] writes the values as bytes
+//! (magic, version, `name + value` records, CRC) and [`ParamSet::import`] reads them back.
+//! Records are matched by name, so a firmware with a changed table still reads what it knows;
+//! each imported value is range-checked again and a bad one keeps its default.
+
+use super::link::crc_accumulate;
+
+/// Longest parameter name (MAVLink's `param_id`, not NUL-terminated when exactly 16).
+pub const PARAM_NAME_LEN: usize = 16;
+
+/// What a parameter holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ParamKind {
+    /// An integer (sent as a float holding an integral value).
+    Int,
+    /// A real number.
+    Real,
+}
+
+/// One entry of the table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamDef {
+    /// Name, at most [`PARAM_NAME_LEN`] ASCII characters.
+    pub name: &'static str,
+    /// Integer or real.
+    pub kind: ParamKind,
+    /// Value until set.
+    pub default: f32,
+    /// Smallest accepted value.
+    pub min: f32,
+    /// Largest accepted value.
+    pub max: f32,
+    /// What it does (for docs and `touchdown companion --list-params`).
+    pub help: &'static str,
+}
+
+/// The parameters, in table order (the order is the MAVLink `param_index`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum ParamId {
+    /// Output profile: 0 ArduPilot (BODY_FRD), 1 PX4 (LOCAL_NED).
+    Profile = 0,
+    /// Most LANDING_TARGETs per second.
+    RateHz,
+    /// Marker edge length for single-marker pads, metres.
+    TagSize,
+    /// Camera mount: rotation about the optical axis from "image top toward the nose", degrees.
+    CamYaw,
+    /// Largest Hamming distance the decoder accepts.
+    MaxHamming,
+    /// Our MAVLink system id.
+    SysId,
+    /// Our MAVLink component id.
+    CompId,
+    /// Send VISION_POSITION_ESTIMATE too (0/1).
+    VpeEnable,
+    /// Serial baud rate to the flight controller (applied at boot).
+    Baud,
+    /// Time base of `time_usec`: 0 by profile, 1 autopilot clock, 2 companion boot clock.
+    TimeBase,
+}
+
+/// Number of parameters.
+pub const PARAM_COUNT: usize = 10;
+
+/// The table (index = [`ParamId`] as usize).
+pub const PARAMS: [ParamDef; PARAM_COUNT] = [
+    ParamDef {
+        name: "TD_PROFILE",
+        kind: ParamKind::Int,
+        default: 0.0,
+        min: 0.0,
+        max: 1.0,
+        help: "0 ArduPilot (LANDING_TARGET in BODY_FRD), 1 PX4 (LOCAL_NED)",
+    },
+    ParamDef {
+        name: "TD_RATE_HZ",
+        kind: ParamKind::Int,
+        default: 30.0,
+        min: 1.0,
+        max: 100.0,
+        help: "most LANDING_TARGET messages per second",
+    },
+    ParamDef {
+        name: "TD_TAG_SIZE",
+        kind: ParamKind::Real,
+        default: 0.2,
+        min: 0.02,
+        max: 5.0,
+        help: "marker edge length of a single-marker pad, metres",
+    },
+    ParamDef {
+        name: "TD_CAM_YAW",
+        kind: ParamKind::Real,
+        default: 0.0,
+        min: -180.0,
+        max: 180.0,
+        help: "camera turned about its optical axis from image-top-forward, degrees",
+    },
+    ParamDef {
+        name: "TD_MAX_HAMMING",
+        kind: ParamKind::Int,
+        default: 1.0,
+        min: 0.0,
+        max: 3.0,
+        help: "largest corrected bit errors per marker",
+    },
+    ParamDef {
+        name: "TD_SYSID",
+        kind: ParamKind::Int,
+        default: 1.0,
+        min: 1.0,
+        max: 255.0,
+        help: "our MAVLink system id (the vehicle's)",
+    },
+    ParamDef {
+        name: "TD_COMPID",
+        kind: ParamKind::Int,
+        default: 191.0,
+        min: 1.0,
+        max: 255.0,
+        help: "our MAVLink component id (191 = MAV_COMP_ID_ONBOARD_COMPUTER)",
+    },
+    ParamDef {
+        name: "TD_VPE_EN",
+        kind: ParamKind::Int,
+        default: 0.0,
+        min: 0.0,
+        max: 1.0,
+        help: "1: also send VISION_POSITION_ESTIMATE (vehicle in a pad-centred NED frame)",
+    },
+    ParamDef {
+        name: "TD_BAUD",
+        kind: ParamKind::Int,
+        default: 921_600.0,
+        min: 9_600.0,
+        max: 3_000_000.0,
+        help: "UART baud rate to the flight controller (applied at boot)",
+    },
+    ParamDef {
+        name: "TD_TIME_BASE",
+        kind: ParamKind::Int,
+        default: 0.0,
+        min: 0.0,
+        max: 2.0,
+        help: "time_usec clock: 0 by profile, 1 autopilot (TIMESYNC), 2 companion boot",
+    },
+];
+
+impl ParamId {
+    /// All ids in table order.
+    pub const ALL: [ParamId; PARAM_COUNT] = [
+        ParamId::Profile,
+        ParamId::RateHz,
+        ParamId::TagSize,
+        ParamId::CamYaw,
+        ParamId::MaxHamming,
+        ParamId::SysId,
+        ParamId::CompId,
+        ParamId::VpeEnable,
+        ParamId::Baud,
+        ParamId::TimeBase,
+    ];
+
+    /// The id at table `index`.
+    pub fn from_index(index: usize) -> Option<ParamId> {
+        Self::ALL.get(index).copied()
+    }
+
+    /// The id named `name` (exact, case-sensitive, as MAVLink names are).
+    pub fn from_name(name: &str) -> Option<ParamId> {
+        Self::ALL.iter().copied().find(|id| id.def().name == name)
+    }
+
+    /// Table index (MAVLink `param_index`).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The table entry.
+    pub fn def(self) -> &'static ParamDef {
+        // `PARAMS` has one entry per variant; the fallback is never taken.
+        PARAMS.get(self.index()).unwrap_or(&PARAMS[0])
+    }
+}
+
+/// Why a value was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ParamError {
+    /// No parameter of that name or index.
+    Unknown,
+    /// NaN or infinite.
+    NotFinite,
+    /// Outside `[min, max]`.
+    OutOfRange,
+    /// An integer parameter given a fractional value.
+    NotIntegral,
+}
+
+/// Why [`ParamSet::import`] refused a blob.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImportError {
+    /// Shorter than its header or than the records it announces.
+    Truncated,
+    /// Not a parameter blob (erased flash reads `0xFF...`).
+    BadMagic,
+    /// Written by an incompatible format version.
+    BadVersion,
+    /// The checksum does not match (a torn write).
+    BadCrc,
+}
+
+/// What [`ParamSet::import`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ImportReport {
+    /// Values taken over.
+    pub applied: u8,
+    /// Records whose value failed the range check (the parameter kept its default).
+    pub rejected: u8,
+    /// Records of names this firmware does not know (ignored).
+    pub unknown: u8,
+}
+
+/// Blob magic, "TDPR".
+const MAGIC: [u8; 4] = *b"TDPR";
+/// Blob format version.
+const FORMAT_VERSION: u8 = 1;
+/// Header: magic (4), version (1), record count (1), CRC-16 (2) over the records.
+const HEADER_LEN: usize = 8;
+/// One record: name (16, NUL-padded) + value (f32 little-endian).
+const RECORD_LEN: usize = PARAM_NAME_LEN + 4;
+/// Bytes [`ParamSet::export`] needs.
+pub const EXPORT_LEN: usize = HEADER_LEN + PARAM_COUNT * RECORD_LEN;
+
+/// The parameter values.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamSet {
+    values: [f32; PARAM_COUNT],
+}
+
+impl Default for ParamSet {
+    fn default() -> Self {
+        ParamSet {
+            values: PARAMS.map(|p| p.default),
+        }
+    }
+}
+
+/// Checks `value` against `def`.
+pub fn validate(def: &ParamDef, value: f32) -> Result<f32, ParamError> {
+    if !value.is_finite() {
+        return Err(ParamError::NotFinite);
+    }
+    if !(value >= def.min && value <= def.max) {
+        return Err(ParamError::OutOfRange);
+    }
+    if def.kind == ParamKind::Int && libm::truncf(value) != value {
+        return Err(ParamError::NotIntegral);
+    }
+    // -0.0 and 0.0 compare equal; store the canonical one.
+    Ok(if value == 0.0 { 0.0 } else { value })
+}
+
+impl ParamSet {
+    /// The value of `id`.
+    pub fn get(&self, id: ParamId) -> f32 {
+        self.values
+            .get(id.index())
+            .copied()
+            .unwrap_or(id.def().default)
+    }
+
+    /// The value of `id` as an integer (for [`ParamKind::Int`] parameters).
+    pub fn get_int(&self, id: ParamId) -> i32 {
+        self.get(id) as i32
+    }
+
+    /// Sets `id` to `value` after [`validate`]; the old value stays on error.
+    pub fn set(&mut self, id: ParamId, value: f32) -> Result<(), ParamError> {
+        let v = validate(id.def(), value)?;
+        let slot = self.values.get_mut(id.index()).ok_or(ParamError::Unknown)?;
+        *slot = v;
+        Ok(())
+    }
+
+    /// Sets the parameter named `name` (see [`ParamSet::set`]).
+    pub fn set_by_name(&mut self, name: &str, value: f32) -> Result<ParamId, ParamError> {
+        let id = ParamId::from_name(name).ok_or(ParamError::Unknown)?;
+        self.set(id, value)?;
+        Ok(id)
+    }
+
+    /// Writes the values into `out` for flash; returns the bytes written (0 when `out` is
+    /// shorter than [`EXPORT_LEN`]).
+    pub fn export(&self, out: &mut [u8]) -> usize {
+        let Some(out) = out.get_mut(..EXPORT_LEN) else {
+            return 0;
+        };
+        let (header, records) = out.split_at_mut(HEADER_LEN);
+        for ((record, def), value) in records
+            .chunks_exact_mut(RECORD_LEN)
+            .zip(PARAMS.iter())
+            .zip(self.values.iter())
+        {
+            let (name, val) = record.split_at_mut(PARAM_NAME_LEN);
+            name.fill(0);
+            for (dst, src) in name.iter_mut().zip(def.name.as_bytes()) {
+                *dst = *src;
+            }
+            val.copy_from_slice(&value.to_le_bytes());
+        }
+        let crc = crc_accumulate(0xFFFF, records);
+        let mut h = [0u8; HEADER_LEN];
+        h[..4].copy_from_slice(&MAGIC);
+        h[4] = FORMAT_VERSION;
+        h[5] = PARAM_COUNT as u8;
+        h[6..8].copy_from_slice(&crc.to_le_bytes());
+        header.copy_from_slice(&h);
+        EXPORT_LEN
+    }
+
+    /// Reads a blob written by [`ParamSet::export`] (this or another firmware version):
+    /// known names with valid values replace the current ones. Nothing changes on error.
+    pub fn import(&mut self, blob: &[u8]) -> Result<ImportReport, ImportError> {
+        let header = blob.get(..HEADER_LEN).ok_or(ImportError::Truncated)?;
+        if header.get(..4) != Some(&MAGIC[..]) {
+            return Err(ImportError::BadMagic);
+        }
+        if header.get(4) != Some(&FORMAT_VERSION) {
+            return Err(ImportError::BadVersion);
+        }
+        let count = usize::from(header.get(5).copied().unwrap_or(0));
+        let crc = u16::from_le_bytes([
+            header.get(6).copied().unwrap_or(0),
+            header.get(7).copied().unwrap_or(0),
+        ]);
+        let records = blob
+            .get(HEADER_LEN..HEADER_LEN + count * RECORD_LEN)
+            .ok_or(ImportError::Truncated)?;
+        if crc_accumulate(0xFFFF, records) != crc {
+            return Err(ImportError::BadCrc);
+        }
+        let mut report = ImportReport::default();
+        let mut next = *self;
+        for record in records.chunks_exact(RECORD_LEN) {
+            let (name, val) = record.split_at(PARAM_NAME_LEN);
+            let name = name_str(name);
+            let mut v = [0u8; 4];
+            v.copy_from_slice(val);
+            match ParamId::from_name(name) {
+                None => report.unknown = report.unknown.saturating_add(1),
+                Some(id) => match next.set(id, f32::from_le_bytes(v)) {
+                    Ok(()) => report.applied = report.applied.saturating_add(1),
+                    Err(_) => report.rejected = report.rejected.saturating_add(1),
+                },
+            }
+        }
+        *self = next;
+        Ok(report)
+    }
+}
+
+/// The name in a NUL-padded `param_id` (empty when not ASCII/UTF-8).
+pub fn name_str(raw: &[u8]) -> &str {
+    let end = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
+    core::str::from_utf8(raw.get(..end).unwrap_or(&[])).unwrap_or("")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_is_consistent() {
+        for (i, (def, id)) in PARAMS.iter().zip(ParamId::ALL).enumerate() {
+            assert_eq!(id.index(), i);
+            assert!(def.name.len() <= PARAM_NAME_LEN, "{}", def.name);
+            assert!(
+                def.min <= def.default && def.default <= def.max,
+                "{}",
+                def.name
+            );
+            assert_eq!(ParamId::from_name(def.name), Some(id));
+        }
+    }
+
+    #[test]
+    fn set_validates() {
+        let mut p = ParamSet::default();
+        assert_eq!(p.set(ParamId::RateHz, 1.0e9), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::RateHz, f32::NAN), Err(ParamError::NotFinite));
+        assert_eq!(p.set(ParamId::RateHz, 2.5), Err(ParamError::NotIntegral));
+        assert_eq!(p.get(ParamId::RateHz), 30.0);
+        assert_eq!(p.set(ParamId::CamYaw, 90.0), Ok(()));
+        assert_eq!(p.get(ParamId::CamYaw), 90.0);
+    }
+
+    #[test]
+    fn export_import_round_trip_and_corruption() {
+        let mut p = ParamSet::default();
+        p.set(ParamId::Profile, 1.0).unwrap();
+        p.set(ParamId::TagSize, 0.5).unwrap();
+        let mut blob = [0u8; EXPORT_LEN];
+        assert_eq!(p.export(&mut blob), EXPORT_LEN);
+        let mut q = ParamSet::default();
+        let r = q.import(&blob).unwrap();
+        assert_eq!(r.applied as usize, PARAM_COUNT);
+        assert_eq!(q, p);
+        let mut torn = blob;
+        torn[20] ^= 1;
+        assert_eq!(q.import(&torn), Err(ImportError::BadCrc));
+        assert_eq!(q.import(&[0xFF; EXPORT_LEN]), Err(ImportError::BadMagic));
+        assert_eq!(q.import(&blob[..30]), Err(ImportError::Truncated));
+    }
+}

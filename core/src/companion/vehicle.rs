@@ -1,0 +1,252 @@
+//! The vehicle state the flight controller streams: attitude and local position, kept in
+//! short histories so they can be read at a frame's **exposure** time.
+//!
+//! A frame is processed tens of milliseconds after its exposure; a vehicle rolling at
+//! 90 °/s turns 3° in 30 ms, which moves the pad by 1 m at 20 m height. So the attitude used
+//! to level a pose must be the one at exposure, not the latest: each history is a ring of
+//! time-stamped samples (our clock) and is read by interpolation between the two samples
+//! around the requested time (spherical for attitude, linear for position). A time outside
+//! the history, or in a gap longer than [`MAX_GAP_US`], has no state: never extrapolate far,
+//! never use an old sample as if it were current. Slightly past the newest sample (up to
+//! [`MAX_EXTRAPOLATION_US`]) the newest is used (the position advanced by its velocity).
+//!
+//! Time stamps: a sample's `time_boot_ms` is in the autopilot's clock; with a known clock
+//! offset ([`super::timesync`]) it is converted to ours, else the receive time is used (late by
+//! the transport delay, a few ms on a fast UART). When the offset changes (first known, or
+//! reset) the histories are cleared, since old and new stamps are not comparable.
+//!
+//! Reboot detection: the autopilot's `time_boot_ms` must advance with our clock. A value more
+//! than [`REBOOT_BACKWARDS_US`] behind what the previous one predicts means the autopilot
+//! restarted (or its clock was reset): [`VehicleState::observe_time`] reports it and the
+//! companion drops everything it knew of the vehicle.
+
+use crate::frames::Attitude;
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// Attitude samples kept (0.64 s at 50 Hz).
+pub const ATTITUDE_HISTORY: usize = 32;
+/// Position samples kept (0.5 s at 30 Hz).
+pub const POSITION_HISTORY: usize = 16;
+/// Longest gap between two samples that is interpolated across, µs.
+pub const MAX_GAP_US: u64 = 200_000;
+/// How far past the newest sample it is still used, µs.
+pub const MAX_EXTRAPOLATION_US: u64 = 60_000;
+/// The autopilot clock going back by more than this means it rebooted, µs.
+pub const REBOOT_BACKWARDS_US: u64 = 1_000_000;
+
+/// One local position sample (LOCAL_POSITION_NED).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionSample {
+    /// Position, metres, NED.
+    pub position: Vector3<f32>,
+    /// Velocity, m/s, NED.
+    pub velocity: Vector3<f32>,
+}
+
+/// A fixed ring of time-stamped samples, oldest overwritten first; times non-decreasing.
+#[derive(Debug, Clone)]
+struct Ring<T: Copy, const N: usize> {
+    items: [Option<(u64, T)>; N],
+    head: usize,
+}
+
+impl<T: Copy, const N: usize> Ring<T, N> {
+    fn new() -> Self {
+        Ring {
+            items: [None; N],
+            head: 0,
+        }
+    }
+
+    fn clear(&mut self) {
+        self.items = [None; N];
+        self.head = 0;
+    }
+
+    fn newest(&self) -> Option<(u64, T)> {
+        let i = (self.head + N - 1) % N;
+        self.items.get(i).copied().flatten()
+    }
+
+    fn push(&mut self, t_us: u64, v: T) {
+        // Out-of-order samples (older than the newest) are dropped: the ring stays sorted.
+        if self.newest().is_some_and(|(t, _)| t_us < t) {
+            return;
+        }
+        if let Some(slot) = self.items.get_mut(self.head) {
+            *slot = Some((t_us, v));
+        }
+        self.head = (self.head + 1) % N;
+    }
+
+    /// The samples just before-or-at and just after `t_us`, or the newest when `t_us` is past
+    /// it by at most `MAX_EXTRAPOLATION_US`.
+    fn around(&self, t_us: u64) -> Option<Around<T>> {
+        let (newest_t, newest) = self.newest()?;
+        if t_us >= newest_t {
+            return (t_us - newest_t <= MAX_EXTRAPOLATION_US)
+                .then_some(Around::After(newest_t, newest));
+        }
+        // Walk from newest to oldest.
+        let mut later = (newest_t, newest);
+        for k in 2..=N {
+            let i = (self.head + N - k) % N;
+            let (t, v) = self.items.get(i).copied().flatten()?;
+            if t <= t_us {
+                if later.0 - t > MAX_GAP_US {
+                    return None;
+                }
+                return Some(Around::Between((t, v), later));
+            }
+            later = (t, v);
+        }
+        None
+    }
+}
+
+enum Around<T> {
+    Between((u64, T), (u64, T)),
+    After(u64, T),
+}
+
+fn fraction(t0: u64, t1: u64, t: u64) -> f32 {
+    if t1 <= t0 {
+        return 0.0;
+    }
+    (t.saturating_sub(t0) as f32 / (t1 - t0) as f32).clamp(0.0, 1.0)
+}
+
+/// The vehicle state histories.
+#[derive(Debug, Clone)]
+pub struct VehicleState {
+    attitude: Ring<UnitQuaternion<f32>, ATTITUDE_HISTORY>,
+    position: Ring<PositionSample, POSITION_HISTORY>,
+    /// Last autopilot time seen (µs, its clock) and our time then.
+    last_time: Option<(u64, u64)>,
+    /// Our time of the newest sample received.
+    last_rx_us: Option<u64>,
+}
+
+impl Default for VehicleState {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl VehicleState {
+    /// Nothing known.
+    pub fn new() -> Self {
+        VehicleState {
+            attitude: Ring::new(),
+            position: Ring::new(),
+            last_time: None,
+            last_rx_us: None,
+        }
+    }
+
+    /// Forgets everything (reboot, clock offset change).
+    pub fn clear(&mut self) {
+        self.attitude.clear();
+        self.position.clear();
+        self.last_time = None;
+        self.last_rx_us = None;
+    }
+
+    /// Forgets the samples but keeps the reboot detector's reference.
+    pub fn clear_samples(&mut self) {
+        self.attitude.clear();
+        self.position.clear();
+    }
+
+    /// Checks an autopilot time stamp (µs, its clock) received at `now_us`; returns true when
+    /// it went back by more than [`REBOOT_BACKWARDS_US`] (the autopilot rebooted). Updates the
+    /// reference either way.
+    pub fn observe_time(&mut self, autopilot_us: u64, now_us: u64) -> bool {
+        let rebooted = self.last_time.is_some_and(|(ap, ours)| {
+            let expected = ap.saturating_add(now_us.saturating_sub(ours));
+            autopilot_us.saturating_add(REBOOT_BACKWARDS_US) < expected
+        });
+        self.last_time = Some((autopilot_us, now_us));
+        rebooted
+    }
+
+    /// Adds an attitude sample at `t_us` (our clock), received at `now_us`.
+    pub fn push_attitude(&mut self, t_us: u64, attitude: &Attitude, now_us: u64) {
+        let [w, x, y, z] = attitude.quaternion_wxyz();
+        let q = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, x, y, z));
+        self.attitude.push(t_us, q);
+        self.last_rx_us = Some(now_us);
+    }
+
+    /// Adds a position sample at `t_us` (our clock), received at `now_us`.
+    pub fn push_position(&mut self, t_us: u64, sample: PositionSample, now_us: u64) {
+        self.position.push(t_us, sample);
+        self.last_rx_us = Some(now_us);
+    }
+
+    /// Our time of the newest sample received.
+    pub fn last_rx_us(&self) -> Option<u64> {
+        self.last_rx_us
+    }
+
+    /// The attitude at `t_us` (our clock), interpolated; `None` outside the history.
+    pub fn attitude_at(&self, t_us: u64) -> Option<Attitude> {
+        let q = match self.attitude.around(t_us)? {
+            Around::After(_, q) => q,
+            Around::Between((t0, q0), (t1, q1)) => {
+                let f = fraction(t0, t1, t_us);
+                q0.try_slerp(&q1, f, 1.0e-6)
+                    .unwrap_or(if f < 0.5 { q0 } else { q1 })
+            }
+        };
+        Attitude::from_quaternion_wxyz([q.w, q.i, q.j, q.k]).ok()
+    }
+
+    /// The local position at `t_us` (our clock); `None` outside the history.
+    pub fn position_at(&self, t_us: u64) -> Option<PositionSample> {
+        match self.position.around(t_us)? {
+            Around::After(t0, s) => {
+                let dt = t_us.saturating_sub(t0) as f32 * 1.0e-6;
+                Some(PositionSample {
+                    position: s.position + s.velocity * dt,
+                    velocity: s.velocity,
+                })
+            }
+            Around::Between((t0, a), (t1, b)) => {
+                let f = fraction(t0, t1, t_us);
+                Some(PositionSample {
+                    position: a.position.lerp(&b.position, f),
+                    velocity: a.velocity.lerp(&b.velocity, f),
+                })
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolates_and_refuses_outside() {
+        let mut v = VehicleState::new();
+        for k in 0..10u64 {
+            let yaw = k as f32 * 0.1;
+            v.push_attitude(k * 20_000, &Attitude::from_euler(0.0, 0.0, yaw).unwrap(), 0);
+        }
+        let a = v.attitude_at(30_000).unwrap();
+        assert!((a.yaw() - 0.15).abs() < 1e-4);
+        assert!(v.attitude_at(180_000 + MAX_EXTRAPOLATION_US + 1).is_none());
+        assert!(v.attitude_at(180_000 + 10_000).is_some());
+        v.clear();
+        assert!(v.attitude_at(30_000).is_none());
+    }
+
+    #[test]
+    fn reboot_is_time_going_back() {
+        let mut v = VehicleState::new();
+        assert!(!v.observe_time(100_000_000, 0));
+        assert!(!v.observe_time(101_000_000, 1_000_000));
+        assert!(v.observe_time(500_000, 2_000_000));
+    }
+}

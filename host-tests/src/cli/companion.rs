@@ -1,0 +1,174 @@
+//! `touchdown companion`: the board's MAVLink companion logic against a real endpoint.
+//!
+//! Runs the same pipeline as the camera board (detector, pad pose, then
+//! `touchdown_core::companion::Companion`) on a recording, in real time at the recording's
+//! frame times, and exchanges MAVLink with a flight controller or SITL over UDP: a datagram
+//! socket sends to `--udp HOST:PORT` (for example MAVProxy's `--out udpin:0.0.0.0:14550` or
+//! PX4 SITL's onboard port 14540) and reads whatever comes back on the same socket. The
+//! companion state machine is sans-IO, so this file is only the loop: read datagrams, feed
+//! frames when due, drain `poll_transmit` into datagrams.
+
+use std::io::{ErrorKind, Write};
+use std::net::UdpSocket;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use clap::{Args, ValueEnum};
+use touchdown_core::companion::{
+    Companion, CompanionConfig, FrameOutcome, FrameResult, Profile, MAX_FRAME_LEN,
+};
+use touchdown_core::detect::{Detector, DetectorConfig};
+use touchdown_core::family::Family;
+use touchdown_core::pose::pad_pose;
+
+use super::{CliError, Outcome};
+use crate::families::{self, SelectedFamily};
+use crate::recording::RecordingReader;
+use crate::workspace::HostWorkspace;
+
+/// Arguments of `touchdown companion`.
+#[derive(Debug, Clone, Args)]
+pub struct CompanionArgs {
+    /// MAVLink endpoint to send to (UDP), e.g. 127.0.0.1:14550
+    #[arg(long, value_name = "HOST:PORT")]
+    pub udp: String,
+
+    /// Recording directory (camera.toml, pad.toml, frames/, frames.csv) to replay
+    #[arg(long, value_name = "DIR")]
+    pub recording: PathBuf,
+
+    /// LANDING_TARGET format
+    #[arg(long, value_enum, default_value_t = ProfileArg::Ardupilot)]
+    pub profile: ProfileArg,
+
+    /// Seconds of MAVLink before the first frame (time sync, stream requests)
+    #[arg(long, value_name = "S", default_value_t = 2.0)]
+    pub lead: f64,
+
+    /// Seconds to keep the link up after the last frame
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    pub linger: f64,
+}
+
+/// `--profile`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ProfileArg {
+    /// LANDING_TARGET in MAV_FRAME_BODY_FRD (ArduPilot).
+    Ardupilot,
+    /// LANDING_TARGET in MAV_FRAME_LOCAL_NED (PX4; needs its attitude and local position).
+    Px4,
+}
+
+/// Runs `touchdown companion`.
+pub fn run(
+    args: &CompanionArgs,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<Outcome, CliError> {
+    if !(args.lead.is_finite() && args.lead >= 0.0 && args.linger.is_finite() && args.linger >= 0.0)
+    {
+        return Err(CliError::new(
+            "--lead and --linger must be non-negative seconds",
+        ));
+    }
+    let reader = RecordingReader::open(&args.recording).map_err(CliError::new)?;
+    let layout = reader
+        .pad
+        .layout()
+        .map_err(|e| CliError(format!("{}: pad.toml: {e:?}", args.recording.display())))?;
+    let mut names: Vec<String> = reader
+        .pad
+        .markers
+        .iter()
+        .map(|m| m.family.clone())
+        .collect();
+    names.sort();
+    names.dedup();
+    let selected = families::resolve_all(&names).map_err(CliError::new)?;
+    let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
+    let family_refs: Vec<&Family<'_>> = views.iter().collect();
+
+    let socket = UdpSocket::bind("0.0.0.0:0").map_err(CliError::new)?;
+    socket
+        .connect(&args.udp)
+        .map_err(|e| CliError(format!("--udp {}: {e}", args.udp)))?;
+    socket.set_nonblocking(true).map_err(CliError::new)?;
+
+    let profile = match args.profile {
+        ProfileArg::Ardupilot => Profile::ArduPilot,
+        ProfileArg::Px4 => Profile::Px4,
+    };
+    let mut companion = Companion::new(CompanionConfig::with_profile(profile))
+        .map_err(|e| CliError(format!("companion configuration: {e:?}")))?;
+    let mut detector = Detector::new(DetectorConfig::default());
+    let mut workspace = HostWorkspace::new();
+
+    let start = Instant::now();
+    let now_us = || start.elapsed().as_micros() as u64;
+    let lead_us = (args.lead * 1e6) as u64;
+    let t0 = reader.entries.first().map_or(0, |e| e.t_us);
+    let last = reader.entries.last().map_or(0, |e| e.t_us - t0);
+    let end_us = lead_us + last + (args.linger * 1e6) as u64;
+    let mut next = 0usize;
+    let mut rx = [0u8; 2048];
+    let mut tx = [0u8; MAX_FRAME_LEN];
+    let mut targets = 0usize;
+    let mut send_errors = 0usize;
+
+    while now_us() < end_us {
+        loop {
+            match socket.recv(&mut rx) {
+                Ok(n) => companion.receive(rx.get(..n).unwrap_or(&[]), now_us()),
+                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
+                // ICMP "port unreachable" until the endpoint is up: keep going.
+                Err(e) if e.kind() == ErrorKind::ConnectionRefused => break,
+                Err(e) => return Err(CliError(format!("--udp {}: {e}", args.udp))),
+            }
+        }
+        if let Some(entry) = reader.entries.get(next) {
+            let exposure_us = lead_us + (entry.t_us - t0);
+            if now_us() >= exposure_us {
+                next += 1;
+                let frame = reader.frame(next - 1).map_err(CliError::new)?;
+                let view = frame.image.view();
+                let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
+                let fix = match detector.detect(&view, &family_refs, &mut buffers) {
+                    Ok(detections) => {
+                        pad_pose(detections, &family_refs, &layout, &reader.camera).ok()
+                    }
+                    Err(e) => {
+                        let _ = writeln!(err, "warning: frame {}: {e:?}", frame.index);
+                        None
+                    }
+                };
+                let outcome = companion.on_frame(FrameResult { exposure_us, fix }, now_us());
+                if outcome == FrameOutcome::TargetQueued {
+                    targets += 1;
+                }
+            }
+        }
+        while let Some(n) = companion.poll_transmit(now_us(), &mut tx) {
+            if socket.send(tx.get(..n).unwrap_or(&[])).is_err() {
+                send_errors += 1;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let s = companion.stats();
+    writeln!(
+        out,
+        "{} frames, {targets} LANDING_TARGET queued, {} sent; tx {} frames ({} send errors); \
+         rx {} frames, {} bad CRC; autopilot {:?}, clock offset {:?} us ({:?})",
+        next,
+        s.landing_targets,
+        s.tx_frames,
+        send_errors,
+        s.link.frames,
+        s.link.bad_crc,
+        s.autopilot,
+        s.clock_offset_us,
+        s.time_source
+    )
+    .map_err(CliError::new)?;
+    Ok(Outcome::Success)
+}

@@ -1,0 +1,373 @@
+//! `touchdown pad`: a printable SVG of a pad layout at true size, and its `pad.toml`.
+//!
+//! The SVG's user unit is the millimetre and its width and height are given in `mm`, so
+//! printing at 100 % gives the real marker sizes; the 10 cm scale bar checks that the
+//! printer did not rescale. Each marker is one `<path>` of its black cells (a single path
+//! so renderers leave no hairline seams between cells), drawn on the white sheet the
+//! simulator renders ([`crate::sim::pad`]: each marker's grid plus one cell of white).
+//! Cut marks sit outside the sheet's corners; marker labels go in light grey beside each
+//! marker where they fit clear of every marker's grid (light grey thresholds as white, so a
+//! label never looks like a marker edge), and every marker is listed under the sheet.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::PathBuf;
+
+use clap::builder::PossibleValuesParser;
+use clap::{ArgGroup, Args};
+
+use super::{CliError, Outcome};
+use crate::config;
+use crate::sim::pad::{design_names, pad_toml, PrintedPad, Rect};
+
+/// `touchdown pad --help`.
+pub const LONG_HELP: &str = "\
+Write a printable landing pad: pad.svg at true size and the matching pad.toml.
+
+Give a shipped design (--design) or your own layout (--layout pad.toml, the contract's
+format: name, then [[marker]] tables with family, id, size (outer black border, metres), x,
+y (centre in the pad frame, metres) and yaw_deg). Families must be shipped ones.
+
+pad.svg is in millimetres: print it at 100 % (no \"fit to page\"), then check the 10 cm
+scale bar with a ruler; cut along the cut marks at the corners. Marker ids are printed in
+light grey beside the markers and listed under the sheet. The white sheet includes one cell
+of white around every marker; keep it white and flat.
+
+pad.toml is the layout to give the camera board and `replay`: the same numbers as the SVG.
+
+Exit status: 0 on success; 2 with one line on stderr for a bad option or layout.";
+
+/// Arguments of `touchdown pad`.
+#[derive(Debug, Clone, Args)]
+#[command(group(ArgGroup::new("source").required(true).args(["design", "layout"])))]
+pub struct PadArgs {
+    /// A shipped pad design
+    #[arg(long, value_name = "NAME", value_parser = PossibleValuesParser::new(design_names()))]
+    pub design: Option<String>,
+
+    /// A pad layout file (pad.toml)
+    #[arg(long, value_name = "pad.toml")]
+    pub layout: Option<PathBuf>,
+
+    /// Directory to write pad.svg and pad.toml into (created if needed)
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+/// Border around the sheet for cut marks, mm.
+const BORDER_MM: f64 = 25.0;
+/// Extra border under the sheet for the scale bar and the legend, mm.
+const FOOTER_MM: f64 = 40.0;
+/// Gap between a cut mark and the sheet corner, mm.
+const CUT_GAP_MM: f64 = 3.0;
+/// Length of a cut mark, mm.
+const CUT_LENGTH_MM: f64 = 15.0;
+/// Label grey (thresholds as white next to black ink).
+const LABEL_GREY: &str = "#a8a8a8";
+
+/// Runs `touchdown pad`.
+pub fn run(args: &PadArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Result<Outcome, CliError> {
+    let pad = match (&args.design, &args.layout) {
+        (Some(name), _) => {
+            PrintedPad::design(name).ok_or_else(|| CliError(format!("unknown design `{name}`")))?
+        }
+        (None, Some(path)) => {
+            let config = config::load_pad(path).map_err(CliError::new)?;
+            PrintedPad::from_config(&config)
+                .map_err(|e| CliError(format!("{}: {e}", path.display())))?
+        }
+        (None, None) => return Err(CliError("give --design NAME or --layout pad.toml".into())),
+    };
+    std::fs::create_dir_all(&args.out).map_err(|e| {
+        CliError(format!(
+            "{}: cannot create directory: {e}",
+            args.out.display()
+        ))
+    })?;
+    let svg_path = args.out.join("pad.svg");
+    let toml_path = args.out.join("pad.toml");
+    std::fs::write(&svg_path, pad_svg(&pad))
+        .map_err(|e| CliError(format!("{}: cannot write: {e}", svg_path.display())))?;
+    std::fs::write(&toml_path, pad_toml(&pad.config))
+        .map_err(|e| CliError(format!("{}: cannot write: {e}", toml_path.display())))?;
+    writeln!(
+        out,
+        "wrote {} ({:.0} x {:.0} mm sheet, {} markers; print at 100 %) and {}",
+        svg_path.display(),
+        pad.sheet.width() * 1000.0,
+        pad.sheet.height() * 1000.0,
+        pad.markers.len(),
+        toml_path.display()
+    )
+    .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+    Ok(Outcome::Success)
+}
+
+/// A number in the SVG (mm), short but exact to a micrometre.
+fn n(v: f64) -> String {
+    let s = format!("{v:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s.to_string()
+    }
+}
+
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// The pad as an SVG document (millimetres).
+pub fn pad_svg(pad: &PrintedPad) -> String {
+    let sheet = pad.sheet;
+    let (sheet_w, sheet_h) = (sheet.width() * 1000.0, sheet.height() * 1000.0);
+    let width = sheet_w + 2.0 * BORDER_MM;
+    let height = sheet_h + 2.0 * BORDER_MM + FOOTER_MM;
+    // Pad metres to SVG millimetres (y down).
+    let to_svg = |x: f64, y: f64| {
+        (
+            BORDER_MM + (x - sheet.x0) * 1000.0,
+            BORDER_MM + (sheet.y1 - y) * 1000.0,
+        )
+    };
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
+         <svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}mm\" height=\"{h}mm\" \
+         viewBox=\"0 0 {w} {h}\">\n\
+         <title>touchdown landing pad {name}</title>",
+        w = n(width),
+        h = n(height),
+        name = escape(&pad.name)
+    );
+    let (sx, sy) = to_svg(sheet.x0, sheet.y1);
+    let _ = writeln!(
+        svg,
+        "<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"#ffffff\"/>",
+        n(sx),
+        n(sy),
+        n(sheet_w),
+        n(sheet_h)
+    );
+    // Markers: one path of black cells each, rows merged into runs.
+    for m in &pad.markers {
+        let (cx, cy) = to_svg(m.x, m.y);
+        let cell = m.cell * 1000.0;
+        let half = 0.5 * cell * m.grid() as f64;
+        let mut d = String::new();
+        for row in 0..m.grid() {
+            let mut col = 0;
+            while col < m.grid() {
+                if m.pattern.is_white(row, col) {
+                    col += 1;
+                    continue;
+                }
+                let start = col;
+                while col < m.grid() && !m.pattern.is_white(row, col) {
+                    col += 1;
+                }
+                let _ = write!(
+                    d,
+                    "M{} {}h{}v{}h{}z",
+                    n(-half + start as f64 * cell),
+                    n(-half + row as f64 * cell),
+                    n((col - start) as f64 * cell),
+                    n(cell),
+                    n(-((col - start) as f64) * cell)
+                );
+            }
+        }
+        let _ = writeln!(
+            svg,
+            "<path transform=\"translate({} {}) rotate({})\" fill=\"#000000\" d=\"{}\"><title>{} id {}, {} mm</title></path>",
+            n(cx),
+            n(cy),
+            n(-m.yaw_deg),
+            d,
+            escape(&m.family),
+            m.id,
+            n(m.size * 1000.0)
+        );
+    }
+    // Labels beside the markers, where they fit.
+    let grids: Vec<Rect> = pad.markers.iter().map(grid_bounds).collect();
+    let mut legend = Vec::new();
+    for (k, m) in pad.markers.iter().enumerate() {
+        let text = format!("{} #{} ({} mm)", m.family, m.id, n(m.size * 1000.0));
+        legend.push(format!(
+            "{} #{}: {} mm at x {} y {} mm, yaw {} deg",
+            m.family,
+            m.id,
+            n(m.size * 1000.0),
+            n(m.x * 1000.0),
+            n(m.y * 1000.0),
+            n(m.yaw_deg)
+        ));
+        let font = (m.cell * 1000.0 * 0.3).clamp(3.0, 12.0) / 1000.0;
+        let text_w = 0.6 * font * text.chars().count() as f64;
+        let g = grids[k];
+        let gap = 0.3 * font;
+        let (mx, my) = (0.5 * (g.x0 + g.x1), 0.5 * (g.y0 + g.y1));
+        // Below, above, right, left of the grid (pad frame: y up); the text's box.
+        let candidates = [
+            (mx, g.y0 - gap - font),
+            (mx, g.y1 + gap),
+            (g.x1 + gap + 0.5 * text_w, my - 0.5 * font),
+            (g.x0 - gap - 0.5 * text_w, my - 0.5 * font),
+        ];
+        // On the sheet if possible, else in the border beside it (cut off with the trim).
+        let page = Rect {
+            x0: sheet.x0 - BORDER_MM / 1000.0,
+            x1: sheet.x1 + BORDER_MM / 1000.0,
+            y0: sheet.y0 - BORDER_MM / 1000.0,
+            y1: sheet.y1 + BORDER_MM / 1000.0,
+        };
+        let fits = |&(x, y): &(f64, f64), within: &Rect| {
+            let b = Rect {
+                x0: x - 0.5 * text_w,
+                x1: x + 0.5 * text_w,
+                y0: y,
+                y1: y + font,
+            };
+            let inside =
+                b.x0 >= within.x0 && b.x1 <= within.x1 && b.y0 >= within.y0 && b.y1 <= within.y1;
+            inside
+                && grids
+                    .iter()
+                    .all(|r| b.x1 <= r.x0 || b.x0 >= r.x1 || b.y1 <= r.y0 || b.y0 >= r.y1)
+        };
+        let place = candidates
+            .iter()
+            .find(|c| fits(c, &sheet))
+            .or_else(|| candidates.iter().find(|c| fits(c, &page)));
+        if let Some(&(x, y)) = place {
+            // SVG text sits on its baseline: the box's bottom edge (pad y0).
+            let (tx, ty) = to_svg(x, y);
+            let _ = writeln!(
+                svg,
+                "<text x=\"{}\" y=\"{}\" font-family=\"sans-serif\" font-size=\"{}\" text-anchor=\"middle\" fill=\"{LABEL_GREY}\">{}</text>",
+                n(tx),
+                n(ty - 0.15 * font * 1000.0),
+                n(font * 1000.0),
+                escape(&text)
+            );
+        }
+    }
+    // Cut marks at the four corners, outside the sheet.
+    let (x0, y0) = (BORDER_MM, BORDER_MM);
+    let (x1, y1) = (BORDER_MM + sheet_w, BORDER_MM + sheet_h);
+    let mut marks = String::new();
+    for (x, y, dx, dy) in [
+        (x0, y0, -1.0, -1.0),
+        (x1, y0, 1.0, -1.0),
+        (x1, y1, 1.0, 1.0),
+        (x0, y1, -1.0, 1.0),
+    ] {
+        let _ = write!(
+            marks,
+            "M{} {}h{}M{} {}v{}",
+            n(x + dx * CUT_GAP_MM),
+            n(y),
+            n(dx * CUT_LENGTH_MM),
+            n(x),
+            n(y + dy * CUT_GAP_MM),
+            n(dy * CUT_LENGTH_MM)
+        );
+    }
+    let _ = writeln!(
+        svg,
+        "<path d=\"{marks}\" stroke=\"#000000\" stroke-width=\"0.3\" fill=\"none\"/>"
+    );
+    // Scale bar: 100 mm, a tick every 10 mm.
+    let bar_x = BORDER_MM;
+    let bar_y = y1 + BORDER_MM;
+    let mut ticks = String::new();
+    for k in 0..=10 {
+        let len = if k % 5 == 0 { 6.0 } else { 3.0 };
+        let _ = write!(
+            ticks,
+            "M{} {}v{}",
+            n(bar_x + 10.0 * k as f64),
+            n(bar_y),
+            n(-len)
+        );
+    }
+    let _ = writeln!(
+        svg,
+        "<g font-family=\"sans-serif\" font-size=\"4\" fill=\"#000000\">\n\
+         <rect x=\"{bx}\" y=\"{by}\" width=\"100\" height=\"1.5\"/>\n\
+         <path d=\"{ticks}\" stroke=\"#000000\" stroke-width=\"0.3\"/>\n\
+         <text x=\"{bx}\" y=\"{t1}\">0</text><text x=\"{b100}\" y=\"{t1}\" text-anchor=\"middle\">100 mm</text>\n\
+         <text x=\"{b110}\" y=\"{t0}\">scale bar: must measure 100 mm. Print at 100 %, no fit-to-page.</text>\n\
+         </g>",
+        bx = n(bar_x),
+        by = n(bar_y),
+        t1 = n(bar_y + 6.0),
+        b100 = n(bar_x + 100.0),
+        b110 = n(bar_x + 110.0),
+        t0 = n(bar_y + 1.5),
+    );
+    let _ = writeln!(
+        svg,
+        "<text x=\"{}\" y=\"{}\" font-family=\"sans-serif\" font-size=\"4\" fill=\"#000000\">touchdown pad {}: sheet {} x {} mm (cut at the corner marks); pad frame x right, y up this page, origin = landing point</text>",
+        n(bar_x),
+        n(bar_y + 14.0),
+        escape(&pad.name),
+        n(sheet_w),
+        n(sheet_h)
+    );
+    for (k, line) in legend.iter().enumerate() {
+        let _ = writeln!(
+            svg,
+            "<text x=\"{}\" y=\"{}\" font-family=\"sans-serif\" font-size=\"3.5\" fill=\"#000000\">{}</text>",
+            n(bar_x),
+            n(bar_y + 20.0 + 4.5 * k as f64),
+            escape(line)
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
+/// Axis-aligned bounds of a marker's grid (quiet rings included) in the pad frame.
+fn grid_bounds(m: &crate::sim::pad::PrintedMarker) -> Rect {
+    let h = 0.5 * m.grid_size();
+    let corners = [(-h, -h), (h, -h), (h, h), (-h, h)].map(|(x, y)| m.to_pad(x, y));
+    Rect {
+        x0: corners.iter().map(|c| c[0]).fold(f64::INFINITY, f64::min),
+        x1: corners
+            .iter()
+            .map(|c| c[0])
+            .fold(f64::NEG_INFINITY, f64::max),
+        y0: corners.iter().map(|c| c[1]).fold(f64::INFINITY, f64::min),
+        y1: corners
+            .iter()
+            .map(|c| c[1])
+            .fold(f64::NEG_INFINITY, f64::max),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn svg_is_true_size_with_every_marker() {
+        let pad = PrintedPad::design("nested").unwrap();
+        let svg = pad_svg(&pad);
+        let w = pad.sheet.width() * 1000.0 + 2.0 * BORDER_MM;
+        assert!(
+            svg.contains(&format!("width=\"{}mm\"", n(w))),
+            "{}",
+            &svg[..300]
+        );
+        assert_eq!(svg.matches("<path transform").count(), 6);
+        assert!(svg.contains("tag36h11 #5 (160 mm)"));
+        assert!(svg.contains("100 mm"));
+    }
+}

@@ -1,0 +1,789 @@
+//! Recordings (the contract's format): a directory with `camera.toml`, `pad.toml`,
+//! `frames/NNNNNN.pgm` (8-bit P5) and `frames.csv`, written by the simulator and, later, by
+//! the camera board; read back by `replay` and the tests.
+//!
+//! `frames.csv` has the header `index,t_us` or `index,t_us,cam_x,cam_y,cam_z,cam_qw,cam_qx,
+//! cam_qy,cam_qz` (the camera's true position in the pad frame, metres, and its camera-to-pad
+//! rotation as a unit quaternion). A row may leave all seven truth fields empty (truth lost
+//! for that frame). Indices count up from 0 without gaps (frame `k` is `frames/` + `k`
+//! zero-padded to 6 digits + `.pgm`); a dropped camera frame shows as a larger step in `t_us`,
+//! which must increase strictly.
+//!
+//! Set-point labels (the paper's tables group frames by them) are an extension in a separate
+//! `setpoints.csv` (`index,label`), so `frames.csv` keeps exactly the contract's columns.
+//! Readers that do not know it ignore it.
+//!
+//! Exactness: truth values are written in Rust's shortest round-trip form, and the camera's
+//! `f32` numbers in the shortest form that reads back to the same `f32`, so a recording
+//! written and read back is identical, bit for bit.
+//!
+//! Reading is strict and every error is one line naming the file and, for CSV files, the
+//! line: `rec/frames.csv: line 7: t_us 200000 is not after the previous frame's 233333`.
+//! [`RecordingReader`] checks the CSV files and that every listed frame file exists up
+//! front, then decodes frames one at a time ([`RecordingReader::frames`]) so a long recording
+//! never has to fit in memory.
+
+use std::fmt;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use touchdown_core::camera::CameraModel;
+
+use crate::config::{self, ConfigError, PadConfig};
+use crate::image_io::GrayFrame;
+
+/// The truth columns of `frames.csv`, in order.
+pub const TRUTH_COLUMNS: [&str; 7] = [
+    "cam_x", "cam_y", "cam_z", "cam_qw", "cam_qx", "cam_qy", "cam_qz",
+];
+/// How far from 1 a truth quaternion's norm may be.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+
+/// The camera's true pose for a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraTruth {
+    /// Camera centre in the pad frame, metres.
+    pub position: [f64; 3],
+    /// Camera-to-pad rotation, unit quaternion `[w, x, y, z]`.
+    pub orientation: [f64; 4],
+}
+
+/// A recording that cannot be read or written: one line naming the file (and line).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordingError {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line, for text files.
+    pub line: Option<usize>,
+    /// What is wrong.
+    pub reason: String,
+}
+
+impl fmt::Display for RecordingError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(line) = self.line {
+            write!(f, ": line {line}")?;
+        }
+        write!(f, ": {}", self.reason.replace(['\n', '\r'], " "))
+    }
+}
+
+impl std::error::Error for RecordingError {}
+
+impl From<ConfigError> for RecordingError {
+    fn from(e: ConfigError) -> Self {
+        RecordingError {
+            path: e.path,
+            line: e.line,
+            reason: match e.key {
+                Some(key) => format!("{key}: {}", e.reason),
+                None => e.reason,
+            },
+        }
+    }
+}
+
+fn error(path: &Path, line: Option<usize>, reason: impl Into<String>) -> RecordingError {
+    RecordingError {
+        path: path.to_path_buf(),
+        line,
+        reason: reason.into(),
+    }
+}
+
+/// One frame of a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedFrame {
+    /// Position in the recording (0, 1, ...).
+    pub index: usize,
+    /// Time, microseconds (middle of the exposure for simulated frames).
+    pub t_us: u64,
+    /// The camera's true pose, when known.
+    pub truth: Option<CameraTruth>,
+    /// Set-point label, when the recording has one for this frame.
+    pub label: Option<String>,
+    /// The image.
+    pub image: GrayFrame,
+}
+
+/// A whole recording in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    /// The camera (`camera.toml`).
+    pub camera: CameraModel,
+    /// The pad (`pad.toml`).
+    pub pad: PadConfig,
+    /// Whether `frames.csv` has the truth columns.
+    pub has_truth: bool,
+    /// The frames.
+    pub frames: Vec<RecordedFrame>,
+}
+
+impl Recording {
+    /// Writes the recording into `dir` (created if needed).
+    pub fn write(&self, dir: &Path) -> Result<(), RecordingError> {
+        let mut writer = RecordingWriter::create(dir, &self.camera, &self.pad, self.has_truth)?;
+        for frame in &self.frames {
+            writer.push(
+                frame.t_us,
+                frame.truth.as_ref(),
+                frame.label.as_deref(),
+                &frame.image,
+            )?;
+        }
+        writer.finish()?;
+        Ok(())
+    }
+
+    /// Reads a whole recording.
+    pub fn read(dir: &Path) -> Result<Recording, RecordingError> {
+        let reader = RecordingReader::open(dir)?;
+        let frames = reader.frames().collect::<Result<Vec<_>, _>>()?;
+        Ok(Recording {
+            camera: reader.camera,
+            pad: reader.pad,
+            has_truth: reader.has_truth,
+            frames,
+        })
+    }
+}
+
+/// `camera.toml` text (the contract's format) for a camera model, exact.
+pub fn camera_toml(camera: &CameraModel) -> String {
+    let mut out = format!(
+        "# camera intrinsics, pixels ((0, 0) = centre of the top-left pixel)\n\
+         width = {}\nheight = {}\nfx = {}\nfy = {}\ncx = {}\ncy = {}\n",
+        camera.width,
+        camera.height,
+        exact_f32(camera.fx),
+        exact_f32(camera.fy),
+        exact_f32(camera.cx),
+        exact_f32(camera.cy)
+    );
+    if camera.has_distortion() {
+        let d: Vec<String> = camera.distortion.iter().map(|&k| exact_f32(k)).collect();
+        out.push_str(&format!(
+            "distortion = [{}]   # k1, k2, p1, p2, k3 (OpenCV order)\n",
+            d.join(", ")
+        ));
+    }
+    out
+}
+
+/// The shortest decimal that reads back (through `f64`, as the config reader does) to `v`.
+fn exact_f32(v: f32) -> String {
+    let short = format!("{v:?}");
+    if short.parse::<f64>().map(|x| x as f32) == Ok(v) {
+        short
+    } else {
+        format!("{:?}", f64::from(v))
+    }
+}
+
+/// Writes a recording frame by frame (the simulator never holds more than one frame).
+#[derive(Debug)]
+pub struct RecordingWriter {
+    dir: PathBuf,
+    csv: BufWriter<File>,
+    setpoints: Option<BufWriter<File>>,
+    has_truth: bool,
+    size: (usize, usize),
+    next_index: usize,
+    last_t_us: Option<u64>,
+}
+
+fn io_error(path: &Path, what: &str, e: std::io::Error) -> RecordingError {
+    error(path, None, format!("cannot {what}: {e}"))
+}
+
+/// Path of frame `index` inside a recording directory.
+pub fn frame_path(dir: &Path, index: usize) -> PathBuf {
+    dir.join("frames").join(format!("{index:06}.pgm"))
+}
+
+impl RecordingWriter {
+    /// Creates `dir` (and `dir/frames`), writes `camera.toml` and `pad.toml`, and starts
+    /// `frames.csv` (with the truth columns when `has_truth`).
+    pub fn create(
+        dir: &Path,
+        camera: &CameraModel,
+        pad: &PadConfig,
+        has_truth: bool,
+    ) -> Result<Self, RecordingError> {
+        camera.validate().map_err(|e| {
+            error(
+                &dir.join("camera.toml"),
+                None,
+                format!("invalid camera: {e:?}"),
+            )
+        })?;
+        let frames_dir = dir.join("frames");
+        std::fs::create_dir_all(&frames_dir)
+            .map_err(|e| io_error(&frames_dir, "create directory", e))?;
+        let write = |name: &str, text: String| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).map_err(|e| io_error(&path, "write", e))
+        };
+        write("camera.toml", camera_toml(camera))?;
+        write("pad.toml", crate::sim::pad::pad_toml(pad))?;
+        let csv_path = dir.join("frames.csv");
+        let file = File::create(&csv_path).map_err(|e| io_error(&csv_path, "create", e))?;
+        let mut csv = BufWriter::new(file);
+        let mut header = String::from("index,t_us");
+        if has_truth {
+            for column in TRUTH_COLUMNS {
+                header.push(',');
+                header.push_str(column);
+            }
+        }
+        writeln!(csv, "{header}").map_err(|e| io_error(&csv_path, "write", e))?;
+        // A previous recording's labels must not survive into this one.
+        let setpoints_path = dir.join("setpoints.csv");
+        if setpoints_path.exists() {
+            std::fs::remove_file(&setpoints_path)
+                .map_err(|e| io_error(&setpoints_path, "remove", e))?;
+        }
+        Ok(RecordingWriter {
+            dir: dir.to_path_buf(),
+            csv,
+            setpoints: None,
+            has_truth,
+            size: (camera.width as usize, camera.height as usize),
+            next_index: 0,
+            last_t_us: None,
+        })
+    }
+
+    /// Appends a frame.
+    pub fn push(
+        &mut self,
+        t_us: u64,
+        truth: Option<&CameraTruth>,
+        label: Option<&str>,
+        image: &GrayFrame,
+    ) -> Result<(), RecordingError> {
+        let index = self.next_index;
+        let path = frame_path(&self.dir, index);
+        if (image.width, image.height) != self.size
+            || image.pixels.len() != image.width * image.height
+        {
+            return Err(error(
+                &path,
+                None,
+                format!(
+                    "frame is {}x{} but the camera is {}x{}",
+                    image.width, image.height, self.size.0, self.size.1
+                ),
+            ));
+        }
+        if self.last_t_us.is_some_and(|last| t_us <= last) {
+            return Err(error(
+                &self.dir.join("frames.csv"),
+                None,
+                format!("frame {index}: time {t_us} us does not increase"),
+            ));
+        }
+        if truth.is_some() && !self.has_truth {
+            return Err(error(
+                &self.dir.join("frames.csv"),
+                None,
+                "truth given for a recording created without truth columns",
+            ));
+        }
+        crate::image_io::save_pgm(&path, image).map_err(|e| io_error(&path, "write", e))?;
+        let mut row = format!("{index},{t_us}");
+        if self.has_truth {
+            match truth {
+                Some(t) => {
+                    for v in t.position.iter().chain(&t.orientation) {
+                        if !v.is_finite() {
+                            return Err(error(
+                                &self.dir.join("frames.csv"),
+                                None,
+                                format!("frame {index}: truth value {v} is not finite"),
+                            ));
+                        }
+                        row.push_str(&format!(",{v:?}"));
+                    }
+                }
+                None => row.push_str(",,,,,,,"),
+            }
+        }
+        let csv_path = self.dir.join("frames.csv");
+        writeln!(self.csv, "{row}").map_err(|e| io_error(&csv_path, "write", e))?;
+        if let Some(label) = label {
+            let sp_path = self.dir.join("setpoints.csv");
+            if label.is_empty() || label.contains([',', '\n', '\r']) {
+                return Err(error(
+                    &sp_path,
+                    None,
+                    format!("label `{label}` must be non-empty without commas or line breaks"),
+                ));
+            }
+            if self.setpoints.is_none() {
+                let file = File::create(&sp_path).map_err(|e| io_error(&sp_path, "create", e))?;
+                let mut w = BufWriter::new(file);
+                writeln!(w, "index,label").map_err(|e| io_error(&sp_path, "write", e))?;
+                self.setpoints = Some(w);
+            }
+            if let Some(w) = &mut self.setpoints {
+                writeln!(w, "{index},{label}").map_err(|e| io_error(&sp_path, "write", e))?;
+            }
+        }
+        self.next_index += 1;
+        self.last_t_us = Some(t_us);
+        Ok(())
+    }
+
+    /// Flushes the CSV files; returns the number of frames written.
+    pub fn finish(mut self) -> Result<usize, RecordingError> {
+        let csv_path = self.dir.join("frames.csv");
+        self.csv
+            .flush()
+            .map_err(|e| io_error(&csv_path, "write", e))?;
+        if let Some(w) = &mut self.setpoints {
+            let sp_path = self.dir.join("setpoints.csv");
+            w.flush().map_err(|e| io_error(&sp_path, "write", e))?;
+        }
+        Ok(self.next_index)
+    }
+}
+
+/// A row of `frames.csv`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameEntry {
+    /// Frame index.
+    pub index: usize,
+    /// Time, microseconds.
+    pub t_us: u64,
+    /// Truth, when present.
+    pub truth: Option<CameraTruth>,
+    /// Line in `frames.csv`.
+    pub line: usize,
+}
+
+/// An opened recording: configuration and frame list read and checked; images decoded on
+/// demand.
+#[derive(Debug, Clone)]
+pub struct RecordingReader {
+    /// The directory.
+    pub dir: PathBuf,
+    /// The camera (`camera.toml`).
+    pub camera: CameraModel,
+    /// The pad (`pad.toml`).
+    pub pad: PadConfig,
+    /// Whether `frames.csv` has the truth columns.
+    pub has_truth: bool,
+    /// The rows of `frames.csv`.
+    pub entries: Vec<FrameEntry>,
+    /// Set-point label per frame (from `setpoints.csv`, when present).
+    pub labels: Vec<Option<String>>,
+}
+
+impl RecordingReader {
+    /// Reads `camera.toml`, `pad.toml`, `frames.csv` (and `setpoints.csv` when present), and
+    /// checks that every listed frame file exists.
+    pub fn open(dir: &Path) -> Result<Self, RecordingError> {
+        if !dir.is_dir() {
+            return Err(error(
+                dir,
+                None,
+                "not a recording directory (no such directory)",
+            ));
+        }
+        let camera = config::load_camera(&dir.join("camera.toml"))?;
+        let pad = config::load_pad(&dir.join("pad.toml"))?;
+        let csv_path = dir.join("frames.csv");
+        let text =
+            std::fs::read_to_string(&csv_path).map_err(|e| io_error(&csv_path, "read", e))?;
+        let (has_truth, entries) = parse_frames_csv(&text)
+            .map_err(|(line, reason)| error(&csv_path, Some(line), reason))?;
+        for entry in &entries {
+            let path = frame_path(dir, entry.index);
+            if !path.is_file() {
+                return Err(error(
+                    &path,
+                    None,
+                    format!(
+                        "missing frame file (frames.csv line {} lists frame {})",
+                        entry.line, entry.index
+                    ),
+                ));
+            }
+        }
+        let mut labels = vec![None; entries.len()];
+        let sp_path = dir.join("setpoints.csv");
+        if sp_path.exists() {
+            let text =
+                std::fs::read_to_string(&sp_path).map_err(|e| io_error(&sp_path, "read", e))?;
+            parse_setpoints_csv(&text, &mut labels)
+                .map_err(|(line, reason)| error(&sp_path, Some(line), reason))?;
+        }
+        Ok(RecordingReader {
+            dir: dir.to_path_buf(),
+            camera,
+            pad,
+            has_truth,
+            entries,
+            labels,
+        })
+    }
+
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether the recording has no frame.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Reads frame `k` (of [`RecordingReader::entries`]).
+    pub fn frame(&self, k: usize) -> Result<RecordedFrame, RecordingError> {
+        let entry = self.entries.get(k).ok_or_else(|| {
+            error(
+                &self.dir.join("frames.csv"),
+                None,
+                format!("no frame {k} (the recording has {})", self.entries.len()),
+            )
+        })?;
+        let path = frame_path(&self.dir, entry.index);
+        let image = read_pgm(
+            &path,
+            Some((self.camera.width as usize, self.camera.height as usize)),
+        )?;
+        Ok(RecordedFrame {
+            index: entry.index,
+            t_us: entry.t_us,
+            truth: entry.truth,
+            label: self.labels.get(k).cloned().flatten(),
+            image,
+        })
+    }
+
+    /// The frames in order, decoded one at a time.
+    pub fn frames(&self) -> impl Iterator<Item = Result<RecordedFrame, RecordingError>> + '_ {
+        (0..self.entries.len()).map(|k| self.frame(k))
+    }
+}
+
+/// Lines of a text file with their 1-based numbers, line breaks (`\n` or `\r\n`) removed,
+/// blank lines skipped.
+fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.split('\n')
+        .enumerate()
+        .map(|(k, l)| (k + 1, l.strip_suffix('\r').unwrap_or(l)))
+        .filter(|(_, l)| !l.trim().is_empty())
+}
+
+/// Parses `frames.csv`: whether it has truth, and its rows. Errors are (line, reason).
+pub fn parse_frames_csv(text: &str) -> Result<(bool, Vec<FrameEntry>), (usize, String)> {
+    let mut lines = numbered_lines(text);
+    let Some((header_line, header)) = lines.next() else {
+        return Err((
+            1,
+            "empty file: expected the header `index,t_us[,cam_x,...]`".into(),
+        ));
+    };
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let basic = ["index", "t_us"];
+    let has_truth = if columns == basic {
+        false
+    } else if columns.len() == 9 && columns[..2] == basic && columns[2..] == TRUTH_COLUMNS {
+        true
+    } else {
+        return Err((
+            header_line,
+            format!(
+                "header `{header}`: expected `index,t_us` or `index,t_us,{}`",
+                TRUTH_COLUMNS.join(",")
+            ),
+        ));
+    };
+    let width = if has_truth { 9 } else { 2 };
+    let mut entries = Vec::new();
+    let mut previous_t: Option<u64> = None;
+    for (line, row) in lines {
+        let fields: Vec<&str> = row.split(',').map(str::trim).collect();
+        if fields.len() != width {
+            return Err((
+                line,
+                format!(
+                    "expected {width} comma-separated columns, found {} (truncated or corrupt row?)",
+                    fields.len()
+                ),
+            ));
+        }
+        let index: usize = fields[0].parse().map_err(|_| {
+            (
+                line,
+                format!("index: `{}` is not a whole number", fields[0]),
+            )
+        })?;
+        let expected = entries.len();
+        if index != expected {
+            return Err((
+                line,
+                format!(
+                    "index {index} where {expected} was expected (indices count up from 0 \
+                     without gaps; dropped frames show in t_us)"
+                ),
+            ));
+        }
+        let t_us: u64 = fields[1].parse().map_err(|_| {
+            (
+                line,
+                format!(
+                    "t_us: `{}` is not a whole number of microseconds",
+                    fields[1]
+                ),
+            )
+        })?;
+        if let Some(previous) = previous_t {
+            if t_us <= previous {
+                return Err((
+                    line,
+                    format!(
+                        "t_us {t_us} is not after the previous frame's {previous} (times must increase)"
+                    ),
+                ));
+            }
+        }
+        let truth = if has_truth {
+            let values = &fields[2..];
+            if values.iter().all(|v| v.is_empty()) {
+                None
+            } else {
+                let mut parsed = [0.0f64; 7];
+                for ((slot, text), name) in parsed.iter_mut().zip(values).zip(TRUTH_COLUMNS) {
+                    *slot = text
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| {
+                            (line, format!("{name}: `{text}` is not a finite number"))
+                        })?;
+                }
+                let q = [parsed[3], parsed[4], parsed[5], parsed[6]];
+                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+                if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                    return Err((
+                        line,
+                        format!("cam_qw..cam_qz has norm {norm:.6}; it must be a unit quaternion"),
+                    ));
+                }
+                Some(CameraTruth {
+                    position: [parsed[0], parsed[1], parsed[2]],
+                    orientation: q,
+                })
+            }
+        } else {
+            None
+        };
+        entries.push(FrameEntry {
+            index,
+            t_us,
+            truth,
+            line,
+        });
+        previous_t = Some(t_us);
+    }
+    Ok((has_truth, entries))
+}
+
+/// Parses `setpoints.csv` into `labels` (one slot per frame). Errors are (line, reason).
+fn parse_setpoints_csv(text: &str, labels: &mut [Option<String>]) -> Result<(), (usize, String)> {
+    let mut lines = numbered_lines(text);
+    match lines.next() {
+        Some((_, header)) if header.trim() == "index,label" => {}
+        Some((line, header)) => {
+            return Err((line, format!("header `{header}`: expected `index,label`")));
+        }
+        None => return Ok(()),
+    }
+    for (line, row) in lines {
+        let Some((index, label)) = row.split_once(',') else {
+            return Err((line, "expected `index,label`".into()));
+        };
+        let index: usize = index.trim().parse().map_err(|_| {
+            (
+                line,
+                format!("index: `{}` is not a whole number", index.trim()),
+            )
+        })?;
+        let count = labels.len();
+        let slot = labels.get_mut(index).ok_or_else(|| {
+            (
+                line,
+                format!("frame {index} is not in frames.csv (it has {count} frames)"),
+            )
+        })?;
+        let label = label.trim();
+        if label.is_empty() {
+            return Err((line, "empty label".into()));
+        }
+        *slot = Some(label.to_string());
+    }
+    Ok(())
+}
+
+/// Reads an 8-bit binary PGM (P5) strictly: one image, maxval 255, exactly
+/// `width x height` pixel bytes, and the size `expected` when given.
+pub fn read_pgm(
+    path: &Path,
+    expected: Option<(usize, usize)>,
+) -> Result<GrayFrame, RecordingError> {
+    let bytes = std::fs::read(path).map_err(|e| io_error(path, "read", e))?;
+    parse_pgm(&bytes, expected).map_err(|reason| error(path, None, reason))
+}
+
+/// [`read_pgm`] on bytes; the error is the reason alone.
+pub fn parse_pgm(bytes: &[u8], expected: Option<(usize, usize)>) -> Result<GrayFrame, String> {
+    if bytes.get(..2) != Some(b"P5") {
+        return Err("not a binary PGM file (it must start with `P5`)".into());
+    }
+    let mut pos = 2;
+    let mut numbers = [0usize; 3];
+    for (k, name) in ["width", "height", "maxval"].iter().enumerate() {
+        // Whitespace and `#` comments separate the header fields.
+        loop {
+            match bytes.get(pos) {
+                Some(b) if b.is_ascii_whitespace() => pos += 1,
+                Some(b'#') => {
+                    while bytes.get(pos).is_some_and(|&b| b != b'\n') {
+                        pos += 1;
+                    }
+                }
+                _ => break,
+            }
+        }
+        let start = pos;
+        while bytes.get(pos).is_some_and(u8::is_ascii_digit) {
+            pos += 1;
+        }
+        if start == pos {
+            return Err(match bytes.get(pos) {
+                None => format!("truncated header: no {name}"),
+                Some(_) => format!("bad header: {name} is not a number"),
+            });
+        }
+        let text = std::str::from_utf8(bytes.get(start..pos).unwrap_or(&[])).unwrap_or("");
+        numbers[k] = text
+            .parse()
+            .map_err(|_| format!("bad header: {name} `{text}` is too large"))?;
+    }
+    let [width, height, maxval] = numbers;
+    if maxval != 255 {
+        return Err(format!(
+            "maxval {maxval}: only 8-bit frames (maxval 255) are supported"
+        ));
+    }
+    if width == 0
+        || height == 0
+        || width > touchdown_core::image::MAX_DIMENSION
+        || height > touchdown_core::image::MAX_DIMENSION
+    {
+        return Err(format!("unsupported size {width}x{height}"));
+    }
+    match bytes.get(pos) {
+        Some(b) if b.is_ascii_whitespace() => pos += 1,
+        Some(_) => return Err("bad header: no whitespace after maxval".into()),
+        None => return Err("truncated: no pixel data".into()),
+    }
+    let needed = width * height;
+    let data = bytes.get(pos..).unwrap_or(&[]);
+    if data.len() < needed {
+        return Err(format!(
+            "truncated: a {width}x{height} frame needs {needed} pixel bytes, the file has {}",
+            data.len()
+        ));
+    }
+    if data.len() > needed {
+        return Err(format!(
+            "{} unexpected bytes after the {width}x{height} frame",
+            data.len() - needed
+        ));
+    }
+    if let Some((w, h)) = expected {
+        if (w, h) != (width, height) {
+            return Err(format!(
+                "frame is {width}x{height} but camera.toml says {w}x{h}"
+            ));
+        }
+    }
+    Ok(GrayFrame {
+        width,
+        height,
+        pixels: data.to_vec(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pgm_header_with_comment() {
+        let mut bytes = b"P5\n# hello\n2 1\n255\n".to_vec();
+        bytes.extend_from_slice(&[7, 9]);
+        let f = parse_pgm(&bytes, Some((2, 1))).unwrap();
+        assert_eq!(f.pixels, vec![7, 9]);
+        assert!(parse_pgm(&bytes[..bytes.len() - 1], None)
+            .unwrap_err()
+            .starts_with("truncated"));
+        assert!(parse_pgm(b"P5\n2 1\n65535\n\0\0\0\0", None)
+            .unwrap_err()
+            .contains("maxval"));
+        assert!(parse_pgm(&bytes, Some((3, 1)))
+            .unwrap_err()
+            .contains("camera.toml"));
+        assert!(parse_pgm(b"P2\n", None).is_err());
+        assert!(parse_pgm(b"P5\n2", None).unwrap_err().contains("truncated"));
+    }
+
+    #[test]
+    fn csv_errors_name_the_line() {
+        let head = "index,t_us\n";
+        assert_eq!(
+            parse_frames_csv(&format!("{head}0,10\n1,20\n"))
+                .unwrap()
+                .1
+                .len(),
+            2
+        );
+        let e = parse_frames_csv(&format!("{head}0,10\n2,20\n")).unwrap_err();
+        assert_eq!(e.0, 3);
+        let e = parse_frames_csv(&format!("{head}0,10\n1,10\n")).unwrap_err();
+        assert!(e.0 == 3 && e.1.contains("after"), "{e:?}");
+        let e = parse_frames_csv(&format!("{head}0,1x\n")).unwrap_err();
+        assert!(e.0 == 2 && e.1.contains("t_us"));
+        let e = parse_frames_csv("index,time\n").unwrap_err();
+        assert_eq!(e.0, 1);
+        let truth = format!("index,t_us,{}\n", TRUTH_COLUMNS.join(","));
+        let (has, rows) =
+            parse_frames_csv(&format!("{truth}0,5,1,2,3,1,0,0,0\n1,6,,,,,,,\n")).unwrap();
+        assert!(has && rows[0].truth.is_some() && rows[1].truth.is_none());
+        let e = parse_frames_csv(&format!("{truth}0,5,1,2,3,2,0,0,0\n")).unwrap_err();
+        assert!(e.1.contains("unit quaternion"), "{e:?}");
+        let e = parse_frames_csv(&format!("{truth}0,5,1,2,3,1,0,0\n")).unwrap_err();
+        assert!(e.1.contains("columns"), "{e:?}");
+    }
+
+    #[test]
+    fn camera_toml_is_exact() {
+        let camera = CameraModel {
+            distortion: [-0.12, 0.03, 0.0005, -0.0003, 0.0],
+            ..CameraModel::pinhole(640, 480, 554.256_3, 554.256_3, 319.5, 239.5)
+        };
+        let back = config::parse_camera(&camera_toml(&camera)).unwrap();
+        assert_eq!(back, camera);
+        let pinhole = CameraModel::pinhole(64, 48, 1.0e-1, 0.1, 31.5, 23.5);
+        assert_eq!(
+            config::parse_camera(&camera_toml(&pinhole)).unwrap(),
+            pinhole
+        );
+    }
+}
