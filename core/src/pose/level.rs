@@ -26,9 +26,9 @@ use crate::family::Family;
 use crate::pad::PadLayout;
 use nalgebra::{Matrix3, Vector3};
 
-/// Re-solves `fix` with the pad's tilt from gravity (see the module docs). The rotation part
-/// of the covariance is kept from `fix` (the heading still comes from it); the translation
-/// part and the cross terms come from the linear solve.
+/// Re-solves `fix` with the pad's tilt from gravity (see the module docs). The covariance's
+/// rotation part is the heading variance of `fix` about the vertical (the tilt is known); the
+/// translation part comes from the linear solve; cross terms are dropped.
 pub fn level_pad_fix(
     fix: &PadFix,
     detections: &[Detection],
@@ -102,16 +102,18 @@ pub fn level_pad_fix(
     let rms_normalised = libm::sqrtf(residual_sq / equations as f32);
     let sigma = rms_normalised.max(PIXEL_NOISE_FLOOR_PX / focal);
     let translation_cov = normal.try_inverse().ok_or(PoseError::NoSolution)? * (sigma * sigma);
-    let mut covariance = fix.covariance;
-    for r in 0..6 {
-        for k in 0..6 {
-            if r >= 3 || k >= 3 {
-                covariance[(r, k)] = if r >= 3 && k >= 3 {
-                    translation_cov[(r - 3, k - 3)]
-                } else {
-                    0.0
-                };
-            }
+    // Rotation: only the heading is still uncertain, a rotation about the vertical, which is
+    // `up` in the camera frame (the covariance is over left increments in the camera frame).
+    // Its variance is the image fix's along that axis; the tilt's is gone.
+    let up = camera_from_level * Vector3::new(0.0, 0.0, 1.0);
+    let rotation_cov = fix.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+    let heading_var = up.dot(&(rotation_cov * up)).max(0.0);
+    let heading_cov = up * up.transpose() * heading_var;
+    let mut covariance = nalgebra::Matrix6::<f32>::zeros();
+    for r in 0..3 {
+        for k in 0..3 {
+            covariance[(r, k)] = heading_cov[(r, k)];
+            covariance[(r + 3, k + 3)] = translation_cov[(r, k)];
         }
     }
     Ok(PadFix {
