@@ -55,7 +55,7 @@ pub struct GroundTexture {
     /// its own offset). A table look-up is several times cheaper than hashing, and the
     /// texture is most of a frame's rendering time; the period (256 cells of the octave)
     /// is hidden by the coarser octaves.
-    lattice: std::sync::Arc<[f32]>,
+    lattice: std::sync::Arc<[f32; LATTICE * LATTICE]>,
 }
 
 impl std::fmt::Debug for GroundTexture {
@@ -77,16 +77,17 @@ impl PartialEq for GroundTexture {
 impl GroundTexture {
     /// A texture of `kind`.
     pub fn new(kind: GroundKind, seed: u64) -> Self {
-        let mut lattice = Vec::with_capacity(LATTICE * LATTICE);
-        for b in 0..LATTICE as i64 {
-            for a in 0..LATTICE as i64 {
-                lattice.push(lattice_hash(seed, 0, a, b) as f32);
+        let mut lattice = std::sync::Arc::new([0.0f32; LATTICE * LATTICE]);
+        if let Some(table) = std::sync::Arc::get_mut(&mut lattice) {
+            for (k, v) in table.iter_mut().enumerate() {
+                let (a, b) = ((k % LATTICE) as i64, (k / LATTICE) as i64);
+                *v = lattice_hash(seed, 0, a, b) as f32;
             }
         }
         GroundTexture {
             kind,
             seed,
-            lattice: lattice.into(),
+            lattice,
         }
     }
 
@@ -206,17 +207,15 @@ impl GroundTexture {
         let (fu, fv) = (smooth(u - iu as f64), smooth(v - iv as f64));
         // Each octave reads the table at its own offset, so octaves are not correlated.
         let offset = octave.wrapping_mul(0x9e37_79b9) as i64;
-        let mask = LATTICE as i64 - 1;
-        let (a0, b0) = ((iu + offset) & mask, (iv + (offset >> 8)) & mask);
+        let mask = LATTICE - 1;
+        let (a0, b0) = (
+            (iu.wrapping_add(offset) as usize) & mask,
+            (iv.wrapping_add(offset >> 8) as usize) & mask,
+        );
         let (a1, b1) = ((a0 + 1) & mask, (b0 + 1) & mask);
-        let l = |a: i64, b: i64| {
-            f64::from(
-                self.lattice
-                    .get((b * LATTICE as i64 + a) as usize)
-                    .copied()
-                    .unwrap_or(0.0),
-            )
-        };
+        // Masked indices into a fixed-size table: no bounds check survives.
+        let table: &[f32; LATTICE * LATTICE] = &self.lattice;
+        let l = |a: usize, b: usize| f64::from(table[(b * LATTICE + a) & (LATTICE * LATTICE - 1)]);
         let top = l(a0, b0) + (l(a1, b0) - l(a0, b0)) * fu;
         let bottom = l(a0, b1) + (l(a1, b1) - l(a0, b1)) * fu;
         top + (bottom - top) * fv
