@@ -137,7 +137,9 @@ fn checkerboard(
 ) -> GrayFrame {
     // Enough squares to cover the frame at any rotation, and the far side at a 35-degree tilt.
     let n = ((800.0 * 2.0 / square_px).ceil() as usize).max(2) | 1;
-    let cells: Vec<bool> = (0..n * n).map(|k| (k / n + k % n).is_multiple_of(2)).collect();
+    let cells: Vec<bool> = (0..n * n)
+        .map(|k| (k / n + k % n).is_multiple_of(2))
+        .collect();
     let placement = Placement::new(319.5 + 0.3, 239.5 - 0.2, square_px * n as f64)
         .rotated(rotation_deg)
         .tilted(tilt_deg, 30.0)
