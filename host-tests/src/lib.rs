@@ -11,5 +11,6 @@ pub mod families;
 pub mod image_io;
 pub mod recording;
 pub mod render;
+pub mod shared_data;
 pub mod sim;
 pub mod workspace;

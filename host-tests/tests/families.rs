@@ -14,10 +14,7 @@ use touchdown_core::family::{parse_family, tables, Family};
 mod user_family;
 
 fn data_dir() -> PathBuf {
-    match std::env::var_os("TOUCHDOWN_DATA") {
-        Some(dir) => PathBuf::from(dir),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
-    }
+    touchdown_host::shared_data::shared_data_dir()
 }
 
 /// A family file's name (`# family`) as the contract spells it: the ArUco files are named

@@ -327,9 +327,7 @@ fn markers_of_other_families_are_not_reported() {
 
 /// `TOUCHDOWN_DATA`, else `shared/data` beside the repository.
 fn data_dir() -> PathBuf {
-    std::env::var_os("TOUCHDOWN_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"))
+    touchdown_host::shared_data::shared_data_dir()
 }
 
 /// Corner quads of an AprilTag test `.txt`: `id, (x0 y0), (x1 y1), (x2 y2), (x3 y3)`.

@@ -40,10 +40,7 @@ use touchdown_host::image_io::load_gray;
 use touchdown_host::workspace::HostWorkspace;
 
 fn data_dir() -> PathBuf {
-    match std::env::var_os("TOUCHDOWN_DATA") {
-        Some(dir) => PathBuf::from(dir),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
-    }
+    touchdown_host::shared_data::shared_data_dir()
 }
 
 fn visp_dir() -> Option<PathBuf> {

@@ -58,16 +58,7 @@ type Corners = [[f64; 2]; 4];
 
 /// The shared data directory, or `None` (after printing why) when it is absent.
 fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("TOUCHDOWN_DATA") {
-        Some(dir) => PathBuf::from(dir),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
-    };
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!("skipping: shared data not found at {}", dir.display());
-        None
-    }
+    touchdown_host::shared_data::shared_data_or_skip()
 }
 
 /// A reference marker: id and corners in our order and pixel convention.
