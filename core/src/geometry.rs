@@ -24,6 +24,16 @@ pub fn cyclic<T: Copy + Default>(items: &[T; 4], k: usize) -> T {
     items.get(k % 4).copied().unwrap_or_default()
 }
 
+/// Area of a quadrilateral (shoelace), in squared units of its points.
+pub fn quad_area(corners: &[Point; 4]) -> f32 {
+    let mut twice = 0.0;
+    for (k, a) in corners.iter().enumerate() {
+        let b = cyclic(corners, k + 1);
+        twice += a.x * b.y - b.x * a.y;
+    }
+    0.5 * twice.abs()
+}
+
 impl Point {
     /// A point from its coordinates.
     pub const fn new(x: f32, y: f32) -> Self {

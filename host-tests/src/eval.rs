@@ -61,11 +61,11 @@ use touchdown_core::camera::CameraModel;
 use touchdown_core::detect::{DetectError, Detection, Detector, DetectorConfig};
 use touchdown_core::family::Family;
 use touchdown_core::filter::{Measurement, PaperConfig, PaperKalman, Tracker, TrackerConfig};
-use touchdown_core::geometry::Point;
 use touchdown_core::image::GrayImage;
-use touchdown_core::pad::{PadLayout, PadMarker};
+use touchdown_core::pad::PadLayout;
 use touchdown_core::pose::{
-    level_pad_fix, marker_pose, pad_pose_with_prediction, Pose, PoseMethod,
+    largest_layout_marker, level_pad_fix, marker_pose, marker_to_pad, pad_pose_with_prediction,
+    PoseMethod,
 };
 
 use crate::workspace::HostWorkspace;
@@ -535,40 +535,6 @@ impl Pipeline {
             }
         }
     }
-}
-
-/// The transform from a layout marker's frame to the pad frame.
-fn marker_to_pad(marker: &PadMarker<'_>) -> Pose {
-    let (s, c) = marker.yaw_deg.to_radians().sin_cos();
-    Pose {
-        rotation: Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0),
-        translation: Vector3::new(marker.x, marker.y, 0.0),
-    }
-}
-
-/// The layout marker with the largest image among the detections (the paper uses one tag).
-fn largest_layout_marker<'d, 'l>(
-    detections: &'d [Detection],
-    families: &[&Family<'_>],
-    layout: &'l PadLayout<'l>,
-) -> Option<(&'d Detection, &'l PadMarker<'l>)> {
-    detections
-        .iter()
-        .filter_map(|d| {
-            let family = families.get(d.family as usize)?;
-            Some((d, layout.find(family.name, d.id)?))
-        })
-        .max_by(|a, b| quad_area(&a.0.corners).total_cmp(&quad_area(&b.0.corners)))
-}
-
-/// Area of a quadrilateral (shoelace), pixels squared.
-fn quad_area(corners: &[Point; 4]) -> f32 {
-    let mut twice = 0.0;
-    for (k, a) in corners.iter().enumerate() {
-        let b = corners[(k + 1) % 4];
-        twice += a.x * b.y - b.x * a.y;
-    }
-    0.5 * twice.abs()
 }
 
 /// Why an experiment could not be set up or run.

@@ -31,7 +31,10 @@ pub mod pad_pose;
 pub mod refine;
 
 pub use level::level_pad_fix;
-pub use pad_pose::{pad_pose, pad_pose_with_prediction, PadFix, PIXEL_NOISE_FLOOR_PX};
+pub use pad_pose::{
+    largest_layout_marker, marker_to_pad, pad_pose, pad_pose_with_prediction, PadFix,
+    PIXEL_NOISE_FLOOR_PX,
+};
 
 use crate::camera::CameraModel;
 use crate::geometry::Point;

@@ -29,7 +29,7 @@ use super::{ippe, marker_corners, normalized_corners, refine, Pose, PoseError};
 use crate::camera::CameraModel;
 use crate::detect::Detection;
 use crate::family::Family;
-use crate::geometry::Point;
+use crate::geometry::{quad_area, Point};
 use crate::pad::{PadLayout, PadMarker, MAX_PAD_MARKERS};
 use nalgebra::{Matrix3, Matrix6, Vector3};
 
@@ -83,7 +83,7 @@ impl PadFix {
 }
 
 /// The transform from a layout marker's frame to the pad frame.
-fn marker_to_pad(marker: &PadMarker<'_>) -> Pose {
+pub fn marker_to_pad(marker: &PadMarker<'_>) -> Pose {
     let yaw = marker.yaw_deg.to_radians();
     let (s, c) = (libm::sinf(yaw), libm::cosf(yaw));
     Pose {
@@ -115,14 +115,17 @@ pub(crate) fn layout_marker<'l>(
     layout_marker_index(layout, families, detection).map(|(_, m)| m)
 }
 
-/// Twice the signed area of a quadrilateral (shoelace), pixels squared.
-fn quad_area(corners: &[Point; 4]) -> f32 {
-    let mut twice = 0.0;
-    for (k, a) in corners.iter().enumerate() {
-        let b = crate::geometry::cyclic(corners, k + 1);
-        twice += a.x * b.y - b.x * a.y;
-    }
-    libm::fabsf(twice)
+/// The layout marker with the largest image among the detections, with its detection (the
+/// paper's method uses one marker; the pad fit starts from it).
+pub fn largest_layout_marker<'d, 'l>(
+    detections: &'d [Detection],
+    families: &[&Family<'_>],
+    layout: &'l PadLayout<'l>,
+) -> Option<(&'d Detection, &'l PadMarker<'l>)> {
+    detections
+        .iter()
+        .filter_map(|d| Some((d, layout_marker(layout, families, d)?)))
+        .max_by(|a, b| quad_area(&a.0.corners).total_cmp(&quad_area(&b.0.corners)))
 }
 
 /// [`pad_pose_with_prediction`] without a prediction.
