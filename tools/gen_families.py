@@ -41,6 +41,10 @@ row-major, the first data cell being the most significant bit. The script then
   cells, one white quiet ring makes the 9x9 grid the other 5x5 families use;
 * cross-checks the shipped ArUco families (and OpenCV's AprilTag dictionaries, which are
   the shared grids turned by 180 degrees) against OpenCV and prints the result;
+* builds, for each family that corrects bits, the multi-index of corrected look-ups
+  (`core/src/family/index.rs`): the data bits split into more chunks than the correction
+  bound, one bucket table per chunk; `choose_chunks` picks the chunk count that balances
+  flash against look-up cost, and none when scanning the codes is as cheap (tiny families);
 * writes one Rust file per family and `mod.rs` (with `ALL`, `DEFAULT`, `by_name`, `names`
   and the unit tests), and runs `rustfmt --edition 2021` on the files it wrote.
 
@@ -308,6 +312,93 @@ def max_correction_for(bits: int, codes: int, min_hamming_: int) -> int:
 
 
 # --------------------------------------------------------------------------------------
+# Multi-index (core/src/family/index.rs)
+# --------------------------------------------------------------------------------------
+
+MAX_CHUNK_BITS = 16  # core::family::index::MAX_CHUNK_BITS
+# Cortex-M7 instructions, for `choose_chunks`: one bucket look-up of one reading in one chunk
+# and one code verified against a reading (xor, software popcount of a u64, compare) are
+# estimates; one code of the linear scan (four readings) is measured on bench/m7: ~47,000
+# per candidate that is not a marker, over the 837 codes of tag36h11 and aruco_6x6_250.
+LOOKUP_INSNS = 12
+VERIFY_INSNS = 35
+SCAN_INSNS_PER_CODE = 56
+# Flash bytes an index may spend to save one instruction per decode. At 4, aruco_6x6_250 gets
+# 4 chunks of 9 bits rather than 8+7+7+7+7: 2,058 bytes more, measured 1.2 M instructions
+# less on bench/m7's qvga-adv-quads frame (540 bordered quads that are not markers).
+BYTES_PER_INSN = 4
+
+
+def even_chunks(bits: int, count: int) -> list[int]:
+    """`bits` split into `count` chunks as even as possible, the wider ones first."""
+    base, extra = divmod(bits, count)
+    return [base + 1] * extra + [base] * (count - extra)
+
+
+def index_flash(widths: list[int], codes: int) -> int:
+    """Bytes of the index: the u16 bucket offsets and the u16 ids of every chunk."""
+    return 2 * (sum((1 << w) + 1 for w in widths) + len(widths) * codes)
+
+
+def index_insns(widths: list[int], codes: int) -> float:
+    """Expected instructions of one indexed look-up of a reading that matches nothing: four
+    readings, each looked up in every chunk, verifying the bucket's codes (n / 2^w of them on
+    average for a random reading)."""
+    return 4 * sum(LOOKUP_INSNS + VERIFY_INSNS * codes / (1 << w) for w in widths)
+
+
+def choose_chunks(bits: int, codes: int, max_correction: int) -> list[int] | None:
+    """The chunk widths of a family's multi-index, or None when it has none.
+
+    Any split into more than `max_correction` chunks finds every code within that many bits
+    (pigeonhole). Few wide chunks make small buckets (fast) but large offset tables; many
+    narrow chunks the reverse. The choice minimises flash bytes plus BYTES_PER_INSN times the
+    expected instructions per look-up, against no index at all (a linear scan, no flash), so a
+    family with very few codes keeps the scan."""
+    if max_correction == 0:
+        return None
+    best_cost, best = BYTES_PER_INSN * SCAN_INSNS_PER_CODE * codes, None
+    for count in range(max_correction + 1, bits + 1):
+        widths = even_chunks(bits, count)
+        if widths[0] > MAX_CHUNK_BITS:
+            continue
+        cost = index_flash(widths, codes) + BYTES_PER_INSN * index_insns(widths, codes)
+        if cost < best_cost:
+            best_cost, best = cost, widths
+    return best
+
+
+def multi_index(codes: np.ndarray, widths: list[int]) -> tuple[list[int], list[int]]:
+    """Bucket offsets and ids of every chunk, chunk 0 on the least significant bits."""
+    values = [int(c) for c in codes]
+    starts: list[int] = []
+    ids: list[int] = []
+    shift = 0
+    for w in widths:
+        chunk = [(v >> shift) & ((1 << w) - 1) for v in values]
+        counts = [0] * (1 << w)
+        for c in chunk:
+            counts[c] += 1
+        offsets = [0]
+        for c in counts:
+            offsets.append(offsets[-1] + c)
+        starts += offsets
+        ids += sorted(range(len(values)), key=lambda i: (chunk[i], i))
+        shift += w
+    if shift != sum(widths):
+        raise GenError("chunk widths do not add up")
+    return starts, ids
+
+
+def index_summary(fam: "Family") -> str:
+    widths = fam.chunk_bits
+    if widths is None:
+        return "none"
+    shape = f"{len(widths)} x {widths[0]}" if len(set(widths)) == 1 else "+".join(map(str, widths))
+    return f"{shape} bits, {index_flash(widths, len(fam.codes)):,} B"
+
+
+# --------------------------------------------------------------------------------------
 # Families
 # --------------------------------------------------------------------------------------
 
@@ -327,6 +418,10 @@ class Family:
     @property
     def ident(self) -> str:
         return static_ident(self.name)
+
+    @property
+    def chunk_bits(self) -> list[int] | None:
+        return choose_chunks(self.layout.bits, len(self.codes), self.max_correction)
 
     @property
     def module(self) -> str:
@@ -536,10 +631,11 @@ def rust_table(
     order = sorted(range(len(codes)), key=lambda i: codes[i])
     w = hex_width(fam.layout.bits)
     n = len(codes)
+    widths = fam.chunk_bits
     out = [f"//! {line}".rstrip() for line in header_doc]
     out += [
         "",
-        f"use {crate_path}::family::Family;",
+        f"use {crate_path}::family::Family;" if widths is None else f"use {crate_path}::family::{{Family, MultiIndex}};",
         "",
         f"/// `{fam.name}`: {n} code{'' if n == 1 else 's'} of {fam.layout.bits} bits, "
         f"{fam.layout.grid}x{fam.layout.grid} cells, minimum distance {fam.min_hamming}, "
@@ -556,6 +652,7 @@ def rust_table(
         if prefix_of is not None
         else "    codes: &CODES,",
         "    sorted_ids: &SORTED,",
+        "    index: None," if widths is None else "    index: Some(&INDEX),",
         "};",
         "",
     ]
@@ -568,7 +665,8 @@ def rust_table(
         out += [
             "/// The codes, indexed by id (kept a few per line: rustfmt would put one per line).",
             "#[rustfmt::skip]",
-            f"pub(crate) static CODES: [u64; {n}] = [",
+            # Visible to the sibling tables that borrow a prefix (shipped families only).
+            f"{'pub(crate) ' if crate_path == 'crate' else ''}static CODES: [u64; {n}] = [",
         ]
         per_line = max(1, min(8, 96 // (w + 4)))
         for start in range(0, n, per_line):
@@ -578,6 +676,34 @@ def rust_table(
     for start in range(0, n, 12):
         out.append("    " + " ".join(f"{i}," for i in order[start : start + 12]))
     out += ["];", ""]
+    if widths is not None:
+        starts, ids = multi_index(fam.codes, widths)
+        chunks = ", ".join(map(str, widths))
+        out += [
+            f"/// Multi-index for corrected look-ups: {len(widths)} chunks of {chunks} bits (least",
+            f"/// significant first), {index_flash(widths, n):,} bytes of tables.",
+            "static INDEX: MultiIndex<'static> = MultiIndex {",
+            f"    chunk_bits: &[{chunks}],",
+            "    starts: &STARTS,",
+            "    ids: &IDS,",
+            "};",
+            "",
+            "/// Bucket offsets of each chunk (kept many per line: rustfmt would put one per line).",
+            "#[rustfmt::skip]",
+            f"static STARTS: [u16; {len(starts)}] = [",
+        ]
+        for start in range(0, len(starts), 16):
+            out.append("    " + " ".join(f"{i}," for i in starts[start : start + 16]))
+        out += [
+            "];",
+            "",
+            "/// Ids of each chunk grouped by bucket (kept many per line: rustfmt would put one per line).",
+            "#[rustfmt::skip]",
+            f"static IDS: [u16; {len(ids)}] = [",
+        ]
+        for start in range(0, len(ids), 16):
+            out.append("    " + " ".join(f"{i}," for i in ids[start : start + 16]))
+        out += ["];", ""]
     return "\n".join(out)
 
 
@@ -802,18 +928,22 @@ def rust_mod(families: list[Family], command: str, source_dir: str) -> str:
         f"//! {command}",
         "//! ```",
         "//!",
-        "//! | family | grid | bits | codes | min distance | max correction |",
-        "//! |---|---:|---:|---:|---:|---:|",
+        "//! | family | grid | bits | codes | min distance | max correction | multi-index |",
+        "//! |---|---:|---:|---:|---:|---:|---:|",
     ]
     for f in families:
         lines.append(
-            f"//! | `{f.name}` | {f.layout.grid} | {f.layout.bits} | {len(f.codes)} | {f.min_hamming} | {f.max_correction} |"
+            f"//! | `{f.name}` | {f.layout.grid} | {f.layout.bits} | {len(f.codes)} | {f.min_hamming} | {f.max_correction} | {index_summary(f)} |"
         )
     lines += [
         "//!",
         "//! The correction bound is the largest `k` below half the minimum distance for which a random",
         f"//! pattern inside a valid border is accepted with probability at most {MAX_FALSE_ACCEPT:g}",
         "//! ([`MAX_FALSE_ACCEPT`](super::MAX_FALSE_ACCEPT)).",
+        "//!",
+        "//! Families that correct bits carry a [`MultiIndex`](super::MultiIndex) (chunk widths and",
+        "//! flash bytes in the last column) chosen by the generator to balance flash against look-up",
+        "//! cost; a family with so few codes that scanning them is as fast has none.",
     ]
     notes = [n for f in families for n in f.notes]
     if notes:
@@ -883,11 +1013,11 @@ def default_families_dir() -> Path:
 
 
 def print_table(families: list[Family]) -> None:
-    print(f"{'family':<18}{'grid':>5}{'bits':>6}{'codes':>7}{'header d':>10}{'computed d':>12}{'max corr':>10}")
+    print(f"{'family':<18}{'grid':>5}{'bits':>6}{'codes':>7}{'header d':>10}{'computed d':>12}{'max corr':>10}  multi-index")
     for f in families:
         header = "-" if f.header_min_hamming is None else str(f.header_min_hamming)
         flag = "" if f.header_min_hamming in (None, f.min_hamming) else "  <-- MISMATCH"
-        print(f"{f.name:<18}{f.layout.grid:>5}{f.layout.bits:>6}{len(f.codes):>7}{header:>10}{f.min_hamming:>12}{f.max_correction:>10}{flag}")
+        print(f"{f.name:<18}{f.layout.grid:>5}{f.layout.bits:>6}{len(f.codes):>7}{header:>10}{f.min_hamming:>12}{f.max_correction:>10}  {index_summary(f)}{flag}")
 
 
 def shipped(args) -> int:

@@ -91,8 +91,10 @@ impl<'a> GrayImage<'a> {
     /// The pixel at (x, y), clamped to the nearest pixel inside the image.
     #[inline]
     pub fn pixel_clamped(&self, x: isize, y: isize) -> u8 {
-        let xc = x.clamp(0, self.width as isize - 1) as usize;
-        let yc = y.clamp(0, self.height as isize - 1) as usize;
+        // min-then-max rather than `clamp`, whose "min > max" panic the optimiser cannot rule
+        // out (it does not know the image is never empty); same result for any real image.
+        let xc = x.min(self.width as isize - 1).max(0) as usize;
+        let yc = y.min(self.height as isize - 1).max(0) as usize;
         self.data.get(yc * self.stride + xc).copied().unwrap_or(0)
     }
 
@@ -131,9 +133,10 @@ impl<'a> GrayImage<'a> {
         let yf = floor(y);
         let fx = x - xf;
         let fy = y - yf;
-        // Clamp before converting so huge values cannot overflow the cast.
-        let xi = xf.clamp(-2.0, self.width as f32 + 1.0) as isize;
-        let yi = yf.clamp(-2.0, self.height as f32 + 1.0) as isize;
+        // Clamp before converting so huge values cannot overflow the cast (max/min: `clamp`
+        // keeps a panic path for bounds the optimiser cannot order; x, y are finite here).
+        let xi = xf.max(-2.0).min(self.width as f32 + 1.0) as isize;
+        let yi = yf.max(-2.0).min(self.height as f32 + 1.0) as isize;
         let p00 = self.pixel_clamped(xi, yi) as f32;
         let p10 = self.pixel_clamped(xi + 1, yi) as f32;
         let p01 = self.pixel_clamped(xi, yi + 1) as f32;

@@ -42,3 +42,4 @@ pub mod geometry;
 pub mod image;
 pub mod pad;
 pub mod pose;
+pub mod sensor;

@@ -19,8 +19,12 @@
 /// it runs once (`main`). The value is constructed in place by the optimiser in release builds;
 /// avoid initialisers that are expensive to build on the stack in debug builds.
 macro_rules! axisram_static {
-    ($ty:ty = $init:expr) => {{
-        #[link_section = ".axisram"]
+    ($ty:ty = $init:expr) => {
+        $crate::axisram::axisram_static!(".axisram", $ty = $init)
+    };
+    // The same in another NOLOAD section of memory.x (e.g. ".sram123").
+    ($section:literal, $ty:ty = $init:expr) => {{
+        #[link_section = $section]
         static mut SLOT: ::core::mem::MaybeUninit<$ty> = ::core::mem::MaybeUninit::uninit();
         // In .bss (DTCM), so it really starts `false`.
         static TAKEN: ::core::sync::atomic::AtomicBool =

@@ -1,12 +1,14 @@
 //! Clock tree and core voltage.
 //!
-//! Source: the NUCLEO-H743ZI2 feeds the H743's OSC_IN (PH0) with the 8 MHz MCO output of its
-//! ST-LINK (no crystal fitted by default), so HSE runs in *bypass* mode at 8 MHz.
+//! Source: the board's HSE ([`crate::board::HSE`]). The NUCLEO-H743ZI2 feeds OSC_IN (PH0)
+//! with the 8 MHz MCO output of its ST-LINK (no crystal fitted by default), so HSE runs in
+//! *bypass* mode at 8 MHz, divided by 2; the OpenMV Cam H7 has a 12 MHz crystal, divided by
+//! 3. Either way PLL1 sees a 4 MHz reference and everything below is the same.
 //!
 //! | clock | default (400 MHz) | feature `clk-480mhz` |
 //! |---|---|---|
 //! | voltage scale | VOS1 | VOS0 |
-//! | PLL1 reference = HSE / DIVM | 8 / 2 = 4 MHz | 8 / 2 = 4 MHz |
+//! | PLL1 reference = HSE / DIVM | 4 MHz | 4 MHz |
 //! | PLL1 VCO = ref x DIVN | 4 x 200 = 800 MHz | 4 x 240 = 960 MHz |
 //! | SYSCLK = CPU = PLL1_P = VCO / 2 | 400 MHz | 480 MHz |
 //! | PLL1_Q = VCO / 8 (SPI1-3, SDMMC kernel clock) | 100 MHz | 120 MHz |
@@ -24,14 +26,12 @@
 //! directly. embassy also sets the flash wait states for the chosen AXI clock and voltage.
 
 use embassy_stm32::rcc::{
-    AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllDiv, PllMul, PllPreDiv, PllSource, Sysclk,
-    VoltageScale,
+    AHBPrescaler, APBPrescaler, Hse, HseMode, Pll, PllDiv, PllMul, PllSource, Sysclk, VoltageScale,
 };
 use embassy_stm32::time::Hertz;
 use embassy_stm32::Config;
 
-/// Frequency of the ST-LINK's MCO fed into OSC_IN.
-pub const HSE_HZ: u32 = 8_000_000;
+use crate::board::HSE;
 
 /// Core clock this build runs at.
 #[cfg(not(feature = "clk-480mhz"))]
@@ -55,12 +55,16 @@ pub fn config() -> Config {
     let mut config = Config::default();
     let rcc = &mut config.rcc;
     rcc.hse = Some(Hse {
-        freq: Hertz(HSE_HZ),
-        mode: HseMode::Bypass,
+        freq: Hertz(HSE.hz),
+        mode: if HSE.bypass {
+            HseMode::Bypass
+        } else {
+            HseMode::Oscillator
+        },
     });
     rcc.pll1 = Some(Pll {
         source: PllSource::HSE,
-        prediv: PllPreDiv::DIV2,
+        prediv: HSE.prediv,
         mul: PLL1_MUL,
         fracn: None,
         divp: Some(PllDiv::DIV2),

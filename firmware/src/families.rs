@@ -22,8 +22,3 @@ pub static SEARCHED: &[&Family<'static>] = touchdown_core::family::tables::DEFAU
 /// The families searched in every frame, in the order detections refer to by index.
 #[cfg(feature = "user-family")]
 pub static SEARCHED: &[&Family<'static>] = &[&crate::user_family::USER_FAMILY];
-
-/// The family the placeholder frame source draws markers of.
-pub fn test_pattern_family() -> Option<&'static Family<'static>> {
-    SEARCHED.first().copied()
-}

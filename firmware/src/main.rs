@@ -1,19 +1,25 @@
 //! # touchdown firmware: STM32H743 camera board
 //!
-//! Finds the landing pad's fiducial markers in camera frames and (from issue 5 on) streams the
-//! pad pose to the flight controller as MAVLink. All algorithms live in `touchdown-core`; this
-//! crate only owns hardware: clocks, memory placement, the camera, the UART and the tasks.
+//! Finds the landing pad's fiducial markers in camera frames and streams the pad pose to the
+//! flight controller as MAVLink. All algorithms live in `touchdown-core` (detector, pose,
+//! filter, the companion MAVLink state machine, the OV7725 driver, the exposure loop, the
+//! parameter log format); this crate only owns hardware and wiring. Tasks, on one cooperative
+//! embassy executor:
 //!
-//! This is the skeleton: it builds for the NUCLEO-H743ZI2 (STM32H743ZI) and runs, on one
-//! cooperative embassy executor,
-//! - [`vision::task`]: detector on every frame of the *placeholder* [`frame_source`] (a
-//!   rendered test pattern; issue 5 replaces it with the OV7725 on the DCMI), stats via defmt;
-//! - [`watchdog::task`]: feeds the independent watchdog while frames keep being processed;
-//! - [`heartbeat::task`]: blinks the green user LED.
+//! - [`vision::task`]: OV7725 over DCMI + DMA into two frame buffers (capture of frame n+1
+//!   overlaps processing of frame n), detector, pad pose, software auto-exposure, camera
+//!   re-initialisation after repeated capture errors;
+//! - [`link::task`]: the UART to the flight controller and the [`Companion`] state machine
+//!   (HEARTBEAT, LANDING_TARGET, TIMESYNC, parameters, STATUSTEXT);
+//! - [`param_store::task`]: saves changed MAVLink parameters to flash;
+//! - [`watchdog::task`]: feeds the independent watchdog while both vision and link progress;
+//! - [`heartbeat::task`]: blinks the user LED.
 //!
-//! Memory (see the root `memory.x`): stack, `.data`, `.bss` and the task futures in DTCM
-//! (fast, not DMA-reachable); the frame buffer and the detector's work memory in AXI SRAM
-//! ([`axisram`]); code and the marker tables in flash.
+//! Boards ([`board`]): NUCLEO-H743ZI2 (default feature `board-nucleo`) or OpenMV Cam H7
+//! (`board-openmv`). Memory (see the root `memory.x` and `firmware/README.md`): stack,
+//! `.data`, `.bss` and the task futures in DTCM (fast, not DMA-reachable); frame buffers,
+//! detector work memory and the SCCB bounce buffer in AXI SRAM ([`axisram`]); code and the
+//! marker tables in flash, parameters in flash bank 2's last sector.
 //!
 //! Build and flash: `cd firmware && cargo run --release` (or `cargo fw` from the root); see
 //! `firmware/README.md` for the wiring.
@@ -23,11 +29,16 @@
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
 mod axisram;
+mod board;
+mod capture;
 mod clocks;
+mod config;
 mod families;
-mod frame_source;
 mod heartbeat;
+mod link;
 mod mavlink_check;
+mod param_store;
+mod sccb;
 // Generated table of the user's own marker family; searched with the `user-family` feature
 // (see families.rs), type-checked in every build.
 #[cfg_attr(not(feature = "user-family"), allow(dead_code))]
@@ -38,50 +49,108 @@ mod watchdog;
 use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_stm32::gpio::{Level, Output, Speed};
-use embassy_stm32::wdg::IndependentWatchdog;
 use panic_probe as _;
-use touchdown_core::detect::QvgaWorkspace;
+use touchdown_core::companion::{Companion, CompanionConfig, ParamId};
+use touchdown_core::sensor::ov7725::Ov7725;
 
 use crate::axisram::axisram_static;
-use crate::frame_source::{FrameBuffer, TestPattern};
+use crate::capture::{Capture, FrameBuffer};
+use crate::sccb::{Bounce, Sccb};
+
+/// The detector's frame-sized work memory for this build's frame size.
+#[cfg(not(feature = "camera-vga"))]
+pub type Workspace = touchdown_core::detect::QvgaWorkspace;
+/// The detector's frame-sized work memory for this build's frame size.
+#[cfg(feature = "camera-vga")]
+pub type Workspace = touchdown_core::detect::VgaWorkspace;
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clocks::config());
     info!(
-        "touchdown firmware {=str}: core clock {} MHz",
+        "touchdown firmware {=str} on {=str}: core clock {} MHz",
         env!("CARGO_PKG_VERSION"),
+        board::NAME,
         clocks::CPU_HZ / 1_000_000
     );
+    let board = board::init(p, config::DEFAULT_BAUD, watchdog::TIMEOUT_US);
     enable_caches();
 
-    // AXI SRAM: each call site runs once (main does not loop or return), so each claim
+    // Large buffers. Each call site runs once (main does not loop or return), so each claim
     // succeeds; `unwrap!` documents that invariant rather than handling run-time data.
-    let frame: &'static mut FrameBuffer =
+    let front: &'static mut FrameBuffer =
         unwrap!(axisram_static!(FrameBuffer = FrameBuffer::new()));
-    let workspace: &'static mut QvgaWorkspace =
-        unwrap!(axisram_static!(QvgaWorkspace = QvgaWorkspace::new()));
+    #[cfg(not(feature = "camera-vga"))]
+    let back: &'static mut FrameBuffer = unwrap!(axisram_static!(FrameBuffer = FrameBuffer::new()));
+    // Two VGA frames (2 x 250 KiB) and the VGA work memory do not fit the 512 KiB AXI SRAM
+    // together: the second frame goes to SRAM1..3 (D2, also reachable by DMA1).
+    #[cfg(feature = "camera-vga")]
+    let back: &'static mut FrameBuffer = {
+        enable_sram123();
+        unwrap!(axisram_static!(
+            ".sram123",
+            FrameBuffer = FrameBuffer::new()
+        ))
+    };
+    let workspace: &'static mut Workspace = unwrap!(axisram_static!(Workspace = Workspace::new()));
+    let bounce: &'static mut Bounce = unwrap!(axisram_static!(Bounce = Bounce::new()));
 
-    let source = TestPattern::new(frame, families::test_pattern_family());
-    let led = Output::new(p.PB0, Level::Low, Speed::Low);
-    let wdg = IndependentWatchdog::new(p.IWDG1, watchdog::TIMEOUT_US);
+    // Parameters from flash, then the UART at the stored baud rate.
+    let mut flash = board.flash;
+    let (params, next_free) = param_store::load(&mut flash);
+    let baud = params.get_int(ParamId::Baud) as u32;
+    if baud != config::DEFAULT_BAUD {
+        if let Err(e) = board.uart.set_baudrate(baud) {
+            warn!(
+                "TD_BAUD {} refused ({}), staying at {}",
+                baud,
+                e,
+                config::DEFAULT_BAUD
+            );
+        }
+    }
+    info!("link: {} baud", baud);
+    let companion = unwrap!(
+        Companion::new(CompanionConfig {
+            params,
+            ..CompanionConfig::default()
+        })
+        .ok(),
+        "the default tracker configuration is valid"
+    );
+
+    capture::configure_dcmi();
+    let camera = board.camera;
+    let sensor = vision::Sensor {
+        driver: Ov7725::new(Sccb::new(camera.sccb, bounce)),
+        reset_n: camera.reset_n,
+        power_down: camera.power_down,
+    };
+    // MCO1 keeps running on its own once configured; the driver needs no further calls.
+    let _xclk = camera.xclk;
 
     // Each task has a pool of one and is spawned exactly once here, so spawning cannot find
     // its pool busy.
-    spawner.spawn(unwrap!(watchdog::task(wdg)));
-    spawner.spawn(unwrap!(heartbeat::task(led)));
-    spawner.spawn(unwrap!(vision::task(source, workspace)));
+    spawner.spawn(unwrap!(watchdog::task(board.watchdog)));
+    spawner.spawn(unwrap!(heartbeat::task(board.led)));
+    spawner.spawn(unwrap!(param_store::task(flash, next_free)));
+    spawner.spawn(unwrap!(link::task(board.uart, companion)));
+    spawner.spawn(unwrap!(vision::task(
+        sensor,
+        Capture::new(camera.dcmi),
+        [front, back],
+        workspace
+    )));
 }
 
 /// Turns on the Cortex-M7's instruction and data caches (16 KB each).
 ///
 /// Without the D-cache every detector access to AXI SRAM goes over the AXI bus at HCLK with
 /// wait states; with it row-by-row accesses are served from 32-byte cache lines and the hot
-/// parts of the work memory stay cached. DTCM (stack,
-/// `.bss`, the RTT log buffer) is never cached, so defmt's buffer stays coherent for the
-/// debugger. Any DMA into cacheable memory (issue 5's DCMI frame buffer, UART buffers) needs
-/// cache maintenance; see [`frame_source`].
+/// parts of the work memory stay cached. DTCM (stack, `.bss`, the RTT log buffer) is never
+/// cached, so defmt's buffer stays coherent for the debugger. DMA into cacheable memory (the
+/// frame buffers, the SCCB bounce buffer) is kept coherent by cache maintenance in
+/// [`capture`] and [`sccb`].
 fn enable_caches() {
     // `take` only fails if someone took the core peripherals before; embassy does not.
     let Some(mut core) = cortex_m::Peripherals::take() else {
@@ -90,4 +159,16 @@ fn enable_caches() {
     };
     core.SCB.enable_icache();
     core.SCB.enable_dcache(&mut core.CPUID);
+}
+
+/// Clocks SRAM1, SRAM2 and SRAM3 (off after reset; an access before this faults).
+#[cfg(feature = "camera-vga")]
+fn enable_sram123() {
+    // RM0433 §8.7 RCC registers, RCC_AHB2ENR: SRAM1EN (bit 29), SRAM2EN (bit 30),
+    // SRAM3EN (bit 31) = 1 enable the D2 SRAM clocks.
+    embassy_stm32::pac::RCC.ahb2enr().modify(|w| {
+        w.set_sram1en(true);
+        w.set_sram2en(true);
+        w.set_sram3en(true);
+    });
 }

@@ -19,6 +19,7 @@ pub static USER_FAMILY: Family<'static> = Family {
     max_correction: 5,
     codes: &CODES,
     sorted_ids: &SORTED,
+    index: None,
 };
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).

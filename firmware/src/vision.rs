@@ -1,138 +1,284 @@
-//! The vision task: frames in, markers out.
+//! The vision task: camera frames in, pad fixes out to the MAVLink link.
 //!
-//! It owns the [`Detector`] (fixed-capacity candidate storage, ~20 KB, kept in the task's
-//! static storage in DTCM) and borrows the frame-sized work memory ([`QvgaWorkspace`]) that
-//! `main` placed in AXI SRAM. Each frame from the [`frame_source`](crate::frame_source) is
-//! searched for the [`SEARCHED`](crate::families::SEARCHED) families; the result is logged
-//! with defmt (a summary every second at `info`, every frame at `debug`), and each finished
-//! frame is reported to the [`watchdog`](crate::watchdog).
+//! Per frame: capture (DMA, [`crate::capture`]) of frame n+1 runs while frame n is searched
+//! for markers ([`Detector`]), the pad pose is solved ([`pad_pose`]) and the result is posted
+//! to the link task with the frame's exposure time. The software auto-exposure
+//! ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
 //!
-//! Issue 5 adds pose estimation and hands the result to the MAVLink task here.
+//! Faults: a capture error (DCMI overrun, timeout) costs that frame and is counted; after
+//! [`MAX_CONSECUTIVE_ERRORS`] in a row the camera is power-cycled and configured again, and the
+//! ground station gets a STATUSTEXT. Only finished frames feed the watchdog, so a camera that
+//! never comes back ends in a reset.
+//!
+//! Logs: once a second at `info`, frames per second, detection time (mean and max), frames
+//! lost to capture errors, overruns and re-initialisations.
 
 use defmt::{debug, info, warn};
-use embassy_time::{Duration, Instant};
-use touchdown_core::detect::{DetectStats, Detector, DetectorConfig, QvgaWorkspace};
+use embassy_futures::join::join;
+use embassy_stm32::gpio::Output;
+use embassy_time::{Delay, Duration, Instant, Timer};
+use touchdown_core::companion::{FrameResult, MavSeverity};
+use touchdown_core::detect::{Detector, DetectorConfig};
+use touchdown_core::image::GrayImage;
+use touchdown_core::pose::pad_pose;
+use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure};
+use touchdown_core::sensor::ov7725::{self, ClockPlan, Ov7725};
+use touchdown_core::sensor::FrameTiming;
 
+use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, WIDTH};
+use crate::config;
 use crate::families::SEARCHED;
-use crate::frame_source::TestPattern;
+use crate::link::{self, LinkEvent};
+use crate::sccb::Sccb;
 use crate::watchdog;
+use crate::Workspace;
 
+/// Capture errors in a row that trigger a camera re-initialisation.
+pub const MAX_CONSECUTIVE_ERRORS: u32 = 3;
+/// Pause between failed camera initialisations.
+const INIT_RETRY: Duration = Duration::from_millis(500);
 /// Interval of the `info` summary.
 const SUMMARY_PERIOD: Duration = Duration::from_secs(1);
+/// Sample every 8th pixel of every 8th row for the exposure loop.
+const BRIGHTNESS_STEP: usize = 8;
 
-/// Runs the detector on every frame of `source`, forever.
-#[embassy_executor::task]
-pub async fn task(mut source: TestPattern, workspace: &'static mut QvgaWorkspace) {
-    let mut detector = Detector::new(DetectorConfig::default());
-    let mut summary = Summary::new();
-    info!("vision: searching {} famil(ies)", SEARCHED.len());
-    for family in SEARCHED {
-        info!("vision:   {=str}", family.name);
-    }
+/// The sensor with its control pins.
+pub struct Sensor {
+    /// The OV7725 driver on the SCCB bus.
+    pub driver: Ov7725<Sccb>,
+    /// RESETB (active low).
+    pub reset_n: Output<'static>,
+    /// PWDN (active high).
+    pub power_down: Output<'static>,
+}
 
-    loop {
-        let frame = match source.next_frame().await {
-            Ok(frame) => frame,
-            Err(e) => {
-                warn!("vision: bad frame: {}", e);
-                continue;
-            }
-        };
-        let started = Instant::now();
-        let result = detector
-            .detect(&frame.image, SEARCHED, &mut workspace.buffers())
-            .map(|detections| detections.len());
-        let elapsed = started.elapsed();
-
-        match result {
-            Ok(count) => {
-                debug!(
-                    "frame {}: {} marker(s), detect {} us, {} us after capture, {}",
-                    frame.sequence,
-                    count,
-                    elapsed.as_micros(),
-                    frame.captured.elapsed().as_micros(),
-                    detector.stats()
-                );
-                for d in detector.detections() {
-                    let family = SEARCHED.get(d.family as usize).map_or("?", |f| f.name);
-                    debug!(
-                        "  {=str} id {} hamming {} margin {} centre ({}, {})",
-                        family, d.id, d.hamming, d.decision_margin, d.center.x, d.center.y
-                    );
-                }
-                summary.add(count, elapsed, *detector.stats());
-            }
-            Err(e) => {
-                summary.errors += 1;
-                debug!("frame {}: detect failed: {}", frame.sequence, e);
-            }
-        }
-        watchdog::frame_done();
-
-        if summary.since.elapsed() >= SUMMARY_PERIOD {
-            summary.log(&detector);
-            summary = Summary::new();
-        }
+impl Sensor {
+    /// Power-cycles the sensor through its pins and configures it.
+    async fn start(&mut self) -> Result<ClockPlan, ov7725::Error<crate::sccb::SccbError>> {
+        // Power down and hold in reset, then wake up and release (datasheet: >1 ms each).
+        self.power_down.set_high();
+        self.reset_n.set_low();
+        Timer::after_millis(5).await;
+        self.power_down.set_low();
+        Timer::after_millis(5).await;
+        self.reset_n.set_high();
+        Timer::after_millis(5).await;
+        self.driver.init(&mut Delay, &config::sensor_config()).await
     }
 }
 
 /// Counters of one summary period.
+#[derive(Default)]
 struct Summary {
-    since: Instant,
     frames: u32,
-    errors: u32,
     markers: u32,
-    max_detect: Duration,
+    fixes: u32,
+    capture_errors: u32,
+    overruns: u32,
+    timeouts: u32,
+    reinits: u32,
     total_detect: Duration,
-    last_stats: DetectStats,
+    max_detect: Duration,
 }
 
-impl Summary {
-    fn new() -> Self {
-        Summary {
-            since: Instant::now(),
-            frames: 0,
-            errors: 0,
-            markers: 0,
-            max_detect: Duration::from_ticks(0),
-            total_detect: Duration::from_ticks(0),
-            last_stats: DetectStats::default(),
-        }
-    }
+/// Runs the camera and the detector forever.
+#[embassy_executor::task]
+pub async fn task(
+    mut sensor: Sensor,
+    mut capture: Capture,
+    buffers: [&'static mut FrameBuffer; 2],
+    workspace: &'static mut Workspace,
+) {
+    let mut detector = Detector::new(DetectorConfig::default());
+    let [mut front, mut back] = buffers;
+    info!(
+        "vision: {}x{} grey, searching {} famil(ies), pad '{}'",
+        WIDTH,
+        HEIGHT,
+        SEARCHED.len(),
+        config::PAD.name()
+    );
 
-    fn add(&mut self, markers: usize, elapsed: Duration, stats: DetectStats) {
-        self.frames += 1;
-        self.markers += markers as u32;
-        self.max_detect = self.max_detect.max(elapsed);
-        self.total_detect += elapsed;
-        self.last_stats = stats;
-    }
-
-    fn log(&self, detector: &Detector) {
-        let mean_us = self
-            .total_detect
-            .as_micros()
-            .checked_div(u64::from(self.frames))
-            .unwrap_or(0);
+    let mut summary = Summary::default();
+    let mut next_summary = Instant::now() + SUMMARY_PERIOD;
+    loop {
+        // (Re)start the camera until it answers.
+        let plan = loop {
+            match sensor.start().await {
+                Ok(plan) => break plan,
+                Err(e) => {
+                    warn!("vision: camera init failed: {}", e);
+                    link::post(LinkEvent::Status(
+                        MavSeverity::MAV_SEVERITY_CRITICAL,
+                        "touchdown: camera not responding",
+                    ));
+                    Timer::after(INIT_RETRY).await;
+                }
+            }
+        };
+        let timing = plan.timing;
         info!(
-            "vision: {} frames ({} failed), {} markers, detect mean {} us max {} us; last {}",
-            self.frames + self.errors,
-            self.errors,
-            self.markers,
-            mean_us,
-            self.max_detect.as_micros(),
-            self.last_stats
+            "vision: camera up, PCLK {} Hz, {} lines of {} ns, {} fps",
+            plan.pclk_hz,
+            timing.frame_lines,
+            timing.line_ns,
+            timing.fps()
         );
-        if let Some(d) = detector.detections().first() {
-            info!(
-                "vision: last frame saw id {} (+{} more)",
-                d.id,
-                detector.detections().len().saturating_sub(1)
-            );
+        let mut exposure =
+            AutoExposure::new(config::EXPOSURE_LIMITS, timing.line_ns, timing.frame_lines);
+        let setting = exposure.setting();
+        if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
+            warn!("vision: exposure: {}", e);
         }
-        if self.errors > 0 && self.frames == 0 {
-            warn!("vision: every frame failed; check the family tables and buffer sizes");
+
+        // The first frame has nothing to overlap with.
+        let mut front_end = match capture.capture(front).await {
+            Ok(end) => Some(end),
+            Err(e) => {
+                count_error(&mut summary, e);
+                None
+            }
+        };
+        let mut consecutive_errors = 0u32;
+        while consecutive_errors < MAX_CONSECUTIVE_ERRORS {
+            // Capture into `back` (polled first, so the DMA is armed before the detector
+            // takes the CPU) while `front` is processed.
+            let (captured, processed) = join(capture.capture(back), async {
+                front_end
+                    .map(|end| process(front, end, &timing, &exposure, &mut detector, workspace))
+            })
+            .await;
+
+            if let Some(p) = processed {
+                summary.frames += 1;
+                summary.markers += p.markers;
+                summary.fixes += u32::from(p.fix);
+                summary.total_detect += p.detect;
+                summary.max_detect = summary.max_detect.max(p.detect);
+                watchdog::frame_done();
+                if let Some(setting) = exposure.update(p.mean) {
+                    if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
+                        warn!("vision: exposure: {}", e);
+                    }
+                }
+            }
+            front_end = match captured {
+                Ok(end) => {
+                    consecutive_errors = 0;
+                    Some(end)
+                }
+                Err(e) => {
+                    count_error(&mut summary, e);
+                    consecutive_errors += 1;
+                    None
+                }
+            };
+            core::mem::swap(&mut front, &mut back);
+
+            if Instant::now() >= next_summary {
+                next_summary += SUMMARY_PERIOD;
+                log_summary(&summary);
+                summary = Summary::default();
+            }
         }
+        warn!(
+            "vision: {} capture errors in a row, restarting the camera",
+            consecutive_errors
+        );
+        link::post(LinkEvent::Status(
+            MavSeverity::MAV_SEVERITY_ERROR,
+            "touchdown: camera capture failing, restarting it",
+        ));
+        summary.reinits += 1;
     }
+}
+
+fn count_error(summary: &mut Summary, e: CaptureError) {
+    summary.capture_errors += 1;
+    match e {
+        CaptureError::Dcmi(embassy_stm32::dcmi::Error::Overrun) => summary.overruns += 1,
+        CaptureError::Timeout => summary.timeouts += 1,
+        CaptureError::Dcmi(_) => {}
+    }
+    debug!("vision: capture {}", e);
+}
+
+/// What processing one frame gave.
+struct Processed {
+    markers: u32,
+    fix: bool,
+    detect: Duration,
+    mean: u8,
+}
+
+/// Detects, solves the pose and posts the frame to the link. Runs on the CPU without
+/// yielding (the capture of the next frame proceeds by DMA meanwhile).
+fn process(
+    frame: &FrameBuffer,
+    frame_end: Instant,
+    timing: &FrameTiming,
+    exposure: &AutoExposure,
+    detector: &mut Detector,
+    workspace: &mut Workspace,
+) -> Processed {
+    // Mid-exposure of the middle row: the frame ended when its last row was read out; the
+    // middle row was read half a readout earlier, and exposed for the exposure time before
+    // its read.
+    let exposure_us = u64::from(exposure.setting().lines) * u64::from(timing.line_ns) / 1000;
+    let back_us = u64::from(timing.readout_us()) / 2 + exposure_us / 2;
+    let exposure_at = frame_end.as_micros().saturating_sub(back_us);
+
+    let Ok(image) = GrayImage::new(frame.pixels(), WIDTH, HEIGHT) else {
+        // Unreachable: the buffer has exactly WIDTH x HEIGHT bytes.
+        return Processed {
+            markers: 0,
+            fix: false,
+            detect: Duration::from_ticks(0),
+            mean: 0,
+        };
+    };
+    let mean = mean_brightness(&image, BRIGHTNESS_STEP);
+    let started = Instant::now();
+    let (markers, fix) = match detector.detect(&image, SEARCHED, &mut workspace.buffers()) {
+        Ok(detections) => {
+            let fix = pad_pose(detections, SEARCHED, config::PAD, &config::CAMERA).ok();
+            (detections.len() as u32, fix)
+        }
+        Err(e) => {
+            debug!("vision: detect failed: {}", e);
+            (0, None)
+        }
+    };
+    let detect = started.elapsed();
+    let has_fix = fix.is_some();
+    link::post(LinkEvent::Frame(FrameResult {
+        exposure_us: exposure_at,
+        fix,
+    }));
+    Processed {
+        markers,
+        fix: has_fix,
+        detect,
+        mean,
+    }
+}
+
+fn log_summary(s: &Summary) {
+    let mean_us = s
+        .total_detect
+        .as_micros()
+        .checked_div(u64::from(s.frames))
+        .unwrap_or(0);
+    info!(
+        "vision: {} fps, {} markers, {} fixes, detect mean {} us max {} us; dropped {} (overrun {}, timeout {}), reinit {}",
+        s.frames,
+        s.markers,
+        s.fixes,
+        mean_us,
+        s.max_detect.as_micros(),
+        s.capture_errors,
+        s.overruns,
+        s.timeouts,
+        s.reinits
+    );
 }

@@ -1,11 +1,13 @@
-//! Independent watchdog (IWDG1), fed only while the vision pipeline makes progress.
+//! Independent watchdog (IWDG1), fed only while the vision pipeline *and* the MAVLink link
+//! make progress.
 //!
 //! The IWDG runs from the 32 kHz LSI, independent of the PLL, so it also catches a clock
 //! failure. A task pets it every [`PET_PERIOD`], but only while the vision task has finished a
-//! frame within the last [`STALL_LIMIT`]: a hung executor (a task that never yields) and a
-//! stalled frame source (e.g. a camera that stopped delivering frames) both end in a reset
-//! after at most `STALL_LIMIT + TIMEOUT`. The flight controller sees the companion's
-//! heartbeat stop and resume, which is what it is built to handle.
+//! frame within the last [`STALL_LIMIT`] and the link task has run its loop within the same
+//! limit (it runs at least every 5 ms): a hung executor (a task that never yields), a stalled
+//! camera that re-initialisation cannot revive, and a wedged link all end in a reset after at
+//! most `STALL_LIMIT + TIMEOUT`. The flight controller sees the companion's heartbeat stop and
+//! resume, which is what it is built to handle.
 //!
 //! Once started the IWDG cannot be stopped, and it keeps counting while a debugger halts the
 //! core: expect a reset about one second after hitting a breakpoint.
@@ -25,10 +27,46 @@ pub const STALL_LIMIT: Duration = Duration::from_millis(2000);
 
 /// Frames the vision task has finished (it calls [`frame_done`]).
 static FRAMES_DONE: AtomicU32 = AtomicU32::new(0);
+/// Passes of the link task's loop (it calls [`link_alive`]).
+static LINK_LOOPS: AtomicU32 = AtomicU32::new(0);
 
 /// Reports one finished frame (called by the vision task).
 pub fn frame_done() {
     FRAMES_DONE.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Reports one pass of the MAVLink loop (called by the link task).
+pub fn link_alive() {
+    LINK_LOOPS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Progress of one counter.
+struct Progress {
+    name: &'static str,
+    counter: &'static AtomicU32,
+    last_count: u32,
+    last_progress: Instant,
+}
+
+impl Progress {
+    fn new(name: &'static str, counter: &'static AtomicU32) -> Self {
+        Progress {
+            name,
+            counter,
+            last_count: counter.load(Ordering::Relaxed),
+            last_progress: Instant::now(),
+        }
+    }
+
+    /// True while the counter moved within [`STALL_LIMIT`].
+    fn alive(&mut self, now: Instant) -> bool {
+        let count = self.counter.load(Ordering::Relaxed);
+        if count != self.last_count {
+            self.last_count = count;
+            self.last_progress = now;
+        }
+        now.duration_since(self.last_progress) <= STALL_LIMIT
+    }
 }
 
 /// The watchdog's constructor takes the timeout in microseconds.
@@ -39,26 +77,30 @@ pub const TIMEOUT_US: u32 = TIMEOUT.as_micros() as u32;
 pub async fn task(mut wdg: IndependentWatchdog<'static, IWDG1>) {
     wdg.unleash();
     let mut ticker = Ticker::every(PET_PERIOD);
-    let mut last_count = FRAMES_DONE.load(Ordering::Relaxed);
-    let mut last_progress = Instant::now();
+    let mut watched = [
+        Progress::new("vision (no frame)", &FRAMES_DONE),
+        Progress::new("link (MAVLink loop)", &LINK_LOOPS),
+    ];
     let mut warned = false;
     loop {
         ticker.next().await;
         let now = Instant::now();
-        let count = FRAMES_DONE.load(Ordering::Relaxed);
-        if count != last_count {
-            last_count = count;
-            last_progress = now;
-            warned = false;
+        let mut all_alive = true;
+        for p in watched.iter_mut() {
+            if !p.alive(now) {
+                all_alive = false;
+                if !warned {
+                    defmt::error!(
+                        "watchdog: {=str} stalled for {} ms, letting the IWDG reset the board",
+                        p.name,
+                        now.duration_since(p.last_progress).as_millis()
+                    );
+                    warned = true;
+                }
+            }
         }
-        if now.duration_since(last_progress) <= STALL_LIMIT {
+        if all_alive {
             wdg.pet();
-        } else if !warned {
-            defmt::error!(
-                "watchdog: no frame for {} ms, letting the IWDG reset the board",
-                now.duration_since(last_progress).as_millis()
-            );
-            warned = true;
         }
     }
 }

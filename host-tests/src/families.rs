@@ -139,6 +139,7 @@ impl FileFamily {
             max_correction: family.max_correction,
             codes: &[],
             sorted_ids: &[],
+            index: None,
         };
         codes.truncate(header.count);
         Ok(FileFamily {

@@ -27,8 +27,6 @@ const FAR_ALTITUDE_M: f64 = 40.0;
 const FAR_DETECTION_RATE: f64 = 0.9;
 
 #[test]
-#[ignore = "issue 3 acceptance, one row short: Z 25 m is 4.7 cm against 4.15 cm (a +0.18 % \
-            altitude bias of 22-pixel markers); run with --ignored"]
 fn paper_tables_at_a_quarter_of_the_papers_error() {
     let config = Config {
         // The bound holds for the mean over a hover, not for a few frames: at 20 m one

@@ -506,8 +506,14 @@ fn apriltag_test_photos() {
     // itself); ours are independent sub-pixel edge fits on JPEG-compressed 10-45 px markers.
     // For scale: AprilTag 3 with refine_edges on differs from this reference by a median of
     // 0.31 px and up to 2.3 px (44 tags), so these bounds ask for agreement with the
-    // reference closer than AprilTag's own refinement keeps.
-    assert_corners(set, &result, 0.3, 1.0);
+    // reference about as closely as AprilTag's own refinement keeps.
+    // The reference is a threshold (mid-level) fit, and ours is the centroid of the
+    // gradient, which is unbiased on rendered truth (see `core/src/detect/refine.rs`): on
+    // these gamma-encoded, sharpened JPEG edges the two definitions of "the edge" differ by
+    // a few hundredths of a pixel. Our earlier mid-level fit agreed with this reference to
+    // 0.27 px median and 0.94 px max, the centroid to 0.33 and 1.12 px, while the centroid
+    // removed a 0.4 % scale bias on 20-pixel rendered markers.
+    assert_corners(set, &result, 0.35, 1.2);
 }
 
 /// ViSP's family names and ours.

@@ -12,11 +12,17 @@
 //! - `detect`: [`Detector::detect`], called as `firmware/src/vision.rs` does: the default
 //!   families, a static [`QvgaWorkspace`] / [`VgaWorkspace`], a detector kept across frames,
 //!   the default configuration.
-//! - `pose`: [`marker_pose`] (IPPE + Levenberg-Marquardt) of every detection, with the
-//!   simulator's camera. The firmware does not call pose yet; switch to what it calls (pad
-//!   pose on pad-layout frames) when issue 5 lands.
+//! - `fix`: [`pad_pose`] (IPPE + Levenberg-Marquardt), as the vision task calls it, with
+//!   the simulator's camera, on a one-marker pad made of the frame's first detection (the
+//!   benchmark frames are not pad layouts; a multi-marker pad adds four corners per marker
+//!   to the one refinement).
+//! - `filter`: [`Companion::on_frame`] with that fix, as the link task calls it: the
+//!   trackers' predict and update, the ArduPilot profile's target.
+//! - `encode`: draining [`Companion::poll_transmit`] into a UART buffer (MAVLink 2 framing,
+//!   CRC), as the link task does after each frame.
 //!
-//! The filter and message encoding are added as one [`region`] call each in [`run_frame`].
+//! Frames without a detection run `fix`, `filter` and `encode` too (the empty fix is what
+//! the firmware posts then).
 //!
 //! Frames ([`FRAMES`]): the typical ones are rendered by the simulator
 //! (`cargo run --release -p touchdown-host --example m7_frames` writes `frames/*.pgm`); the
@@ -39,10 +45,12 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
 use touchdown_core::camera::CameraModel;
+use touchdown_core::companion::{Companion, CompanionConfig, FrameResult, Profile, MAX_FRAME_LEN};
 use touchdown_core::detect::{DetectStats, Detector, DetectorConfig, QvgaWorkspace, VgaWorkspace};
 use touchdown_core::family::tables;
 use touchdown_core::image::GrayImage;
-use touchdown_core::pose::{marker_pose, PoseMethod};
+use touchdown_core::pad::{PadLayout, PadMarker};
+use touchdown_core::pose::pad_pose;
 
 use frames::{FrameBuffer, Source};
 
@@ -77,6 +85,11 @@ struct Frame {
 
 const QVGA: (usize, usize) = (320, 240);
 const VGA: (usize, usize) = (640, 480);
+
+/// Frames each benchmark frame is shown to the companion before the counted one.
+const WARM_UP_FRAMES: usize = 6;
+/// 30 Hz.
+const FRAME_PERIOD_US: u64 = 33_333;
 
 /// Edge of the printed markers for the pose stage, metres (any positive size: the count does
 /// not depend on it).
@@ -221,6 +234,9 @@ struct Pipeline {
     detector: &'static mut Detector,
     qvga: &'static mut QvgaWorkspace,
     vga: &'static mut VgaWorkspace,
+    companion: Companion,
+    /// Frame time, µs (33 ms per frame).
+    now_us: u64,
 }
 
 /// The per-frame path on one frame: one region per stage. Returns false when the frame's
@@ -230,6 +246,8 @@ fn run_frame(pipeline: &mut Pipeline, frame: &Frame, image: &GrayImage<'_>) -> b
         detector,
         qvga,
         vga,
+        companion,
+        now_us,
     } = pipeline;
     let vga_frame = (frame.width, frame.height) == VGA;
     // Stage 1: detection, as firmware/src/vision.rs calls it.
@@ -242,25 +260,76 @@ fn run_frame(pipeline: &mut Pipeline, frame: &Frame, image: &GrayImage<'_>) -> b
         result.map(|detections| detections.len())
     });
     let ok = report(frame, detected, detector);
-    // Stage 2: pose of every detected marker (IPPE, both candidates refined by
-    // Levenberg-Marquardt). The firmware does not call pose yet (issue 5); until it does,
-    // this is the per-marker method on the simulator's camera.
     let camera = camera_for(frame.width, frame.height);
     let detections = detector.detections();
-    let (poses, failures) = region(frame.name, "pose", || {
-        let (mut poses, mut failures) = (0u32, 0u32);
-        for d in detections {
-            match marker_pose(&d.corners, MARKER_SIZE_M, &camera, PoseMethod::Ippe) {
-                Ok(_) => poses += 1,
-                Err(_) => failures += 1,
-            }
-        }
-        (poses, failures)
+    // Stage 2: the pad fix (pose), on a one-marker pad of the first detection.
+    let first = detections.first().and_then(|d| {
+        let family = tables::DEFAULT.get(usize::from(d.family))?;
+        Some(PadMarker {
+            family: family.name,
+            id: d.id,
+            size: MARKER_SIZE_M,
+            x: 0.0,
+            y: 0.0,
+            yaw_deg: 0.0,
+        })
     });
-    hprintln!("  poses {} failed {}", poses, failures);
-    // Further stages (filter, message encoding) go here, each as one
-    // `let x = region(frame.name, "filter", || ...);` on the previous stage's results.
-    ok && failures == 0
+    let layout = first.and_then(|m| PadLayout::new("bench", &[m]).ok());
+    let fix = region(frame.name, "fix", || {
+        layout
+            .as_ref()
+            .and_then(|layout| pad_pose(detections, tables::DEFAULT, layout, &camera).ok())
+    });
+    // Stages 3 and 4: the link task's filter and MAVLink output for this frame. The tracker
+    // confirms a track over a few frames; the benchmark frames are unrelated scenes, so each
+    // is first shown to the companion a few times outside the regions (as a hover would),
+    // and the counted frame is the one that sends its LANDING_TARGET.
+    for _ in 0..WARM_UP_FRAMES {
+        *now_us += FRAME_PERIOD_US;
+        companion.on_frame(
+            FrameResult {
+                exposure_us: *now_us,
+                fix,
+            },
+            *now_us,
+        );
+        while companion
+            .poll_transmit(*now_us, &mut [0u8; MAX_FRAME_LEN])
+            .is_some()
+        {}
+    }
+    *now_us += FRAME_PERIOD_US;
+    let t = *now_us;
+    let outcome = region(frame.name, "filter", || {
+        companion.on_frame(
+            FrameResult {
+                exposure_us: t,
+                fix,
+            },
+            t,
+        )
+    });
+    let mut uart = [0u8; MAX_FRAME_LEN];
+    let (messages, bytes) = region(frame.name, "encode", || {
+        let (mut messages, mut bytes) = (0u32, 0usize);
+        while let Some(n) = companion.poll_transmit(t, &mut uart) {
+            messages += 1;
+            bytes += n;
+        }
+        (messages, bytes)
+    });
+    hprintln!(
+        "  fix {} filter {:?} sent {} messages, {} bytes",
+        fix.is_some(),
+        outcome,
+        messages,
+        bytes
+    );
+    let fix_expected = frame.expected.is_none_or(|n| (n > 0) == fix.is_some());
+    if !fix_expected {
+        hprintln!("  MISMATCH: pad fix {}", fix.is_some());
+    }
+    ok && fix_expected
 }
 
 /// Prints the detections and statistics of a frame (outside every region); false when the
@@ -332,6 +401,16 @@ fn main() -> ! {
                 detector: (*addr_of_mut!(DETECTOR)).write(Detector::new(DetectorConfig::default())),
                 qvga: &mut *addr_of_mut!(QVGA_WORKSPACE),
                 vga: &mut *addr_of_mut!(VGA_WORKSPACE),
+                companion: match Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)) {
+                    Ok(companion) => companion,
+                    Err(_) => {
+                        hprintln!("m7bench: bad companion configuration");
+                        debug::exit(debug::EXIT_FAILURE);
+                        #[allow(clippy::empty_loop)]
+                        loop {}
+                    }
+                },
+                now_us: 0,
             },
             &mut *addr_of_mut!(FRAME),
         )

@@ -33,6 +33,8 @@
 //!   stream is not arriving, so a rebooted autopilot gets asked again.
 //! - PARAM_VALUE for the parameter protocol ([`params`]); a full list is paced at one
 //!   PARAM_VALUE per [`CompanionConfig::param_stream_interval_us`].
+//! - STATUSTEXT when the firmware reports a fault ([`Companion::queue_status_text`]: camera
+//!   lost, parameters reset), which ground stations show to the pilot.
 //!
 //! # Frames and filtering
 //!
@@ -63,6 +65,7 @@
 
 pub mod link;
 pub mod params;
+pub mod persist;
 pub mod profile;
 pub mod timesync;
 pub mod vehicle;
@@ -70,6 +73,7 @@ pub mod vehicle;
 pub use mavlink;
 
 pub use link::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
+pub use mavlink::dialects::common::MavSeverity;
 pub use params::{ParamError, ParamId, ParamSet, PARAMS, PARAM_COUNT};
 pub use profile::{Profile, TargetFields, TargetFrame};
 pub use timesync::{TimeSource, TimeSync};
@@ -82,10 +86,10 @@ use heapless::Deque;
 use mavlink::dialects::common::{
     LandingTargetType, MavAutopilot, MavBool, MavCmd, MavFrame, MavMessage, MavModeFlag,
     MavParamType, MavResult, MavState, MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
-    HEARTBEAT_DATA, LANDING_TARGET_DATA, PARAM_VALUE_DATA, TIMESYNC_DATA,
+    HEARTBEAT_DATA, LANDING_TARGET_DATA, PARAM_VALUE_DATA, STATUSTEXT_DATA, TIMESYNC_DATA,
     VISION_POSITION_ESTIMATE_DATA,
 };
-use mavlink::{MAVLinkV2MessageRaw, MavHeader, MessageData};
+use mavlink::MessageData;
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// LANDING_TARGET's payload with every MAVLink 2 extension field. If the mavlink crate is ever
@@ -98,6 +102,10 @@ const _: () = assert!(
 
 /// Capacity of the transmit queue (heartbeat, TIMESYNC, commands, PARAM_VALUE).
 pub const TX_QUEUE_CAPACITY: usize = 16;
+/// Capacity of the STATUSTEXT queue (faults are rare; more are dropped and counted).
+pub const STATUS_QUEUE_CAPACITY: usize = 4;
+/// Longest STATUSTEXT text, bytes (MAVLink's field; longer text is cut).
+pub const STATUS_TEXT_LEN: usize = 50;
 /// MAVLink message id of ATTITUDE_QUATERNION.
 const MSG_ATTITUDE_QUATERNION: u32 = 31;
 /// MAVLink message id of LOCAL_POSITION_NED.
@@ -233,8 +241,10 @@ pub struct CompanionStats {
     pub vision_estimates: u32,
     /// PARAM_VALUEs sent.
     pub param_values: u32,
-    /// Queue items dropped because the queue was full.
+    /// Queue items (STATUSTEXTs included) dropped because their queue was full.
     pub queue_overflows: u32,
+    /// STATUSTEXTs sent.
+    pub status_texts: u32,
     /// Targets dropped because they were not transmitted in time.
     pub targets_expired: u32,
     /// Unsent targets replaced by a newer one.
@@ -296,6 +306,13 @@ enum Pending {
     ParamValue(ParamId),
 }
 
+/// A STATUSTEXT waiting to be sent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct StatusText {
+    severity: MavSeverity,
+    text: [u8; STATUS_TEXT_LEN],
+}
+
 #[derive(Debug, Clone, PartialEq)]
 struct PendingTarget {
     created_us: u64,
@@ -327,6 +344,7 @@ struct State {
     vehicle: VehicleState,
     timesync: TimeSync,
     queue: Deque<Pending, TX_QUEUE_CAPACITY>,
+    status: Deque<StatusText, STATUS_QUEUE_CAPACITY>,
     target: Option<PendingTarget>,
     vpe: Option<PendingVpe>,
     sequence: u8,
@@ -370,6 +388,7 @@ impl Companion {
                 vehicle: VehicleState::new(),
                 timesync: TimeSync::new(),
                 queue: Deque::new(),
+                status: Deque::new(),
                 target: None,
                 vpe: None,
                 sequence: 0,
@@ -415,6 +434,32 @@ impl Companion {
     /// it regularly, e.g. every few milliseconds and after every `on_frame`/`receive`.
     pub fn poll_transmit(&mut self, now_us: u64, out: &mut [u8]) -> Option<usize> {
         self.state.poll_transmit(now_us, out)
+    }
+
+    /// Queues a STATUSTEXT with `text` (cut to [`STATUS_TEXT_LEN`] bytes at a character
+    /// boundary). Returns `false`, and counts an overflow, when the queue is full.
+    pub fn queue_status_text(&mut self, severity: MavSeverity, text: &str) -> bool {
+        let mut end = text.len().min(STATUS_TEXT_LEN);
+        while !text.is_char_boundary(end) {
+            end -= 1;
+        }
+        let mut bytes = [0u8; STATUS_TEXT_LEN];
+        if let (Some(dst), Some(src)) = (bytes.get_mut(..end), text.as_bytes().get(..end)) {
+            dst.copy_from_slice(src);
+        }
+        let state = &mut self.state;
+        if state
+            .status
+            .push_back(StatusText {
+                severity,
+                text: bytes,
+            })
+            .is_err()
+        {
+            state.stats.queue_overflows = state.stats.queue_overflows.saturating_add(1);
+            return false;
+        }
+        true
     }
 
     /// Counters and link state.
@@ -788,13 +833,16 @@ impl State {
 
     /// Queues what is due at `now_us`.
     fn tick(&mut self, now_us: u64) {
-        if now_us >= self.next_heartbeat_us {
+        // A schedule saturated at u64::MAX is never due: otherwise a clock at the end of its
+        // range would queue a frame on every poll, forever, at one instant (found by the
+        // mavlink_stream fuzz target; fuzz/regressions/mavlink_stream/).
+        if now_us >= self.next_heartbeat_us && self.next_heartbeat_us < u64::MAX {
             self.enqueue(Pending::Heartbeat);
             self.next_heartbeat_us = now_us.saturating_add(self.config.heartbeat_period_us);
         }
         let alive = self.autopilot_alive(now_us);
         if let (Some(target), true) = (self.autopilot, alive) {
-            if now_us >= self.next_timesync_us {
+            if now_us >= self.next_timesync_us && self.next_timesync_us < u64::MAX {
                 let ts1 = self.timesync.request(now_us);
                 self.enqueue(Pending::TimesyncRequest { ts1, target });
                 self.next_timesync_us = now_us.saturating_add(self.config.timesync_period_us);
@@ -810,7 +858,8 @@ impl State {
                 let flowing = s
                     .last_rx_us
                     .is_some_and(|t| now_us.saturating_sub(t) <= timeout);
-                if wanted && !flowing && now_us >= s.next_request_us {
+                if wanted && !flowing && now_us >= s.next_request_us && s.next_request_us < u64::MAX
+                {
                     s.next_request_us = now_us.saturating_add(period);
                     let interval_us = if s.message_id == MSG_ATTITUDE_QUATERNION {
                         self.config.attitude_interval_us
@@ -864,6 +913,15 @@ impl State {
                 self.stats.vision_estimates = self.stats.vision_estimates.saturating_add(1);
                 return self.emit(&MavMessage::VISION_POSITION_ESTIMATE(p.data), out);
             }
+        }
+        if let Some(s) = self.status.pop_front() {
+            self.stats.status_texts = self.stats.status_texts.saturating_add(1);
+            let msg = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                severity: s.severity,
+                text: s.text.into(),
+                ..STATUSTEXT_DATA::DEFAULT
+            });
+            return self.emit(&msg, out);
         }
         let p = self.queue.pop_front()?;
         let msg = self.message(p);
@@ -925,20 +983,28 @@ impl State {
     }
 
     fn emit(&mut self, msg: &MavMessage, out: &mut [u8]) -> Option<usize> {
-        let header = MavHeader {
-            system_id: u32::from(self.sysid()),
-            component_id: self.compid(),
-            sequence: self.sequence,
+        let (seq, sys, comp) = (self.sequence, self.sysid(), self.compid());
+        // Serialise through the concrete payload type. `serialize_message(&MavMessage)` would
+        // link the serialiser of every message of the common dialect (~110 KB of flash in the
+        // firmware) although the companion only ever sends these. Framed by
+        // `link::write_v2_frame` (same bytes as `MAVLinkV2MessageRaw`, without its panic
+        // paths; see nopanic/).
+        let written = match msg {
+            MavMessage::HEARTBEAT(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::TIMESYNC(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::COMMAND_LONG(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::COMMAND_ACK(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::PARAM_VALUE(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::LANDING_TARGET(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::VISION_POSITION_ESTIMATE(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::STATUSTEXT(d) => link::write_v2_frame(out, seq, sys, comp, d),
+            _ => return None,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message(header, msg);
-        let bytes = raw.raw_bytes();
-        let dst = out.get_mut(..bytes.len())?;
-        dst.copy_from_slice(bytes);
+        let len = written?;
         self.stats.tx_frames = self.stats.tx_frames.saturating_add(1);
-        self.stats.tx_bytes = self.stats.tx_bytes.saturating_add(bytes.len() as u64);
-        Some(bytes.len())
+        self.stats.tx_bytes = self.stats.tx_bytes.saturating_add(len as u64);
+        Some(len)
     }
 }
 
@@ -1012,6 +1078,41 @@ mod tests {
             }
         }
         assert_eq!(heartbeats, 3);
+    }
+
+    #[test]
+    fn status_text_is_sent_once_and_cut_to_the_field() {
+        let mut c = Companion::new(CompanionConfig::default()).unwrap();
+        let mut out = [0u8; MAX_FRAME_LEN];
+        // Drain the first heartbeat.
+        while c.poll_transmit(0, &mut out).is_some() {}
+        let long = "camera: no frame for 2 s, re-initialising the OV7725 sensor now";
+        assert!(long.len() > STATUS_TEXT_LEN);
+        assert!(c.queue_status_text(MavSeverity::MAV_SEVERITY_ERROR, long));
+        let mut texts = 0;
+        let mut parser = FrameParser::new();
+        while let Some(n) = c.poll_transmit(1000, &mut out) {
+            parser.push(&out[..n], |frame| {
+                if let Ok(MavMessage::STATUSTEXT(s)) = frame.decode() {
+                    assert_eq!(s.severity, MavSeverity::MAV_SEVERITY_ERROR);
+                    assert_eq!(s.text.to_str().unwrap(), &long[..STATUS_TEXT_LEN]);
+                    texts += 1;
+                }
+            });
+        }
+        assert_eq!(texts, 1);
+        assert_eq!(c.stats().status_texts, 1);
+        // A full queue refuses and counts.
+        for _ in 0..STATUS_QUEUE_CAPACITY {
+            assert!(c.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, "x"));
+        }
+        assert!(!c.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, "x"));
+        assert_eq!(c.stats().queue_overflows, 1);
+        // Multi-byte characters are never split.
+        let mut c = Companion::new(CompanionConfig::default()).unwrap();
+        let accents = "é".repeat(30); // 60 bytes
+        assert!(c.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, &accents));
+        assert_eq!(c.state.status.front().unwrap().text[48..], [0xC3, 0xA9]);
     }
 
     #[test]

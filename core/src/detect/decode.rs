@@ -30,6 +30,15 @@ const MARGIN_ERROR_FRACTION: f32 = 0.25;
 const MULTI_SAMPLE_CELL_PX: f32 = 4.0;
 /// Weight of the Laplacian that sharpens the sampled cell grid before thresholding.
 const DECODE_SHARPENING: f32 = 0.25;
+/// A data cell whose reading lies closer to the threshold than this fraction of half the
+/// contrast is uncertain: it counts as an erasure in the look-up (see [`lookup`]).
+const UNCERTAIN_CELL_MARGIN: f32 = 0.2;
+/// Families whose minimum distance exceeds their correction by at most this many bits get
+/// the registration check of [`read_robust`]: for them, that many confidently misread cells
+/// make another code.
+const REGISTRATION_CHECK_SLACK: u8 = 5;
+/// How far the registration check moves the sampling grid, cells.
+const REGISTRATION_SHIFT: f32 = 0.25;
 
 /// A decoded marker before de-duplication.
 #[derive(Debug, Clone, Copy)]
@@ -186,11 +195,26 @@ pub(crate) struct GridRead {
     readings: [u64; 4],
     margin: f32,
     contrast: f32,
+    /// Data cells read too close to the threshold to trust.
+    uncertain: u8,
 }
 
 /// Looks a read grid up in `family` (which must have the layout it was read with).
+///
+/// Errors and erasures: a code at distance `h` from the reading is the only possible one,
+/// even if every uncertain cell was misread, when `2h + uncertain < d` (the family's minimum
+/// distance). A read that fails this is dropped. The bound on `h` alone protects the
+/// families with a large distance; this protects the small ones (aruco_4x4_1000 has d = 2,
+/// so two misread cells can turn one code into another) against blurred, steep markers whose
+/// cells are sampled across their edges, where a wrong id with a clean-looking average
+/// margin was seen. A family without a distance guarantee (d < 2) needs a reading without
+/// uncertain cells.
 pub(crate) fn lookup(family: &Family<'_>, grid: &GridRead, max_hamming: u8) -> Option<Read> {
     let decoded = family.decode(&grid.readings, max_hamming)?;
+    let ambiguity = 2 * u32::from(decoded.hamming) + u32::from(grid.uncertain);
+    if ambiguity > 0 && ambiguity >= u32::from(family.min_hamming).max(1) {
+        return None;
+    }
     let (corners, center) = oriented_corners(family, &grid.h, decoded.rotation)?;
     Some(Read {
         decoded,
@@ -284,54 +308,100 @@ pub(crate) fn read_robust(
 
     // Data cells, sharpened against their neighbours: at one or two pixels per cell the
     // optics and the sampling spread each cell into the next, and a small Laplacian term
-    // undoes part of that (AprilTag 3's decode_sharpening does the same).
-    for r in 0..n {
-        for c in 0..n {
-            if family.role(r, c) == CellRole::Data {
-                let z = read_cell(image, &h, c as f32 + 0.5, r as f32 + 0.5, multi)?;
-                if let Some(slot) = values.get_mut(r * n + c) {
-                    *slot = z;
+    // undoes part of that (AprilTag 3's decode_sharpening does the same). `shift` moves
+    // every sample point by that many cells (see the registration check below).
+    let white_mean = white.mean();
+    let read_data = |shift: (f32, f32), values: &mut [f32; MAX_GRID * MAX_GRID]| {
+        for r in 0..n {
+            for c in 0..n {
+                if family.role(r, c) == CellRole::Data {
+                    let (u, v) = (c as f32 + 0.5 + shift.0, r as f32 + 0.5 + shift.1);
+                    let z = read_cell(image, &h, u, v, multi)?;
+                    if let Some(slot) = values.get_mut(r * n + c) {
+                        *slot = z;
+                    }
                 }
             }
         }
-    }
-    let value_at = |r: isize, c: isize, own: f32| -> f32 {
-        if r < 0 || c < 0 || r >= n as isize || c >= n as isize {
-            return own;
-        }
-        let (ru, cu) = (r as usize, c as usize);
-        match family.role(ru, cu) {
-            CellRole::Quiet => {
-                // Quiet cells are not stored: the white ring next to the border is, as samples.
-                white.mean()
-            }
-            _ => values.get(ru * n + cu).copied().unwrap_or(own),
-        }
+        Some(())
     };
+    // The sharpened reading of data cell (r, c) minus its threshold.
+    let decide = |values: &[f32; MAX_GRID * MAX_GRID], r: usize, c: usize| -> f32 {
+        let value_at = |r: isize, c: isize, own: f32| -> f32 {
+            if r < 0 || c < 0 || r >= n as isize || c >= n as isize {
+                return own;
+            }
+            let (ru, cu) = (r as usize, c as usize);
+            match family.role(ru, cu) {
+                // Quiet cells are not stored: the white ring next to the border is, as samples.
+                CellRole::Quiet => white_mean,
+                _ => values.get(ru * n + cu).copied().unwrap_or(own),
+            }
+        };
+        let own = values.get(r * n + c).copied().unwrap_or(0.0);
+        let (ri, ci) = (r as isize, c as isize);
+        let neighbours = value_at(ri - 1, ci, own)
+            + value_at(ri + 1, ci, own)
+            + value_at(ri, ci - 1, own)
+            + value_at(ri, ci + 1, own);
+        let z = own + DECODE_SHARPENING * (4.0 * own - neighbours);
+        z - threshold(c as f32 + 0.5, r as f32 + 0.5)
+    };
+    read_data((0.0, 0.0), &mut values)?;
     let mut cells = [false; MAX_GRID * MAX_GRID];
     let mut margin_sum = 0.0f32;
     let mut data_count = 0usize;
+    // Cells too close to their threshold, or (below) unstable under a shifted grid.
+    let mut uncertain_cells = [false; MAX_GRID * MAX_GRID];
     for r in 0..n {
         for c in 0..n {
             if family.role(r, c) != CellRole::Data {
                 continue;
             }
-            let own = values.get(r * n + c).copied().unwrap_or(0.0);
-            let (ri, ci) = (r as isize, c as isize);
-            let neighbours = value_at(ri - 1, ci, own)
-                + value_at(ri + 1, ci, own)
-                + value_at(ri, ci - 1, own)
-                + value_at(ri, ci + 1, own);
-            let z = own + DECODE_SHARPENING * (4.0 * own - neighbours);
-            let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
-            let t = threshold(u, v);
+            let d = decide(&values, r, c);
             if let Some(cell) = cells.get_mut(r * n + c) {
-                *cell = z > t;
+                *cell = d > 0.0;
             }
-            margin_sum += ((z - t).abs() / (0.5 * contrast)).min(1.0);
+            let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
+            if let Some(flag) = uncertain_cells.get_mut(r * n + c) {
+                *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
+            }
+            margin_sum += cell_margin;
             data_count += 1;
         }
     }
+    // Registration check for families where a few misread cells make another code: a grid
+    // laid half a cell off (a blurred, steep marker whose short edges are a pixel off) reads
+    // whole cells of its neighbours with full confidence. Read again with every sample
+    // moved a quarter cell each way; a cell whose bit changes is uncertain. On a well-placed
+    // grid a quarter cell stays inside each cell.
+    if family.min_hamming.saturating_sub(family.max_correction) <= REGISTRATION_CHECK_SLACK {
+        let mut shifted = values;
+        for shift in [
+            (REGISTRATION_SHIFT, 0.0),
+            (-REGISTRATION_SHIFT, 0.0),
+            (0.0, REGISTRATION_SHIFT),
+            (0.0, -REGISTRATION_SHIFT),
+        ] {
+            read_data(shift, &mut shifted)?;
+            for r in 0..n {
+                for c in 0..n {
+                    if family.role(r, c) != CellRole::Data {
+                        continue;
+                    }
+                    let bit = decide(&shifted, r, c) > 0.0;
+                    let k = r * n + c;
+                    if cells.get(k).copied() != Some(bit) {
+                        if let Some(flag) = uncertain_cells.get_mut(k) {
+                            *flag = true;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let uncertain = uncertain_cells.iter().filter(|&&f| f).count();
+    let uncertain = u8::try_from(uncertain).unwrap_or(u8::MAX);
     let margin = margin_sum / data_count.max(1) as f32;
     if margin < config.min_decision_margin {
         return None;
@@ -341,6 +411,7 @@ pub(crate) fn read_robust(
         readings: family.codes_of_grid(cells.get(..n * n)?),
         margin,
         contrast,
+        uncertain,
     })
 }
 
@@ -397,6 +468,8 @@ pub(crate) fn read_paper(
         readings: family.codes_of_grid(cells.get(..n * n)?),
         margin: 1.0,
         contrast: light_sum / light_n.max(1) as f32 - dark_sum / dark_n.max(1) as f32,
+        // The paper's method accepts exact matches only and has no notion of certainty.
+        uncertain: 0,
     })
 }
 

@@ -157,6 +157,14 @@ pub struct DetectorConfig {
     /// adversarial frames. When exhausted, detection stops and [`DetectStats::truncated`] is
     /// set.
     pub trace_budget_per_pixel: u8,
+    /// Candidate quads refined and read per frame. A quad costs far more than a traced
+    /// pixel (sub-pixel edges, the cell grid, the look-up: ~80,000 Cortex-M7 instructions
+    /// for a small one), so a frame full of marker-like squares would cost 40 typical frames
+    /// without this. When reached, detection stops and [`DetectStats::truncated`] is set. A
+    /// landing frame has a few (each marker, a few look-alikes in the clutter): the budget
+    /// leaves a wide margin, but on a frame with more candidates than this, markers after
+    /// the budget (in raster order of their top edge) are not searched.
+    pub max_candidates: u16,
 }
 
 impl Default for DetectorConfig {
@@ -169,6 +177,7 @@ impl Default for DetectorConfig {
             refine_edges: true,
             min_decision_margin: 0.25,
             trace_budget_per_pixel: 4,
+            max_candidates: 48,
         }
     }
 }
@@ -222,7 +231,8 @@ pub struct DetectStats {
     pub decoded: u32,
     /// Contour-following steps spent.
     pub trace_steps: u32,
-    /// The step budget ran out, or a fixed capacity filled: some of the frame was not searched.
+    /// The step or candidate budget ran out, or a fixed capacity filled: some of the frame was
+    /// not searched.
     pub truncated: bool,
 }
 
@@ -340,7 +350,8 @@ impl Detector {
             budget,
             steps: 0,
         };
-        'scan: for (y, row) in bitmap.chunks(wpr).enumerate() {
+        // `max(1)`: a frame is never empty, so `wpr >= 1`; stated so no panic path remains.
+        'scan: for (y, row) in bitmap.chunks(wpr.max(1)).enumerate() {
             let mut left_word = 0u32;
             for (k, &dark) in row.iter().enumerate() {
                 loop {
@@ -355,6 +366,10 @@ impl Detector {
                         contour::Trace::Closed(len) => {
                             if let Some(boundary) = contour.get(..len) {
                                 candidates.process(boundary, detections, stats);
+                            }
+                            if stats.quads >= u32::from(config.max_candidates) {
+                                stats.truncated = true;
+                                break 'scan;
                             }
                         }
                         contour::Trace::TooLong => {}

@@ -102,9 +102,27 @@ fn simplify(
             stack.push((best.1, j)).ok()?;
         }
     }
-    vertices.sort_unstable();
+    sort_short(&mut vertices);
     Some(vertices)
 }
+
+/// Ascending insertion sort of a short vertex list (at most [`MAX_VERTICES`]). Used instead
+/// of `sort_unstable`, whose order-violation panic path the optimiser cannot remove (the
+/// no-panic link check, nopanic/, needs every panic path gone).
+fn sort_short(v: &mut [usize]) {
+    for i in 1..v.len() {
+        for j in (1..=i).rev() {
+            match v.get_mut(j - 1..=j) {
+                Some([a, b]) if *a > *b => core::mem::swap(a, b),
+                _ => break,
+            }
+        }
+    }
+}
+
+/// Smallest twice-area over squared boundary length of a candidate (see [`fit_quad`]): a
+/// square traced along its axes gives 1/8, at 45 degrees 1/4, a 1:8 rectangle 1/20.
+const COMPACTNESS: f32 = 0.04;
 
 /// Fits a candidate quad to a closed boundary.
 pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
@@ -117,20 +135,34 @@ pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
     if area2 == 0 {
         return None;
     }
+    // Compactness: a quad's area is a good fraction of its squared perimeter (a 1:8
+    // rectangle traced pixel by pixel still has area >= n^2 / 40 for n boundary steps),
+    // while noise blobs and thin strokes are ragged outlines around little area. Rejecting
+    // them here, before the Douglas-Peucker fit, is most of the cost of a noisy frame.
+    if (area2.unsigned_abs() as f32) < COMPACTNESS * (n * n) as f32 {
+        return None;
+    }
     let hole = area2 < 0;
     // Split at two far-apart points: the farthest from the first, and the farthest from that.
-    let farthest = |from: Point| -> usize {
-        let mut best = (0.0f32, 0usize);
-        for t in 0..n {
-            let d = at(contour, t).distance(from);
+    // Squared integer distances: this runs on every traced contour (thousands on a noisy
+    // frame), and a square root per pixel was most of its cost on the Cortex-M7.
+    let farthest = |from: usize| -> usize {
+        let Some(f) = contour.get(from) else {
+            return 0;
+        };
+        let (fx, fy) = (i32::from(f.x), i32::from(f.y));
+        let mut best = (0i32, 0usize);
+        for (t, p) in contour.iter().enumerate() {
+            let (dx, dy) = (i32::from(p.x) - fx, i32::from(p.y) - fy);
+            let d = dx * dx + dy * dy;
             if d > best.0 {
                 best = (d, t);
             }
         }
         best.1
     };
-    let origin = farthest(at(contour, 0));
-    let split_abs = farthest(at(contour, origin));
+    let origin = farthest(0);
+    let split_abs = farthest(origin);
     let split = (split_abs + n - origin) % n;
     if split == 0 {
         return None;
@@ -157,7 +189,9 @@ pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
         if best.0 > 2.0 * tolerance {
             return None;
         }
-        vertices.remove(best.1);
+        if best.1 < vertices.len() {
+            vertices.remove(best.1);
+        }
     }
     if vertices.len() != 4 {
         return None;

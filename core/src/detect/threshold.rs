@@ -49,6 +49,40 @@ pub(crate) fn set_bit(bitmap: &mut [u32], wpr: usize, x: usize, y: usize) {
     }
 }
 
+/// Which of four pixels (packed little-endian in `pixels`, first pixel in the low byte) are
+/// below `threshold`, as a nibble (first pixel = bit 0).
+///
+/// Four comparisons in one 32-bit word (SIMD within a register), because the Cortex-M7 has
+/// no byte-vector compare a compiler would use from stable Rust: per byte, the low seven
+/// bits are compared by a subtraction that cannot borrow from the next byte, the top bits
+/// decide where they differ, and a multiplication gathers the four flags into a nibble.
+#[inline(always)]
+fn darker_than(pixels: u32, threshold: u8) -> u32 {
+    const HIGH: u32 = 0x8080_8080;
+    let t = u32::from(threshold) * 0x0101_0101;
+    // Per byte, bit 7: low seven bits of the pixel >= those of the threshold.
+    let low_ge = ((pixels | HIGH).wrapping_sub(t & !HIGH)) & HIGH;
+    // Pixel >= threshold: its top bit set and the threshold's clear, or the top bits equal
+    // and the low bits decide.
+    let ge = (pixels & !t & HIGH) | (!(pixels ^ t) & low_ge);
+    let lt = (!ge & HIGH) >> 7;
+    // Bits 0, 8, 16, 24 -> 21, 22, 23, 24: the partial products land on distinct bits, so
+    // nothing carries into the window.
+    (lt.wrapping_mul(0x0020_4081) >> 21) & 0xF
+}
+
+/// Per-byte minimum and maximum of two words of four pixels (SIMD within a register, as
+/// [`darker_than`]): one per-byte comparison, spread to a byte mask, selects either way.
+#[inline(always)]
+fn byte_min_max(a: u32, b: u32) -> (u32, u32) {
+    const HIGH: u32 = 0x8080_8080;
+    let low_ge = ((a | HIGH).wrapping_sub(b & !HIGH)) & HIGH;
+    let ge = (a & !b & HIGH) | (!(a ^ b) & low_ge);
+    // 0xFF in every byte where a >= b.
+    let mask = (ge >> 7).wrapping_mul(0xFF);
+    ((b & mask) | (a & !mask), (a & mask) | (b & !mask))
+}
+
 /// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold. `tiles` holds at
 /// least `2 * ceil(w/4) * ceil(h/4)` bytes.
 pub(crate) fn local_threshold(
@@ -66,28 +100,59 @@ pub(crate) fn local_threshold(
     let Some(tmax) = rest.get_mut(..n) else {
         return;
     };
-    tmin.fill(255);
-    tmax.fill(0);
-    // Tile extrema, one pass over the frame in row order; four pixels of a tile at a time,
-    // reduced in registers before touching the tile's stored extrema.
-    for y in 0..h {
-        let row = image.row(y);
-        let base = (y / TILE) * tw;
-        let (Some(mins), Some(maxs)) =
-            (tmin.get_mut(base..base + tw), tmax.get_mut(base..base + tw))
-        else {
-            return;
-        };
-        for ((chunk, lo), hi) in row.chunks(TILE).zip(mins.iter_mut()).zip(maxs.iter_mut()) {
-            let (mn, mx) = if let [a, b, c, d] = *chunk {
-                (a.min(b).min(c.min(d)), a.max(b).max(c.max(d)))
-            } else {
-                chunk
-                    .iter()
-                    .fold((255u8, 0u8), |(mn, mx), &p| (mn.min(p), mx.max(p)))
+    if tw == 0 {
+        return;
+    }
+    // Tile extrema, one tile row at a time: a tile's four rows are four 32-bit words, which
+    // are reduced to a per-byte min and max word in registers (SWAR, see `byte_min_max`),
+    // then to the tile's min and max byte.
+    for (ty, (mins, maxs)) in tmin
+        .chunks_exact_mut(tw)
+        .zip(tmax.chunks_exact_mut(tw))
+        .enumerate()
+    {
+        // The last tile row may be short: repeating its last row leaves min and max as is.
+        let y0 = ty * TILE;
+        let last = h.saturating_sub(1);
+        let rows = [
+            image.row(y0),
+            image.row((y0 + 1).min(last)),
+            image.row((y0 + 2).min(last)),
+            image.row((y0 + 3).min(last)),
+        ];
+        let [r0, r1, r2, r3] = rows;
+        let whole = r0
+            .chunks_exact(TILE)
+            .zip(r1.chunks_exact(TILE))
+            .zip(r2.chunks_exact(TILE).zip(r3.chunks_exact(TILE)));
+        for (((a, b), (c, d)), (lo, hi)) in whole.zip(mins.iter_mut().zip(maxs.iter_mut())) {
+            let word = |q: &[u8]| match *q {
+                [p0, p1, p2, p3] => u32::from_le_bytes([p0, p1, p2, p3]),
+                _ => 0,
             };
-            *lo = (*lo).min(mn);
-            *hi = (*hi).max(mx);
+            let (mn01, mx01) = byte_min_max(word(a), word(b));
+            let (mn23, mx23) = byte_min_max(word(c), word(d));
+            let (mn, _) = byte_min_max(mn01, mn23);
+            let (_, mx) = byte_min_max(mx01, mx23);
+            let [m0, m1, m2, m3] = mn.to_le_bytes();
+            let [x0, x1, x2, x3] = mx.to_le_bytes();
+            *lo = m0.min(m1).min(m2.min(m3));
+            *hi = x0.max(x1).max(x2.max(x3));
+        }
+        // A partial tile at the end of the rows (width not a multiple of the tile).
+        let start = (w / TILE) * TILE;
+        if start < w {
+            let (mut mn, mut mx) = (255u8, 0u8);
+            for row in rows {
+                for &p in row.get(start..).unwrap_or(&[]) {
+                    mn = mn.min(p);
+                    mx = mx.max(p);
+                }
+            }
+            if let (Some(lo), Some(hi)) = (mins.last_mut(), maxs.last_mut()) {
+                *lo = mn;
+                *hi = mx;
+            }
         }
     }
     // Spread over the 3x3 tile neighbourhood, in place: a horizontal then a vertical pass,
@@ -111,21 +176,29 @@ pub(crate) fn local_threshold(
         let Some(out) = bitmap.get_mut(y * wpr..y * wpr + wpr) else {
             return;
         };
-        // Whole words: 32 pixels = 8 tiles, one threshold load per tile.
+        // Whole words: 32 pixels = 8 tiles. Where all eight tiles are flat (threshold 0) no
+        // pixel can be dark and the pixels are not even read; elsewhere each tile's four
+        // pixels are compared with its threshold at once, in one 32-bit word.
         let full = w / 32;
         for ((pixels, tile_thresholds), word) in row
             .chunks_exact(32)
             .zip(thresholds.chunks_exact(32 / TILE))
             .zip(out.iter_mut())
         {
+            let flat = match *tile_thresholds {
+                [t0, t1, t2, t3, t4, t5, t6, t7] => {
+                    u32::from_le_bytes([t0, t1, t2, t3]) | u32::from_le_bytes([t4, t5, t6, t7]) == 0
+                }
+                _ => false,
+            };
+            if flat {
+                *word = 0;
+                continue;
+            }
             let mut bits = 0u32;
             for (t, (quad, &th)) in pixels.chunks_exact(TILE).zip(tile_thresholds).enumerate() {
                 if let [a, b, c, d] = *quad {
-                    let nibble = (a < th) as u32
-                        | ((b < th) as u32) << 1
-                        | ((c < th) as u32) << 2
-                        | ((d < th) as u32) << 3;
-                    bits |= nibble << (TILE * t);
+                    bits |= darker_than(u32::from_le_bytes([a, b, c, d]), th) << (TILE * t);
                 }
             }
             *word = bits;
@@ -145,7 +218,7 @@ pub(crate) fn local_threshold(
 
 /// 3x3 min (or max) filter of a `tw` x `th` grid, in place.
 fn spread(grid: &mut [u8], tw: usize, th: usize, pick: fn(u8, u8) -> u8) {
-    for row in grid.chunks_mut(tw).take(th) {
+    for row in grid.chunks_mut(tw.max(1)).take(th) {
         let mut previous = row.first().copied().unwrap_or(0);
         for x in 0..tw {
             let current = row.get(x).copied().unwrap_or(0);
@@ -196,7 +269,13 @@ pub(crate) fn paper_edges(image: &GrayImage<'_>, bitmap: &mut [u32], scratch: &m
         }
     }
     let range = (hi.saturating_sub(lo)).max(1) as i32;
-    let norm = |p: u8| -> i32 { (p.saturating_sub(lo) as i32 * 255) / range };
+    // `checked_div`: range >= 1, but the optimiser loses that inside the closure and would
+    // keep a division-by-zero panic path (see nopanic/).
+    let norm = |p: u8| -> i32 {
+        (p.saturating_sub(lo) as i32 * 255)
+            .checked_div(range)
+            .unwrap_or(0)
+    };
     // Blurred row y into ring slot y % 3.
     const KERNEL: [i32; 5] = [1, 4, 6, 4, 1];
     let blur_row = |y: usize, out: &mut [u8]| {
@@ -243,6 +322,43 @@ pub(crate) fn paper_edges(image: &GrayImage<'_>, bitmap: &mut [u32], scratch: &m
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn byte_min_max_agrees_with_bytes() {
+        let levels = [0u8, 1, 2, 63, 64, 127, 128, 129, 191, 200, 254, 255];
+        for &a in &levels {
+            for &b in &levels {
+                for (c, d) in [(0u8, 255u8), (a, a), (b, a), (255, 0)] {
+                    let x = u32::from_le_bytes([a, b, c, d]);
+                    let y = u32::from_le_bytes([b, d, a, c]);
+                    let (mn, mx) = byte_min_max(x, y);
+                    let expect_min = [a.min(b), b.min(d), c.min(a), d.min(c)];
+                    let expect_max = [a.max(b), b.max(d), c.max(a), d.max(c)];
+                    assert_eq!(mn.to_le_bytes(), expect_min, "{x:#x} {y:#x}");
+                    assert_eq!(mx.to_le_bytes(), expect_max, "{x:#x} {y:#x}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn darker_than_agrees_with_byte_comparisons() {
+        let levels = [0u8, 1, 2, 63, 64, 127, 128, 129, 191, 200, 254, 255];
+        for &t in &levels {
+            for &a in &levels {
+                for &b in &levels {
+                    for (c, d) in [(0u8, 255u8), (t, t.wrapping_sub(1)), (a, b), (255, 0)] {
+                        let expected = (a < t) as u32
+                            | ((b < t) as u32) << 1
+                            | ((c < t) as u32) << 2
+                            | ((d < t) as u32) << 3;
+                        let got = darker_than(u32::from_le_bytes([a, b, c, d]), t);
+                        assert_eq!(got, expected, "{a} {b} {c} {d} < {t}");
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn dark_square_on_white_and_flat_areas() {

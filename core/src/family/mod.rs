@@ -23,10 +23,19 @@
 //! [`MAX_FALSE_ACCEPT`]. That gives tag36h11 and aruco_6x6_250 two bits, tagStandard41h12
 //! three, aruco_7x7_250 six, and none to the 4x4 and 16h5 families whose codes are too short
 //! to correct anything safely.
+//!
+//! ## Look-up
+//! [`Family::decode`] finds exact matches by binary search in `sorted_ids`. Corrected matches
+//! go through the family's [`MultiIndex`] (multi-index hashing, see [`index`]), which verifies
+//! only the few codes that share a chunk of bits with a reading; a family without one (a user
+//! family parsed at run time) compares the readings with every code. Both give the same
+//! answer: the nearest code, ties broken by the smallest id, then the smallest rotation.
 
+pub mod index;
 mod parse;
 pub mod tables;
 
+pub use index::MultiIndex;
 pub use parse::{parse_family, FamilyError, FamilyErrorKind, FamilyHeader};
 
 /// Largest grid (cells per side) a family may have.
@@ -74,6 +83,9 @@ pub struct Family<'a> {
     pub codes: &'a [u64],
     /// Ids sorted by code, for exact look-ups in O(log n); may be empty (linear search).
     pub sorted_ids: &'a [u16],
+    /// Bucket tables for corrected look-ups (families with `max_correction > 0`); `None`
+    /// compares every code instead.
+    pub index: Option<&'a MultiIndex<'a>>,
 }
 
 /// A successful decode.
@@ -196,18 +208,18 @@ impl<'a> Family<'a> {
     pub fn codes_of_grid(&self, cells: &[bool]) -> [u64; 4] {
         let n = self.grid as usize;
         let mut out = [0u64; 4];
-        for (k, code) in out.iter_mut().enumerate() {
-            let mut acc = 0u64;
-            for r in 0..n {
-                for c in 0..n {
-                    if self.role(r, c) == CellRole::Data {
-                        let (sr, sc) = self.rotate_grid_index(r, c, k as u8);
-                        let bit = cells.get(sr * n + sc).copied().unwrap_or(false);
-                        acc = (acc << 1) | bit as u64;
-                    }
+        // One pass over the data cells feeds all four rotations (runs once per candidate).
+        for r in 0..n {
+            for c in 0..n {
+                if self.role(r, c) != CellRole::Data {
+                    continue;
+                }
+                for (k, code) in out.iter_mut().enumerate() {
+                    let (sr, sc) = self.rotate_grid_index(r, c, k as u8);
+                    let bit = cells.get(sr * n + sc).copied().unwrap_or(false);
+                    *code = (*code << 1) | bit as u64;
                 }
             }
-            *code = acc;
         }
         out
     }
@@ -238,9 +250,11 @@ impl<'a> Family<'a> {
 
     /// Finds the id whose code is nearest to one of the four readings, within
     /// `max_hamming` bits (clamped to [`Family::max_correction`]). Exact matches use the
-    /// sorted index when the family has one.
+    /// sorted index when the family has one (the first rotation that matches wins); other
+    /// matches use the multi-index when there is one, else a scan of every code. Either way
+    /// the result is the nearest code, ties going to the smallest id, then rotation.
     pub fn decode(&self, readings: &[u64; 4], max_hamming: u8) -> Option<Decoded> {
-        let limit = max_hamming.min(self.max_correction) as u32;
+        let limit = max_hamming.min(self.max_correction);
         if !self.sorted_ids.is_empty() {
             for (k, &reading) in readings.iter().enumerate() {
                 if let Some(id) = self.exact(reading) {
@@ -255,6 +269,16 @@ impl<'a> Family<'a> {
                 return None;
             }
         }
+        match self.index {
+            Some(index) if index.covers(limit) => index.nearest(self.codes, readings, limit),
+            _ => self.scan(readings, limit),
+        }
+    }
+
+    /// The look-up without a multi-index: every code against every reading, the first
+    /// smallest distance in (id, rotation) order wins.
+    fn scan(&self, readings: &[u64; 4], limit: u8) -> Option<Decoded> {
+        let limit = u32::from(limit);
         let mut best: Option<Decoded> = None;
         let mut best_distance = limit + 1;
         for (id, &code) in self.codes.iter().enumerate() {
@@ -293,7 +317,9 @@ impl<'a> Family<'a> {
     }
 
     /// Checks that the fields agree with each other: the layout has the declared number of
-    /// data bits, every code fits in them, and the index is a sorted permutation.
+    /// data bits, every code fits in them, the sorted index is a sorted permutation, and the
+    /// multi-index, if any, lists every code in its bucket of every chunk
+    /// ([`MultiIndex::check`]).
     pub fn validate(&self) -> Result<(), FamilyErrorKind> {
         self.check_layout()?;
         if self.codes.is_empty() || self.codes.len() > u16::MAX as usize {
@@ -318,6 +344,9 @@ impl<'a> Family<'a> {
                 }
                 previous = Some(code);
             }
+        }
+        if let Some(index) = self.index {
+            index.check(self.codes, self.bits, self.max_correction)?;
         }
         Ok(())
     }

@@ -37,6 +37,9 @@ pub enum FamilyErrorKind {
     BadCode,
     /// The sorted index is not a sorted permutation of the ids.
     BadIndex,
+    /// The multi-index does not list every code in its bucket of every chunk, or does not
+    /// have enough chunks for the correction bound.
+    BadMultiIndex,
     /// The correction bound exceeds half the minimum distance.
     BadCorrection,
     /// Two ids have the same code (or one is a rotation of another).
@@ -70,6 +73,9 @@ impl core::fmt::Display for FamilyErrorKind {
             FamilyErrorKind::BadGrid => "grid size out of range",
             FamilyErrorKind::BadCode => "code has bits beyond the layout",
             FamilyErrorKind::BadIndex => "sorted index is not a sorted permutation of the ids",
+            FamilyErrorKind::BadMultiIndex => {
+                "multi-index does not list every code in its bucket of every chunk"
+            }
             FamilyErrorKind::BadCorrection => "correction bound above half the minimum distance",
             FamilyErrorKind::DuplicateCode => {
                 "two codes are equal or rotations of each other (minimum distance 0)"
@@ -217,6 +223,7 @@ pub fn parse_family<'t>(
         max_correction: 0,
         codes: &[],
         sorted_ids: &[],
+        index: None,
     };
     let bits = (0..n * n)
         .filter(|k| layout.role(k / n, k % n) == super::CellRole::Data)
@@ -285,6 +292,7 @@ impl<'t> FamilyHeader<'t> {
             max_correction: 0,
             codes,
             sorted_ids: &[],
+            index: None,
         };
         let d = min_hamming_of(&family);
         if d == 0 {

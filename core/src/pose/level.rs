@@ -106,7 +106,8 @@ pub fn level_pad_fix(
     // `up` in the camera frame (the covariance is over left increments in the camera frame).
     // Its variance is the image fix's along that axis; the tilt's is gone.
     let up = camera_from_level * Vector3::new(0.0, 0.0, 1.0);
-    let rotation_cov = fix.covariance.fixed_view::<3, 3>(0, 0).into_owned();
+    // Element by element: `fixed_view(..).into_owned()` keeps a panic path (see nopanic/).
+    let rotation_cov = Matrix3::from_fn(|r, c| fix.covariance.get((r, c)).copied().unwrap_or(0.0));
     let heading_var = up.dot(&(rotation_cov * up)).max(0.0);
     let heading_cov = up * up.transpose() * heading_var;
     let mut covariance = nalgebra::Matrix6::<f32>::zeros();

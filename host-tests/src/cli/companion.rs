@@ -2,13 +2,16 @@
 //!
 //! Runs the same pipeline as the camera board (detector, pad pose, then
 //! `touchdown_core::companion::Companion`) on a recording, in real time at the recording's
-//! frame times, and exchanges MAVLink with a flight controller or SITL over UDP: a datagram
-//! socket sends to `--udp HOST:PORT` (for example MAVProxy's `--out udpin:0.0.0.0:14550` or
-//! PX4 SITL's onboard port 14540) and reads whatever comes back on the same socket. The
-//! companion state machine is sans-IO, so this file is only the loop: read datagrams, feed
-//! frames when due, drain `poll_transmit` into datagrams.
+//! frame times, and exchanges MAVLink with a flight controller or SITL over UDP or a serial
+//! port: with `--udp HOST:PORT` a datagram socket sends there (for example MAVProxy's
+//! `--out udpin:0.0.0.0:14550` or PX4 SITL's onboard port 14540) and reads whatever comes back
+//! on the same socket; with `--serial PATH --baud N` it talks to a real flight controller's
+//! TELEM port through a USB-serial adapter, exactly as the board would (8N1, raw, no flow
+//! control; Linux/Unix termios). The companion state machine is sans-IO, so this file is only
+//! the loop: read bytes, feed frames when due, drain `poll_transmit` into the endpoint.
 
-use std::io::{ErrorKind, Write};
+use std::fs::File;
+use std::io::{ErrorKind, Read, Write};
 use std::net::UdpSocket;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -30,8 +33,21 @@ use crate::workspace::HostWorkspace;
 #[derive(Debug, Clone, Args)]
 pub struct CompanionArgs {
     /// MAVLink endpoint to send to (UDP), e.g. 127.0.0.1:14550
-    #[arg(long, value_name = "HOST:PORT")]
-    pub udp: String,
+    #[arg(
+        long,
+        value_name = "HOST:PORT",
+        conflicts_with = "serial",
+        required_unless_present = "serial"
+    )]
+    pub udp: Option<String>,
+
+    /// Serial port to the flight controller instead of UDP, e.g. /dev/ttyUSB0
+    #[arg(long, value_name = "PATH")]
+    pub serial: Option<PathBuf>,
+
+    /// Baud rate of --serial (ArduPilot SERIALn_BAUD 921 = 921600)
+    #[arg(long, value_name = "N", default_value_t = 921_600, requires = "serial")]
+    pub baud: u32,
 
     /// Recording directory (camera.toml, pad.toml, frames/, frames.csv) to replay
     #[arg(long, value_name = "DIR")]
@@ -57,6 +73,76 @@ pub enum ProfileArg {
     Ardupilot,
     /// LANDING_TARGET in MAV_FRAME_LOCAL_NED (PX4; needs its attitude and local position).
     Px4,
+}
+
+/// Where MAVLink goes: a UDP socket or a serial port, both non-blocking.
+enum Endpoint {
+    Udp(UdpSocket),
+    Serial(File),
+}
+
+impl Endpoint {
+    /// Opens `--udp` or `--serial`.
+    fn open(args: &CompanionArgs) -> Result<(Endpoint, String), CliError> {
+        if let Some(path) = &args.serial {
+            let name = path.display().to_string();
+            let file = open_serial(path, args.baud)
+                .map_err(|e| CliError(format!("--serial {name}: {e}")))?;
+            return Ok((Endpoint::Serial(file), format!("--serial {name}")));
+        }
+        let addr = args.udp.as_deref().unwrap_or_default();
+        let name = format!("--udp {addr}");
+        let socket = UdpSocket::bind("0.0.0.0:0").map_err(CliError::new)?;
+        socket
+            .connect(addr)
+            .map_err(|e| CliError(format!("{name}: {e}")))?;
+        socket.set_nonblocking(true).map_err(CliError::new)?;
+        Ok((Endpoint::Udp(socket), name))
+    }
+
+    /// Bytes received, 0 when nothing is waiting.
+    fn recv(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let r = match self {
+            Endpoint::Udp(s) => s.recv(buf),
+            Endpoint::Serial(f) => f.read(buf),
+        };
+        match r {
+            Ok(n) => Ok(n),
+            Err(e) if e.kind() == ErrorKind::WouldBlock => Ok(0),
+            // ICMP "port unreachable" until the UDP endpoint is up: keep going.
+            Err(e) if e.kind() == ErrorKind::ConnectionRefused => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Sends one MAVLink frame.
+    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        match self {
+            Endpoint::Udp(s) => s.send(frame).map(|_| ()),
+            Endpoint::Serial(f) => f.write_all(frame),
+        }
+    }
+}
+
+/// Opens a serial port raw (8N1, no echo, no flow control, non-blocking) at `baud`.
+fn open_serial(path: &std::path::Path, baud: u32) -> std::io::Result<File> {
+    use rustix::fs::{Mode, OFlags};
+    use rustix::termios::{self, ControlModes, OptionalActions};
+    // NOCTTY: the port must not become our controlling terminal.
+    let fd = rustix::fs::open(
+        path,
+        OFlags::RDWR | OFlags::NOCTTY | OFlags::NONBLOCK | OFlags::CLOEXEC,
+        Mode::empty(),
+    )?;
+    let mut t = termios::tcgetattr(&fd)?;
+    t.make_raw();
+    // Ignore modem lines (CLOCAL), enable the receiver (CREAD), no hardware flow control.
+    t.control_modes |= ControlModes::CLOCAL | ControlModes::CREAD;
+    t.control_modes -= ControlModes::CRTSCTS;
+    t.set_speed(baud)?;
+    termios::tcsetattr(&fd, OptionalActions::Now, &t)?;
+    termios::tcflush(&fd, termios::QueueSelector::IFlush)?;
+    Ok(File::from(fd))
 }
 
 /// Runs `touchdown companion`.
@@ -88,11 +174,7 @@ pub fn run(
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
 
-    let socket = UdpSocket::bind("0.0.0.0:0").map_err(CliError::new)?;
-    socket
-        .connect(&args.udp)
-        .map_err(|e| CliError(format!("--udp {}: {e}", args.udp)))?;
-    socket.set_nonblocking(true).map_err(CliError::new)?;
+    let (mut endpoint, endpoint_name) = Endpoint::open(args)?;
 
     let profile = match args.profile {
         ProfileArg::Ardupilot => Profile::ArduPilot,
@@ -117,12 +199,10 @@ pub fn run(
 
     while now_us() < end_us {
         loop {
-            match socket.recv(&mut rx) {
+            match endpoint.recv(&mut rx) {
+                Ok(0) => break,
                 Ok(n) => companion.receive(rx.get(..n).unwrap_or(&[]), now_us()),
-                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                // ICMP "port unreachable" until the endpoint is up: keep going.
-                Err(e) if e.kind() == ErrorKind::ConnectionRefused => break,
-                Err(e) => return Err(CliError(format!("--udp {}: {e}", args.udp))),
+                Err(e) => return Err(CliError(format!("{endpoint_name}: {e}"))),
             }
         }
         if let Some(entry) = reader.entries.get(next) {
@@ -148,7 +228,7 @@ pub fn run(
             }
         }
         while let Some(n) = companion.poll_transmit(now_us(), &mut tx) {
-            if socket.send(tx.get(..n).unwrap_or(&[])).is_err() {
+            if endpoint.send(tx.get(..n).unwrap_or(&[])).is_err() {
                 send_errors += 1;
             }
         }

@@ -7,6 +7,7 @@
 pub mod companion;
 pub mod detect;
 pub mod pad;
+pub mod replay;
 pub mod simulate;
 
 use std::fmt;
@@ -44,10 +45,14 @@ pub enum Command {
     /// Render a simulated flight over a landing pad into a recording.
     #[command(long_about = simulate::LONG_HELP)]
     Simulate(simulate::SimulateArgs),
+    /// Replay a recording or a simulated scenario through both methods: tables and figures.
+    #[command(long_about = replay::LONG_HELP)]
+    Replay(replay::ReplayArgs),
     /// Write a printable landing pad (SVG at true size) and its pad.toml.
     #[command(long_about = pad::LONG_HELP)]
     Pad(pad::PadArgs),
-    /// Run the board's MAVLink companion logic on a recording against a UDP endpoint (SITL).
+    /// Run the board's MAVLink companion logic on a recording against a UDP endpoint (SITL)
+    /// or a serial port.
     Companion(companion::CompanionArgs),
 }
 
@@ -86,6 +91,7 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
     match cli.command {
         Command::Detect(args) => detect::run(&args, out, err),
         Command::Simulate(args) => simulate::run(&args, out, err),
+        Command::Replay(args) => replay::run(&args, out, err),
         Command::Pad(args) => pad::run(&args, out, err),
         Command::Companion(args) => companion::run(&args, out, err),
     }

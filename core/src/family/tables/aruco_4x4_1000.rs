@@ -19,6 +19,7 @@ pub static ARUCO_4X4_1000: Family<'static> = Family {
     max_correction: 0,
     codes: &CODES,
     sorted_ids: &SORTED,
+    index: None,
 };
 
 /// The codes, indexed by id (kept a few per line: rustfmt would put one per line).

@@ -19,6 +19,7 @@ pub static ARUCO_4X4_250: Family<'static> = Family {
     max_correction: 0,
     codes: CODES,
     sorted_ids: &SORTED,
+    index: None,
 };
 
 /// The codes, indexed by id: the first 250 codes of `aruco_4x4_1000`.

@@ -19,6 +19,7 @@ pub static ARUCO_5X5_100: Family<'static> = Family {
     max_correction: 0,
     codes: CODES,
     sorted_ids: &SORTED,
+    index: None,
 };
 
 /// The codes, indexed by id: the first 100 codes of `aruco_5x5_1000`.

@@ -15,35 +15,39 @@
 //! python3 tools/gen_families.py
 //! ```
 //!
-//! | family | grid | bits | codes | min distance | max correction |
-//! |---|---:|---:|---:|---:|---:|
-//! | `tag16h5` | 8 | 16 | 30 | 5 | 0 |
-//! | `tag25h9` | 9 | 25 | 35 | 9 | 0 |
-//! | `tag36h10` | 10 | 36 | 2320 | 10 | 2 |
-//! | `tag36h11` | 10 | 36 | 587 | 11 | 2 |
-//! | `aruco_4x4_50` | 8 | 16 | 50 | 4 | 0 |
-//! | `aruco_4x4_100` | 8 | 16 | 100 | 3 | 0 |
-//! | `aruco_4x4_250` | 8 | 16 | 250 | 3 | 0 |
-//! | `aruco_4x4_1000` | 8 | 16 | 1000 | 2 | 0 |
-//! | `aruco_5x5_50` | 9 | 25 | 50 | 8 | 0 |
-//! | `aruco_5x5_100` | 9 | 25 | 100 | 7 | 0 |
-//! | `aruco_5x5_250` | 9 | 25 | 250 | 6 | 0 |
-//! | `aruco_5x5_1000` | 9 | 25 | 1000 | 5 | 0 |
-//! | `aruco_6x6_50` | 10 | 36 | 50 | 13 | 3 |
-//! | `aruco_6x6_100` | 10 | 36 | 100 | 12 | 3 |
-//! | `aruco_6x6_250` | 10 | 36 | 250 | 11 | 2 |
-//! | `aruco_6x6_1000` | 10 | 36 | 1000 | 9 | 2 |
-//! | `aruco_7x7_50` | 11 | 49 | 50 | 19 | 7 |
-//! | `aruco_7x7_100` | 11 | 49 | 100 | 18 | 7 |
-//! | `aruco_7x7_250` | 11 | 49 | 250 | 17 | 6 |
-//! | `aruco_7x7_1000` | 11 | 49 | 1000 | 14 | 5 |
-//! | `aruco_mip_36h12` | 10 | 36 | 250 | 12 | 2 |
-//! | `aruco_original` | 9 | 25 | 1024 | 0 | 0 |
-//! | `tagStandard41h12` | 9 | 41 | 2115 | 12 | 3 |
+//! | family | grid | bits | codes | min distance | max correction | multi-index |
+//! |---|---:|---:|---:|---:|---:|---:|
+//! | `tag16h5` | 8 | 16 | 30 | 5 | 0 | none |
+//! | `tag25h9` | 9 | 25 | 35 | 9 | 0 | none |
+//! | `tag36h10` | 10 | 36 | 2320 | 10 | 2 | 4 x 9 bits, 22,664 B |
+//! | `tag36h11` | 10 | 36 | 587 | 11 | 2 | 4 x 9 bits, 8,800 B |
+//! | `aruco_4x4_50` | 8 | 16 | 50 | 4 | 0 | none |
+//! | `aruco_4x4_100` | 8 | 16 | 100 | 3 | 0 | none |
+//! | `aruco_4x4_250` | 8 | 16 | 250 | 3 | 0 | none |
+//! | `aruco_4x4_1000` | 8 | 16 | 1000 | 2 | 0 | none |
+//! | `aruco_5x5_50` | 9 | 25 | 50 | 8 | 0 | none |
+//! | `aruco_5x5_100` | 9 | 25 | 100 | 7 | 0 | none |
+//! | `aruco_5x5_250` | 9 | 25 | 250 | 6 | 0 | none |
+//! | `aruco_5x5_1000` | 9 | 25 | 1000 | 5 | 0 | none |
+//! | `aruco_6x6_50` | 10 | 36 | 50 | 13 | 3 | 8+7+7+7+7 bits, 2,046 B |
+//! | `aruco_6x6_100` | 10 | 36 | 100 | 12 | 3 | 8+7+7+7+7 bits, 2,546 B |
+//! | `aruco_6x6_250` | 10 | 36 | 250 | 11 | 2 | 4 x 9 bits, 6,104 B |
+//! | `aruco_6x6_1000` | 10 | 36 | 1000 | 9 | 2 | 4 x 9 bits, 12,104 B |
+//! | `aruco_7x7_50` | 11 | 49 | 50 | 19 | 7 | 7+6+6+6+6+6+6+6 bits, 1,968 B |
+//! | `aruco_7x7_100` | 11 | 49 | 100 | 18 | 7 | 7+6+6+6+6+6+6+6 bits, 2,768 B |
+//! | `aruco_7x7_250` | 11 | 49 | 250 | 17 | 6 | 7 x 7 bits, 5,306 B |
+//! | `aruco_7x7_1000` | 11 | 49 | 1000 | 14 | 5 | 9+8+8+8+8+8 bits, 15,596 B |
+//! | `aruco_mip_36h12` | 10 | 36 | 250 | 12 | 2 | 4 x 9 bits, 6,104 B |
+//! | `aruco_original` | 9 | 25 | 1024 | 0 | 0 | none |
+//! | `tagStandard41h12` | 9 | 41 | 2115 | 12 | 3 | 11+10+10+10 bits, 27,168 B |
 //!
 //! The correction bound is the largest `k` below half the minimum distance for which a random
 //! pattern inside a valid border is accepted with probability at most 0.0001
 //! ([`MAX_FALSE_ACCEPT`](super::MAX_FALSE_ACCEPT)).
+//!
+//! Families that correct bits carry a [`MultiIndex`](super::MultiIndex) (chunk widths and
+//! flash bytes in the last column) chosen by the generator to balance flash against look-up
+//! cost; a family with so few codes that scanning them is as fast has none.
 //!
 //! Notes from the generator:
 //! - aruco_5x5_50 (../shared/data/families/tagAruco5x5_50.txt): header says min_hamming 7, computed 8 (id 25 vs itself turned 1 quarter(s)); using 8

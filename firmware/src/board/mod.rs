@@ -1,0 +1,93 @@
+//! The two supported boards: pin maps, clocks and the drivers built from them.
+//!
+//! Exactly one board feature is enabled (`board-nucleo`, the default, or `board-openmv`);
+//! each also selects its chip for embassy-stm32 (`stm32h743zi`, LQFP144, on the NUCLEO;
+//! `stm32h743vi`, LQFP100, on the OpenMV Cam H7), so a pin that does not exist on the chip
+//! fails to compile. Each board module provides the same items:
+//!
+//! - `NAME`, `HSE` (the clock into OSC_IN and its PLL pre-divider, see [`crate::clocks`]) and
+//!   `XCLK_HZ` (the camera clock driven out of MCO1);
+//! - `init(p, baud) -> Board`: claims the pins and builds every driver.
+//!
+//! The pin tables with their sources are in `firmware/README.md`.
+
+#[cfg(all(feature = "board-nucleo", feature = "board-openmv"))]
+compile_error!(
+    "enable exactly one board feature: `board-openmv` needs `--no-default-features` \
+     (the default is `board-nucleo`)"
+);
+#[cfg(not(any(feature = "board-nucleo", feature = "board-openmv")))]
+compile_error!("enable one board feature: `board-nucleo` or `board-openmv`");
+
+#[cfg(feature = "board-nucleo")]
+mod nucleo;
+#[cfg(feature = "board-nucleo")]
+pub use nucleo::{init, HSE, NAME, XCLK_HZ};
+
+#[cfg(feature = "board-openmv")]
+mod openmv;
+#[cfg(feature = "board-openmv")]
+pub use openmv::{init, HSE, NAME, XCLK_HZ};
+
+use embassy_stm32::dcmi::Dcmi;
+use embassy_stm32::flash::{Async as FlashAsync, Flash};
+use embassy_stm32::gpio::Output;
+use embassy_stm32::i2c::{I2c, Master};
+use embassy_stm32::mode::Async;
+use embassy_stm32::peripherals::{DCMI, IWDG1, MCO1};
+use embassy_stm32::rcc::Mco;
+use embassy_stm32::usart::BufferedUart;
+use embassy_stm32::wdg::IndependentWatchdog;
+
+/// The external clock into OSC_IN.
+pub struct HseClock {
+    /// Frequency, Hz.
+    pub hz: u32,
+    /// `true`: an oscillator drives OSC_IN (bypass mode); `false`: a crystal.
+    pub bypass: bool,
+    /// PLL1 input divider (DIVM) giving a 4 MHz reference.
+    pub prediv: embassy_stm32::rcc::PllPreDiv,
+}
+
+/// The camera's hardware: the parallel bus, its control bus and its control pins.
+pub struct CameraPins {
+    /// DCMI with its DMA stream, 8 data lines, HSYNC, VSYNC, PIXCLK.
+    pub dcmi: Dcmi<'static, DCMI>,
+    /// SCCB (I2C1) to the sensor's registers.
+    pub sccb: I2c<'static, Async, Master>,
+    /// RESETB, active low: low holds the sensor in reset.
+    pub reset_n: Output<'static>,
+    /// PWDN, active high: high powers the sensor down.
+    pub power_down: Output<'static>,
+    /// XCLK from MCO1 (kept alive: dropping it would not stop the clock, but owning it
+    /// documents that the pin is taken).
+    pub xclk: Mco<'static, MCO1>,
+}
+
+/// Everything the tasks need, built from the board's pins.
+pub struct Board {
+    /// The heartbeat LED.
+    pub led: Output<'static>,
+    /// The camera.
+    pub camera: CameraPins,
+    /// The UART to the flight controller (interrupt driven, buffers in DTCM).
+    pub uart: BufferedUart<'static>,
+    /// The flash controller (parameter storage).
+    pub flash: Flash<'static, FlashAsync>,
+    /// The independent watchdog.
+    pub watchdog: IndependentWatchdog<'static, IWDG1>,
+}
+
+/// Bytes of the UART's receive ring buffer: 22 ms of a saturated 921600-baud line, enough
+/// to ride out the vision task's longest stretch without a yield (one detection).
+pub const UART_RX_BUFFER: usize = 2048;
+/// Bytes of the UART's transmit ring buffer.
+pub const UART_TX_BUFFER: usize = 512;
+
+/// The UART ring buffers, claimed once (statics in DTCM: the UART is interrupt driven, the
+/// CPU copies every byte, so no DMA needs to reach them).
+fn uart_buffers() -> (&'static mut [u8], &'static mut [u8]) {
+    let tx = defmt::unwrap!(cortex_m::singleton!(: [u8; UART_TX_BUFFER] = [0; UART_TX_BUFFER]));
+    let rx = defmt::unwrap!(cortex_m::singleton!(: [u8; UART_RX_BUFFER] = [0; UART_RX_BUFFER]));
+    (tx, rx)
+}

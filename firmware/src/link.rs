@@ -1,0 +1,134 @@
+//! The MAVLink link to the flight controller: the UART and the companion state machine.
+//!
+//! One task owns the [`Companion`] (touchdown-core's sans-IO MAVLink state machine) and the
+//! UART; everything else talks to it through the [`EVENTS`] channel: the vision task posts
+//! each processed frame ([`LinkEvent::Frame`]) and faults ([`LinkEvent::Status`]). One owner
+//! and a channel keeps it simple: no lock around the companion, no task ever waits on
+//! another's critical section, and the vision task never blocks on the link ([`post`] drops
+//! and counts an event when the channel is full rather than stall a frame).
+//!
+//! The loop waits for whichever comes first: bytes from the UART, an event, or a 5 ms tick
+//! (heartbeats, TIMESYNC, parameter streaming, target expiry are driven by
+//! `poll_transmit`'s clock). After each, it drains `poll_transmit` into the UART.
+//!
+//! The UART is embassy's interrupt-driven `BufferedUart`: its ring buffers are in DTCM, which
+//! DMA cannot reach but the CPU (the interrupt handler copies each byte) can, so neither DMA
+//! reachability nor cache maintenance comes into it; at the few kB/s a MAVLink telemetry
+//! port carries the interrupt load is small.
+//!
+//! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
+//! stable for two seconds ([`persist::SaveDebounce`]) by the [`param_store`] task.
+
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use defmt::{info, warn};
+use embassy_futures::select::{select3, Either3};
+use embassy_stm32::usart::BufferedUart;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_time::{Duration, Instant, Ticker};
+use embedded_io_async::{Read, Write};
+use touchdown_core::companion::persist::SaveDebounce;
+use touchdown_core::companion::{Companion, FrameResult, MavSeverity, MAX_FRAME_LEN};
+
+use crate::param_store;
+use crate::watchdog;
+
+/// What other tasks send the link. (A frame is ~220 bytes, a status ~12: the channel holds
+/// four events of the larger size, under 1 KiB; boxing is not an option without a heap.)
+#[allow(clippy::large_enum_variant)]
+pub enum LinkEvent {
+    /// A processed frame (exposure time and pad fix, if any).
+    Frame(FrameResult),
+    /// A fault or notice for the ground station (STATUSTEXT).
+    Status(MavSeverity, &'static str),
+}
+
+/// Events for the link task. Four frames is 130 ms at 30 fps: more means the link is stuck.
+static EVENTS: Channel<CriticalSectionRawMutex, LinkEvent, 4> = Channel::new();
+/// Events dropped because the channel was full.
+static DROPPED_EVENTS: AtomicU32 = AtomicU32::new(0);
+
+/// Hands an event to the link task without waiting; drops (and counts) it when the channel is
+/// full.
+pub fn post(event: LinkEvent) {
+    if EVENTS.try_send(event).is_err() {
+        DROPPED_EVENTS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// How often the link runs its periodic work without any input.
+const TICK: Duration = Duration::from_millis(5);
+/// Interval of the `info` summary.
+const SUMMARY_PERIOD: Duration = Duration::from_secs(1);
+
+/// Microseconds since boot (the companion's clock).
+fn now_us() -> u64 {
+    Instant::now().as_micros()
+}
+
+/// Runs the link forever.
+#[embassy_executor::task]
+pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
+    let (mut tx, mut rx) = uart.split();
+    let mut rx_buf = [0u8; 256];
+    let mut tx_buf = [0u8; MAX_FRAME_LEN];
+    let mut ticker = Ticker::every(TICK);
+    let mut debounce = SaveDebounce::new(*companion.params());
+    let mut uart_errors = 0u32;
+    let mut next_summary = Instant::now() + SUMMARY_PERIOD;
+    info!(
+        "link: profile {}, sysid {}, compid {}",
+        companion.profile(),
+        companion
+            .params()
+            .get_int(touchdown_core::companion::ParamId::SysId),
+        companion
+            .params()
+            .get_int(touchdown_core::companion::ParamId::CompId)
+    );
+
+    loop {
+        match select3(rx.read(&mut rx_buf), EVENTS.receive(), ticker.next()).await {
+            Either3::First(Ok(n)) => companion.receive(rx_buf.get(..n).unwrap_or(&[]), now_us()),
+            Either3::First(Err(e)) => {
+                // Framing/noise/overrun: the parser resynchronises on the next frame start.
+                uart_errors = uart_errors.wrapping_add(1);
+                defmt::debug!("link: uart {}", e);
+            }
+            Either3::Second(LinkEvent::Frame(frame)) => {
+                companion.on_frame(frame, now_us());
+            }
+            Either3::Second(LinkEvent::Status(severity, text)) => {
+                companion.queue_status_text(severity, text);
+            }
+            Either3::Third(()) => {}
+        }
+        while let Some(n) = companion.poll_transmit(now_us(), &mut tx_buf) {
+            if let Err(e) = tx.write_all(tx_buf.get(..n).unwrap_or(&[])).await {
+                warn!("link: uart write {}", e);
+            }
+        }
+        if let Some(params) = debounce.poll(companion.params(), now_us()) {
+            param_store::SAVE.signal(params);
+            debounce.saved(&params);
+        }
+        watchdog::link_alive();
+
+        if Instant::now() >= next_summary {
+            next_summary += SUMMARY_PERIOD;
+            let s = companion.stats();
+            info!(
+                "link: tx {} frames, {} targets, {} status; rx {} frames ({} bad crc, {} uart errors); autopilot {}, dropped events {}",
+                s.tx_frames,
+                s.landing_targets,
+                s.status_texts,
+                s.link.frames,
+                s.link.bad_crc,
+                uart_errors,
+                s.autopilot,
+                DROPPED_EVENTS.load(Ordering::Relaxed)
+            );
+        }
+    }
+}

@@ -1,0 +1,296 @@
+//! Replays the fuzz seed corpora (`fuzz/corpus/<target>/`) and every input a fuzzer found
+//! (`fuzz/regressions/<target>/`) through the fuzz harnesses, without libFuzzer.
+//!
+//! The harnesses are `fuzz/src/lib.rs`, included here as a module, so a crash found by
+//! `cargo fuzz` and saved under `fuzz/regressions/` fails `cargo test` until it is fixed, and
+//! the checks the fuzzers make (valid ids, finite corners, valid MAVLink out, budgets) run in
+//! CI on the seeds. The seeds are also checked for reaching what they are meant to reach (the
+//! marker seed decodes, the MAVLink capture makes the companion send targets).
+//!
+//! The MAVLink seeds are scripts for the `mavlink_stream` harness built from a simulated
+//! autopilot's byte stream; `write_mavlink_seeds` (ignored) regenerates them:
+//! `cargo test -p touchdown-host --test fuzz_regressions -- --ignored write_mavlink_seeds`.
+
+#[path = "../../fuzz/src/lib.rs"]
+#[allow(dead_code)]
+mod harness;
+
+use std::path::{Path, PathBuf};
+
+use touchdown_core::companion::mavlink::dialects::common::{
+    MavAutopilot, MavMessage, MavModeFlag, MavParamType, MavState, MavType,
+    ATTITUDE_QUATERNION_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, PARAM_REQUEST_LIST_DATA,
+    PARAM_SET_DATA, SYSTEM_TIME_DATA, TIMESYNC_DATA,
+};
+use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+
+const TARGETS: [&str; 5] = [
+    "detect",
+    "family_file",
+    "config_toml",
+    "recording",
+    "mavlink_stream",
+];
+
+fn fuzz_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz")
+}
+
+/// Files of `fuzz/<kind>/<target>/`, sorted (none if the directory does not exist).
+fn inputs(kind: &str, target: &str) -> Vec<PathBuf> {
+    let dir = fuzz_dir().join(kind).join(target);
+    let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    files.sort();
+    files
+}
+
+fn run(target: &str, data: &[u8], state: &mut harness::DetectState) {
+    match target {
+        "detect" => harness::detect(state, data),
+        "family_file" => harness::family_file(data),
+        "config_toml" => harness::config_toml(data),
+        "recording" => harness::recording(data),
+        "mavlink_stream" => {
+            harness::mavlink_stream(data);
+        }
+        _ => unreachable!("unknown target {target}"),
+    }
+}
+
+/// Every seed and every saved regression input passes its harness.
+#[test]
+fn seeds_and_regressions_pass_their_harness() {
+    let mut state = harness::DetectState::default();
+    let mut seeds = 0;
+    for target in TARGETS {
+        let corpus = inputs("corpus", target);
+        assert!(!corpus.is_empty(), "fuzz/corpus/{target}/ has no seeds");
+        seeds += corpus.len();
+        for path in corpus.iter().chain(inputs("regressions", target).iter()) {
+            let data = std::fs::read(path).unwrap();
+            println!("{target}: {}", path.display());
+            run(target, &data, &mut state);
+        }
+    }
+    assert!(seeds >= 10);
+}
+
+/// The marker seed of the detect target holds a readable tag36h11 id 0 (so the fuzzer starts
+/// inside the decoder, not only in the threshold and contour code).
+#[test]
+fn detect_seed_holds_a_marker() {
+    let data = std::fs::read(fuzz_dir().join("corpus/detect/tag36h11-id0-48x48")).unwrap();
+    let (header, pixels) = data.split_at(5);
+    let width = usize::from(u16::from_le_bytes([header[0], header[1]])) + 1;
+    let height = usize::from(u16::from_le_bytes([header[2], header[3]])) + 1;
+    assert_eq!(pixels.len(), width * height);
+    let image = touchdown_core::image::GrayImage::new(pixels, width, height).unwrap();
+    let mut workspace = Box::new(touchdown_core::detect::QvgaWorkspace::new());
+    let mut detector =
+        touchdown_core::detect::Detector::new(touchdown_core::detect::DetectorConfig::default());
+    let families = touchdown_core::family::tables::DEFAULT;
+    let found = detector
+        .detect(&image, families, &mut workspace.buffers())
+        .unwrap();
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_eq!((found[0].family, found[0].id), (0, 0));
+}
+
+/// The MAVLink capture seeds drive the companion all the way to LANDING_TARGETs.
+#[test]
+fn mavlink_seeds_reach_landing_targets() {
+    for (name, _) in mavlink_seeds() {
+        let data = std::fs::read(fuzz_dir().join("corpus/mavlink_stream").join(name)).unwrap();
+        let stats = harness::mavlink_stream(&data);
+        println!("{name}: {stats:?}");
+        if name.starts_with("capture") {
+            assert!(stats.landing_targets > 0, "{name}: {stats:?}");
+            assert!(stats.autopilot.is_some(), "{name}: {stats:?}");
+        } else {
+            assert!(stats.param_sets_rejected > 0, "{name}: {stats:?}");
+        }
+        assert_eq!(stats.decode_errors, 0, "{name}: {stats:?}");
+    }
+}
+
+/// Regenerates `fuzz/corpus/mavlink_stream/` (run on demand, see the module docs).
+#[test]
+#[ignore]
+fn write_mavlink_seeds() {
+    let dir = fuzz_dir().join("corpus/mavlink_stream");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (name, bytes) in mavlink_seeds() {
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+}
+
+/// A `mavlink_stream` script (see `harness::mavlink_stream` for the format).
+struct Script(Vec<u8>);
+
+impl Script {
+    fn new(px4: bool, vpe: bool, start_us: u32) -> Self {
+        let mut s = vec![u8::from(px4), u8::from(vpe)];
+        s.extend_from_slice(&start_us.to_le_bytes());
+        Script(s)
+    }
+
+    /// Received bytes, as the UART delivered them (chunks of at most 300 bytes).
+    fn receive(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(300) {
+            self.0.push(harness::Op::RawBytes as u8);
+            self.0
+                .extend_from_slice(&(chunk.len() as u16).to_le_bytes());
+            self.0.extend_from_slice(chunk);
+        }
+    }
+
+    /// Time passes by `dt_us` (at most 50 ms).
+    fn wait(&mut self, dt_us: u16) {
+        self.0.extend_from_slice(&[harness::Op::Time as u8, 3]);
+        self.0.extend_from_slice(&dt_us.to_le_bytes());
+    }
+
+    /// A processed frame exposed `age_us` ago with a level pad `height_dm` decimetres below.
+    fn frame_with_fix(&mut self, age_us: u32, offset: (i8, i8), height_dm: u8) {
+        self.0
+            .extend_from_slice(&[harness::Op::CameraFrame as u8, 1]);
+        self.0.extend_from_slice(&age_us.to_le_bytes());
+        // Plausible fix: level, offset in 5 cm steps, height in 0.2 m steps, sigma 0.0101.
+        self.0
+            .extend_from_slice(&[0, 0, 0, 0, offset.0 as u8, offset.1 as u8, height_dm / 2]);
+        self.0.extend_from_slice(&[10, 6, 4]);
+        self.0.extend_from_slice(&f32::INFINITY.to_le_bytes());
+    }
+
+    fn param_set(&mut self, index: u8, value: f32) {
+        self.0
+            .extend_from_slice(&[harness::Op::ParamSet as u8, index]);
+        self.0.extend_from_slice(&value.to_le_bytes());
+        self.0.push(0);
+    }
+}
+
+/// Autopilot (system 1, component 1) frames, MAVLink 2.
+struct Autopilot {
+    seq: u8,
+}
+
+impl Autopilot {
+    fn frame(&mut self, msg: &MavMessage) -> Vec<u8> {
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(
+            MavHeader {
+                system_id: 1,
+                component_id: 1,
+                sequence: self.seq,
+            },
+            msg,
+        );
+        self.seq = self.seq.wrapping_add(1);
+        raw.raw_bytes().to_vec()
+    }
+
+    fn heartbeat(&mut self) -> Vec<u8> {
+        self.frame(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 9,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        }))
+    }
+}
+
+/// (file name, script) of every MAVLink seed.
+fn mavlink_seeds() -> Vec<(&'static str, Vec<u8>)> {
+    let mut seeds = Vec::new();
+    for (name, px4) in [("capture-ardupilot", false), ("capture-px4", true)] {
+        let mut ap = Autopilot { seq: 0 };
+        let mut s = Script::new(px4, px4, 1_000_000);
+        // The autopilot's clock is 5 s ahead of ours; 2 s of flight at 30 frames per second.
+        let ap_ahead_ms = 5_000u32;
+        for k in 0..60u32 {
+            let t_ms = 1_000 + k * 33;
+            let mut rx = Vec::new();
+            if k % 30 == 0 {
+                rx.extend(ap.heartbeat());
+                rx.extend(ap.frame(&MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
+                    time_unix_usec: 0,
+                    time_boot_ms: t_ms + ap_ahead_ms,
+                })));
+                rx.extend(ap.frame(&MavMessage::TIMESYNC(TIMESYNC_DATA {
+                    tc1: 0,
+                    ts1: i64::from(t_ms + ap_ahead_ms) * 1_000_000,
+                    target_system: 0,
+                    target_component: 0,
+                })));
+            }
+            rx.extend(
+                ap.frame(&MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+                    time_boot_ms: t_ms + ap_ahead_ms,
+                    q1: 1.0,
+                    ..ATTITUDE_QUATERNION_DATA::DEFAULT
+                })),
+            );
+            rx.extend(
+                ap.frame(&MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
+                    time_boot_ms: t_ms + ap_ahead_ms,
+                    z: -10.0,
+                    ..LOCAL_POSITION_NED_DATA::DEFAULT
+                })),
+            );
+            s.receive(&rx);
+            s.wait(8_000);
+            s.frame_with_fix(25_000, (2, -1), 100);
+            s.wait(25_333);
+        }
+        seeds.push((name, s.0));
+    }
+
+    // Parameters: the list, an absurd value (rejected), garbage, a truncated frame.
+    let mut ap = Autopilot { seq: 0 };
+    let mut s = Script::new(false, false, 0);
+    s.receive(&ap.heartbeat());
+    let gcs = |msg: &MavMessage| {
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(
+            MavHeader {
+                system_id: 255,
+                component_id: 190,
+                sequence: 0,
+            },
+            msg,
+        );
+        raw.raw_bytes().to_vec()
+    };
+    s.receive(&gcs(&MavMessage::PARAM_REQUEST_LIST(
+        PARAM_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 0,
+        },
+    )));
+    s.wait(50_000);
+    s.wait(50_000);
+    s.param_set(1, 1.0e9); // TD_RATE_HZ
+    s.param_set(3, f32::NAN); // TD_CAM_YAW
+    let set = gcs(&MavMessage::PARAM_SET(PARAM_SET_DATA {
+        param_value: -5.0,
+        target_system: 1,
+        target_component: 191,
+        param_id: "TD_TAG_SIZE".into(),
+        param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+    }));
+    s.receive(&[0xFD, 0x09, 0x00, 0x55, 0xAA]);
+    s.receive(&set[..set.len() - 3]);
+    s.receive(&set);
+    s.wait(10_000);
+    seeds.push(("params-absurd", s.0));
+    seeds
+}

@@ -1,0 +1,194 @@
+//! Link-time proof that touchdown-core's per-frame path cannot panic.
+//!
+//! This image is never run. It is built for the firmware's target with the firmware's release
+//! profile (see Cargo.toml), and its entry point calls the whole per-frame path on inputs the
+//! optimiser cannot see through ([`black_box`]): detection (any configuration, so both
+//! pipelines; any families; any pixels), single-marker pose (IPPE + refinement), pad pose and
+//! the level pad fix, the trackers inside the companion, and the companion's MAVLink parse
+//! (any received bytes) and encode (draining `poll_transmit`).
+//!
+//! Not covered: `PoseMethod::PaperHomography`, the paper's homography decomposition, which
+//! only reproduces the paper's tables on the host; it uses nalgebra's SVD, whose internal
+//! indexing keeps panic paths.
+//!
+//! The panic handler calls [`touchdown_core_per_frame_path_can_panic`], a function that is
+//! declared but defined nowhere. If, after inlining and dead-code elimination, any panic
+//! (an index out of bounds, an `unwrap` on `None`, a division by zero, a slice of the wrong
+//! length...) is still reachable from the entry point, the handler is reachable too and the
+//! link fails with an undefined-symbol error naming that function. A clean link is the proof.
+//!
+//! `scripts/nopanic_check.sh` runs the build and explains a failure; with
+//! `--features find-panics` the handler is an ordinary function instead, so the image links
+//! and its disassembly shows which functions still call into `core::panicking`.
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+use core::panic::PanicInfo;
+
+use nalgebra::Matrix3;
+use touchdown_core::camera::CameraModel;
+use touchdown_core::companion::{Companion, CompanionConfig, FrameResult, MAX_FRAME_LEN};
+use touchdown_core::detect::{Detector, DetectorConfig, QvgaWorkspace};
+use touchdown_core::family::{tables, Family};
+use touchdown_core::image::GrayImage;
+use touchdown_core::pad::{designs, PadLayout};
+use touchdown_core::pose::{level_pad_fix, marker_pose, pad_pose_with_prediction, PoseMethod};
+
+/// QVGA, the firmware's frame size.
+const WIDTH: usize = 320;
+const HEIGHT: usize = 240;
+
+/// The frame, as the camera's DMA leaves it (contents unknown to the optimiser).
+static mut FRAME: [u8; WIDTH * HEIGHT] = [0; WIDTH * HEIGHT];
+/// Detector work memory, as the firmware provides it.
+static mut WORKSPACE: QvgaWorkspace = QvgaWorkspace::new();
+/// Bytes from the flight controller's UART (contents unknown to the optimiser).
+static mut RX: [u8; 256] = [0; 256];
+
+/// Everything the per-frame path keeps across frames.
+struct Pipeline<'a> {
+    detector: Detector,
+    workspace: &'a mut QvgaWorkspace,
+    companion: Companion,
+}
+
+/// One frame: detection, pose, pad fix, filter (inside the companion), MAVLink in and out.
+/// Every input comes through `black_box`, so no branch can be decided at compile time.
+#[inline(never)]
+fn per_frame(
+    pipeline: &mut Pipeline<'_>,
+    pixels: &[u8],
+    families: &[&Family<'_>],
+    layout: &PadLayout<'_>,
+    camera: &CameraModel,
+    rx: &[u8],
+    now_us: u64,
+) {
+    let fix = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
+        Ok(image) => {
+            match pipeline
+                .detector
+                .detect(&image, families, &mut pipeline.workspace.buffers())
+            {
+                Ok(detections) => {
+                    for d in detections {
+                        let size = black_box(0.16);
+                        let _ = black_box(marker_pose(&d.corners, size, camera, PoseMethod::Ippe));
+                    }
+                    let predicted = black_box(None);
+                    match pad_pose_with_prediction(detections, families, layout, camera, predicted)
+                    {
+                        Ok(fix) => {
+                            let camera_from_level: Matrix3<f32> = black_box(Matrix3::identity());
+                            Some(
+                                level_pad_fix(
+                                    &fix,
+                                    detections,
+                                    families,
+                                    layout,
+                                    camera,
+                                    &camera_from_level,
+                                )
+                                .unwrap_or(fix),
+                            )
+                        }
+                        Err(_) => None,
+                    }
+                }
+                Err(_) => None,
+            }
+        }
+        Err(_) => None,
+    };
+    #[cfg(feature = "canary")]
+    {
+        // A deliberate bug: indexes one past the frame. The canary build must not link.
+        let past_end = black_box(pixels.len());
+        black_box(pixels[past_end]);
+    }
+    let companion = &mut pipeline.companion;
+    companion.receive(rx, now_us);
+    let exposure_us = black_box(now_us.wrapping_sub(25_000));
+    let _ = black_box(companion.on_frame(FrameResult { exposure_us, fix }, now_us));
+    let mut tx = [0u8; MAX_FRAME_LEN];
+    while let Some(n) = companion.poll_transmit(now_us, &mut tx) {
+        black_box(tx.get(..n));
+    }
+    let _ = black_box(companion.stats());
+}
+
+/// The entry point (lld's default `_start`): builds the pipeline and runs frames forever.
+#[no_mangle]
+pub extern "C" fn _start() -> ! {
+    // SAFETY: `_start` runs once; each static is borrowed exactly once, here.
+    let (workspace, frame, rx) = unsafe {
+        (
+            &mut *core::ptr::addr_of_mut!(WORKSPACE),
+            &*core::ptr::addr_of!(FRAME),
+            &*core::ptr::addr_of!(RX),
+        )
+    };
+    let Ok(companion) = Companion::new(black_box(CompanionConfig::default())) else {
+        loop {
+            core::hint::spin_loop();
+        }
+    };
+    let mut pipeline = Pipeline {
+        detector: Detector::new(black_box(DetectorConfig::default())),
+        workspace,
+        companion,
+    };
+    let families: &[&Family<'static>] = black_box(tables::DEFAULT);
+    let layout: &PadLayout<'static> = black_box(&designs::NESTED);
+    let camera = black_box(CameraModel::pinhole(
+        WIDTH as u32,
+        HEIGHT as u32,
+        320.0,
+        320.0,
+        159.5,
+        119.5,
+    ));
+    let mut now_us = 0u64;
+    loop {
+        now_us = now_us.wrapping_add(black_box(33_333));
+        let pixels: &[u8] = black_box(&frame[..]);
+        let rx_len = black_box(0usize).min(rx.len());
+        let rx_bytes = rx.get(..rx_len).unwrap_or(&[]);
+        per_frame(
+            &mut pipeline,
+            pixels,
+            families,
+            layout,
+            &camera,
+            black_box(rx_bytes),
+            now_us,
+        );
+    }
+}
+
+#[cfg(not(feature = "find-panics"))]
+extern "C" {
+    /// Defined nowhere, on purpose: see the crate documentation.
+    fn touchdown_core_per_frame_path_can_panic() -> !;
+}
+
+/// Reachable only if some panic in the per-frame path survived optimisation; then the link
+/// fails on the undefined [`touchdown_core_per_frame_path_can_panic`].
+#[cfg(not(feature = "find-panics"))]
+#[panic_handler]
+fn panic(_info: &PanicInfo<'_>) -> ! {
+    // SAFETY: never executed in a linked image: if this is reachable, there is no image.
+    unsafe { touchdown_core_per_frame_path_can_panic() }
+}
+
+/// `--features find-panics`: a real handler, so the image links and its disassembly shows the
+/// callers of `core::panicking::*`.
+#[cfg(feature = "find-panics")]
+#[panic_handler]
+#[inline(never)]
+fn panic(_info: &PanicInfo<'_>) -> ! {
+    loop {
+        core::hint::spin_loop();
+    }
+}
