@@ -31,12 +31,13 @@ pub use openmv::{init, HSE, NAME, XCLK_HZ};
 
 use embassy_stm32::dcmi::Dcmi;
 use embassy_stm32::flash::{Async as FlashAsync, Flash};
-use embassy_stm32::gpio::Output;
-use embassy_stm32::i2c::{I2c, Master};
+use embassy_stm32::gpio::{Output, Speed};
+use embassy_stm32::i2c::{self, I2c, Master};
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::{DCMI, IWDG1, MCO1};
-use embassy_stm32::rcc::Mco;
-use embassy_stm32::usart::BufferedUart;
+use embassy_stm32::rcc::{Mco, McoConfig, McoPrescaler};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 
 /// The external clock into OSC_IN.
@@ -83,6 +84,30 @@ pub struct Board {
 pub const UART_RX_BUFFER: usize = 2048;
 /// Bytes of the UART's transmit ring buffer.
 pub const UART_TX_BUFFER: usize = 512;
+
+/// MCO1 settings for the camera's XCLK: `prescaler` divides HSI48 down to the board's
+/// `XCLK_HZ`; the fastest pin speed keeps the clock's edges clean at 12-24 MHz.
+fn xclk_config(prescaler: McoPrescaler) -> McoConfig {
+    let mut config = McoConfig::default();
+    config.prescaler = prescaler;
+    config.speed = Speed::VeryHigh;
+    config
+}
+
+/// I2C settings of the sensor's SCCB port: standard mode (100 kHz), which every OV sensor
+/// accepts.
+fn sccb_config() -> i2c::Config {
+    let mut config = i2c::Config::default();
+    config.frequency = Hertz::khz(100);
+    config
+}
+
+/// UART settings of the flight-controller link (8N1 at `baud`).
+fn uart_config(baud: u32) -> usart::Config {
+    let mut config = usart::Config::default();
+    config.baudrate = baud;
+    config
+}
 
 /// The UART ring buffers, claimed once (statics in DTCM: the UART is interrupt driven, the
 /// CPU copies every byte, so no DMA needs to reach them).

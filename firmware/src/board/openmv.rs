@@ -26,8 +26,7 @@ use embassy_stm32::flash::{self, Flash};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::i2c::{self, I2c};
 use embassy_stm32::peripherals::{self, DCMI};
-use embassy_stm32::rcc::{Mco, Mco1Source, McoConfig, McoPrescaler, PllPreDiv};
-use embassy_stm32::time::Hertz;
+use embassy_stm32::rcc::{Mco, Mco1Source, McoPrescaler, PllPreDiv};
 use embassy_stm32::usart::{self, BufferedUart};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, Peripherals};
@@ -63,10 +62,12 @@ pub fn init(p: Peripherals, baud: u32, watchdog_timeout_us: u32) -> Board {
     let led = Output::new(p.PC1, Level::High, Speed::Low);
 
     // XCLK first: the sensor's SCCB port needs its clock running.
-    let mut mco_config = McoConfig::default();
-    mco_config.prescaler = McoPrescaler::DIV4;
-    mco_config.speed = Speed::VeryHigh;
-    let xclk = Mco::new(p.MCO1, p.PA8, Mco1Source::HSI48, mco_config);
+    let xclk = Mco::new(
+        p.MCO1,
+        p.PA8,
+        Mco1Source::HSI48,
+        super::xclk_config(McoPrescaler::DIV4),
+    );
 
     let dcmi = Dcmi::new_8bit(
         p.DCMI,
@@ -85,10 +86,14 @@ pub fn init(p: Peripherals, baud: u32, watchdog_timeout_us: u32) -> Board {
         p.PA6,
         crate::capture::dcmi_config(),
     );
-    let mut i2c_config = i2c::Config::default();
-    i2c_config.frequency = Hertz::khz(100);
     let sccb = I2c::new(
-        p.I2C1, p.PB8, p.PB9, p.DMA1_CH1, p.DMA1_CH2, Irqs, i2c_config,
+        p.I2C1,
+        p.PB8,
+        p.PB9,
+        p.DMA1_CH1,
+        p.DMA1_CH2,
+        Irqs,
+        super::sccb_config(),
     );
     let camera = CameraPins {
         dcmi,
@@ -99,8 +104,6 @@ pub fn init(p: Peripherals, baud: u32, watchdog_timeout_us: u32) -> Board {
     };
 
     let (tx_buffer, rx_buffer) = super::uart_buffers();
-    let mut uart_config = usart::Config::default();
-    uart_config.baudrate = baud;
     let uart = defmt::unwrap!(BufferedUart::new(
         p.USART3,
         p.PB11,
@@ -108,7 +111,7 @@ pub fn init(p: Peripherals, baud: u32, watchdog_timeout_us: u32) -> Board {
         tx_buffer,
         rx_buffer,
         Irqs,
-        uart_config
+        super::uart_config(baud)
     ));
 
     Board {
