@@ -41,7 +41,7 @@ pub struct PadMarker<'a> {
 
 impl PadMarker<'_> {
     /// A placeholder for unused slots.
-    const EMPTY: PadMarker<'static> = PadMarker {
+    pub(crate) const EMPTY: PadMarker<'static> = PadMarker {
         family: "",
         id: 0,
         size: 0.0,

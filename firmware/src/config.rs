@@ -1,12 +1,14 @@
-//! Compile-time defaults: camera, lens, pad, exposure limits, MAVLink profile.
+//! Compile-time defaults: camera, lens, pad, MAVLink profile.
 //!
 //! What users tune in the field is a MAVLink parameter (`touchdown_core::companion::params`,
-//! persisted in flash by [`crate::param_store`]); what depends on the hardware build is here.
-//! Change these to match your lens and pad, then rebuild.
+//! persisted in flash by [`crate::param_store`]): among them the auto-exposure limits
+//! (TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET, defaults `AutoExposureLimits::default()`), the
+//! decoder's correction cap (TD_MAX_HAMMING) and the printed size of the pad (TD_TAG_SIZE);
+//! see [`crate::vision`]. What depends on the hardware build is here. Change these to match
+//! your lens and pad, then rebuild.
 
 use touchdown_core::camera::CameraModel;
 use touchdown_core::pad::{designs, PadLayout};
-use touchdown_core::sensor::exposure::AutoExposureLimits;
 use touchdown_core::sensor::ov7725::{self, Exposure};
 use touchdown_core::sensor::{GainX16, Resolution};
 
@@ -16,7 +18,8 @@ use crate::capture::{HEIGHT, WIDTH};
 pub const FPS: u32 = 30;
 
 /// The sensor set-up: QVGA (or VGA with `camera-vga`), YUV, the board's XCLK. Exposure
-/// starts manual at a medium value; [`EXPOSURE_LIMITS`] then drive it per frame.
+/// starts manual at a medium value; the software auto-exposure then drives it per frame within
+/// the limits of the TD_EXP_MAX_US / TD_GAIN_MAX parameters.
 pub fn sensor_config() -> ov7725::Config {
     ov7725::Config {
         resolution: if cfg!(feature = "camera-vga") {
@@ -34,15 +37,6 @@ pub fn sensor_config() -> ov7725::Config {
         mirror: false,
     }
 }
-
-/// The software auto-exposure's limits: at most 4 ms (less than half a QVGA pixel of blur at
-/// 30 deg/s) and 8x gain, aiming for a mid-grey frame.
-pub const EXPOSURE_LIMITS: AutoExposureLimits = AutoExposureLimits {
-    target: 110,
-    deadband: 12,
-    max_exposure_us: 4_000,
-    max_gain: GainX16(16 * 8),
-};
 
 /// Nominal pinhole model of the OV7725 with the usual 2.8 mm M12 lens: 6 µm pixels at VGA, so
 /// f = 2.8 mm / 6 µm = 467 px at 640x480 (233 px at QVGA), principal point at the centre.
@@ -62,7 +56,9 @@ pub const CAMERA: CameraModel = if cfg!(feature = "camera-vga") {
     CameraModel::pinhole(WIDTH as u32, HEIGHT as u32, 233.5, 233.5, 159.5, 119.5)
 };
 
-/// The pad the firmware looks for: touchdown's nested tag36h11 pad (`pads/nested.toml`).
+/// The pad the firmware looks for: touchdown's nested tag36h11 pad (`pads/nested.toml`), at
+/// the size it is built with. A pad printed at another scale is set with TD_TAG_SIZE (the
+/// edge of its largest marker as printed: the whole layout is scaled to it), no rebuild.
 pub const PAD: &PadLayout<'static> = &designs::NESTED;
 
 /// Default UART baud rate; TD_BAUD overrides it at boot.

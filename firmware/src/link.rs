@@ -17,8 +17,15 @@
 //! port carries the interrupt load is small.
 //!
 //! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
-//! stable for two seconds ([`persist::SaveDebounce`]) by the [`param_store`] task.
+//! stable for two seconds ([`persist::SaveDebounce`]) by the [`param_store`] task. Those of the
+//! camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure limits) take effect at once: after
+//! every input the link converts the parameters with [`VisionSettings::from_params`] and, when
+//! the result differs from what it last published, signals [`vision::SETTINGS`] (the vision
+//! task started with the settings of the parameters restored at boot). A changed TD_TAG_SIZE
+//! is confirmed to the ground station with a STATUSTEXT giving the pad's scale, so a size
+//! typed for the wrong marker shows before the flight.
 
+use core::fmt::Write as _;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use defmt::{info, warn};
@@ -29,10 +36,13 @@ use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Ticker};
 use embedded_io_async::{Read, Write};
 use touchdown_core::companion::persist::SaveDebounce;
-use touchdown_core::companion::{Companion, FrameResult, MavSeverity, MAX_FRAME_LEN};
+use touchdown_core::companion::{
+    Companion, FrameResult, MavSeverity, VisionSettings, MAX_FRAME_LEN,
+};
 
 use crate::param_store;
 use crate::watchdog;
+use crate::{config, vision};
 
 /// What other tasks send the link. (A frame is ~220 bytes, a status ~12: the channel holds
 /// four events of the larger size, under 1 KiB; boxing is not an option without a heap.)
@@ -77,6 +87,11 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
     let mut debounce = SaveDebounce::new(*companion.params());
     let mut uart_errors = 0u32;
     let mut next_summary = Instant::now() + SUMMARY_PERIOD;
+    // What the vision task runs with: main gave it the settings of the restored parameters.
+    let mut vision_settings = VisionSettings::from_params(companion.params());
+    if vision_settings.tag_size_m.is_some() {
+        announce_pad_scale(&mut companion, &vision_settings);
+    }
     info!(
         "link: profile {}, sysid {}, compid {}",
         companion.profile(),
@@ -103,6 +118,14 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
                 companion.queue_status_text(severity, text);
             }
             Either3::Third(()) => {}
+        }
+        let settings = VisionSettings::from_params(companion.params());
+        if settings != vision_settings {
+            if settings.tag_size_m != vision_settings.tag_size_m {
+                announce_pad_scale(&mut companion, &settings);
+            }
+            vision::SETTINGS.signal(settings);
+            vision_settings = settings;
         }
         while let Some(n) = companion.poll_transmit(now_us(), &mut tx_buf) {
             if let Err(e) = tx.write_all(tx_buf.get(..n).unwrap_or(&[])).await {
@@ -131,4 +154,24 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
             );
         }
     }
+}
+
+/// Tells the ground station what TD_TAG_SIZE does to the built pad (its scale in percent).
+fn announce_pad_scale(companion: &mut Companion, settings: &VisionSettings) {
+    // Room to spare: `queue_status_text` cuts at STATUSTEXT's 50 bytes, which these texts fit
+    // (50 with a four-digit percentage).
+    let mut text = heapless::String::<64>::new();
+    let written = match settings.tag_size_m {
+        Some(_) => write!(
+            text,
+            "touchdown: TD_TAG_SIZE: pad at {}% of built size",
+            vision::percent(settings.pad_scale(config::PAD))
+        ),
+        None => write!(text, "touchdown: TD_TAG_SIZE 0: pad as built"),
+    };
+    if written.is_err() {
+        warn!("link: pad scale text too long");
+    }
+    info!("link: {=str}", text.as_str());
+    companion.queue_status_text(MavSeverity::MAV_SEVERITY_NOTICE, &text);
 }

@@ -50,7 +50,7 @@ use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use panic_probe as _;
-use touchdown_core::companion::{Companion, CompanionConfig, ParamId};
+use touchdown_core::companion::{Companion, CompanionConfig, ParamId, VisionSettings};
 use touchdown_core::sensor::ov7725::Ov7725;
 
 use crate::axisram::axisram_static;
@@ -110,6 +110,8 @@ async fn main(spawner: Spawner) {
         }
     }
     info!("link: {} baud", baud);
+    // The vision task starts with the restored parameters; later changes come from the link.
+    let vision_settings = VisionSettings::from_params(&params);
     let companion = unwrap!(
         Companion::new(CompanionConfig {
             params,
@@ -139,7 +141,8 @@ async fn main(spawner: Spawner) {
         sensor,
         Capture::new(camera.dcmi),
         [front, back],
-        workspace
+        workspace,
+        vision_settings
     )));
 }
 

@@ -5,6 +5,15 @@
 //! to the link task with the frame's exposure time. The software auto-exposure
 //! ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
 //!
+//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_EXP_MAX_US,
+//! TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`VisionSettings`]: at boot as the task's argument
+//! (from the parameters restored from flash, before the first frame), afterwards through
+//! [`SETTINGS`], which the link task signals whenever a PARAM_SET changed them. They are
+//! taken between frames, never during one: the detector's correction cap
+//! ([`Detector::set_config`]), the pad (the built [`config::PAD`], scaled to TD_TAG_SIZE) and
+//! the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
+//! current exposure is outside them). No restart, no lost frame.
+//!
 //! Faults: a capture error (DCMI overrun, timeout) costs that frame and is counted; after
 //! [`MAX_CONSECUTIVE_ERRORS`] in a row the camera is power-cycled and configured again, and the
 //! ground station gets a STATUSTEXT. Only finished frames feed the watchdog, so a camera that
@@ -16,10 +25,13 @@
 use defmt::{debug, info, warn};
 use embassy_futures::join::join;
 use embassy_stm32::gpio::Output;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Timer};
-use touchdown_core::companion::{FrameResult, MavSeverity};
+use touchdown_core::companion::{FrameResult, MavSeverity, VisionSettings};
 use touchdown_core::detect::{Detector, DetectorConfig};
 use touchdown_core::image::GrayImage;
+use touchdown_core::pad::PadLayout;
 use touchdown_core::pose::pad_pose;
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure};
 use touchdown_core::sensor::ov7725::{self, ClockPlan, Ov7725};
@@ -41,6 +53,9 @@ const INIT_RETRY: Duration = Duration::from_millis(500);
 const SUMMARY_PERIOD: Duration = Duration::from_secs(1);
 /// Sample every 8th pixel of every 8th row for the exposure loop.
 const BRIGHTNESS_STEP: usize = 8;
+
+/// New settings from the link task (the newest wins if several arrive within one frame).
+pub static SETTINGS: Signal<CriticalSectionRawMutex, VisionSettings> = Signal::new();
 
 /// The sensor with its control pins.
 pub struct Sensor {
@@ -81,15 +96,54 @@ struct Summary {
     max_detect: Duration,
 }
 
-/// Runs the camera and the detector forever.
+/// What the vision task applies from the parameters: the detector and the pad (the exposure
+/// loop is rebuilt with each camera start and updated in place).
+struct Applied {
+    settings: VisionSettings,
+    pad: PadLayout<'static>,
+}
+
+impl Applied {
+    /// Applies `settings` to the detector and the pad (the caller updates the exposure loop).
+    fn new(settings: VisionSettings, detector: &mut Detector) -> Self {
+        detector.set_config(settings.detector_config(DetectorConfig::default()));
+        let pad = match settings.pad(config::PAD) {
+            Ok(pad) => pad,
+            Err(e) => {
+                // Only an empty built pad cannot be scaled, and a test keeps the shipped pads
+                // non-empty; searching the pad as built is the best left to do.
+                warn!("vision: pad '{}' not scaled: {}", config::PAD.name(), e);
+                *config::PAD
+            }
+        };
+        info!(
+            "vision: max hamming {}, pad '{}' at {} % of its built size, exposure {}",
+            settings.max_hamming,
+            pad.name(),
+            percent(settings.pad_scale(config::PAD)),
+            settings.exposure
+        );
+        Applied { settings, pad }
+    }
+}
+
+/// `factor` in whole percent (for logs and STATUSTEXT; saturates, NaN gives 0).
+pub fn percent(factor: f32) -> u32 {
+    (factor * 100.0 + 0.5) as u32
+}
+
+/// Runs the camera and the detector forever, starting with `settings` (the parameters
+/// restored at boot) and following [`SETTINGS`].
 #[embassy_executor::task]
 pub async fn task(
     mut sensor: Sensor,
     mut capture: Capture,
     buffers: [&'static mut FrameBuffer; 2],
     workspace: &'static mut Workspace,
+    settings: VisionSettings,
 ) {
     let mut detector = Detector::new(DetectorConfig::default());
+    let mut applied = Applied::new(settings, &mut detector);
     let [mut front, mut back] = buffers;
     info!(
         "vision: {}x{} grey, searching {} famil(ies), pad '{}'",
@@ -124,8 +178,11 @@ pub async fn task(
             timing.line_ns,
             timing.fps()
         );
-        let mut exposure =
-            AutoExposure::new(config::EXPOSURE_LIMITS, timing.line_ns, timing.frame_lines);
+        let mut exposure = AutoExposure::new(
+            applied.settings.exposure,
+            timing.line_ns,
+            timing.frame_lines,
+        );
         let setting = exposure.setting();
         if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
             warn!("vision: exposure: {}", e);
@@ -141,11 +198,32 @@ pub async fn task(
         };
         let mut consecutive_errors = 0u32;
         while consecutive_errors < MAX_CONSECUTIVE_ERRORS {
+            // Parameter changes, between frames.
+            if let Some(settings) = SETTINGS.try_take() {
+                applied = Applied::new(settings, &mut detector);
+                if let Some(setting) =
+                    exposure.set_limits(settings.exposure, timing.line_ns, timing.frame_lines)
+                {
+                    if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
+                        warn!("vision: exposure: {}", e);
+                    }
+                }
+            }
             // Capture into `back` (polled first, so the DMA is armed before the detector
             // takes the CPU) while `front` is processed.
             let (captured, processed) = join(capture.capture(back), async {
-                front_end
-                    .map(|end| process(front, end, &timing, &exposure, &mut detector, workspace))
+                front_end.map(|end| {
+                    let pad = &applied.pad;
+                    process(
+                        front,
+                        end,
+                        &timing,
+                        &exposure,
+                        pad,
+                        &mut detector,
+                        workspace,
+                    )
+                })
             })
             .await;
 
@@ -211,13 +289,14 @@ struct Processed {
     mean: u8,
 }
 
-/// Detects, solves the pose and posts the frame to the link. Runs on the CPU without
+/// Detects, solves the pose of `pad` and posts the frame to the link. Runs on the CPU without
 /// yielding (the capture of the next frame proceeds by DMA meanwhile).
 fn process(
     frame: &FrameBuffer,
     frame_end: Instant,
     timing: &FrameTiming,
     exposure: &AutoExposure,
+    pad: &PadLayout<'_>,
     detector: &mut Detector,
     workspace: &mut Workspace,
 ) -> Processed {
@@ -241,7 +320,7 @@ fn process(
     let started = Instant::now();
     let (markers, fix) = match detector.detect(&image, SEARCHED, &mut workspace.buffers()) {
         Ok(detections) => {
-            let fix = pad_pose(detections, SEARCHED, config::PAD, &config::CAMERA).ok();
+            let fix = pad_pose(detections, SEARCHED, pad, &config::CAMERA).ok();
             (detections.len() as u32, fix)
         }
         Err(e) => {

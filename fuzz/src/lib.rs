@@ -252,10 +252,12 @@ pub fn detect(state: &mut DetectState, data: &[u8]) {
             .expect("valid families and VGA buffers");
         check_detections(detections, families);
         let stats = *detector.stats();
-        let budget = u32::from(detector.config().trace_budget_per_pixel) * (width * height) as u32;
+        let budget = ((detector.config().work_budget_per_pixel * (width * height) as f32) as u32)
+            .max(touchdown_core::detect::MIN_WORK_BUDGET);
         assert!(
-            stats.trace_steps <= budget,
-            "{} trace steps over a budget of {budget}",
+            stats.work <= budget && stats.trace_steps <= stats.work,
+            "{} work units ({} trace steps) over a budget of {budget}",
+            stats.work,
             stats.trace_steps
         );
         run_pose(detector.detections(), families, &camera);

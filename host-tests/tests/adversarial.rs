@@ -15,13 +15,15 @@
 //!
 //! Work is judged by counters, never by the clock (a loaded CI machine would make a time limit
 //! flaky): the contour-following steps never exceed the frame's budget
-//! (`trace_budget_per_pixel` x pixels), every started boundary costs at least one dark pixel,
+//! (`work_budget_per_pixel` x pixels, in work units of which a step is one), every started
+//! boundary costs at least one dark pixel,
 //! the later stages see at most what the earlier ones passed on, and the result fits the
 //! fixed capacity. Together with the linear threshold pass this bounds the time per frame on
 //! any input.
 
 use touchdown_core::detect::{
     DetectStats, Detection, Detector, DetectorConfig, Method, MAX_DETECTIONS, MAX_FAMILIES,
+    MIN_WORK_BUDGET,
 };
 use touchdown_core::family::{tables, Family};
 use touchdown_host::image_io::GrayFrame;
@@ -56,12 +58,18 @@ fn detect_bounded(
     let stats = *detector.stats();
     let config = detector.config();
     let pixels = (frame.width * frame.height) as u64;
-    let budget = u64::from(config.trace_budget_per_pixel) * pixels;
+    let budget =
+        ((config.work_budget_per_pixel * pixels as f32) as u64).max(u64::from(MIN_WORK_BUDGET));
     let dark = frame.pixels.len() as u64; // an upper bound on dark (or edge) pixels
     assert!(
-        u64::from(stats.trace_steps) <= budget,
-        "{label}: {} trace steps, budget {budget}",
-        stats.trace_steps
+        u64::from(stats.work) <= budget,
+        "{label}: {} work units, budget {budget}",
+        stats.work
+    );
+    assert!(stats.trace_steps <= stats.work, "{label}: {stats:?}");
+    assert!(
+        stats.refined <= u32::from(config.max_candidates) && stats.refined <= stats.quads,
+        "{label}: {stats:?}"
     );
     assert!(
         u64::from(stats.contours) <= dark,
@@ -99,16 +107,17 @@ fn assert_no_ids(name: &str, make: impl Fn(usize, usize) -> GrayFrame) {
                         .map(|d| (families[usize::from(d.family)].name, d.id, d.center))
                         .collect::<Vec<_>>()
                 );
-                if stats.trace_steps >= worst.trace_steps {
+                if stats.work >= worst.work {
                     worst = stats;
                 }
             }
             println!(
-                "{name} {w}x{h} {:?}: at most {} trace steps of {} budget ({:.2} per pixel), {} boundaries, {} quads, truncated {}",
+                "{name} {w}x{h} {:?}: at most {} work units of {:.0} ({:.2} per pixel), {} trace steps, {} boundaries, {} quads, truncated {}",
                 config.method,
+                worst.work,
+                f64::from(config.work_budget_per_pixel) * (w * h) as f64,
+                f64::from(worst.work) / (w * h) as f64,
                 worst.trace_steps,
-                u64::from(config.trace_budget_per_pixel) * (w * h) as u64,
-                f64::from(worst.trace_steps) / (w * h) as f64,
                 worst.contours,
                 worst.quads,
                 worst.truncated

@@ -16,6 +16,11 @@
 //! the decoded values are compared with the truth. Without pymavlink the tests print
 //! `skipping: pymavlink not installed` (CI installs it). Figures are printed; run with
 //! `--nocapture` to see them.
+//!
+//! The camera parameters (TD_TAG_SIZE, TD_MAX_HAMMING and the auto-exposure limits
+//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are checked without pymavlink: a ground
+//! station's PARAM_SETs are range-checked, the resulting vision settings are what the
+//! firmware's vision task applies, and the values survive the flash log across a reboot.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;
@@ -30,12 +35,18 @@ use touchdown_core::companion::mavlink::dialects::common::{
     TIMESYNC_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::params::name_str;
+use touchdown_core::companion::persist::{self, Restore, ERASED, SLOT_LEN};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, CompanionStats, FrameParser, FrameResult, ParamId, Profile,
-    MAX_FRAME_LEN, PARAM_COUNT,
+    Companion, CompanionConfig, CompanionStats, FrameParser, FrameResult, ParamId, ParamSet,
+    Profile, VisionSettings, MAX_FRAME_LEN, PARAM_COUNT,
 };
+use touchdown_core::detect::DetectorConfig;
 use touchdown_core::frames::{camera_to_ned_matrix, Attitude, CameraMount};
+use touchdown_core::pad::designs;
 use touchdown_core::pose::{PadFix, Pose};
+use touchdown_core::sensor::exposure::AutoExposureLimits;
+use touchdown_core::sensor::GainX16;
 
 /// The pad, LOCAL_NED, metres.
 fn pad_ned() -> Vector3<f32> {
@@ -838,7 +849,7 @@ fn ardupilot_profile_pymavlink() {
         ("TD_RATE_HZ".into(), 30.0)
     );
     let r = by_time(4_100_000);
-    assert!((f(r[0], "param_value") - 0.2).abs() < 1e-6, "{}", r[0]);
+    assert_eq!(f(r[0], "param_value"), 0.0, "{}", r[0]);
     let r = by_time(4_200_000);
     assert_eq!(f(r[0], "param_value"), 1.0);
     let r = by_time(4_300_000);
@@ -1077,4 +1088,157 @@ fn target_lost_sends_nothing() {
     assert_eq!(during, 0);
     assert!(last_before < 3_000_000 + PROCESS_DELAY_US + 5_000);
     assert!(first_after - 4_500_000 < 1_000_000);
+}
+
+/// Sends `action` from the ground station at `now` and returns every PARAM_VALUE the
+/// companion answers with (name, value), decoded by our own parser.
+fn ground_station(
+    companion: &mut Companion,
+    seq: &mut u8,
+    action: ParamAction,
+    now: u64,
+) -> Vec<(String, f32)> {
+    companion.receive(&gcs_message(seq, action), now);
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut parser = FrameParser::new();
+    let mut values = Vec::new();
+    while let Some(n) = companion.poll_transmit(now, &mut out) {
+        parser.push(&out[..n], |raw| {
+            if let Ok(MavMessage::PARAM_VALUE(v)) = raw.decode() {
+                values.push((name_str(&v.param_id[..]).to_string(), v.param_value));
+            }
+        });
+    }
+    values
+}
+
+#[test]
+fn camera_params_are_range_checked_applied_and_persisted() {
+    let mut companion = Companion::new(CompanionConfig::default()).unwrap();
+    let mut seq = 0u8;
+    let mut now = 1_000_000u64;
+    // (name, value sent, value answered: the new one if accepted, else the old one)
+    let sets: [(&str, f32, f32); 17] = [
+        ("TD_EXP_MAX_US", 2_000.0, 2_000.0),
+        ("TD_EXP_MAX_US", 50.0, 2_000.0),     // below 100 us
+        ("TD_EXP_MAX_US", 40_000.0, 2_000.0), // above 33 ms
+        ("TD_EXP_MAX_US", 1_500.5, 2_000.0),  // an integer
+        ("TD_GAIN_MAX", 2.5, 2.5),
+        ("TD_GAIN_MAX", 0.5, 2.5),  // below unity
+        ("TD_GAIN_MAX", 40.0, 2.5), // above 32x
+        ("TD_GAIN_MAX", f32::NAN, 2.5),
+        ("TD_EXP_TARGET", 90.0, 90.0),
+        ("TD_EXP_TARGET", 250.0, 90.0), // above 220
+        ("TD_EXP_TARGET", 30.0, 90.0),  // below 40
+        ("TD_TAG_SIZE", 0.01, 0.0),     // between "unset" and 2 cm
+        ("TD_TAG_SIZE", 0.625, 0.625),
+        ("TD_TAG_SIZE", -0.625, 0.625),
+        ("TD_TAG_SIZE", f32::INFINITY, 0.625),
+        ("TD_MAX_HAMMING", 2.0, 2.0),
+        ("TD_MAX_HAMMING", 4.0, 2.0), // above 3
+    ];
+    for (name, sent, answered) in sets {
+        now += 10_000;
+        let replies = ground_station(&mut companion, &mut seq, ParamAction::Set(name, sent), now);
+        assert_eq!(
+            replies,
+            vec![(name.to_string(), answered)],
+            "{name} = {sent}"
+        );
+    }
+    let stats = companion.stats();
+    assert_eq!(
+        (stats.param_sets_accepted, stats.param_sets_rejected),
+        (5, 12)
+    );
+
+    // What the firmware's vision task gets.
+    let settings = VisionSettings::from_params(companion.params());
+    assert_eq!(
+        settings,
+        VisionSettings {
+            max_hamming: 2,
+            tag_size_m: Some(0.625),
+            exposure: AutoExposureLimits {
+                target: 90,
+                max_exposure_us: 2_000,
+                max_gain: GainX16(40),
+                ..AutoExposureLimits::default()
+            },
+        }
+    );
+    assert_eq!(
+        settings
+            .detector_config(DetectorConfig::default())
+            .max_hamming,
+        2
+    );
+    // The nested pad (largest marker 1.25 m) printed at half size.
+    let pad = settings.pad(&designs::NESTED).unwrap();
+    assert_eq!(settings.pad_scale(&designs::NESTED), 0.5);
+    assert_eq!(
+        pad.find("tag36h11", 0).map(|m| (m.size, m.y)),
+        Some((0.625, 0.7))
+    );
+    // The defaults are the compile-time ones.
+    let defaults = VisionSettings::from_params(&ParamSet::default());
+    assert_eq!(defaults.exposure, AutoExposureLimits::default());
+    assert_eq!(defaults.pad(&designs::NESTED), Ok(designs::NESTED));
+
+    // Saved to the flash log (after a first save of the defaults), restored at the next boot.
+    let mut sector = [[ERASED; SLOT_LEN]; 4];
+    persist::encode_slot(&ParamSet::default(), &mut sector[0]);
+    persist::encode_slot(companion.params(), &mut sector[1]);
+    let mut restored = ParamSet::default();
+    let scan = persist::scan(
+        sector.len(),
+        |i, buf| {
+            *buf = sector[i];
+            true
+        },
+        &mut restored,
+    );
+    assert_eq!(scan.next_free, Some(2));
+    match scan.restore {
+        Restore::Restored {
+            slot,
+            report,
+            bad_slots,
+        } => {
+            assert_eq!((slot, bad_slots), (1, 0));
+            assert_eq!(usize::from(report.applied), PARAM_COUNT);
+            assert_eq!((report.rejected, report.unknown), (0, 0));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(&restored, companion.params());
+    assert_eq!(VisionSettings::from_params(&restored), settings);
+
+    // After the reboot a ground station reads the new parameters back, by name and by index.
+    let mut rebooted = Companion::new(CompanionConfig {
+        params: restored,
+        ..CompanionConfig::default()
+    })
+    .unwrap();
+    let mut seq = 0u8;
+    assert_eq!(
+        ground_station(
+            &mut rebooted,
+            &mut seq,
+            ParamAction::ReadName("TD_EXP_MAX_US"),
+            100_000
+        ),
+        vec![("TD_EXP_MAX_US".to_string(), 2_000.0)]
+    );
+    for (id, want) in [
+        (ParamId::ExpMaxUs, 2_000.0),
+        (ParamId::GainMax, 2.5),
+        (ParamId::ExpTarget, 90.0),
+    ] {
+        let i = id.index() as i16;
+        assert_eq!(
+            ground_station(&mut rebooted, &mut seq, ParamAction::ReadIndex(i), 200_000),
+            vec![(id.def().name.to_string(), want)]
+        );
+    }
 }

@@ -74,7 +74,7 @@ fn read_cmo(path: &Path) -> Pose {
 
 fn detect(image: &Path, family: &Family<'static>) -> Vec<Detection> {
     let frame = load_gray(image).expect("image");
-    let mut detector = Detector::new(DetectorConfig::default());
+    let mut detector = Detector::new(DetectorConfig::offline());
     let mut workspace = HostWorkspace::new();
     workspace
         .detect(&mut detector, &frame.view(), &[family])

@@ -409,7 +409,7 @@ fn run_set(
 /// Runs the robust detector (asserted) and the paper's method (printed only) on a set.
 fn evaluate(set: &str, family: &Family<'_>, images: &[(PathBuf, Vec<Expected>)]) -> SetResult {
     let paper = run_set(DetectorConfig::paper(), family, images);
-    let robust = run_set(DetectorConfig::default(), family, images);
+    let robust = run_set(DetectorConfig::offline(), family, images);
     println!(
         "{}\n{}",
         robust.summary(set, true),

@@ -15,6 +15,16 @@ pub enum Source {
     Checker { cell: usize },
     /// Dark `side`-pixel squares (grey 30) every `pitch` pixels on light paper (grey 220).
     Squares { side: usize, pitch: usize },
+    /// Marker look-alikes every `pitch` pixels: a `side`-pixel square of 8 x 8 cells, the
+    /// outer ring black, the 6 x 6 inside random black and white (xorshift32 from `seed`),
+    /// on white paper. Each has a marker's border, margin and busy interior, so the detector
+    /// refines and reads every one (the costliest path per candidate) before the code
+    /// look-up turns it down (no code of the default families).
+    Tags {
+        side: usize,
+        pitch: usize,
+        seed: u32,
+    },
 }
 
 /// The frame buffer: one VGA frame, aligned like the firmware's (32-byte cache lines).
@@ -80,6 +90,40 @@ impl FrameBuffer {
                     for (x, p) in row.iter_mut().enumerate() {
                         let dark = dark_row && dark_at(x, x0, x_extent);
                         *p = if dark { 30 } else { 220 };
+                    }
+                }
+            }
+            Source::Tags { side, pitch, seed } => {
+                let pitch = pitch.max(1);
+                let cell = (side / 8).max(1);
+                let side = cell * 8;
+                pixels.fill(235);
+                let mut state = seed.max(1);
+                let (across, down) = (width / pitch, height / pitch);
+                let margin = (pitch.saturating_sub(side)) / 2;
+                for ty in 0..down {
+                    for tx in 0..across {
+                        let (x0, y0) = (tx * pitch + margin, ty * pitch + margin);
+                        for cy in 0..8 {
+                            for cx in 0..8 {
+                                let border = cx == 0 || cy == 0 || cx == 7 || cy == 7;
+                                state ^= state << 13;
+                                state ^= state >> 17;
+                                state ^= state << 5;
+                                let black = border || state & 1 == 1;
+                                if !black {
+                                    continue;
+                                }
+                                for y in y0 + cy * cell..y0 + (cy + 1) * cell {
+                                    if let Some(row) = pixels.get_mut(y * width..(y + 1) * width) {
+                                        let (a, b) = (x0 + cx * cell, x0 + (cx + 1) * cell);
+                                        if let Some(run) = row.get_mut(a..b.min(width)) {
+                                            run.fill(25);
+                                        }
+                                    }
+                                }
+                            }
+                        }
                     }
                 }
             }

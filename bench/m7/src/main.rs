@@ -26,7 +26,7 @@
 //!
 //! Frames ([`FRAMES`]): the typical ones are rendered by the simulator
 //! (`cargo run --release -p touchdown-host --example m7_frames` writes `frames/*.pgm`); the
-//! adversarial ones (noise, checkerboard, thousands of small squares) and the flat ones (the
+//! adversarial ones (noise, checkerboard, hundreds of small squares, marker look-alikes) and the flat ones (the
 //! floor: thresholding and the scan with nothing to trace) are generated here, outside the
 //! counted regions. Every frame is copied into one 32-byte-aligned RAM buffer first, as the
 //! camera's DMA would leave it.
@@ -172,6 +172,17 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Squares { side: 8, pitch: 12 },
+        expected: None,
+    },
+    Frame {
+        name: "qvga-adv-tags",
+        width: QVGA.0,
+        height: QVGA.1,
+        source: Source::Tags {
+            side: 24,
+            pitch: 32,
+            seed: 0x1234_5678,
+        },
         expected: None,
     },
     Frame {
@@ -342,9 +353,11 @@ fn report(
     let DetectStats {
         contours,
         quads,
+        refined,
         bordered,
         decoded,
         trace_steps,
+        work,
         truncated,
     } = *detector.stats();
     let count = match detected {
@@ -355,13 +368,15 @@ fn report(
         }
     };
     hprintln!(
-        "  detections {} contours {} quads {} bordered {} decoded {} trace_steps {} truncated {}",
+        "  detections {} contours {} quads {} refined {} bordered {} decoded {} trace_steps {} work {} truncated {}",
         count,
         contours,
         quads,
+        refined,
         bordered,
         decoded,
         trace_steps,
+        work,
         truncated
     );
     for d in detector.detections() {

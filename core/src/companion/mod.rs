@@ -69,6 +69,7 @@ pub mod persist;
 pub mod profile;
 pub mod timesync;
 pub mod vehicle;
+pub mod vision;
 
 pub use mavlink;
 
@@ -78,6 +79,7 @@ pub use params::{ParamError, ParamId, ParamSet, PARAMS, PARAM_COUNT};
 pub use profile::{Profile, TargetFields, TargetFrame};
 pub use timesync::{TimeSource, TimeSync};
 pub use vehicle::{PositionSample, VehicleState};
+pub use vision::VisionSettings;
 
 use crate::filter::{ConfigError, Measurement, Tracker, TrackerConfig};
 use crate::frames::{level_measurement, Attitude, CameraMount};
@@ -475,7 +477,8 @@ impl Companion {
     }
 
     /// The current parameter values (the firmware reads the ones the companion does not use,
-    /// e.g. TD_TAG_SIZE, TD_MAX_HAMMING, TD_BAUD, and exports them for flash).
+    /// e.g. TD_BAUD and, through [`VisionSettings::from_params`], the camera's, and exports
+    /// them for flash).
     pub fn params(&self) -> &ParamSet {
         &self.state.params
     }

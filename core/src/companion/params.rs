@@ -14,6 +14,10 @@
 //! and is answered with the **old** value, which is how a ground station learns that the write
 //! failed.
 //!
+//! The parameters of the camera side (TD_TAG_SIZE, TD_MAX_HAMMING, the auto-exposure limits
+//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are turned into the settings the vision code
+//! uses by [`super::vision::VisionSettings::from_params`].
+//!
 //! Persistence is the firmware's job: [`ParamSet::export`] writes the values as bytes
 //! (magic, version, `name + value` records, CRC) and [`ParamSet::import`] reads them back.
 //! Records are matched by name, so a firmware with a changed table still reads what it knows;
@@ -47,6 +51,9 @@ pub struct ParamDef {
     pub min: f32,
     /// Largest accepted value.
     pub max: f32,
+    /// 0 is accepted besides `[min, max]` and means "not set: the build's own value" (for a
+    /// parameter whose meaningful range excludes 0, like a marker size).
+    pub zero_is_unset: bool,
     /// What it does (for docs and `touchdown companion --list-params`).
     pub help: &'static str,
 }
@@ -60,7 +67,8 @@ pub enum ParamId {
     Profile = 0,
     /// Most LANDING_TARGETs per second.
     RateHz,
-    /// Marker edge length for single-marker pads, metres.
+    /// Edge of the pad's largest marker, metres; the whole pad is scaled to it (a pad printed
+    /// at another size). 0: the pad as built.
     TagSize,
     /// Camera mount: rotation about the optical axis from "image top toward the nose", degrees.
     CamYaw,
@@ -76,10 +84,16 @@ pub enum ParamId {
     Baud,
     /// Time base of `time_usec`: 0 by profile, 1 autopilot clock, 2 companion boot clock.
     TimeBase,
+    /// Auto-exposure: longest exposure, µs (motion blur).
+    ExpMaxUs,
+    /// Auto-exposure: highest analog gain, times (noise).
+    GainMax,
+    /// Auto-exposure: mean grey level aimed for.
+    ExpTarget,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 10;
+pub const PARAM_COUNT: usize = 13;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -89,6 +103,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 0.0,
         min: 0.0,
         max: 1.0,
+        zero_is_unset: false,
         help: "0 ArduPilot (LANDING_TARGET in BODY_FRD), 1 PX4 (LOCAL_NED)",
     },
     ParamDef {
@@ -97,15 +112,17 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 30.0,
         min: 1.0,
         max: 100.0,
+        zero_is_unset: false,
         help: "most LANDING_TARGET messages per second",
     },
     ParamDef {
         name: "TD_TAG_SIZE",
         kind: ParamKind::Real,
-        default: 0.2,
+        default: 0.0,
         min: 0.02,
         max: 5.0,
-        help: "marker edge length of a single-marker pad, metres",
+        zero_is_unset: true,
+        help: "edge of the pad's largest marker, metres: the pad is scaled to it (0 = as built)",
     },
     ParamDef {
         name: "TD_CAM_YAW",
@@ -113,6 +130,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 0.0,
         min: -180.0,
         max: 180.0,
+        zero_is_unset: false,
         help: "camera turned about its optical axis from image-top-forward, degrees",
     },
     ParamDef {
@@ -121,6 +139,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 1.0,
         min: 0.0,
         max: 3.0,
+        zero_is_unset: false,
         help: "largest corrected bit errors per marker",
     },
     ParamDef {
@@ -129,6 +148,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 1.0,
         min: 1.0,
         max: 255.0,
+        zero_is_unset: false,
         help: "our MAVLink system id (the vehicle's)",
     },
     ParamDef {
@@ -137,6 +157,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 191.0,
         min: 1.0,
         max: 255.0,
+        zero_is_unset: false,
         help: "our MAVLink component id (191 = MAV_COMP_ID_ONBOARD_COMPUTER)",
     },
     ParamDef {
@@ -145,6 +166,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 0.0,
         min: 0.0,
         max: 1.0,
+        zero_is_unset: false,
         help: "1: also send VISION_POSITION_ESTIMATE (vehicle in a pad-centred NED frame)",
     },
     ParamDef {
@@ -153,6 +175,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 921_600.0,
         min: 9_600.0,
         max: 3_000_000.0,
+        zero_is_unset: false,
         help: "UART baud rate to the flight controller (applied at boot)",
     },
     ParamDef {
@@ -161,7 +184,37 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         default: 0.0,
         min: 0.0,
         max: 2.0,
+        zero_is_unset: false,
         help: "time_usec clock: 0 by profile, 1 autopilot (TIMESYNC), 2 companion boot",
+    },
+    // The auto-exposure limits (`sensor::exposure::AutoExposureLimits`); the defaults are
+    // `AutoExposureLimits::default()` (a test checks it).
+    ParamDef {
+        name: "TD_EXP_MAX_US",
+        kind: ParamKind::Int,
+        default: 4_000.0,
+        min: 100.0,
+        max: 33_000.0,
+        zero_is_unset: false,
+        help: "longest auto-exposure time, us (motion blur; capped at the frame period)",
+    },
+    ParamDef {
+        name: "TD_GAIN_MAX",
+        kind: ParamKind::Real,
+        default: 8.0,
+        min: 1.0,
+        max: 32.0,
+        zero_is_unset: false,
+        help: "highest auto-exposure analog gain, times (noise)",
+    },
+    ParamDef {
+        name: "TD_EXP_TARGET",
+        kind: ParamKind::Int,
+        default: 110.0,
+        min: 40.0,
+        max: 220.0,
+        zero_is_unset: false,
+        help: "mean grey level (0-255) the auto-exposure aims for",
     },
 ];
 
@@ -178,6 +231,9 @@ impl ParamId {
         ParamId::VpeEnable,
         ParamId::Baud,
         ParamId::TimeBase,
+        ParamId::ExpMaxUs,
+        ParamId::GainMax,
+        ParamId::ExpTarget,
     ];
 
     /// The id at table `index`.
@@ -267,10 +323,14 @@ impl Default for ParamSet {
     }
 }
 
-/// Checks `value` against `def`.
+/// Checks `value` against `def`: finite, in `[min, max]` (or 0 where that means "unset"),
+/// integral for an integer parameter.
 pub fn validate(def: &ParamDef, value: f32) -> Result<f32, ParamError> {
     if !value.is_finite() {
         return Err(ParamError::NotFinite);
+    }
+    if def.zero_is_unset && value == 0.0 {
+        return Ok(0.0);
     }
     if !(value >= def.min && value <= def.max) {
         return Err(ParamError::OutOfRange);
@@ -396,13 +456,92 @@ mod tests {
         for (i, (def, id)) in PARAMS.iter().zip(ParamId::ALL).enumerate() {
             assert_eq!(id.index(), i);
             assert!(def.name.len() <= PARAM_NAME_LEN, "{}", def.name);
+            assert_eq!(validate(def, def.default), Ok(def.default), "{}", def.name);
+            assert!(def.min <= def.max, "{}", def.name);
             assert!(
-                def.min <= def.default && def.default <= def.max,
+                (def.min <= def.default && def.default <= def.max)
+                    || (def.zero_is_unset && def.default == 0.0),
                 "{}",
                 def.name
             );
             assert_eq!(ParamId::from_name(def.name), Some(id));
         }
+    }
+
+    #[test]
+    fn zero_means_unset_only_where_declared() {
+        let mut p = ParamSet::default();
+        // TD_TAG_SIZE: 0 (as built) or 0.02..5 m; nothing in between.
+        assert_eq!(p.set(ParamId::TagSize, 0.5), Ok(()));
+        assert_eq!(p.set(ParamId::TagSize, 0.01), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::TagSize, -0.5), Err(ParamError::OutOfRange));
+        assert_eq!(p.get(ParamId::TagSize), 0.5);
+        assert_eq!(p.set(ParamId::TagSize, -0.0), Ok(()));
+        assert_eq!(p.get(ParamId::TagSize).to_bits(), 0.0f32.to_bits());
+        // Elsewhere 0 is just a value like any other.
+        assert_eq!(p.set(ParamId::GainMax, 0.0), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::ExpMaxUs, 0.0), Err(ParamError::OutOfRange));
+    }
+
+    #[test]
+    fn exposure_params_are_range_checked() {
+        let mut p = ParamSet::default();
+        assert_eq!(p.set(ParamId::ExpMaxUs, 99.0), Err(ParamError::OutOfRange));
+        assert_eq!(
+            p.set(ParamId::ExpMaxUs, 33_001.0),
+            Err(ParamError::OutOfRange)
+        );
+        assert_eq!(
+            p.set(ParamId::ExpMaxUs, 1_500.5),
+            Err(ParamError::NotIntegral)
+        );
+        assert_eq!(p.set(ParamId::ExpMaxUs, 1_500.0), Ok(()));
+        assert_eq!(p.set(ParamId::GainMax, 0.5), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::GainMax, 33.0), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::GainMax, 2.5), Ok(()));
+        assert_eq!(p.set(ParamId::ExpTarget, 39.0), Err(ParamError::OutOfRange));
+        assert_eq!(
+            p.set(ParamId::ExpTarget, 221.0),
+            Err(ParamError::OutOfRange)
+        );
+        assert_eq!(p.set(ParamId::ExpTarget, 90.0), Ok(()));
+        assert_eq!(
+            (
+                p.get(ParamId::ExpMaxUs),
+                p.get(ParamId::GainMax),
+                p.get(ParamId::ExpTarget)
+            ),
+            (1_500.0, 2.5, 90.0)
+        );
+    }
+
+    /// A blob of an older firmware whose table ended before `records` parameters.
+    fn older_blob(params: &ParamSet, records: usize) -> [u8; EXPORT_LEN] {
+        let mut blob = [0u8; EXPORT_LEN];
+        params.export(&mut blob);
+        let end = HEADER_LEN + records * RECORD_LEN;
+        blob[end..].fill(0);
+        blob[5] = records as u8;
+        let crc = crc_accumulate(0xFFFF, &blob[HEADER_LEN..end]);
+        blob[6..8].copy_from_slice(&crc.to_le_bytes());
+        blob
+    }
+
+    #[test]
+    fn a_blob_without_the_newer_params_keeps_their_defaults() {
+        let mut saved = ParamSet::default();
+        saved.set(ParamId::RateHz, 10.0).unwrap();
+        saved.set(ParamId::ExpMaxUs, 2_000.0).unwrap();
+        // Saved by a firmware with the first ten parameters only (before TD_EXP_MAX_US).
+        let blob = older_blob(&saved, ParamId::ExpMaxUs.index());
+        let mut now = ParamSet::default();
+        now.set(ParamId::GainMax, 4.0).unwrap();
+        let r = now.import(&blob).unwrap();
+        assert_eq!((r.applied, r.rejected, r.unknown), (10, 0, 0));
+        assert_eq!(now.get(ParamId::RateHz), 10.0);
+        // Not in the blob: unchanged.
+        assert_eq!(now.get(ParamId::ExpMaxUs), 4_000.0);
+        assert_eq!(now.get(ParamId::GainMax), 4.0);
     }
 
     #[test]
@@ -421,6 +560,9 @@ mod tests {
         let mut p = ParamSet::default();
         p.set(ParamId::Profile, 1.0).unwrap();
         p.set(ParamId::TagSize, 0.5).unwrap();
+        p.set(ParamId::ExpMaxUs, 2_500.0).unwrap();
+        p.set(ParamId::GainMax, 3.5).unwrap();
+        p.set(ParamId::ExpTarget, 150.0).unwrap();
         let mut blob = [0u8; EXPORT_LEN];
         assert_eq!(p.export(&mut blob), EXPORT_LEN);
         let mut q = ParamSet::default();

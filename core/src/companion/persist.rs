@@ -3,10 +3,10 @@
 //! The STM32H743 erases flash only in 128 KiB sectors (seconds, and ~10k cycles per sector)
 //! but programs it in 32-byte flash words, each once per erase. So every save appends one
 //! [`SLOT_LEN`]-byte slot (the export blob, zero padded to whole flash words) after the last
-//! written one, and the sector is erased only when it is full (~580 saves). At boot
-//! [`scan`] walks the slots up to the first erased one and restores the newest slot whose
-//! magic, version and CRC check out; a torn last write (power lost mid-save) therefore falls
-//! back to the save before it. [`SaveDebounce`] decides when a changed parameter set is
+//! written one, and the sector is erased only when it is full (455 saves of the 13-parameter
+//! table's 288-byte slots). At boot [`scan`] walks the slots up to the first erased one and
+//! restores the newest slot whose magic, version and CRC check out; a torn last write (power
+//! lost mid-save) therefore falls back to the save before it. [`SaveDebounce`] decides when a changed parameter set is
 //! written: only after it has been stable for a while, so a ground station writing ten
 //! parameters in a row costs one slot, not ten.
 //!
@@ -179,6 +179,14 @@ mod tests {
     }
 
     const _: () = assert!(SLOT_LEN.is_multiple_of(FLASH_WORD) && SLOT_LEN >= EXPORT_LEN);
+
+    /// The slot size the module documentation's save count is worked out from.
+    #[test]
+    fn slot_size_of_the_current_table() {
+        assert_eq!(EXPORT_LEN, 8 + super::super::params::PARAM_COUNT * 20);
+        assert_eq!(SLOT_LEN, 288);
+        assert_eq!(128 * 1024 / SLOT_LEN, 455);
+    }
 
     #[test]
     fn empty_sector_gives_defaults_and_slot_zero() {

@@ -1,21 +1,47 @@
 //! Step 2: following the boundaries of the binary image.
 //!
-//! A boundary starts at every dark pixel whose left neighbour is not dark and which no
-//! earlier boundary passed through ([`start_bits`]). From there, Moore neighbour tracing
-//! walks clockwise around the dark region keeping the light pixel on its left, which gives
-//! the outer boundary of a dark blob (a marker's black border seen from outside) or the
-//! boundary of a hole in it (the inner edge of a border ring), depending on which light
-//! region the start pixel faced. The walk stops when it is about to leave the start pixel in
-//! the direction it first left it (Jacob's criterion), so thin structures are walked fully.
+//! ## Where a boundary starts
+//! The scan ([`start_bits`]) looks at 32 pixels at a time. By default only **outer**
+//! boundaries are followed: a dark 8-connected region is entered at its first pixel in
+//! raster order, which is the only kind of pixel whose west, north-west, north and
+//! north-east neighbours are all light ([`StartRule::OuterOnly`]). A region has one such
+//! pixel per "top" of its shape; the first top traces the outer boundary and marks it in the
+//! `visited` bitmap, so every later top on that boundary is skipped. Holes (light regions
+//! enclosed by dark) are then never followed, unless one of their walls has a top of its
+//! own. This matters for the cost on hostile images: a checkerboard of 2-pixel squares is one
+//! dark region (its squares touch at the corners) with ten thousand holes, and a grid of thin
+//! lines a single region with one hole per mesh. Following every hole of those costs several
+//! typical frames; following the outer boundary costs one trace.
+//!
+//! Families printed white-on-black, and the paper's pipeline (which traces every contour of
+//! its edge map, as OpenCV's `findContours` does), need hole boundaries too
+//! ([`StartRule::AllBoundaries`]): then every dark pixel whose west neighbour is light and
+//! which no earlier boundary passed through starts one, as before.
+//!
+//! Single dark pixels (no dark neighbour at all) are never followed: nothing of one pixel is
+//! a marker, and a frame of isolated dots would otherwise cost one trace per dot.
+//!
+//! ## Following
+//! From a start pixel, Moore neighbour tracing walks clockwise around the dark region keeping
+//! the light pixel on its left, which gives the outer boundary of a dark blob (a marker's
+//! black border seen from outside) or the boundary of a hole in it (the inner edge of a
+//! border ring), depending on which light region the start pixel faced. The walk stops when
+//! it is about to leave the start pixel in the direction it first left it (Jacob's
+//! criterion), so thin structures are walked fully.
+//!
+//! Pixels are addressed by their bit index in the bitmap (`y * 32 * words_per_row + x`), so a
+//! neighbour is one addition of a per-frame offset and a probe is a load and a shift. That
+//! needs every dark pixel to have its eight neighbours inside the frame: the detector clears
+//! the frame's outermost rows and columns first ([`clear_border`]); nothing on them could be
+//! decoded anyway, since a marker needs its light margin.
 //!
 //! Every step marks the pixel in the `visited` bitmap, so no boundary is followed twice, and
-//! draws from a per-frame step budget, so the time per frame is bounded on any image: a
-//! frame of noise ends with [`Trace::OutOfBudget`] rather than a long stall.
-
-use super::threshold::get_bit;
+//! draws from the frame's work budget (one unit per step), so the time per frame is bounded on any image: a
+//! frame the budget cannot cover ends with [`Trace::OutOfBudget`] rather than a long stall.
 
 /// A boundary pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[repr(C)]
 pub(crate) struct Pixel {
     pub x: u16,
     pub y: u16,
@@ -26,6 +52,22 @@ const DX: [isize; 8] = [1, 1, 0, -1, -1, -1, 0, 1];
 const DY: [isize; 8] = [0, 1, 1, 1, 0, -1, -1, -1];
 /// Direction of the light start neighbour (west).
 const WEST: usize = 4;
+/// The same offsets packed as `dx + (dy << 16)` (two's complement, wrapping).
+const XY_STEP: [u32; 8] = [
+    pack_xy(1, 0),
+    pack_xy(1, 1),
+    pack_xy(0, 1),
+    pack_xy(-1, 1),
+    pack_xy(-1, 0),
+    pack_xy(-1, -1),
+    pack_xy(0, -1),
+    pack_xy(1, -1),
+];
+
+/// `dx + (dy << 16)` as a wrapping `u32` offset of a packed `(x, y)`.
+const fn pack_xy(dx: i32, dy: i32) -> u32 {
+    dx.wrapping_add(dy << 16) as u32
+}
 
 /// How a trace ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,108 +76,260 @@ pub(crate) enum Trace {
     Closed(usize),
     /// The boundary closed but was longer than the output buffer (not a candidate).
     TooLong,
-    /// The frame's step budget ran out in the middle of the boundary.
+    /// The frame's work budget ran out in the middle of the boundary.
     OutOfBudget,
+}
+
+/// Which dark pixels start a boundary (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum StartRule {
+    /// Outer boundaries of dark regions (and holes only where a wall has a top of its own).
+    OuterOnly,
+    /// Every boundary: outer ones and those of holes.
+    AllBoundaries,
+}
+
+/// One neighbour direction's offsets.
+#[derive(Debug, Clone, Copy, Default)]
+struct Move {
+    bit: isize,
+    xy: u32,
 }
 
 /// Boundary follower over one frame's bitmaps.
 pub(crate) struct Tracer<'b> {
-    pub bitmap: &'b [u32],
-    pub visited: &'b mut [u32],
-    pub width: usize,
-    pub height: usize,
-    pub words_per_row: usize,
-    /// Steps left for this frame.
-    pub budget: u32,
+    bitmap: &'b [u32],
+    visited: &'b mut [u32],
+    /// Per neighbour direction: the bit-index offset (`DX + DY * stride`) and the packed
+    /// `(x, y)` offset ([`XY_STEP`]), side by side so a move reads one table.
+    moves: [Move; 8],
+    /// Bits per bitmap row.
+    stride: usize,
+    /// Work units left for this frame (one per step, see `charge`).
+    budget: u32,
     /// Steps taken so far.
-    pub steps: u32,
+    steps: u32,
 }
 
-impl Tracer<'_> {
-    #[inline]
-    fn dark(&self, x: isize, y: isize) -> bool {
-        get_bit(
-            self.bitmap,
-            self.words_per_row,
-            x,
-            y,
-            self.width,
-            self.height,
-        )
+impl<'b> Tracer<'b> {
+    /// A tracer over `bitmap` (whose outermost rows and columns must be light, see
+    /// [`clear_border`]) marking `visited`, both `words_per_row` words a row, allowed
+    /// `budget` steps.
+    pub fn new(
+        bitmap: &'b [u32],
+        visited: &'b mut [u32],
+        words_per_row: usize,
+        budget: u32,
+    ) -> Self {
+        let stride = words_per_row * 32;
+        let mut moves = [Move::default(); 8];
+        for (m, ((dx, dy), xy)) in moves.iter_mut().zip(DX.iter().zip(DY.iter()).zip(XY_STEP)) {
+            *m = Move {
+                bit: dx + dy * stride as isize,
+                xy,
+            };
+        }
+        Tracer {
+            bitmap,
+            visited,
+            moves,
+            stride,
+            budget,
+            steps: 0,
+        }
     }
 
-    #[inline]
-    fn mark(&mut self, x: usize, y: usize) {
-        super::threshold::set_bit(self.visited, self.words_per_row, x, y);
+    /// Steps taken so far.
+    pub fn steps(&self) -> u32 {
+        self.steps
     }
 
-    /// First dark neighbour of (x, y), searching clockwise from direction `from`.
+    /// Work units left of the frame's budget (steps and whatever else was charged).
+    pub fn remaining(&self) -> u32 {
+        self.budget
+    }
+
+    /// Takes `units` of other work from the frame's budget; false (and nothing left) when
+    /// there was not enough.
+    pub fn charge(&mut self, units: u32) -> bool {
+        match self.budget.checked_sub(units) {
+            Some(left) => {
+                self.budget = left;
+                true
+            }
+            None => {
+                self.budget = 0;
+                false
+            }
+        }
+    }
+
+    /// The visited bitmap's word `index` (all ones past the end, so nothing starts there).
     #[inline]
-    fn next(&self, x: isize, y: isize, from: usize) -> Option<usize> {
-        (0..8).map(|i| (from + i) & 7).find(|&d| {
-            self.dark(
-                x + DX.get(d).copied().unwrap_or(0),
-                y + DY.get(d).copied().unwrap_or(0),
-            )
+    pub fn visited_word(&self, index: usize) -> u32 {
+        self.visited.get(index).copied().unwrap_or(u32::MAX)
+    }
+
+    /// Whether the pixel at bit index `bit` is dark (past the bitmap: light).
+    #[inline(always)]
+    fn dark(&self, bit: usize) -> bool {
+        self.bitmap
+            .get(bit / 32)
+            .is_some_and(|w| (w >> (bit % 32)) & 1 == 1)
+    }
+
+    /// First dark neighbour of the pixel at bit index `bit`, searching clockwise from the
+    /// light neighbour in direction `from` (which is not probed again: it is the last light
+    /// pixel the search before this one saw, or the start's light west neighbour).
+    ///
+    /// Probing one neighbour at a time: along a boundary the search usually ends at the first
+    /// or second probe, which measured cheaper on the Cortex-M7 than gathering all eight
+    /// neighbours into a ring mask first.
+    #[inline(always)]
+    fn next(&self, bit: usize, from: usize) -> Option<usize> {
+        (1..8).map(|i| (from + i) & 7).find(|&d| {
+            let offset = self.moves.get(d).map_or(0, |m| m.bit);
+            self.dark(bit.wrapping_add_signed(offset))
         })
     }
 
     /// Follows the boundary through the dark pixel (x0, y0) whose west neighbour is light,
     /// storing its pixels in `out`.
+    ///
+    /// Not inlined: inside the detector's scan loop the walk's dozen live values compete
+    /// with the scan's for registers, and the spills cost more than the call (measured on
+    /// the Cortex-M7 benchmark).
+    #[inline(never)]
     pub fn trace(&mut self, x0: usize, y0: usize, out: &mut [Pixel]) -> Trace {
-        let (sx, sy) = (x0 as isize, y0 as isize);
-        let (mut x, mut y) = (sx, sy);
-        let mut from = WEST;
-        let mut first: Option<usize> = None;
-        let mut len = 0usize;
-        let mut overflow = false;
-        loop {
-            let step = self.next(x, y, from);
-            if x == sx && y == sy {
-                match (first, step) {
-                    (Some(f), Some(d)) if f == d => break,
-                    (None, _) => first = step,
-                    _ => {}
-                }
-            }
-            self.mark(x as usize, y as usize);
-            match out.get_mut(len) {
+        let start = y0 * self.stride + x0;
+        // x in the low half, y in the high half: one addition moves both (no pixel on the
+        // boundary is at x = 0, so x never borrows from y).
+        let start_xy = (x0 as u32 & 0xFFFF) | ((y0 as u32) << 16);
+        let start_pixel = Pixel {
+            x: x0 as u16,
+            y: y0 as u16,
+        };
+        let Some(first) = self.next(start, WEST) else {
+            // An isolated pixel.
+            self.mark(start);
+            return match out.first_mut() {
                 Some(slot) => {
-                    *slot = Pixel {
-                        x: x as u16,
-                        y: y as u16,
-                    };
-                    len += 1;
+                    *slot = start_pixel;
+                    Trace::Closed(1)
                 }
-                None => overflow = true,
-            }
-            let Some(d) = step else {
-                break; // an isolated pixel
+                None => Trace::TooLong,
             };
-            if self.budget == 0 {
-                return Trace::OutOfBudget;
+        };
+        let (mut bit, mut xy, mut d) = (start, start_xy, first);
+        let mut len = 0usize;
+        let capacity = out.len();
+        // Steps allowed in this walk. One pixel is stored per step, so the count of stored
+        // pixels doubles as the step count and no separate counter is kept.
+        let limit = self.budget as usize;
+        let result = loop {
+            self.mark(bit);
+            if let Some(slot) = out.get_mut(len) {
+                *slot = Pixel {
+                    x: xy as u16,
+                    y: (xy >> 16) as u16,
+                };
             }
-            self.budget -= 1;
-            self.steps += 1;
-            x += DX.get(d).copied().unwrap_or(0);
-            y += DY.get(d).copied().unwrap_or(0);
-            // The light pixel we passed last, seen from the new pixel.
-            from = if d % 2 == 0 { (d + 6) & 7 } else { (d + 5) & 7 };
+            len += 1;
+            if len > limit {
+                break Trace::OutOfBudget;
+            }
+            let step = self.moves.get(d).copied().unwrap_or_default();
+            bit = bit.wrapping_add_signed(step.bit);
+            xy = xy.wrapping_add(step.xy);
+            // The light pixel passed last, seen from the new pixel.
+            let from = (d + 6 - (d & 1)) & 7;
+            // There is always a dark neighbour: the pixel just left.
+            let Some(next) = self.next(bit, from) else {
+                break Trace::Closed(len);
+            };
+            // Jacob's criterion: back at the start and about to leave it the same way.
+            if bit == start && next == first {
+                break Trace::Closed(len);
+            }
+            d = next;
+        };
+        let steps = match result {
+            Trace::OutOfBudget => len - 1,
+            _ => len,
+        } as u32;
+        self.steps += steps;
+        self.budget = self.budget.saturating_sub(steps);
+        match result {
+            Trace::Closed(_) if len > capacity => Trace::TooLong,
+            other => other,
         }
-        if overflow {
-            Trace::TooLong
-        } else {
-            Trace::Closed(len)
+    }
+
+    /// Marks the pixel at bit index `bit` as on a followed boundary.
+    #[inline(always)]
+    fn mark(&mut self, bit: usize) {
+        if let Some(word) = self.visited.get_mut(bit / 32) {
+            *word |= 1 << (bit % 32);
         }
     }
 }
 
-/// Start pixels of row word `k`: dark, left neighbour light, not yet on a followed boundary.
-/// `left_word` is the previous word of the same row (0 at the row start).
+/// The dark pixels of 32 in one bitmap row, with their neighbours: the word itself, the words
+/// left and right of it in the same row, and the three words above and below (0 outside the
+/// frame).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Neighbourhood {
+    pub left: u32,
+    pub dark: u32,
+    pub right: u32,
+    pub above: [u32; 3],
+    pub below: [u32; 3],
+}
+
+/// Pixels of the word with a dark neighbour in row `[left, middle, right]`: directly above
+/// or below, or diagonally.
+#[inline(always)]
+fn any_of_three(row: [u32; 3]) -> u32 {
+    let [left, middle, right] = row;
+    middle | (middle << 1) | (left >> 31) | (middle >> 1) | (right << 31)
+}
+
+/// Start pixels among 32: dark, west neighbour light, not yet on a followed boundary, and
+/// under [`StartRule::OuterOnly`] also the top of a region (north-west, north and north-east
+/// light) with at least one dark neighbour.
 #[inline]
-pub(crate) fn start_bits(dark: u32, left_word: u32, visited: u32) -> u32 {
-    let left = (dark << 1) | (left_word >> 31);
-    dark & !left & !visited
+pub(crate) fn start_bits(n: &Neighbourhood, visited: u32, rule: StartRule) -> u32 {
+    let west = (n.dark << 1) | (n.left >> 31);
+    let starts = n.dark & !west & !visited;
+    match rule {
+        StartRule::AllBoundaries => starts,
+        StartRule::OuterOnly => {
+            let east = (n.dark >> 1) | (n.right << 31);
+            starts & !any_of_three(n.above) & (east | any_of_three(n.below))
+        }
+    }
+}
+
+/// Makes the frame's outermost rows and columns light, so every dark pixel has all eight
+/// neighbours inside the frame (the [`Tracer`]'s precondition).
+pub(crate) fn clear_border(bitmap: &mut [u32], words_per_row: usize, width: usize) {
+    let wpr = words_per_row.max(1);
+    let last_word = width.saturating_sub(1) / 32;
+    let last_bit = width.saturating_sub(1) % 32;
+    for row in bitmap.chunks_mut(wpr) {
+        if let Some(word) = row.first_mut() {
+            *word &= !1;
+        }
+        if let Some(word) = row.get_mut(last_word) {
+            *word &= !(1 << last_bit);
+        }
+    }
+    let rows = bitmap.len() / wpr;
+    for row in [0, rows.saturating_sub(1)] {
+        if let Some(words) = bitmap.get_mut(row * wpr..(row + 1) * wpr) {
+            words.fill(0);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -157,19 +351,47 @@ mod tests {
     }
 
     fn trace_at(rows: &[&str], x: usize, y: usize) -> (Trace, [Pixel; 64]) {
-        let (w, h, bm) = bitmap_of(rows);
+        let (w, _, bm) = bitmap_of(rows);
         let mut visited = [0u32; 64];
-        let mut t = Tracer {
-            bitmap: &bm,
-            visited: &mut visited,
-            width: w,
-            height: h,
-            words_per_row: words_per_row(w),
-            budget: 1000,
-            steps: 0,
-        };
+        let mut t = Tracer::new(&bm, &mut visited, words_per_row(w), 1000);
         let mut out = [Pixel::default(); 64];
         (t.trace(x, y, &mut out), out)
+    }
+
+    /// Runs the detector's scan (one word per row, `w <= 32`) and returns the start pixel and
+    /// the result of every trace, as `detect` would.
+    fn scan(rows: &[&str], rule: StartRule) -> heapless::Vec<((usize, usize), Trace), 16> {
+        let (w, h, bm) = bitmap_of(rows);
+        assert!(w <= 32);
+        let word = |y: isize| {
+            if y < 0 {
+                0
+            } else {
+                bm.get(y as usize).copied().unwrap_or(0)
+            }
+        };
+        let mut visited = [0u32; 64];
+        let mut t = Tracer::new(&bm, &mut visited, 1, 1000);
+        let mut out = [Pixel::default(); 64];
+        let mut traces = heapless::Vec::new();
+        for y in 0..h {
+            let yi = y as isize;
+            let n = Neighbourhood {
+                dark: word(yi),
+                above: [0, word(yi - 1), 0],
+                below: [0, word(yi + 1), 0],
+                ..Neighbourhood::default()
+            };
+            loop {
+                let starts = start_bits(&n, t.visited_word(y), rule);
+                if starts == 0 {
+                    break;
+                }
+                let x = starts.trailing_zeros() as usize;
+                traces.push(((x, y), t.trace(x, y, &mut out))).unwrap();
+            }
+        }
+        traces
     }
 
     #[test]
@@ -204,25 +426,165 @@ mod tests {
     #[test]
     fn budget_stops_the_walk() {
         let rows = ["......", ".####.", ".####.", ".####.", "......"];
-        let (w, h, bm) = bitmap_of(&rows);
+        let (_, _, bm) = bitmap_of(&rows);
         let mut visited = [0u32; 64];
-        let mut t = Tracer {
-            bitmap: &bm,
-            visited: &mut visited,
-            width: w,
-            height: h,
-            words_per_row: 1,
-            budget: 3,
-            steps: 0,
-        };
+        let mut t = Tracer::new(&bm, &mut visited, 1, 3);
         let mut out = [Pixel::default(); 64];
         assert_eq!(t.trace(1, 1, &mut out), Trace::OutOfBudget);
+        assert_eq!(t.steps(), 3);
     }
 
     #[test]
-    fn start_bits_skip_runs_and_visited() {
-        assert_eq!(start_bits(0b0111_0110, 0, 0), 0b0001_0010);
-        assert_eq!(start_bits(0b1, 1 << 31, 0), 0);
-        assert_eq!(start_bits(0b0110, 0, 0b0010), 0);
+    fn long_boundary_is_followed_but_not_stored() {
+        let rows = ["......", ".####.", ".####.", ".####.", "......"];
+        let (_, _, bm) = bitmap_of(&rows);
+        let mut visited = [0u32; 64];
+        let mut t = Tracer::new(&bm, &mut visited, 1, 1000);
+        let mut out = [Pixel::default(); 4];
+        assert_eq!(t.trace(1, 1, &mut out), Trace::TooLong);
+        // Still marked, so the scan does not start it again.
+        assert_eq!(t.visited_word(3) & 0b11110, 0b11110);
+    }
+
+    #[test]
+    fn all_boundaries_follows_the_hole_of_a_ring() {
+        // Walls two pixels thick: a one-pixel wall is on both boundaries, so the outer
+        // trace would already have marked the hole's start.
+        let rows = [
+            ".........",
+            ".#######.",
+            ".#######.",
+            ".##...##.",
+            ".##...##.",
+            ".#######.",
+            ".#######.",
+            ".........",
+        ];
+        let traces = scan(&rows, StartRule::AllBoundaries);
+        assert_eq!(traces.len(), 2, "{traces:?}");
+        assert_eq!(traces[0], ((1, 1), Trace::Closed(22)));
+        assert_eq!(traces[1].0, (6, 3));
+        // Outer-only: the ring's outer boundary alone.
+        let traces = scan(&rows, StartRule::OuterOnly);
+        assert_eq!(traces.len(), 1, "{traces:?}");
+        assert_eq!(traces[0], ((1, 1), Trace::Closed(22)));
+    }
+
+    #[test]
+    fn a_region_with_two_tops_is_followed_once() {
+        // A "V": both arm tops pass the top test; the second is on the boundary the first
+        // trace walked, so it is skipped.
+        let rows = [
+            ".........",
+            ".#.....#.",
+            "..#...#..",
+            "...#.#...",
+            "....#....",
+            ".........",
+        ];
+        let traces = scan(&rows, StartRule::OuterOnly);
+        assert_eq!(traces.len(), 1, "{traces:?}");
+        assert_eq!(traces[0].0, (1, 1));
+    }
+
+    #[test]
+    fn a_checkerboard_is_one_region() {
+        // 2-pixel squares touching at corners: one dark region, one trace.
+        let rows = [
+            "............",
+            ".##..##..##.",
+            ".##..##..##.",
+            "...##..##...",
+            "...##..##...",
+            ".##..##..##.",
+            ".##..##..##.",
+            "............",
+        ];
+        let outer = scan(&rows, StartRule::OuterOnly);
+        assert_eq!(outer.len(), 1, "{outer:?}");
+    }
+
+    #[test]
+    fn isolated_pixels_are_not_followed() {
+        let rows = ["......", ".#.#..", "......", "..#...", "..##..", "......"];
+        let traces = scan(&rows, StartRule::OuterOnly);
+        // The two single pixels of row 1 are skipped; the L of rows 3-4 is followed.
+        assert_eq!(traces.len(), 1, "{traces:?}");
+        assert_eq!(traces[0].0, (2, 3));
+        // A pixel whose only dark neighbour is diagonal below is not isolated.
+        let traces = scan(&["....", ".#..", "..#.", "...."], StartRule::OuterOnly);
+        assert_eq!(traces.len(), 1, "{traces:?}");
+    }
+
+    #[test]
+    fn a_hole_wall_with_its_own_top_is_followed_as_a_hole() {
+        // A dark spike rising into the hole from its floor: its tip is a top whose west
+        // neighbour is in the hole, so the hole boundary is followed (once).
+        let rows = [
+            ".........",
+            ".#######.",
+            ".#.....#.",
+            ".#..#..#.",
+            ".#..#..#.",
+            ".#######.",
+            ".........",
+        ];
+        let traces = scan(&rows, StartRule::OuterOnly);
+        assert_eq!(traces.len(), 2, "{traces:?}");
+        assert_eq!(traces[1].0, (4, 3));
+    }
+
+    #[test]
+    fn packed_steps_match_the_directions() {
+        for d in 0..8 {
+            let xy = (100u32 | (100 << 16)).wrapping_add(XY_STEP[d]);
+            let (x, y) = ((xy & 0xFFFF) as isize, (xy >> 16) as isize);
+            assert_eq!((x - 100, y - 100), (DX[d], DY[d]), "direction {d}");
+        }
+    }
+
+    #[test]
+    fn start_bits_cross_word_edges() {
+        let n = Neighbourhood {
+            left: 1 << 31,
+            dark: 0b1 | (1 << 31),
+            right: 0,
+            above: [0; 3],
+            below: [0, 0b10, 0],
+        };
+        // Bit 0's west neighbour (the previous word's bit 31) is dark; bit 31 is isolated.
+        assert_eq!(start_bits(&n, 0, StartRule::AllBoundaries), 1 << 31);
+        assert_eq!(start_bits(&n, 0, StartRule::OuterOnly), 0);
+        // Bit 31 with a dark pixel below-right (the next row's next word, bit 0).
+        let n = Neighbourhood {
+            dark: 1 << 31,
+            below: [0, 0, 1],
+            ..Neighbourhood::default()
+        };
+        assert_eq!(start_bits(&n, 0, StartRule::OuterOnly), 1 << 31);
+        // ... and one above-right: not a top.
+        let n = Neighbourhood {
+            above: [0, 0, 1],
+            ..n
+        };
+        assert_eq!(start_bits(&n, 0, StartRule::OuterOnly), 0);
+        assert_eq!(start_bits(&n, 1 << 31, StartRule::AllBoundaries), 0);
+    }
+
+    #[test]
+    fn clear_border_lights_the_frame_edge() {
+        // 40 x 4: two words a row, the last column is bit 7 of the second word.
+        let mut bm = [
+            u32::MAX,
+            0xFF,
+            u32::MAX,
+            0xFF,
+            u32::MAX,
+            0xFF,
+            u32::MAX,
+            0xFF,
+        ];
+        clear_border(&mut bm, 2, 40);
+        assert_eq!(bm, [0, 0, u32::MAX - 1, 0x7F, u32::MAX - 1, 0x7F, 0, 0]);
     }
 }

@@ -26,8 +26,13 @@ use crate::image::GrayImage;
 const BORDER_ERROR_FRACTION: f32 = 0.125;
 /// Margin cells allowed to read dark (a tight print margin, a neighbouring object).
 const MARGIN_ERROR_FRACTION: f32 = 0.25;
-/// Cells at least this many pixels wide are read as the mean of 3x3 points.
-const MULTI_SAMPLE_CELL_PX: f32 = 4.0;
+/// Cells at least this many pixels wide are read as the mean of five points (the centre and
+/// four a quarter cell off it); smaller ones at their centre. One bilinear sample already
+/// averages four pixels, and a cell of fewer than eight pixels is read well enough by it
+/// (its contrast dwarfs sensor noise); above that the extra points keep a speck or a glint
+/// from deciding a cell. Five reads cost four times one: on a landing frame with several
+/// large markers that was a third of the detection time.
+const MULTI_SAMPLE_CELL_PX: f32 = 8.0;
 /// Weight of the Laplacian that sharpens the sampled cell grid before thresholding.
 const DECODE_SHARPENING: f32 = 0.25;
 /// A data cell whose reading lies closer to the threshold than this fraction of half the
@@ -127,14 +132,22 @@ fn read_cell(image: &GrayImage<'_>, h: &Homography, u: f32, v: f32, multi: bool)
         let p = h.map(u, v)?;
         return Some(image.sample(p.x, p.y));
     }
-    let mut acc = 0.0;
-    for du in [-0.22f32, 0.0, 0.22] {
-        for dv in [-0.22f32, 0.0, 0.22] {
-            let p = h.map(u + du, v + dv)?;
-            acc += image.sample(p.x, p.y);
-        }
+    // Five samples: the centre and four points a quarter cell off it diagonally (each
+    // bilinear sample already averages four pixels, so at four or more pixels per cell these
+    // cover the cell's middle half). Across a quarter cell the homography is affine to a
+    // tiny fraction of a pixel, so the offsets are mapped once (two extra points) rather
+    // than each sample through the projective division.
+    const OFFSET: f32 = 0.25;
+    let centre = h.map(u, v)?;
+    let along_u = h.map(u + OFFSET, v)?;
+    let along_v = h.map(u, v + OFFSET)?;
+    let (ux, uy) = (along_u.x - centre.x, along_u.y - centre.y);
+    let (vx, vy) = (along_v.x - centre.x, along_v.y - centre.y);
+    let mut acc = image.sample(centre.x, centre.y);
+    for (i, j) in [(-1.0f32, -1.0f32), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+        acc += image.sample(centre.x + i * ux + j * vx, centre.y + i * uy + j * vy);
     }
-    Some(acc / 9.0)
+    Some(acc / 5.0)
 }
 
 /// Reads a cell as the mean over its area (4x4 points), the paper's "resize".
@@ -226,11 +239,29 @@ pub(crate) fn lookup(family: &Family<'_>, grid: &GridRead, max_hamming: u8) -> O
 }
 
 /// Reads a candidate's cells with touchdown's method, using `family`'s layout.
+///
+/// Adds the cells it read, weighted by their cost in image samples and mapped points, to
+/// `samples` (the detector's work accounting).
 pub(crate) fn read_robust(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     quad: &[Point; 4],
     config: &DetectorConfig,
+    samples: &mut u32,
+) -> Option<GridRead> {
+    let cost = core::cell::Cell::new(0u32);
+    let grid = read_robust_counted(image, family, quad, config, &cost);
+    *samples = samples.saturating_add(cost.get());
+    grid
+}
+
+/// [`read_robust`], counting its reads in `cost`.
+fn read_robust_counted(
+    image: &GrayImage<'_>,
+    family: &Family<'_>,
+    quad: &[Point; 4],
+    config: &DetectorConfig,
+    cost: &core::cell::Cell<u32>,
 ) -> Option<GridRead> {
     let h = grid_homography(family, quad)?;
     let n = family.grid as usize;
@@ -239,6 +270,12 @@ pub(crate) fn read_robust(
     let cell_px =
         quad[0].distance(quad[1]).min(quad[1].distance(quad[2])) / family.quad_cells() as f32;
     let multi = cell_px >= MULTI_SAMPLE_CELL_PX;
+    // A single read: one mapped point, one sample; a multi-sampled one: three and five.
+    let cost_per_cell: u32 = if multi { 8 } else { 2 };
+    let read_cell = |image: &GrayImage<'_>, h: &Homography, u: f32, v: f32, multi: bool| {
+        cost.set(cost.get().saturating_add(cost_per_cell));
+        read_cell(image, h, u, v, multi)
+    };
 
     // Learn the black level from the border ring and the white level from the reference ring
     // (outside the border for normal families, even beyond the drawn grid; inside otherwise).
@@ -413,6 +450,178 @@ pub(crate) fn read_robust(
         contrast,
         uncertain,
     })
+}
+
+/// Largest spread of a candidate's data cells, as a fraction of its black-to-white contrast,
+/// for [`precheck`] to call the interior flat. A marker's data cells span the whole contrast
+/// (some are black, some white); a dark square, a tile or a window spans a few grey levels.
+const FLAT_INTERIOR_SPREAD: f32 = 0.2;
+/// Samples across the data area, per side, of the flat-interior test.
+const FLAT_SAMPLES: usize = 4;
+/// Most samples per side of the border ring and of the margin in [`precheck`] (one per cell
+/// up to this).
+const PRECHECK_RING_SAMPLES: usize = 4;
+/// Smallest cell, pixels, for [`precheck`] to judge the border ring at the rough corners:
+/// those are within about a pixel of the edges, which must stay well inside one cell.
+const PRECHECK_BORDER_CELL_PX: f32 = 2.5;
+/// Fraction of the border (or margin) samples allowed on the wrong side of the mid level at
+/// the rough corners: twice the full read's allowance ([`BORDER_ERROR_FRACTION`],
+/// [`MARGIN_ERROR_FRACTION`]), as rough corners blur the ring's first and last cells.
+const PRECHECK_ERROR_SLACK: f32 = 2.0;
+
+/// What [`precheck`] makes of a candidate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Precheck {
+    /// Worth refining and reading.
+    Candidate,
+    /// The interior is one flat tone (only said for families without a uniform code).
+    Flat,
+    /// No dark border ring inside a light margin, or too little contrast.
+    NoBorder,
+}
+
+/// A quick look at a candidate at its rough corners, before the costly refinement: is there
+/// a dark border ring in a light margin, and (when `flat_rejects`, i.e. no family searched
+/// decodes a uniform grid, see [`uniform_grid_decodes`]) is the interior more than one flat
+/// tone? A frame tiled with dark squares, or the dark blobs inside a marker's own data
+/// cells, would otherwise each spend the refinement (about 80,000 Cortex-M7 instructions for
+/// a small marker, several times that for a large one) only to be turned down by the read.
+///
+/// Cheap on purpose, as it runs on every candidate (about 1,000 Cortex-M7 instructions):
+/// nearest pixels at positions blended bilinearly from the corners (no homography:
+/// perspective moves the samples along the ring or across the data area by a fraction of a
+/// cell, which changes neither test), up to four points along the middle half of each side
+/// of the border ring and of the margin outside it, and a 4x4 lattice over the data cells. For dark-on-light families only. The border test is skipped
+/// below [`PRECHECK_BORDER_CELL_PX`] per cell, where the rough corners are too rough.
+///
+/// `cells` is the number of cells across the detected square; with several families, the
+/// largest: the thinnest border, whose middle lies inside every family's border and whose
+/// margin inside every family's margin (a family with fewer, larger cells only puts more of
+/// its border under the data lattice, which makes the interior look less flat).
+pub(crate) fn precheck(
+    image: &GrayImage<'_>,
+    cells: usize,
+    quad: &[Point; 4],
+    min_contrast: u8,
+    flat_rejects: bool,
+) -> Precheck {
+    let q = cells as f32;
+    if cells < 3 {
+        return Precheck::Candidate;
+    }
+    let [p0, p1, p2, p3] = *quad;
+    // (s, t) in 0..1 across the detected square (the border's outer edge), s along p0 -> p1.
+    let at = |s: f32, t: f32| {
+        let top = (p0.x + (p1.x - p0.x) * s, p0.y + (p1.y - p0.y) * s);
+        let bottom = (p3.x + (p2.x - p3.x) * s, p3.y + (p2.y - p3.y) * s);
+        Point::new(
+            top.0 + (bottom.0 - top.0) * t,
+            top.1 + (bottom.1 - top.1) * t,
+        )
+    };
+    // The nearest pixel ((x + 0.5) truncated: below -0.5 it clamps to the edge anyway).
+    let pixel =
+        |p: Point| f32::from(image.pixel_clamped((p.x + 0.5) as isize, (p.y + 0.5) as isize));
+    // `count` evenly spaced samples between a and b (mapping a line of the square, which the
+    // bilinear blend keeps straight along s or t), into `out` from index `k`.
+    let along =
+        |a: Point, b: Point, count: usize, out: &mut [f32], k: &mut usize, sum: &mut f32| {
+            let (dx, dy) = ((b.x - a.x) / count as f32, (b.y - a.y) / count as f32);
+            let mut p = Point::new(a.x + 0.5 * dx, a.y + 0.5 * dy);
+            for _ in 0..count {
+                let z = pixel(p);
+                *sum += z;
+                if let Some(slot) = out.get_mut(*k) {
+                    *slot = z;
+                    *k += 1;
+                }
+                p = Point::new(p.x + dx, p.y + dy);
+            }
+        };
+    // The ring at depth `d` inside the edge (negative: outside), along the middle half of
+    // each side (clear of the corners, where rough corners are roughest).
+    let per_side = cells.min(PRECHECK_RING_SAMPLES);
+    let read_ring = |d: f32, out: &mut [f32; 4 * PRECHECK_RING_SAMPLES]| {
+        let (mut k, mut sum) = (0usize, 0.0f32);
+        let (lo, hi) = (0.25, 0.75);
+        along(at(lo, d), at(hi, d), per_side, out, &mut k, &mut sum);
+        along(
+            at(1.0 - d, lo),
+            at(1.0 - d, hi),
+            per_side,
+            out,
+            &mut k,
+            &mut sum,
+        );
+        along(
+            at(lo, 1.0 - d),
+            at(hi, 1.0 - d),
+            per_side,
+            out,
+            &mut k,
+            &mut sum,
+        );
+        along(at(d, lo), at(d, hi), per_side, out, &mut k, &mut sum);
+        (sum / k.max(1) as f32, k)
+    };
+    let mut border = [0.0f32; 4 * PRECHECK_RING_SAMPLES];
+    let mut margin = [0.0f32; 4 * PRECHECK_RING_SAMPLES];
+    let (black, n_border) = read_ring(0.5 / q, &mut border);
+    let (white, n_margin) = read_ring(-0.5 / q, &mut margin);
+    let contrast = white - black;
+    if !(contrast >= f32::from(min_contrast) * 0.5) {
+        return Precheck::NoBorder;
+    }
+    let cell_px = quad[0].distance(quad[1]).min(quad[1].distance(quad[2])) / q;
+    if cell_px >= PRECHECK_BORDER_CELL_PX {
+        let mid = 0.5 * (black + white);
+        let light = border.iter().take(n_border).filter(|&&z| z > mid).count();
+        let dark = margin.iter().take(n_margin).filter(|&&z| z < mid).count();
+        if light as f32 > PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * n_border as f32
+            || dark as f32 > PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * n_margin as f32
+        {
+            return Precheck::NoBorder;
+        }
+    }
+    if flat_rejects {
+        // A lattice over the data cells, which span 1..q-1 cells of the square.
+        let (lo, hi) = (1.0 / q, 1.0 - 1.0 / q);
+        let mut lattice = [0.0f32; FLAT_SAMPLES];
+        let (mut min, mut max) = (f32::MAX, f32::MIN);
+        for j in 0..FLAT_SAMPLES {
+            let t = lo + (hi - lo) * (j as f32 + 0.5) / FLAT_SAMPLES as f32;
+            let (mut k, mut sum) = (0usize, 0.0f32);
+            along(
+                at(lo, t),
+                at(hi, t),
+                FLAT_SAMPLES,
+                &mut lattice,
+                &mut k,
+                &mut sum,
+            );
+            for &z in lattice.iter().take(k) {
+                min = min.min(z);
+                max = max.max(z);
+            }
+        }
+        if max - min < FLAT_INTERIOR_SPREAD * contrast {
+            return Precheck::Flat;
+        }
+    }
+    Precheck::Candidate
+}
+
+/// Whether `family` decodes an all-black or an all-white grid (within its correction
+/// radius, in any rotation): then [`precheck`] must not call a flat interior a reject.
+pub(crate) fn uniform_grid_decodes(family: &Family<'_>) -> bool {
+    let ones = if family.bits >= 64 {
+        u64::MAX
+    } else {
+        (1u64 << family.bits) - 1
+    };
+    [0u64, ones]
+        .iter()
+        .any(|&code| family.decode(&[code; 4], family.max_correction).is_some())
 }
 
 /// Reads a candidate's cells with the paper's method (normal families only); the look-up

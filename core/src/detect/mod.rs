@@ -5,10 +5,13 @@
 //!    brightness gradients across the frame do not matter; pixels without local contrast are
 //!    never "dark". The paper's variant ([`Method::Paper`]) instead normalises, blurs, takes
 //!    3x3 gradients and marks strong edges.
-//! 2. [`contour`]: scan the binary image for boundaries and follow each one (Moore
-//!    neighbour tracing, iterative, bounded by a per-frame step budget).
-//! 3. [`quad`]: simplify each contour with Douglas-Peucker and keep convex four-corner shapes
-//!    with sane edges and angles.
+//! 2. [`contour`]: scan the binary image for the tops of dark regions and follow each
+//!    region's outer boundary (Moore neighbour tracing, iterative); holes only for
+//!    white-on-black families and the paper's pipeline.
+//! 3. [`quad`]: screen each boundary (length, compactness, sampled convexity, diameter), then
+//!    simplify the survivors with Douglas-Peucker and keep convex four-corner shapes with
+//!    sane edges and angles. A quick look at the rough corners ([`decode::precheck`]: border
+//!    ring, margin, flat interior) turns down most non-markers before step 4.
 //! 4. [`refine`]: move each edge onto the image's intensity edge with sub-pixel precision
 //!    (line fits to gradient peaks) and intersect neighbouring edges for the corners.
 //! 5. [`decode`]: map the family's cell grid through the corner homography, sample each cell
@@ -16,6 +19,13 @@
 //!    margin, and look the code up in all four rotations with bounded error correction.
 //! 6. De-duplicate: the same marker found twice (two contours, two families) is kept once,
 //!    with the fewest corrected bits and then the largest decision margin.
+//!
+//! ## Time
+//! Every step draws from one work budget per frame
+//! ([`DetectorConfig::work_budget_per_pixel`]), so no image, however hostile, costs more than
+//! the budget allows; the frame is then marked [`DetectStats::truncated`]. The prices of the
+//! steps (`WORK_*`) were measured on the Cortex-M7 benchmark (`bench/m7`), where one unit is
+//! 75 to 100 instructions.
 //!
 //! ## Memory
 //! Frame-sized work memory is lent by the caller as [`Buffers`] (sized by
@@ -50,6 +60,41 @@ pub const MAX_FAMILIES: usize = 8;
 pub const MAX_CONTOUR_POINTS: usize = 4096;
 /// Side of the square tiles of the local threshold, in pixels.
 pub const TILE: usize = 4;
+
+/// Boundary pixels per work unit of the screening before the quad fit
+/// ([`DetectorConfig::work_budget_per_pixel`]): the area, compactness, convexity and
+/// diameter tests cost about 15 Cortex-M7 instructions per boundary pixel.
+pub const WORK_SCREEN_PIXELS: u32 = 4;
+/// Work units of the Douglas-Peucker quad fit of a boundary that passed the screening: this
+/// many, plus one per boundary pixel (measured: about 3,400 Cortex-M7 instructions for the
+/// 28-pixel boundary of an 8-pixel square, 12,000 for a 150-pixel one).
+pub const WORK_FIT: u32 = 20;
+/// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::default`], for the camera:
+/// the bound on the time per frame (see [`DetectorConfig::work_budget_per_pixel`]).
+pub const CAMERA_WORK_BUDGET: f32 = 0.35;
+/// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::offline`]: ten times the
+/// camera's, as much as the most cluttered photo in the test data needs several times over.
+pub const OFFLINE_WORK_BUDGET: f32 = 4.0;
+/// Work units charged for starting a boundary (the call, the first neighbour search, the
+/// bookkeeping): a frame of thousands of two-pixel specks costs that much more than its steps.
+pub const WORK_TRACE_START: u32 = 2;
+
+/// Work units of the quick look at a candidate before its refinement (border ring, margin
+/// and interior at the rough corners: about 80 nearest-pixel samples).
+pub const WORK_PRECHECK: u32 = 30;
+/// Work units of a refined and read candidate besides its image reads (the cell grid's
+/// homography, the black and white level fits, the code look-up: about 20,000 Cortex-M7
+/// instructions).
+pub const WORK_CANDIDATE: u32 = 300;
+/// Twice the work units per image read of a refined candidate: a bilinear sample on an edge
+/// profile or in a cell, or a point mapped through the cell grid's homography, costs about
+/// 110 Cortex-M7 instructions with its share of the bookkeeping (measured: 93,000 for the
+/// 64 profiles of 13 samples that refine a 60-pixel marker's corners).
+pub const WORK_PER_SAMPLE_X2: u32 = 3;
+/// Smallest work budget of a frame, whatever its size (about 1.8 million Cortex-M7
+/// instructions): a small image on busy ground (a 130-pixel crop of the simulator's textured
+/// ground uses 17,600 units for its one marker) is searched to the end.
+pub const MIN_WORK_BUDGET: u32 = 24_000;
 
 /// Sizes of the caller-provided buffers for a frame size.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -153,17 +198,30 @@ pub struct DetectorConfig {
     /// Smallest decision margin (0..1: mean distance of the data cells from the threshold,
     /// relative to half the black/white contrast) for a detection to be reported.
     pub min_decision_margin: f32,
-    /// Contour-following steps allowed per frame, per pixel of the frame: bounds the time on
-    /// adversarial frames. When exhausted, detection stops and [`DetectStats::truncated`] is
-    /// set.
-    pub trace_budget_per_pixel: u8,
+    /// Work allowed per frame, per pixel of the frame, in **work units**: bounds the time per
+    /// frame on any image. One unit is one contour-following step (about 70 Cortex-M7
+    /// instructions); screening a boundary for the quad fit costs one unit per [`WORK_SCREEN_PIXELS`] of
+    /// it (and [`WORK_FIT`] plus one per pixel for the fit itself), a quick look at a candidate
+    /// [`WORK_PRECHECK`] and refining and reading a
+    /// candidate [`WORK_CANDIDATE`] plus its image reads ([`WORK_PER_SAMPLE_X2`]; see their
+    /// docs for the measurements). When the budget
+    /// runs out, detection stops and [`DetectStats::truncated`] is set.
+    ///
+    /// The default, [`CAMERA_WORK_BUDGET`], is for the camera board: it holds the worst
+    /// frames of the Cortex-M7 benchmark (uniform noise, hundreds of small squares) under
+    /// twice the cost of a typical landing frame. Simulated landing frames use 0.04 to 0.27
+    /// units per pixel. Cluttered photos with dozens of markers use more (up to 0.37 in the
+    /// test data): [`DetectorConfig::offline`] is the setting for photos on a host. Not a
+    /// number, or below 0, counts as 0.
+    pub work_budget_per_pixel: f32,
     /// Candidate quads refined and read per frame. A quad costs far more than a traced
     /// pixel (sub-pixel edges, the cell grid, the look-up: ~80,000 Cortex-M7 instructions
-    /// for a small one), so a frame full of marker-like squares would cost 40 typical frames
-    /// without this. When reached, detection stops and [`DetectStats::truncated`] is set. A
-    /// landing frame has a few (each marker, a few look-alikes in the clutter): the budget
+    /// for a small one). When reached, detection stops and [`DetectStats::truncated`] is set.
+    /// A landing frame has a few (each marker, a few look-alikes in the clutter): the default
     /// leaves a wide margin, but on a frame with more candidates than this, markers after
-    /// the budget (in raster order of their top edge) are not searched.
+    /// the budget (in raster order of their top edge) are not searched. Quads without a dark
+    /// border in a light margin, or whose interior is one flat tone (tiles, windows, dark
+    /// squares; for families without a uniform code), are turned down before they count.
     pub max_candidates: u16,
 }
 
@@ -176,19 +234,32 @@ impl Default for DetectorConfig {
             max_hamming: u8::MAX,
             refine_edges: true,
             min_decision_margin: 0.25,
-            trace_budget_per_pixel: 4,
+            work_budget_per_pixel: CAMERA_WORK_BUDGET,
             max_candidates: 48,
         }
     }
 }
 
 impl DetectorConfig {
-    /// The paper's method with its fixed choices.
+    /// The default detector with the [`OFFLINE_WORK_BUDGET`]: for photos on a host (the
+    /// `touchdown detect` command), where searching a cluttered frame to the end matters
+    /// more than a bound on the time per frame.
+    pub fn offline() -> Self {
+        DetectorConfig {
+            work_budget_per_pixel: OFFLINE_WORK_BUDGET,
+            ..DetectorConfig::default()
+        }
+    }
+
+    /// The paper's method with its fixed choices. It follows every contour of its edge map
+    /// (holes and the edge bands' both sides), several times the work of ours, and keeps the
+    /// [`OFFLINE_WORK_BUDGET`] so its tables reproduce.
     pub fn paper() -> Self {
         DetectorConfig {
             method: Method::Paper,
+            work_budget_per_pixel: OFFLINE_WORK_BUDGET,
             max_hamming: 0,
-            refine_edges: false,
+            refine_edges: true,
             min_decision_margin: 0.0,
             ..DetectorConfig::default()
         }
@@ -222,16 +293,23 @@ pub struct Detection {
 pub struct DetectStats {
     /// Boundaries followed.
     pub contours: u32,
-    /// Boundaries that simplified to a convex quad.
+    /// Boundaries that simplified to a convex quad of a polarity some family is printed in
+    /// (dark outline, or a light hole for white-on-black families): the candidates.
     pub quads: u32,
     /// Quads whose cells read as a valid marker grid (black border, white margin, clear
     /// cells) for some family's layout, before the code look-up.
     pub bordered: u32,
     /// Quads decoded to an id (before de-duplication).
     pub decoded: u32,
+    /// Candidates refined and read: the quads that the quick look at their rough corners
+    /// (border ring, margin, flat interior) did not turn down; at most
+    /// [`DetectorConfig::max_candidates`].
+    pub refined: u32,
     /// Contour-following steps spent.
     pub trace_steps: u32,
-    /// The step or candidate budget ran out, or a fixed capacity filled: some of the frame was
+    /// Work units spent, steps included ([`DetectorConfig::work_budget_per_pixel`]).
+    pub work: u32,
+    /// The work or candidate budget ran out, or a fixed capacity filled: some of the frame was
     /// not searched.
     pub truncated: bool,
 }
@@ -326,6 +404,7 @@ impl Detector {
             Method::Robust => threshold::local_threshold(image, config.min_contrast, bitmap, tiles),
             Method::Paper => threshold::paper_edges(image, bitmap, tiles),
         }
+        contour::clear_border(bitmap, wpr, width);
         visited.fill(0);
         let candidates = Candidates {
             image,
@@ -337,37 +416,57 @@ impl Detector {
                 .max()
                 .unwrap_or(1)
                 .max(1),
+            uniform_decodes: families.iter().any(|f| decode::uniform_grid_decodes(f)),
+            quiet_margins: families.iter().all(|f| f.quiet_rings >= f.border_ring),
+        };
+        // Hole boundaries are only candidates for white-on-black families and in the paper's
+        // pipeline; everywhere else following them is wasted time (see `contour`).
+        let rule = if config.method == Method::Paper || families.iter().any(|f| f.reversed()) {
+            contour::StartRule::AllBoundaries
+        } else {
+            contour::StartRule::OuterOnly
         };
         let bitmap: &[u32] = bitmap;
-        let budget = (config.trace_budget_per_pixel as u64 * (width * height) as u64)
-            .min(u32::MAX as u64) as u32;
-        let mut tracer = contour::Tracer {
-            bitmap,
-            visited,
-            width,
-            height,
-            words_per_row: wpr,
-            budget,
-            steps: 0,
-        };
-        // `max(1)`: a frame is never empty, so `wpr >= 1`; stated so no panic path remains.
-        'scan: for (y, row) in bitmap.chunks(wpr.max(1)).enumerate() {
-            let mut left_word = 0u32;
+        let budget = work_budget(config.work_budget_per_pixel, width * height);
+        let mut tracer = contour::Tracer::new(bitmap, visited, wpr, budget);
+        let row_words = |y: usize| bitmap.get(y * wpr..(y + 1) * wpr).unwrap_or(&[]);
+        let word = |row: &[u32], k: usize| row.get(k).copied().unwrap_or(0);
+        'scan: for y in 0..height {
+            let row = row_words(y);
+            let above = y.checked_sub(1).map_or(&[][..], row_words);
+            let below = row_words(y + 1);
             for (k, &dark) in row.iter().enumerate() {
+                if dark == 0 {
+                    continue;
+                }
+                let three = |r: &[u32]| [word(r, k.wrapping_sub(1)), word(r, k), word(r, k + 1)];
+                let neighbourhood = contour::Neighbourhood {
+                    left: word(row, k.wrapping_sub(1)),
+                    dark,
+                    right: word(row, k + 1),
+                    above: three(above),
+                    below: three(below),
+                };
                 loop {
-                    let seen = tracer.visited.get(y * wpr + k).copied().unwrap_or(u32::MAX);
-                    let starts = contour::start_bits(dark, left_word, seen);
+                    let seen = tracer.visited_word(y * wpr + k);
+                    let starts = contour::start_bits(&neighbourhood, seen, rule);
                     if starts == 0 {
                         break;
                     }
                     let x = k * 32 + starts.trailing_zeros() as usize;
                     stats.contours += 1;
+                    if !tracer.charge(WORK_TRACE_START) {
+                        stats.truncated = true;
+                        break 'scan;
+                    }
                     match tracer.trace(x, y, contour) {
                         contour::Trace::Closed(len) => {
-                            if let Some(boundary) = contour.get(..len) {
-                                candidates.process(boundary, detections, stats);
-                            }
-                            if stats.quads >= u32::from(config.max_candidates) {
+                            let fit_work = len as u32 / WORK_SCREEN_PIXELS;
+                            let go_on = tracer.charge(fit_work)
+                                && contour.get(..len).is_none_or(|boundary| {
+                                    candidates.process(boundary, detections, stats, &mut tracer)
+                                });
+                            if !go_on {
                                 stats.truncated = true;
                                 break 'scan;
                             }
@@ -379,10 +478,10 @@ impl Detector {
                         }
                     }
                 }
-                left_word = dark;
             }
         }
-        stats.trace_steps = tracer.steps;
+        stats.trace_steps = tracer.steps();
+        stats.work = budget - tracer.remaining();
         Ok(detections)
     }
 }
@@ -395,21 +494,37 @@ struct Candidates<'f, 'i, 'a> {
     /// Cells across the largest detected square among the families: bounds how far an edge
     /// may be moved without reaching the next edge inside the marker.
     max_quad_cells: usize,
+    /// Some family decodes an all-black or all-white grid, so a candidate with a flat
+    /// interior may still be one of its markers ([`decode::uniform_grid_decodes`]).
+    uniform_decodes: bool,
+    /// Every family has a quiet (white) ring right outside its border: then a marker's
+    /// outline is a clean quad (the screening's convexity test holds) and
+    /// [`decode::precheck`] can take that ring as the white reference. tagStandard41h12 has
+    /// data cells there instead.
+    quiet_margins: bool,
 }
 
 impl Candidates<'_, '_, '_> {
-    /// Quad fit, refinement and decoding of one closed boundary.
+    /// Quad fit, refinement and decoding of one closed boundary, charging the work to
+    /// `tracer`'s budget. Returns false when the scan must stop: the work budget or the
+    /// candidate budget ran out.
     fn process(
         &self,
         boundary: &[contour::Pixel],
         detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
         stats: &mut DetectStats,
-    ) {
+        tracer: &mut contour::Tracer<'_>,
+    ) -> bool {
         let config = self.config;
-        let Some(quad) = quad::fit_quad(boundary, config.min_edge_px) else {
-            return;
+        let Some(screened) = quad::screen(boundary, config.min_edge_px, self.quiet_margins) else {
+            return true;
         };
-        stats.quads += 1;
+        if !tracer.charge(WORK_FIT + boundary.len() as u32) {
+            return false;
+        }
+        let Some(quad) = quad::fit(boundary, &screened, config.min_edge_px) else {
+            return true;
+        };
         let paper = config.method == Method::Paper;
         // The paper traces every contour of its edge map, outer and hole alike (OpenCV's
         // findContours); the edge band around a marker's outline leaves a hole just inside
@@ -423,8 +538,31 @@ impl Candidates<'_, '_, '_> {
             }
         };
         if !self.families.iter().any(|f| wanted(f)) {
-            return;
+            return true;
         }
+        stats.quads += 1;
+        // The quick look is for dark-on-light families with a quiet margin (a hole is a
+        // white-on-black one's).
+        if !paper && !quad.hole && self.quiet_margins {
+            if !tracer.charge(WORK_PRECHECK) {
+                return false;
+            }
+            let rough = refine::half_pixel_adjusted(&quad);
+            let flat_rejects = !self.uniform_decodes;
+            let cells = self.max_quad_cells;
+            match decode::precheck(self.image, cells, &rough, config.min_contrast, flat_rejects) {
+                decode::Precheck::Candidate => {}
+                decode::Precheck::Flat | decode::Precheck::NoBorder => return true,
+            }
+        }
+        // The candidate's work is counted as it is done (image samples) and charged after;
+        // it starts only while some budget is left, so a frame overruns its budget by at most
+        // one candidate.
+        if stats.refined >= u32::from(config.max_candidates) || tracer.remaining() == 0 {
+            return false;
+        }
+        stats.refined += 1;
+        let mut samples = 0u32;
         let corners = if paper {
             // The edge map's outline runs along the outside of the gradient band around the
             // marker's edge (its holes along the inside): step back onto the edge itself.
@@ -435,12 +573,12 @@ impl Candidates<'_, '_, '_> {
                 .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
                 .fold(f32::MAX, f32::min);
             let radius = (0.5 * shortest / self.max_quad_cells as f32).clamp(0.75, 4.0);
-            refine::refine_corners(self.image, &quad, radius)
+            refine::refine_corners(self.image, &quad, radius, &mut samples)
         } else {
             refine::half_pixel_adjusted(&quad)
         };
         if !quad::check_shape(&corners, 0.8 * config.min_edge_px) {
-            return;
+            return tracer.charge(candidate_work(samples));
         }
         let mut bordered = false;
         // The last layout read and its result: consecutive families with the same layout
@@ -456,7 +594,7 @@ impl Candidates<'_, '_, '_> {
                     let grid = if paper {
                         decode::read_paper(self.image, family, &corners)
                     } else {
-                        decode::read_robust(self.image, family, &corners, config)
+                        decode::read_robust(self.image, family, &corners, config, &mut samples)
                     };
                     last = Some((family, grid));
                     grid
@@ -487,6 +625,25 @@ impl Candidates<'_, '_, '_> {
         if bordered {
             stats.bordered += 1;
         }
+        tracer.charge(candidate_work(samples))
+    }
+}
+
+/// Work units of a refined and read candidate that took `samples` weighted image reads.
+fn candidate_work(samples: u32) -> u32 {
+    WORK_CANDIDATE.saturating_add(samples.saturating_mul(WORK_PER_SAMPLE_X2) / 2)
+}
+
+/// Work units of a frame of `pixels` at `per_pixel` units each, at least [`MIN_WORK_BUDGET`]
+/// (0 for a negative, zero or not-a-number setting), saturating.
+fn work_budget(per_pixel: f32, pixels: usize) -> u32 {
+    let units = per_pixel * pixels as f32;
+    if units >= u32::MAX as f32 {
+        u32::MAX
+    } else if units > 0.0 {
+        (units as u32).max(MIN_WORK_BUDGET)
+    } else {
+        0
     }
 }
 

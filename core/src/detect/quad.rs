@@ -62,14 +62,100 @@ fn cross(o: Point, a: Point, b: Point) -> f32 {
 /// Twice the signed area of the boundary polygon: positive when it runs clockwise on
 /// screen (an outer boundary), negative for a hole.
 pub(crate) fn signed_area2(contour: &[Pixel]) -> i64 {
-    let n = contour.len();
-    let mut acc = 0i64;
-    for i in 0..n {
-        let a = contour.get(i).copied().unwrap_or_default();
-        let b = contour.get((i + 1) % n).copied().unwrap_or_default();
-        acc += a.x as i64 * b.y as i64 - b.x as i64 * a.y as i64;
+    // Relative to the first pixel, which makes the first and the closing term zero and keeps
+    // every partial sum (twice the area of a fan from that pixel) within i32: the boundary is
+    // a connected path of at most MAX_CONTOUR_POINTS pixels. 32-bit products are half the
+    // instructions of 64-bit ones on the Cortex-M7, and this runs on every long boundary.
+    let Some(origin) = contour.first() else {
+        return 0;
+    };
+    let (ox, oy) = (i32::from(origin.x), i32::from(origin.y));
+    let mut acc = 0i32;
+    let (mut px, mut py) = (0i32, 0i32);
+    for p in contour.get(1..).unwrap_or(&[]) {
+        let (x, y) = (i32::from(p.x) - ox, i32::from(p.y) - oy);
+        acc = acc.wrapping_add(px.wrapping_mul(y).wrapping_sub(x.wrapping_mul(py)));
+        (px, py) = (x, y);
     }
-    acc
+    i64::from(acc)
+}
+
+/// The boundary at positions `from..to` counted from index 0 of `contour` and wrapping
+/// around its end once, as up to two slices in order.
+fn wrapped_span(contour: &[Pixel], from: usize, to: usize) -> (&[Pixel], &[Pixel]) {
+    let n = contour.len();
+    if to <= n {
+        (contour.get(from..to).unwrap_or(&[]), &[])
+    } else if from >= n {
+        (contour.get(from - n..to - n).unwrap_or(&[]), &[])
+    } else {
+        (
+            contour.get(from..).unwrap_or(&[]),
+            contour.get(..to - n).unwrap_or(&[]),
+        )
+    }
+}
+
+/// The boundary point strictly between positions `i` and `j` (counted from `origin`) that
+/// lies farthest from the chord between them, if it is farther than `tolerance`.
+///
+/// Integer arithmetic on the pixel coordinates (this loop is most of the fit's time on a
+/// noisy frame): the distance is compared as the cross product against `tolerance` times the
+/// chord length, so there is no division per point. The products fit in `i32` because the
+/// boundary is a connected path of at most [`super::MAX_CONTOUR_POINTS`] pixels, so no two of
+/// its points are further apart than that on either axis.
+fn farthest_from_chord(
+    contour: &[Pixel],
+    origin: usize,
+    i: usize,
+    j: usize,
+    tolerance: f32,
+) -> Option<usize> {
+    let n = contour.len();
+    // Positions are below 2n (origin < n, i < j <= n): one subtraction wraps them.
+    let pixel = |t: usize| {
+        let t = if t >= n { t - n } else { t };
+        contour.get(t).copied().unwrap_or_default()
+    };
+    let (a, b) = (pixel(origin + i), pixel(origin + j));
+    let (ax, ay) = (i32::from(a.x), i32::from(a.y));
+    let (dx, dy) = (i32::from(b.x) - ax, i32::from(b.y) - ay);
+    // Distance to the chord's line, scaled by its length; to `a` itself (squared) when the
+    // chord is a single point (a thin boundary coming back to the same pixel).
+    let degenerate = dx == 0 && dy == 0;
+    let measure = |p: &Pixel| {
+        let (ex, ey) = (i32::from(p.x) - ax, i32::from(p.y) - ay);
+        if degenerate {
+            ex.wrapping_mul(ex).wrapping_add(ey.wrapping_mul(ey))
+        } else {
+            ex.wrapping_mul(dy)
+                .wrapping_sub(ey.wrapping_mul(dx))
+                .wrapping_abs()
+        }
+    };
+    let (first, second) = wrapped_span(contour, origin + i + 1, origin + j);
+    let mut best = (0i32, 0usize);
+    for (k, p) in first.iter().enumerate() {
+        let m = measure(p);
+        if m > best.0 {
+            best = (m, k);
+        }
+    }
+    for (k, p) in second.iter().enumerate() {
+        let m = measure(p);
+        if m > best.0 {
+            best = (m, first.len() + k);
+        }
+    }
+    // Squared on both sides: no square root per chord.
+    let best2 = (best.0 as f32) * (best.0 as f32);
+    let limit2 = if degenerate {
+        tolerance * tolerance * tolerance * tolerance
+    } else {
+        let (fx, fy) = (dx as f32, dy as f32);
+        tolerance * tolerance * (fx * fx + fy * fy)
+    };
+    (best2 > limit2).then_some(i + 1 + best.1)
 }
 
 /// Douglas-Peucker vertices of the closed boundary, as positions `t` along it counted from
@@ -88,18 +174,10 @@ fn simplify(
     stack.push((0, split)).ok()?;
     stack.push((split, n)).ok()?;
     while let Some((i, j)) = stack.pop() {
-        let (a, b) = (at(contour, origin + i), at(contour, origin + j));
-        let mut best = (0.0f32, i);
-        for t in i + 1..j {
-            let d = line_distance(at(contour, origin + t), a, b);
-            if d > best.0 {
-                best = (d, t);
-            }
-        }
-        if best.0 > tolerance {
-            vertices.push(best.1).ok()?;
-            stack.push((i, best.1)).ok()?;
-            stack.push((best.1, j)).ok()?;
+        if let Some(t) = farthest_from_chord(contour, origin, i, j, tolerance) {
+            vertices.push(t).ok()?;
+            stack.push((i, t)).ok()?;
+            stack.push((t, j)).ok()?;
         }
     }
     sort_short(&mut vertices);
@@ -120,12 +198,85 @@ fn sort_short(v: &mut [usize]) {
     }
 }
 
-/// Smallest twice-area over squared boundary length of a candidate (see [`fit_quad`]): a
+/// Most points [`roughly_convex`] samples along a boundary.
+const CONVEXITY_SAMPLES: usize = 16;
+/// Fewest boundary steps between two samples of [`roughly_convex`]: a chord of four or more
+/// pixels along a digital straight edge is off its direction by at most atan(1/4), 14
+/// degrees, so two such chords turn the wrong way by at most 28 degrees on a straight edge.
+const CONVEXITY_MIN_SPACING: usize = 4;
+/// sin^2 of the sharpest concave turn [`roughly_convex`] accepts between two chords: 60
+/// degrees, twice the digitisation's worst case, so thresholding jitter and a dent of a
+/// pixel or two in a marker's outline pass while the ragged outline of a noise blob does not.
+const CONVEXITY_MAX_CONCAVE_SIN2: f32 = 0.75;
+
+/// Whether the boundary, sampled at up to [`CONVEXITY_SAMPLES`] evenly spaced points, turns
+/// one way only (up to digitisation): a quad's outline does, the outline of a noise blob or
+/// of texture almost never. `clockwise` is the orientation of a convex outline (the sign of
+/// [`signed_area2`]).
+///
+/// This is the cheap test in front of Douglas-Peucker: it costs a few hundred instructions
+/// whatever the boundary's length, while the fit scans the boundary five to eight times. On a
+/// frame of noise most boundaries long enough to be a marker fail it.
+fn roughly_convex(contour: &[Pixel], clockwise: bool) -> bool {
+    let n = contour.len();
+    let k = (n / CONVEXITY_MIN_SPACING).min(CONVEXITY_SAMPLES);
+    if k < 4 {
+        return true;
+    }
+    let sample = |j: usize| {
+        let p = contour.get(j * n / k).copied().unwrap_or_default();
+        (i32::from(p.x), i32::from(p.y))
+    };
+    let (mut a, mut b) = (sample(k - 2), sample(k - 1));
+    for j in 0..k {
+        let c = sample(j);
+        let (ux, uy) = (b.0 - a.0, b.1 - a.1);
+        let (vx, vy) = (c.0 - b.0, c.1 - b.1);
+        // Screen coordinates (y down): a clockwise outline turns with cross > 0.
+        let cross = (ux * vy - uy * vx) as f32;
+        let concave = if clockwise { cross < 0.0 } else { cross > 0.0 };
+        if concave {
+            let (u2, v2) = ((ux * ux + uy * uy) as f32, (vx * vx + vy * vy) as f32);
+            if cross * cross > CONVEXITY_MAX_CONCAVE_SIN2 * u2 * v2 {
+                return false;
+            }
+        }
+        (a, b) = (b, c);
+    }
+    true
+}
+
+/// Squared ratio of the smallest boundary diameter to `min_edge` that can hold a quad with
+/// every side at least `min_edge`: 2 exactly (a square), 1.9 to stay clear of rounding.
+const MIN_DIAMETER_PER_EDGE2: f32 = 1.9;
+
+/// Smallest twice-area over squared boundary length of a candidate (see [`screen`]): a
 /// square traced along its axes gives 1/8, at 45 degrees 1/4, a 1:8 rectangle 1/20.
 const COMPACTNESS: f32 = 0.04;
 
-/// Fits a candidate quad to a closed boundary.
+/// A boundary that passed [`screen`]: worth the Douglas-Peucker fit ([`fit`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Screened {
+    /// The boundary encloses a light region.
+    hole: bool,
+    /// Index of one end of the boundary's diameter, where the fit starts.
+    origin: usize,
+    /// Position of the other end, counted from `origin`.
+    split: usize,
+}
+
+/// Fits a candidate quad to a closed boundary ([`screen`], then [`fit`]).
+#[cfg(test)]
 pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
+    fit(contour, &screen(contour, min_edge, true)?, min_edge)
+}
+
+/// The cheap tests a boundary must pass before the fit, about 15 Cortex-M7 instructions per
+/// boundary pixel in all: long enough, compact, roughly convex (when `convex`: markers with
+/// a quiet margin have a straight outline; tagStandard41h12's data cells outside its border
+/// make a bumpy one), wide enough for four sides of `min_edge`. Most boundaries of a
+/// cluttered or noisy frame stop here.
+pub(crate) fn screen(contour: &[Pixel], min_edge: f32, convex: bool) -> Option<Screened> {
     let n = contour.len();
     // An edge of `min_edge` pixels at 45 degrees is min_edge / sqrt(2) steps.
     if (n as f32) < 2.8 * min_edge || n < 8 {
@@ -140,6 +291,9 @@ pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
     // while noise blobs and thin strokes are ragged outlines around little area. Rejecting
     // them here, before the Douglas-Peucker fit, is most of the cost of a noisy frame.
     if (area2.unsigned_abs() as f32) < COMPACTNESS * (n * n) as f32 {
+        return None;
+    }
+    if convex && !roughly_convex(contour, area2 > 0) {
         return None;
     }
     let hole = area2 < 0;
@@ -167,39 +321,91 @@ pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
     if split == 0 {
         return None;
     }
-    let tolerance = (TOLERANCE_PER_PIXEL * n as f32).max(MIN_TOLERANCE);
-    let mut vertices = simplify(contour, origin, split, tolerance)?;
-    // Drop the vertex that bends the outline least while more than four remain.
-    while vertices.len() > 4 {
-        let m = vertices.len();
-        let mut best = (f32::MAX, 0usize);
-        for k in 0..m {
-            let prev = vertices.get((k + m - 1) % m).copied().unwrap_or(0);
-            let cur = vertices.get(k).copied().unwrap_or(0);
-            let next = vertices.get((k + 1) % m).copied().unwrap_or(0);
-            let d = line_distance(
-                at(contour, origin + cur),
-                at(contour, origin + prev),
-                at(contour, origin + next),
+    // The quad's corners will be boundary pixels, so its diagonals are at most the
+    // boundary's diameter; and a convex quad whose sides are all at least `min_edge` has a
+    // diagonal of at least sqrt(2) * min_edge (the square is the tightest). A boundary
+    // narrower than that cannot pass `check_shape`: stop before the fit (a frame of noise
+    // has hundreds of compact blobs just too small to be markers).
+    let diameter2 = match (contour.get(origin), contour.get(split_abs)) {
+        (Some(a), Some(b)) => {
+            let (dx, dy) = (
+                f32::from(a.x) - f32::from(b.x),
+                f32::from(a.y) - f32::from(b.y),
             );
-            if d < best.0 {
-                best = (d, k);
-            }
+            dx * dx + dy * dy
         }
-        if best.0 > 2.0 * tolerance {
-            return None;
-        }
-        if best.1 < vertices.len() {
-            vertices.remove(best.1);
-        }
-    }
-    if vertices.len() != 4 {
+        _ => 0.0,
+    };
+    if diameter2 < MIN_DIAMETER_PER_EDGE2 * min_edge * min_edge {
         return None;
     }
-    let mut corners = [Point::default(); 4];
-    for (c, &t) in corners.iter_mut().zip(vertices.iter()) {
-        *c = at(contour, origin + t);
+    Some(Screened {
+        hole,
+        origin,
+        split,
+    })
+}
+
+/// The Douglas-Peucker fit of a screened boundary: a convex quad with sides of at least
+/// `min_edge`, or nothing.
+pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Option<Quad> {
+    let n = contour.len();
+    let Screened {
+        hole,
+        origin,
+        split,
+    } = *screened;
+    let tolerance = (TOLERANCE_PER_PIXEL * n as f32).max(MIN_TOLERANCE);
+    let vertices = simplify(contour, origin, split, tolerance)?;
+    // Drop the vertex that bends the outline least while more than four remain. Each
+    // vertex's bend (its distance from the line through its neighbours) is kept, and only
+    // the two neighbours of a dropped vertex are measured again.
+    // (Filled by pushes and emptied by checked removals: `collect` and `remove` into a
+    // heapless vector have panic paths the no-panic check would find.)
+    let mut corners: heapless::Vec<Point, MAX_VERTICES> = heapless::Vec::new();
+    for &t in vertices.iter() {
+        let _ = corners.push(at(contour, origin + t));
     }
+    let bend = |points: &[Point], k: usize| {
+        let m = points.len().max(1);
+        let point = |i: usize| points.get(i % m).copied().unwrap_or_default();
+        line_distance(point(k), point(k + m - 1), point(k + 1))
+    };
+    let mut bends: heapless::Vec<f32, MAX_VERTICES> = heapless::Vec::new();
+    for k in 0..corners.len() {
+        let _ = bends.push(bend(&corners, k));
+    }
+    while corners.len() > 4 {
+        let (least, bent) = bends
+            .iter()
+            .enumerate()
+            .fold(
+                (0usize, f32::MAX),
+                |best, (k, &b)| {
+                    if b < best.1 {
+                        (k, b)
+                    } else {
+                        best
+                    }
+                },
+            );
+        if bent > 2.0 * tolerance || least >= corners.len() || least >= bends.len() {
+            return None;
+        }
+        corners.remove(least);
+        bends.remove(least);
+        let m = corners.len();
+        for k in [(least + m - 1) % m, least % m] {
+            let b = bend(&corners, k);
+            if let Some(slot) = bends.get_mut(k) {
+                *slot = b;
+            }
+        }
+    }
+    let [c0, c1, c2, c3] = corners.as_slice() else {
+        return None;
+    };
+    let mut corners = [*c0, *c1, *c2, *c3];
     // Clockwise on screen.
     let orientation: f32 = (0..4)
         .map(|k| {

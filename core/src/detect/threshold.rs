@@ -23,7 +23,7 @@ pub(crate) fn words_per_row(width: usize) -> usize {
 }
 
 /// Reads bit (x, y) of a bitmap; outside the image reads as 0.
-#[inline]
+#[cfg(test)]
 pub(crate) fn get_bit(
     bitmap: &[u32],
     wpr: usize,

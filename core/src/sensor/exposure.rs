@@ -80,6 +80,38 @@ impl AutoExposure {
         }
     }
 
+    /// Replaces the limits while running (a user changed them): the current setting is pulled
+    /// inside the new limits at once and the loop continues from there, so a lowered ceiling
+    /// takes effect on the next frame rather than after the loop has walked down to it.
+    /// `line_ns` and `frame_lines` are the sensor timing, as for [`AutoExposure::new`].
+    /// Returns the new setting when it changed (to be written to the sensor).
+    pub fn set_limits(
+        &mut self,
+        limits: AutoExposureLimits,
+        line_ns: u32,
+        frame_lines: u32,
+    ) -> Option<ExposureSetting> {
+        let fresh = AutoExposure::new(limits, line_ns, frame_lines);
+        self.limits = limits;
+        self.max_lines = fresh.max_lines;
+        // min/max rather than `clamp`, which has a panic path for crossed bounds.
+        let next = ExposureSetting {
+            lines: self.setting.lines.min(self.max_lines).max(1),
+            gain: GainX16(
+                self.setting
+                    .gain
+                    .0
+                    .min(limits.max_gain.0)
+                    .max(GainX16::ONE.0),
+            ),
+        };
+        if next == self.setting {
+            return None;
+        }
+        self.setting = next;
+        Some(next)
+    }
+
     /// The longest exposure the limits allow, line periods.
     pub fn max_lines(&self) -> u16 {
         self.max_lines
@@ -102,7 +134,8 @@ impl AutoExposure {
         let wanted = current * target / mean.max(1);
         let wanted = wanted.clamp(current / 2, current.saturating_mul(2)).max(16);
         let max_gain = u32::from(self.limits.max_gain.0.max(16));
-        let lines = (wanted / 16).clamp(1, u32::from(self.max_lines));
+        // min/max: `clamp` panics on crossed bounds, which the optimiser cannot rule out here.
+        let lines = (wanted / 16).min(u32::from(self.max_lines)).max(1);
         let gain = (wanted / lines).clamp(16, max_gain);
         let next = ExposureSetting {
             lines: lines as u16,
@@ -185,6 +218,67 @@ mod tests {
         let p0 = u32::from(before.lines) * u32::from(before.gain.0);
         let p1 = u32::from(after.lines) * u32::from(after.gain.0);
         assert!(p1 * 2 >= p0 - 16 && p1 < p0, "{before:?} -> {after:?}");
+    }
+
+    #[test]
+    fn new_limits_apply_at_once_and_the_loop_follows_them() {
+        let mut ae = qvga();
+        // A dark scene drives exposure and gain to 4 ms (33 lines) and 8x.
+        for _ in 0..20 {
+            let mean = scene(ae.setting(), 10);
+            ae.update(mean);
+        }
+        assert_eq!(ae.setting().lines, 33);
+        assert_eq!(ae.setting().gain, GainX16(128));
+        // Bright sun: the user lowers the ceiling to 1 ms and 2x; the setting is clipped now.
+        let tight = AutoExposureLimits {
+            max_exposure_us: 1_000,
+            max_gain: GainX16(32),
+            ..AutoExposureLimits::default()
+        };
+        let clipped = ae.set_limits(tight, 120_000, 278).unwrap();
+        assert_eq!(ae.max_lines(), 8);
+        assert_eq!(
+            clipped,
+            ExposureSetting {
+                lines: 8,
+                gain: GainX16(32)
+            }
+        );
+        assert_eq!(ae.setting(), clipped);
+        // Still dark: the loop stays at the new ceiling.
+        for _ in 0..20 {
+            let mean = scene(ae.setting(), 10);
+            ae.update(mean);
+        }
+        assert_eq!(ae.setting(), clipped);
+        // The same limits again change nothing.
+        assert_eq!(ae.set_limits(tight, 120_000, 278), None);
+        // Raised limits free the loop again without a jump; it then climbs to them.
+        assert_eq!(
+            ae.set_limits(AutoExposureLimits::default(), 120_000, 278),
+            None
+        );
+        assert_eq!(ae.max_lines(), 33);
+        for _ in 0..20 {
+            let mean = scene(ae.setting(), 10);
+            ae.update(mean);
+        }
+        assert_eq!(ae.setting().lines, 33);
+        assert_eq!(ae.setting().gain, GainX16(128));
+        // A new target moves the operating point.
+        let mut ae = qvga();
+        let darker = AutoExposureLimits {
+            target: 60,
+            ..AutoExposureLimits::default()
+        };
+        assert_eq!(ae.set_limits(darker, 120_000, 278), None);
+        for _ in 0..20 {
+            let mean = scene(ae.setting(), 200);
+            ae.update(mean);
+        }
+        let mean = scene(ae.setting(), 200);
+        assert!(mean.abs_diff(60) <= 12, "mean {mean}, {:?}", ae.setting());
     }
 
     #[test]

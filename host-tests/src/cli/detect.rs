@@ -107,7 +107,7 @@ impl MethodArg {
     /// The detector settings this method stands for.
     pub fn config(self) -> DetectorConfig {
         match self {
-            MethodArg::Robust => DetectorConfig::default(),
+            MethodArg::Robust => DetectorConfig::offline(),
             MethodArg::Paper => DetectorConfig::paper(),
         }
     }

@@ -1,0 +1,276 @@
+//! The camera side's parameters, turned into the settings the vision code applies.
+//!
+//! Four groups of MAVLink parameters tune what happens before a pose reaches the companion:
+//! TD_MAX_HAMMING (the decoder's correction cap), TD_TAG_SIZE (the printed size of the pad)
+//! and TD_EXP_MAX_US / TD_GAIN_MAX / TD_EXP_TARGET (the software auto-exposure's limits, see
+//! [`crate::sensor::exposure`]). The [`super::Companion`] owns the [`ParamSet`], but the
+//! detector, the pad layout and the exposure loop live with the camera (a separate task in the
+//! firmware). [`VisionSettings::from_params`] is the one place that converts: the firmware's
+//! link task calls it whenever the parameters change and hands the result to the vision task,
+//! which applies it between frames; the host tests call the same function.
+//!
+//! Why here and not in `detect`, `pad` or `sensor`: those modules know nothing of MAVLink
+//! parameter names and should not; the dependency points from the companion (which owns the
+//! table) to them.
+//!
+//! # TD_TAG_SIZE
+//!
+//! A pad is built into the firmware (a single marker or several nested ones, see
+//! [`crate::pad::designs`]), but users print it at whatever size their printer or field
+//! allows. TD_TAG_SIZE is the edge of the pad's **largest** marker as printed; the whole
+//! layout (every marker's size and position) is scaled by `TD_TAG_SIZE / built size`, which
+//! is exactly what printing the pad at another scale does. For a single-marker pad it is
+//! simply that marker's edge. 0 (the default) keeps the pad as built, so a build whose pad
+//! matches the print needs no parameter.
+
+use super::params::{ParamId, ParamSet};
+use crate::detect::DetectorConfig;
+use crate::pad::{PadError, PadLayout, PadMarker, MAX_PAD_MARKERS};
+use crate::sensor::exposure::AutoExposureLimits;
+use crate::sensor::GainX16;
+
+/// What the vision code takes from the parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct VisionSettings {
+    /// Upper bound on corrected bits per marker (each family's own bound applies too).
+    pub max_hamming: u8,
+    /// Edge of the pad's largest marker as printed, metres; `None`: the pad as built.
+    pub tag_size_m: Option<f32>,
+    /// The auto-exposure's limits and target.
+    pub exposure: AutoExposureLimits,
+}
+
+impl Default for VisionSettings {
+    /// The settings of the default parameters.
+    fn default() -> Self {
+        VisionSettings::from_params(&ParamSet::default())
+    }
+}
+
+impl VisionSettings {
+    /// The settings `params` ask for. Every value was range-checked when it was set, so this
+    /// only converts units; the exposure loop's deadband is not a parameter and keeps
+    /// [`AutoExposureLimits::default`]'s.
+    pub fn from_params(params: &ParamSet) -> Self {
+        let built = AutoExposureLimits::default();
+        let tag_size = params.get(ParamId::TagSize);
+        // The gain parameter is in times, the sensor's unit is sixteenths.
+        let gain_x16 = libm::roundf(params.get(ParamId::GainMax) * 16.0);
+        VisionSettings {
+            max_hamming: u8::try_from(params.get_int(ParamId::MaxHamming)).unwrap_or(0),
+            tag_size_m: (tag_size > 0.0).then_some(tag_size),
+            exposure: AutoExposureLimits {
+                target: u8::try_from(params.get_int(ParamId::ExpTarget)).unwrap_or(built.target),
+                deadband: built.deadband,
+                max_exposure_us: u32::try_from(params.get_int(ParamId::ExpMaxUs))
+                    .unwrap_or(built.max_exposure_us),
+                // `as` saturates; the parameter's range keeps it within 16..=512 anyway.
+                max_gain: GainX16((gain_x16 as u16).max(GainX16::ONE.0)),
+            },
+        }
+    }
+
+    /// `base` with these settings' correction cap.
+    pub fn detector_config(&self, base: DetectorConfig) -> DetectorConfig {
+        DetectorConfig {
+            max_hamming: self.max_hamming,
+            ..base
+        }
+    }
+
+    /// The factor the built pad is scaled by (1 when TD_TAG_SIZE is unset).
+    pub fn pad_scale(&self, built: &PadLayout<'_>) -> f32 {
+        match self.tag_size_m {
+            Some(size) => size / largest_marker_size(built),
+            None => 1.0,
+        }
+    }
+
+    /// The pad to search for: `built` as is, or scaled so its largest marker is
+    /// TD_TAG_SIZE. An error only for a layout that cannot be scaled (empty).
+    pub fn pad<'a>(&self, built: &PadLayout<'a>) -> Result<PadLayout<'a>, PadError> {
+        match self.tag_size_m {
+            Some(_) => scale_pad(built, self.pad_scale(built)),
+            None => Ok(*built),
+        }
+    }
+}
+
+/// Edge of the largest marker of `layout`, metres (0 for an empty layout).
+pub fn largest_marker_size(layout: &PadLayout<'_>) -> f32 {
+    layout.markers().iter().map(|m| m.size).fold(0.0, f32::max)
+}
+
+/// `layout` with every marker's size and position multiplied by `factor` (names, families,
+/// ids and yaw unchanged). A factor that is not finite and positive gives
+/// [`PadError::BadSize`], an empty layout [`PadError::Empty`].
+pub fn scale_pad<'a>(layout: &PadLayout<'a>, factor: f32) -> Result<PadLayout<'a>, PadError> {
+    let mut markers = [PadMarker::EMPTY; MAX_PAD_MARKERS];
+    let mut len = 0;
+    for (dst, src) in markers.iter_mut().zip(layout.markers()) {
+        *dst = PadMarker {
+            size: src.size * factor,
+            x: src.x * factor,
+            y: src.y * factor,
+            ..*src
+        };
+        len += 1;
+    }
+    if !(factor.is_finite() && factor > 0.0) && len > 0 {
+        return Err(PadError::BadSize { index: 0 });
+    }
+    PadLayout::new(layout.name(), markers.get(..len).unwrap_or(&[]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pad::designs;
+
+    #[test]
+    fn default_parameters_give_the_compile_time_defaults() {
+        let s = VisionSettings::default();
+        assert_eq!(s, VisionSettings::from_params(&ParamSet::default()));
+        assert_eq!(s.exposure, AutoExposureLimits::default());
+        assert_eq!(s.tag_size_m, None);
+        assert_eq!(s.max_hamming, 1);
+        // Every shipped pad is used as built.
+        for pad in designs::ALL {
+            assert_eq!(s.pad(pad), Ok(*pad));
+            assert_eq!(s.pad_scale(pad), 1.0);
+        }
+        // Only the correction cap differs from the detector's own default.
+        let base = DetectorConfig::default();
+        assert_eq!(
+            s.detector_config(base),
+            DetectorConfig {
+                max_hamming: 1,
+                ..base
+            }
+        );
+    }
+
+    #[test]
+    fn each_parameter_changes_its_setting() {
+        let mut p = ParamSet::default();
+        p.set(ParamId::MaxHamming, 3.0).unwrap();
+        assert_eq!(VisionSettings::from_params(&p).max_hamming, 3);
+        assert_eq!(
+            VisionSettings::from_params(&p)
+                .detector_config(DetectorConfig::default())
+                .max_hamming,
+            3
+        );
+        p.set(ParamId::ExpMaxUs, 1_000.0).unwrap();
+        p.set(ParamId::GainMax, 2.5).unwrap();
+        p.set(ParamId::ExpTarget, 150.0).unwrap();
+        p.set(ParamId::TagSize, 0.625).unwrap();
+        let s = VisionSettings::from_params(&p);
+        assert_eq!(
+            s.exposure,
+            AutoExposureLimits {
+                target: 150,
+                deadband: AutoExposureLimits::default().deadband,
+                max_exposure_us: 1_000,
+                max_gain: GainX16(40),
+            }
+        );
+        assert_eq!(s.tag_size_m, Some(0.625));
+        // Parameters that are not the camera's change nothing here.
+        let mut q = p;
+        q.set(ParamId::RateHz, 5.0).unwrap();
+        q.set(ParamId::CamYaw, 90.0).unwrap();
+        assert_eq!(VisionSettings::from_params(&q), s);
+        // Back to 0: the pad as built again.
+        p.set(ParamId::TagSize, 0.0).unwrap();
+        assert_eq!(VisionSettings::from_params(&p).tag_size_m, None);
+    }
+
+    #[test]
+    fn settings_stay_in_range_at_the_parameter_limits() {
+        for pick_max in [false, true] {
+            let mut p = ParamSet::default();
+            for id in [
+                ParamId::MaxHamming,
+                ParamId::TagSize,
+                ParamId::ExpMaxUs,
+                ParamId::GainMax,
+                ParamId::ExpTarget,
+            ] {
+                let def = id.def();
+                p.set(id, if pick_max { def.max } else { def.min }).unwrap();
+            }
+            let s = VisionSettings::from_params(&p);
+            let e = s.exposure;
+            if pick_max {
+                assert_eq!(s.max_hamming, 3);
+                assert_eq!(s.tag_size_m, Some(5.0));
+                assert_eq!(
+                    (e.max_exposure_us, e.max_gain, e.target),
+                    (33_000, GainX16(512), 220)
+                );
+            } else {
+                assert_eq!(s.max_hamming, 0);
+                assert_eq!(s.tag_size_m, Some(0.02));
+                assert_eq!(
+                    (e.max_exposure_us, e.max_gain, e.target),
+                    (100, GainX16::ONE, 40)
+                );
+            }
+            // The deadband keeps the target band inside the grey scale.
+            assert!(e.target > e.deadband && e.target.checked_add(e.deadband).is_some());
+            // Every pad scales to a valid layout.
+            for pad in designs::ALL {
+                let scaled = s.pad(pad).unwrap();
+                let largest = largest_marker_size(&scaled);
+                let want = s.tag_size_m.unwrap();
+                assert!((largest - want).abs() <= 1e-6 * want, "{largest} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_multi_marker_pad_is_scaled_as_a_whole() {
+        let mut p = ParamSet::default();
+        // The nested pad printed at half size: its 1.25 m marker is 0.625 m.
+        p.set(ParamId::TagSize, 0.625).unwrap();
+        let s = VisionSettings::from_params(&p);
+        let built = &designs::NESTED;
+        assert_eq!(s.pad_scale(built), 0.5);
+        let scaled = s.pad(built).unwrap();
+        assert_eq!(scaled.name(), built.name());
+        assert_eq!(scaled.markers().len(), built.markers().len());
+        for (a, b) in scaled.markers().iter().zip(built.markers()) {
+            assert_eq!((a.family, a.id, a.yaw_deg), (b.family, b.id, b.yaw_deg));
+            assert_eq!(a.size, b.size * 0.5);
+            assert_eq!((a.x, a.y), (b.x * 0.5, b.y * 0.5));
+        }
+        assert_eq!(scaled.find("tag36h11", 5).map(|m| m.size), Some(0.08));
+    }
+
+    #[test]
+    fn a_single_marker_pad_takes_the_tag_size() {
+        let mut p = ParamSet::default();
+        p.set(ParamId::TagSize, 0.2).unwrap();
+        let s = VisionSettings::from_params(&p);
+        let scaled = s.pad(&designs::PAPER_SINGLE).unwrap();
+        let m = scaled.markers()[0];
+        assert_eq!((m.family, m.id, m.size), ("aruco_6x6_250", 0, 0.2));
+        assert_eq!((m.x, m.y), (0.0, 0.0));
+    }
+
+    #[test]
+    fn bad_scale_factors_are_errors() {
+        let pad = &designs::NESTED;
+        for factor in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(
+                scale_pad(pad, factor),
+                Err(PadError::BadSize { index: 0 }),
+                "{factor}"
+            );
+        }
+        assert_eq!(scale_pad(pad, 1.0), Ok(*pad));
+        assert_eq!(largest_marker_size(pad), 1.25);
+    }
+}
