@@ -10,8 +10,11 @@ Usage
 Images: AprilTag 3's three test photos (tag36h11, 47 markers, all id 0), ViSP's rendered
 benchmark at 640x480 and 1920x1080 for tag16h5 / tag25h9 / tag36h11 (ids 0-4) and ViSP's
 AprilTag.png photo (tag36h11, ids 8-19), read from `$TOUCHDOWN_DATA` or `../shared/data`
-next to the repository (`--data DIR` overrides), plus any image files or directories given
-on the command line (searched for `--family`, default tag36h11, with no expected ids).
+next to the repository (`--data DIR` overrides); the simulator's four landing frames of the
+Cortex-M7 benchmark (`bench/m7/frames`, 320x240 and 640x480, tag36h11 and aruco_6x6_250 on
+textured ground, truth from their placements; AprilTag 3 has no aruco dictionary); plus any
+image files or directories given on the command line (searched for `--family`, default
+tag36h11, with no expected ids).
 
 Detectors, each in its own subprocess (so one library's threads, allocator or SIMD dispatch
 cannot affect another's timing):
@@ -169,7 +172,36 @@ def builtin_cases(data):
         cases.append(Case(big, family, list(range(5))))
     reference = read_visp_corners(os.path.join(visp, "ground_truth_detection.txt"), swap=True)
     cases.append(Case(os.path.join(visp, "AprilTag.png"), "tag36h11", list(range(8, 20)), reference))
+    cases += simulator_cases()
     return [c for c in cases if os.path.isfile(c.path)]
+
+
+# The simulator's landing frames of the Cortex-M7 benchmark (bench/m7/frames, rendered by
+# host-tests/examples/m7_frames.rs: textured ground, blur, sensor noise): per frame and
+# family, each marker's id, true centre (pixels, (0, 0) = centre of the top-left pixel) and
+# edge (pixels), copied from the example's placements.
+SIMULATOR_FRAMES = [
+    ("qvga-landing-1.pgm", "tag36h11", [(7, 171.3, 113.6, 40.0)]),
+    ("qvga-multi-6.pgm", "tag36h11", [(0, 62.4, 66.7, 56.0), (1, 160.2, 58.3, 32.0), (2, 258.7, 61.1, 20.0)]),
+    ("qvga-multi-6.pgm", "aruco_6x6_250", [(3, 70.6, 175.2, 44.0), (4, 165.3, 178.8, 26.0), (5, 255.1, 172.4, 18.0)]),
+    ("qvga-far-1.pgm", "tag36h11", [(11, 149.6, 127.3, 14.0)]),
+    ("vga-landing-3.pgm", "tag36h11", [(21, 300.4, 230.9, 96.0), (22, 505.2, 110.7, 40.0)]),
+    ("vga-landing-3.pgm", "aruco_6x6_250", [(9, 140.8, 370.3, 64.0)]),
+]
+
+
+def simulator_cases():
+    """The simulator frames with their truth, as reference squares around the true centres
+    (the score only uses a reference's centre and edge)."""
+    cases = []
+    for name, family, markers in SIMULATOR_FRAMES:
+        reference = []
+        for tag_id, x, y, edge in markers:
+            h = edge / 2
+            reference.append((tag_id, [[x - h, y - h], [x + h, y - h], [x + h, y + h], [x - h, y + h]]))
+        path = os.path.join(REPO, "bench", "m7", "frames", name)
+        cases.append(Case(path, family, [m[0] for m in markers], reference))
+    return cases
 
 
 def read_visp_corners(path, swap):

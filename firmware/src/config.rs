@@ -9,8 +9,8 @@
 
 use touchdown_core::camera::CameraModel;
 use touchdown_core::pad::{designs, PadLayout};
-use touchdown_core::sensor::ov7725::{self, Exposure};
-use touchdown_core::sensor::{GainX16, Resolution};
+use touchdown_core::sensor::any::Model;
+use touchdown_core::sensor::{Config, Exposure, GainX16, Resolution};
 
 use crate::capture::{HEIGHT, WIDTH};
 
@@ -20,8 +20,8 @@ pub const FPS: u32 = 30;
 /// The sensor set-up: QVGA (or VGA with `camera-vga`), YUV, the board's XCLK. Exposure
 /// starts manual at a medium value; the software auto-exposure then drives it per frame within
 /// the limits of the TD_EXP_MAX_US / TD_GAIN_MAX parameters.
-pub fn sensor_config() -> ov7725::Config {
-    ov7725::Config {
+pub fn sensor_config() -> Config {
+    Config {
         resolution: if cfg!(feature = "camera-vga") {
             Resolution::Vga
         } else {
@@ -39,22 +39,44 @@ pub fn sensor_config() -> ov7725::Config {
 }
 
 /// Nominal pinhole model of the OV7725 with the usual 2.8 mm M12 lens: 6 µm pixels at VGA, so
-/// f = 2.8 mm / 6 µm = 467 px at 640x480 (233 px at QVGA), principal point at the centre.
+/// f = 2.8 mm / 6 µm = 467 px at 640x480 (233.5 px at QVGA), principal point at the centre.
 /// Calibrate your own lens (e.g. with OpenCV's chessboard calibration) and put the numbers here for
 /// metre-accurate poses.
-pub const CAMERA: CameraModel = if cfg!(feature = "camera-vga") {
-    // The DCMI crops 40 rows off the top: the centre row 239.5 becomes 199.5.
-    CameraModel::pinhole(
-        WIDTH as u32,
-        HEIGHT as u32,
-        467.0,
-        467.0,
-        319.5,
-        239.5 - 40.0,
-    )
-} else {
-    CameraModel::pinhole(WIDTH as u32, HEIGHT as u32, 233.5, 233.5, 159.5, 119.5)
-};
+pub const CAMERA: CameraModel = centred_pinhole(467.0);
+
+/// Nominal pinhole model of the OV2640 with the same 2.8 mm lens. The driver reads the sensor
+/// in its SVGA mode (800x600, 2x2 binned from the 2.2 µm array: 4.4 µm) and the DSP scales that
+/// by 0.8 to 640x480 (5.5 µm per output pixel): f = 2.8 mm / 5.5 µm = 509 px at VGA, 254.5 px
+/// at QVGA (halved first). The OV2640 sees about 9 % less of the scene than the OV7725 through
+/// the same lens, so its model matters for the range.
+pub const CAMERA_OV2640: CameraModel = centred_pinhole(509.0);
+
+/// A pinhole model with focal length `f_vga` pixels at 640x480 (half that at QVGA) and the
+/// principal point at the centre of the sensor's frame. With `camera-vga` the DCMI crops 40
+/// rows off the top, so the centre row 239.5 becomes 199.5.
+const fn centred_pinhole(f_vga: f32) -> CameraModel {
+    if cfg!(feature = "camera-vga") {
+        CameraModel::pinhole(
+            WIDTH as u32,
+            HEIGHT as u32,
+            f_vga,
+            f_vga,
+            319.5,
+            239.5 - 40.0,
+        )
+    } else {
+        let f = f_vga * 0.5;
+        CameraModel::pinhole(WIDTH as u32, HEIGHT as u32, f, f, 159.5, 119.5)
+    }
+}
+
+/// The camera model of the sensor the vision task found.
+pub const fn camera_model(model: Model) -> &'static CameraModel {
+    match model {
+        Model::Ov7725 => &CAMERA,
+        Model::Ov2640 => &CAMERA_OV2640,
+    }
+}
 
 /// The pad the firmware looks for: touchdown's nested tag36h11 pad (`pads/nested.toml`), at
 /// the size it is built with. A pad printed at another scale is set with TD_TAG_SIZE (the

@@ -6,7 +6,8 @@
 //! parameter log format); this crate only owns hardware and wiring. Tasks, on one cooperative
 //! embassy executor:
 //!
-//! - [`vision::task`]: OV7725 over DCMI + DMA into two frame buffers (capture of frame n+1
+//! - [`vision::task`]: the camera (OV7725 or OV2640, probed on the SCCB bus) over DCMI + DMA
+//!   into two frame buffers (capture of frame n+1
 //!   overlaps processing of frame n), detector, pad pose, software auto-exposure, camera
 //!   re-initialisation after repeated capture errors;
 //! - [`link::task`]: the UART to the flight controller and the [`Companion`] state machine
@@ -51,7 +52,6 @@ use defmt_rtt as _;
 use embassy_executor::Spawner;
 use panic_probe as _;
 use touchdown_core::companion::{Companion, CompanionConfig, ParamId, VisionSettings};
-use touchdown_core::sensor::ov7725::Ov7725;
 
 use crate::axisram::axisram_static;
 use crate::capture::{Capture, FrameBuffer};
@@ -123,11 +123,11 @@ async fn main(spawner: Spawner) {
 
     capture::configure_dcmi();
     let camera = board.camera;
-    let sensor = vision::Sensor {
-        driver: Ov7725::new(Sccb::new(camera.sccb, bounce)),
+    let sensor_pins = vision::SensorPins {
         reset_n: camera.reset_n,
         power_down: camera.power_down,
     };
+    let sccb = Sccb::new(camera.sccb, bounce);
     // MCO1 keeps running on its own once configured; the driver needs no further calls.
     let _xclk = camera.xclk;
 
@@ -138,7 +138,8 @@ async fn main(spawner: Spawner) {
     spawner.spawn(unwrap!(param_store::task(flash, next_free)));
     spawner.spawn(unwrap!(link::task(board.uart, companion)));
     spawner.spawn(unwrap!(vision::task(
-        sensor,
+        sensor_pins,
+        sccb,
         Capture::new(camera.dcmi),
         [front, back],
         workspace,

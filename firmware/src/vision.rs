@@ -28,13 +28,14 @@ use embassy_stm32::gpio::Output;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Timer};
+use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::{FrameResult, MavSeverity, VisionSettings};
 use touchdown_core::detect::{Detector, DetectorConfig};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::PadLayout;
 use touchdown_core::pose::pad_pose;
+use touchdown_core::sensor::any::{self, Camera};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure};
-use touchdown_core::sensor::ov7725::{self, ClockPlan, Ov7725};
 use touchdown_core::sensor::FrameTiming;
 
 use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, WIDTH};
@@ -57,20 +58,17 @@ const BRIGHTNESS_STEP: usize = 8;
 /// New settings from the link task (the newest wins if several arrive within one frame).
 pub static SETTINGS: Signal<CriticalSectionRawMutex, VisionSettings> = Signal::new();
 
-/// The sensor with its control pins.
-pub struct Sensor {
-    /// The OV7725 driver on the SCCB bus.
-    pub driver: Ov7725<Sccb>,
+/// The sensor's control pins.
+pub struct SensorPins {
     /// RESETB (active low).
     pub reset_n: Output<'static>,
     /// PWDN (active high).
     pub power_down: Output<'static>,
 }
 
-impl Sensor {
-    /// Power-cycles the sensor through its pins and configures it.
-    async fn start(&mut self) -> Result<ClockPlan, ov7725::Error<crate::sccb::SccbError>> {
-        // Power down and hold in reset, then wake up and release (datasheet: >1 ms each).
+impl SensorPins {
+    /// Power down and hold in reset, then wake up and release (datasheets: >1 ms each).
+    async fn power_cycle(&mut self) {
         self.power_down.set_high();
         self.reset_n.set_low();
         Timer::after_millis(5).await;
@@ -78,7 +76,48 @@ impl Sensor {
         Timer::after_millis(5).await;
         self.reset_n.set_high();
         Timer::after_millis(5).await;
-        self.driver.init(&mut Delay, &config::sensor_config()).await
+    }
+}
+
+/// The sensor found on the SCCB bus (OV7725 or OV2640) with its control pins.
+struct Sensor {
+    camera: Camera<Sccb>,
+    pins: SensorPins,
+}
+
+impl Sensor {
+    /// Power-cycles and probes until a supported sensor answers (each failed round logs,
+    /// sends a STATUSTEXT and waits [`INIT_RETRY`]).
+    async fn probe(mut pins: SensorPins, mut bus: Sccb) -> Self {
+        loop {
+            pins.power_cycle().await;
+            match Camera::detect(bus).await {
+                Ok(camera) => {
+                    info!("vision: {} found", camera.model().name());
+                    return Sensor { camera, pins };
+                }
+                Err(undetected) => {
+                    warn!("vision: no camera: {}", undetected.error);
+                    link::post(LinkEvent::Status(
+                        MavSeverity::MAV_SEVERITY_CRITICAL,
+                        "touchdown: camera not responding",
+                    ));
+                    bus = undetected.bus;
+                    Timer::after(INIT_RETRY).await;
+                }
+            }
+        }
+    }
+
+    /// Power-cycles the sensor through its pins and configures it.
+    async fn start(&mut self) -> Result<FrameTiming, any::Error<crate::sccb::SccbError>> {
+        self.pins.power_cycle().await;
+        self.camera.init(&mut Delay, &config::sensor_config()).await
+    }
+
+    /// The pinhole model of this sensor with the board's lens.
+    fn model(&self) -> &'static CameraModel {
+        config::camera_model(self.camera.model())
     }
 }
 
@@ -136,12 +175,15 @@ pub fn percent(factor: f32) -> u32 {
 /// restored at boot) and following [`SETTINGS`].
 #[embassy_executor::task]
 pub async fn task(
-    mut sensor: Sensor,
+    pins: SensorPins,
+    sccb: Sccb,
     mut capture: Capture,
     buffers: [&'static mut FrameBuffer; 2],
     workspace: &'static mut Workspace,
     settings: VisionSettings,
 ) {
+    let mut sensor = Sensor::probe(pins, sccb).await;
+    let camera = sensor.model();
     let mut detector = Detector::new(DetectorConfig::default());
     let mut applied = Applied::new(settings, &mut detector);
     let [mut front, mut back] = buffers;
@@ -157,9 +199,9 @@ pub async fn task(
     let mut next_summary = Instant::now() + SUMMARY_PERIOD;
     loop {
         // (Re)start the camera until it answers.
-        let plan = loop {
+        let timing = loop {
             match sensor.start().await {
-                Ok(plan) => break plan,
+                Ok(timing) => break timing,
                 Err(e) => {
                     warn!("vision: camera init failed: {}", e);
                     link::post(LinkEvent::Status(
@@ -170,10 +212,10 @@ pub async fn task(
                 }
             }
         };
-        let timing = plan.timing;
         info!(
-            "vision: camera up, PCLK {} Hz, {} lines of {} ns, {} fps",
-            plan.pclk_hz,
+            "vision: {} up, PCLK {} Hz, {} lines of {} ns, {} fps",
+            sensor.camera.model().name(),
+            timing.pclk_hz,
             timing.frame_lines,
             timing.line_ns,
             timing.fps()
@@ -184,7 +226,7 @@ pub async fn task(
             timing.frame_lines,
         );
         let setting = exposure.setting();
-        if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
+        if let Err(e) = sensor.camera.set_manual(setting.lines, setting.gain).await {
             warn!("vision: exposure: {}", e);
         }
 
@@ -204,7 +246,7 @@ pub async fn task(
                 if let Some(setting) =
                     exposure.set_limits(settings.exposure, timing.line_ns, timing.frame_lines)
                 {
-                    if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
+                    if let Err(e) = sensor.camera.set_manual(setting.lines, setting.gain).await {
                         warn!("vision: exposure: {}", e);
                     }
                 }
@@ -213,13 +255,16 @@ pub async fn task(
             // takes the CPU) while `front` is processed.
             let (captured, processed) = join(capture.capture(back), async {
                 front_end.map(|end| {
-                    let pad = &applied.pad;
+                    let geometry = Geometry {
+                        pad: &applied.pad,
+                        camera,
+                    };
                     process(
                         front,
                         end,
                         &timing,
                         &exposure,
-                        pad,
+                        &geometry,
                         &mut detector,
                         workspace,
                     )
@@ -235,7 +280,7 @@ pub async fn task(
                 summary.max_detect = summary.max_detect.max(p.detect);
                 watchdog::frame_done();
                 if let Some(setting) = exposure.update(p.mean) {
-                    if let Err(e) = sensor.driver.set_manual(setting.lines, setting.gain).await {
+                    if let Err(e) = sensor.camera.set_manual(setting.lines, setting.gain).await {
                         warn!("vision: exposure: {}", e);
                     }
                 }
@@ -289,14 +334,21 @@ struct Processed {
     mean: u8,
 }
 
-/// Detects, solves the pose of `pad` and posts the frame to the link. Runs on the CPU without
+/// What the pose is solved against: the pad (scaled by TD_TAG_SIZE) seen through the found
+/// sensor's camera model.
+struct Geometry<'a> {
+    pad: &'a PadLayout<'a>,
+    camera: &'a CameraModel,
+}
+
+/// Detects, solves the pose of the pad and posts the frame to the link. Runs on the CPU without
 /// yielding (the capture of the next frame proceeds by DMA meanwhile).
 fn process(
     frame: &FrameBuffer,
     frame_end: Instant,
     timing: &FrameTiming,
     exposure: &AutoExposure,
-    pad: &PadLayout<'_>,
+    geometry: &Geometry<'_>,
     detector: &mut Detector,
     workspace: &mut Workspace,
 ) -> Processed {
@@ -320,7 +372,7 @@ fn process(
     let started = Instant::now();
     let (markers, fix) = match detector.detect(&image, SEARCHED, &mut workspace.buffers()) {
         Ok(detections) => {
-            let fix = pad_pose(detections, SEARCHED, pad, &config::CAMERA).ok();
+            let fix = pad_pose(detections, SEARCHED, geometry.pad, geometry.camera).ok();
             (detections.len() as u32, fix)
         }
         Err(e) => {

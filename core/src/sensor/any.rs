@@ -16,7 +16,7 @@ use embedded_hal_async::i2c::{ErrorType, I2c};
 
 use super::ov2640::{self, Ov2640};
 use super::ov7725::{self, Ov7725};
-use super::{gain_ceiling_log2, Config, ConfigError, Exposure, FrameTiming, GainX16};
+use super::{Config, ConfigError, Exposure, FrameTiming, GainX16};
 
 /// The supported sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -103,11 +103,7 @@ impl<E> From<ov7725::Error<E>> for Error<E> {
                 pid,
                 ver,
             },
-            ov7725::Error::Config(c) => Error::Config(match c {
-                ov7725::ConfigError::XclkOutOfRange => ConfigError::XclkOutOfRange,
-                ov7725::ConfigError::FrameRateUnreachable => ConfigError::FrameRateUnreachable,
-                ov7725::ConfigError::ZeroExposure => ConfigError::ZeroExposure,
-            }),
+            ov7725::Error::Config(c) => Error::Config(c),
         }
     }
 }
@@ -123,35 +119,6 @@ impl<E> From<ov2640::Error<E>> for Error<E> {
             },
             ov2640::Error::Config(c) => Error::Config(c),
         }
-    }
-}
-
-/// The OV7725's exposure settings for a sensor-independent [`Exposure`]: the gain ceiling
-/// is the largest power of two (2x ... 32x) not above `max_gain`.
-pub fn ov7725_exposure(exposure: Exposure) -> ov7725::Exposure {
-    match exposure {
-        Exposure::Auto { max_gain } => ov7725::Exposure::Auto {
-            gain_ceiling: match gain_ceiling_log2(max_gain) {
-                1 => ov7725::GainCeiling::X2,
-                2 => ov7725::GainCeiling::X4,
-                3 => ov7725::GainCeiling::X8,
-                4 => ov7725::GainCeiling::X16,
-                _ => ov7725::GainCeiling::X32,
-            },
-        },
-        Exposure::Manual { lines, gain } => ov7725::Exposure::Manual { lines, gain },
-    }
-}
-
-/// The OV7725 driver's configuration for a sensor-independent [`Config`].
-pub fn ov7725_config(config: &Config) -> ov7725::Config {
-    ov7725::Config {
-        resolution: config.resolution,
-        xclk_hz: config.xclk_hz,
-        fps: config.fps,
-        exposure: ov7725_exposure(config.exposure),
-        vflip: config.vflip,
-        mirror: config.mirror,
     }
 }
 
@@ -213,7 +180,7 @@ impl<I: I2c> Camera<I> {
         config: &Config,
     ) -> Result<FrameTiming, Error<I::Error>> {
         match self {
-            Camera::Ov7725(sensor) => Ok(sensor.init(delay, &ov7725_config(config)).await?.timing),
+            Camera::Ov7725(sensor) => Ok(sensor.init(delay, config).await?.timing),
             Camera::Ov2640(sensor) => Ok(sensor.init(delay, config).await?.timing),
         }
     }
@@ -221,7 +188,7 @@ impl<I: I2c> Camera<I> {
     /// Switches exposure control (the sensor's AEC/AGC with a gain ceiling, or manual).
     pub async fn set_exposure(&mut self, exposure: Exposure) -> Result<(), Error<I::Error>> {
         match self {
-            Camera::Ov7725(sensor) => Ok(sensor.set_exposure(ov7725_exposure(exposure)).await?),
+            Camera::Ov7725(sensor) => Ok(sensor.set_exposure(exposure).await?),
             Camera::Ov2640(sensor) => Ok(sensor.set_exposure(exposure).await?),
         }
     }
@@ -402,23 +369,9 @@ mod tests {
                 (ov2640::reg::sensor::COM8, 0xC5)
             ]
         );
-        // Below 2x and above 32x are limited to the sensors' range.
-        assert!(matches!(
-            ov7725_exposure(Exposure::Auto {
-                max_gain: GainX16::ONE
-            }),
-            ov7725::Exposure::Auto {
-                gain_ceiling: ov7725::GainCeiling::X2
-            }
-        ));
-        assert!(matches!(
-            ov7725_exposure(Exposure::Auto {
-                max_gain: GainX16(u16::MAX)
-            }),
-            ov7725::Exposure::Auto {
-                gain_ceiling: ov7725::GainCeiling::X32
-            }
-        ));
+        // Below 2x and above 32x are limited to the sensors' range (COM9[6:4] = 0 and 4).
+        assert_eq!(super::super::gain_ceiling_log2(GainX16::ONE), 1);
+        assert_eq!(super::super::gain_ceiling_log2(GainX16(u16::MAX)), 5);
     }
 
     #[test]

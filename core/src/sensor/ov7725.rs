@@ -32,7 +32,10 @@
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 
-use super::{FrameTiming, GainX16, Resolution};
+use super::{gain_ceiling_log2, FrameTiming, GainX16, Resolution};
+// The set-up and its errors are the sensor-independent ones (`super::Config`), so the firmware
+// drives either sensor through one type; re-exported so `ov7725::Config` still names them.
+pub use super::{Config, ConfigError, Exposure};
 
 /// 7-bit SCCB address (0x42 to write, 0x43 to read in 8-bit notation).
 pub const I2C_ADDRESS: u8 = 0x21;
@@ -156,19 +159,6 @@ pub enum Error<E> {
     },
     /// The configuration cannot be realised.
     Config(ConfigError),
-}
-
-/// A configuration the sensor cannot realise.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum ConfigError {
-    /// The input clock is outside [`XCLK_RANGE_HZ`].
-    XclkOutOfRange,
-    /// No PLL/prescaler/dummy-line setting gives this frame rate (0 fps, or faster than
-    /// [`MAX_PCLK_HZ`] allows).
-    FrameRateUnreachable,
-    /// Manual exposure of 0 lines.
-    ZeroExposure,
 }
 
 /// The sensor's PLL setting (COM4[7:6]).
@@ -354,22 +344,6 @@ pub fn plan_clock(
         .ok_or(ConfigError::FrameRateUnreachable)
 }
 
-/// The AGC gain ceiling (COM9[6:4]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum GainCeiling {
-    /// 2x.
-    X2 = 0,
-    /// 4x.
-    X4 = 1,
-    /// 8x.
-    X8 = 2,
-    /// 16x.
-    X16 = 3,
-    /// 32x (the reset value).
-    X32 = 4,
-}
-
 /// Encodes a gain for the GAIN register (clamped to 1x ... 31x, the register's range).
 pub fn gain_register(gain: GainX16) -> u8 {
     let g = gain.0.clamp(16, 16 * 32);
@@ -387,59 +361,6 @@ pub fn gain_register(gain: GainX16) -> u8 {
 pub fn gain_from_register(value: u8) -> GainX16 {
     let doublings = (value >> 4).count_ones();
     GainX16((16 + u16::from(value & 0x0F)) << doublings)
-}
-
-/// Exposure and gain control.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Exposure {
-    /// The sensor's AEC and AGC, gain limited to the ceiling. The exposure can grow to the
-    /// whole frame period.
-    Auto {
-        /// Highest gain the AGC may use.
-        gain_ceiling: GainCeiling,
-    },
-    /// Fixed exposure and gain (also what [`super::exposure::AutoExposure`] drives).
-    Manual {
-        /// Exposure in line periods ([`FrameTiming::line_ns`]), at least 1.
-        lines: u16,
-        /// Analog gain.
-        gain: GainX16,
-    },
-}
-
-/// What [`Ov7725::init`] sets up.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Config {
-    /// Output size.
-    pub resolution: Resolution,
-    /// Frequency of the clock the MCU drives into XCLK, Hz.
-    pub xclk_hz: u32,
-    /// Frame rate, frames per second.
-    pub fps: u32,
-    /// Exposure and gain.
-    pub exposure: Exposure,
-    /// Flip the image vertically (COM3 bit 7), e.g. for a module mounted upside down.
-    pub vflip: bool,
-    /// Mirror the image horizontally (COM3 bit 6).
-    pub mirror: bool,
-}
-
-impl Default for Config {
-    /// QVGA at 30 fps from a 24 MHz clock, sensor AEC/AGC with an 8x gain ceiling.
-    fn default() -> Self {
-        Config {
-            resolution: Resolution::Qvga,
-            xclk_hz: 24_000_000,
-            fps: 30,
-            exposure: Exposure::Auto {
-                gain_ceiling: GainCeiling::X8,
-            },
-            vflip: false,
-            mirror: false,
-        }
-    }
 }
 
 /// The OV7725 on an SCCB (I2C) bus.
@@ -560,9 +481,11 @@ impl<I: I2c> Ov7725<I> {
     /// Switches exposure control (sensor AEC/AGC with a gain ceiling, or manual values).
     pub async fn set_exposure(&mut self, exposure: Exposure) -> Result<(), Error<I::Error>> {
         match exposure {
-            Exposure::Auto { gain_ceiling } => {
+            Exposure::Auto { max_gain } => {
+                // COM9[6:4]: the AGC ceiling, 0 = 2x ... 4 = 32x.
+                let ceiling = gain_ceiling_log2(max_gain) - 1;
                 let com9 = self.read_register(reg::COM9).await?;
-                let com9 = (com9 & !COM9_CEILING_MASK) | ((gain_ceiling as u8) << 4);
+                let com9 = (com9 & !COM9_CEILING_MASK) | (ceiling << 4);
                 self.write_register(reg::COM9, com9).await?;
                 self.write_register(reg::COM8, COM8_AUTO).await
             }
