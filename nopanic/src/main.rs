@@ -4,8 +4,9 @@
 //! profile (see Cargo.toml), and its entry point calls the whole per-frame path on inputs the
 //! optimiser cannot see through ([`black_box`]): detection (any configuration, so both
 //! pipelines; any families; any pixels), single-marker pose (IPPE + refinement), pad pose and
-//! the level pad fix, the trackers inside the companion, and the companion's MAVLink parse
-//! (any received bytes) and encode (draining `poll_transmit`).
+//! the level pad fix, the trackers inside the companion, the companion's MAVLink parse
+//! (any received bytes) and encode (draining `poll_transmit`), and the vision task's exposure
+//! loop and parameter hand-over (`VisionSettings`, `AutoExposure::set_limits`).
 //!
 //! Not covered: `PoseMethod::PaperHomography`, the paper's homography decomposition, which
 //! only reproduces the paper's tables on the host; it uses nalgebra's SVD, whose internal
@@ -28,12 +29,15 @@ use core::panic::PanicInfo;
 
 use nalgebra::Matrix3;
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{Companion, CompanionConfig, FrameResult, MAX_FRAME_LEN};
+use touchdown_core::companion::{
+    Companion, CompanionConfig, FrameResult, VisionSettings, MAX_FRAME_LEN,
+};
 use touchdown_core::detect::{Detector, DetectorConfig, QvgaWorkspace};
 use touchdown_core::family::{tables, Family};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::pose::{level_pad_fix, marker_pose, pad_pose_with_prediction, PoseMethod};
+use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, AutoExposureLimits};
 
 /// QVGA, the firmware's frame size.
 const WIDTH: usize = 320;
@@ -51,6 +55,7 @@ struct Pipeline<'a> {
     detector: Detector,
     workspace: &'a mut QvgaWorkspace,
     companion: Companion,
+    exposure: AutoExposure,
 }
 
 /// One frame: detection, pose, pad fix, filter (inside the companion), MAVLink in and out.
@@ -116,6 +121,20 @@ fn per_frame(
         black_box(tx.get(..n));
     }
     let _ = black_box(companion.stats());
+    // The vision task's exposure step and, after a PARAM_SET, its settings hand-over: the
+    // detector's correction cap, the scaled pad and the exposure limits.
+    if let Ok(image) = GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
+        let mean = mean_brightness(&image, black_box(8));
+        let _ = black_box(pipeline.exposure.update(mean));
+    }
+    let settings = VisionSettings::from_params(pipeline.companion.params());
+    let base = black_box(DetectorConfig::default());
+    pipeline.detector.set_config(settings.detector_config(base));
+    let _ = black_box(settings.pad(layout));
+    let (line_ns, frame_lines) = (black_box(120_000), black_box(278));
+    pipeline
+        .exposure
+        .set_limits(settings.exposure, line_ns, frame_lines);
 }
 
 /// The entry point (lld's default `_start`): builds the pipeline and runs frames forever.
@@ -134,10 +153,16 @@ pub extern "C" fn _start() -> ! {
             core::hint::spin_loop();
         }
     };
+    let exposure = AutoExposure::new(
+        black_box(AutoExposureLimits::default()),
+        black_box(120_000),
+        black_box(278),
+    );
     let mut pipeline = Pipeline {
         detector: Detector::new(black_box(DetectorConfig::default())),
         workspace,
         companion,
+        exposure,
     };
     let families: &[&Family<'static>] = black_box(tables::DEFAULT);
     let layout: &PadLayout<'static> = black_box(&designs::NESTED);

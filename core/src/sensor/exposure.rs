@@ -124,19 +124,24 @@ impl AutoExposure {
 
     /// Feeds the mean grey level of the latest frame; returns the new setting when it changed.
     pub fn update(&mut self, mean: u8) -> Option<ExposureSetting> {
-        let target = u32::from(self.limits.target.max(1));
-        let mean = u32::from(mean);
-        if mean.abs_diff(target) <= u32::from(self.limits.deadband) {
+        let target = u64::from(self.limits.target.max(1));
+        let mean = u64::from(mean);
+        if mean.abs_diff(target) <= u64::from(self.limits.deadband) {
             return None;
         }
-        // Brightness is proportional to exposure x gain; work in (lines x gain/16).
-        let current = u32::from(self.setting.lines) * u32::from(self.setting.gain.0);
+        // Brightness is proportional to exposure x gain; work in (lines x gain/16), in u64
+        // (65,535 lines at 4,096x gain times a target of 255 would overflow u32).
+        let current = u64::from(self.setting.lines) * u64::from(self.setting.gain.0);
         let wanted = current * target / mean.max(1);
-        let wanted = wanted.clamp(current / 2, current.saturating_mul(2)).max(16);
-        let max_gain = u32::from(self.limits.max_gain.0.max(16));
-        // min/max: `clamp` panics on crossed bounds, which the optimiser cannot rule out here.
-        let lines = (wanted / 16).min(u32::from(self.max_lines)).max(1);
-        let gain = (wanted / lines).clamp(16, max_gain);
+        // min/max rather than `clamp`, whose panic on crossed bounds the optimiser cannot rule
+        // out (the no-panic check, nopanic/, covers this loop).
+        let wanted = wanted
+            .min(current.saturating_mul(2))
+            .max(current / 2)
+            .max(16);
+        let max_gain = u64::from(self.limits.max_gain.0.max(16));
+        let lines = (wanted / 16).min(u64::from(self.max_lines)).max(1);
+        let gain = (wanted / lines).min(max_gain).max(16);
         let next = ExposureSetting {
             lines: lines as u16,
             gain: GainX16(gain as u16),
