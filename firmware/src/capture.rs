@@ -1,11 +1,14 @@
-//! Frame capture: the OV7725 on the DCMI, DMA into two frame buffers, frame time stamps.
+//! Frame capture: the camera sensor (OV7725 or OV2640) on the DCMI, DMA into two frame
+//! buffers, frame time stamps.
 //!
 //! # Data path
 //!
-//! The sensor sends YUV 4:2:2 with Y first (`Y U Y V ...`, one byte per pixel clock, see
-//! `touchdown_core::sensor::ov7725`). The DCMI's byte select keeps every other byte starting
-//! with the first (RM0433 §34.5.1 DCMI_CR, BSM = 01, OEBS = 0), so the DMA writes 8-bit grey
-//! straight into the frame buffer: 76,800 bytes per QVGA frame, 19,200 32-bit words.
+//! The sensor sends YUV 4:2:2 with Y first (`Y U Y V ...`, one byte per pixel clock). Both
+//! drivers set up this format and the same sync polarities (`touchdown_core::sensor::any`), so
+//! this module is the same for either and is configured before it is known which one answers
+//! on the SCCB bus. The DCMI's byte select keeps every other byte starting with the first
+//! (RM0433 §34.5.1 DCMI_CR, BSM = 01, OEBS = 0), so the DMA writes 8-bit grey straight into
+//! the frame buffer: 76,800 bytes per QVGA frame, 19,200 32-bit words.
 //!
 //! # The 65,535-word limit and VGA
 //!
@@ -13,7 +16,9 @@
 //! counts at most 65,535 items (NDTR is 16 bits): 262,140 bytes. A 640x480 grey frame is
 //! 307,200 bytes, so with the `camera-vga` feature the DCMI crops the frame to its middle
 //! 640x400 rows (RM0433 §34.5.9/§34.5.10 DCMI_CWSTRT/DCMI_CWSIZE: 256,000 bytes, 64,000
-//! words). The camera model's principal point moves up by the 40 cropped rows
+//! words). Both sensors deliver the same 640x480 (the OV7725 from its VGA window, the OV2640
+//! from its DSP's scaling of the 800x600 readout), so the crop is the same for both, and so
+//! is the shift of the principal point up by the 40 cropped rows in either camera model
 //! ([`crate::config`]).
 //!
 //! # Double buffering
@@ -106,8 +111,11 @@ impl FrameBuffer {
     }
 }
 
-/// DCMI signal polarities for the OV7725 at its reset defaults: VSYNC high between frames,
-/// HREF high while a line's data is valid, data stable on the rising edge of PCLK.
+/// DCMI signal polarities, the same for both sensors: VSYNC high between frames, HREF high
+/// while a line's data is valid, data stable on the rising edge of PCLK. The OV7725 does this
+/// at its reset defaults; the OV2640's VSYNC is the other way round at reset (high during the
+/// frame), so its driver inverts it (COM10 bit 1) to match. (OpenMV's DCMI set-up agrees: it
+/// uses VSYNC-high-is-blanking for the OV7725 and the opposite for an OV2640 left at reset.)
 pub fn dcmi_config() -> dcmi::Config {
     let mut config = dcmi::Config::default();
     config.vsync_level = dcmi::VSyncDataInvalidLevel::High;

@@ -44,11 +44,24 @@ pub fn sensor_config() -> Config {
 /// metre-accurate poses.
 pub const CAMERA: CameraModel = centred_pinhole(467.0);
 
-/// Nominal pinhole model of the OV2640 with the same 2.8 mm lens. The driver reads the sensor
-/// in its SVGA mode (800x600, 2x2 binned from the 2.2 µm array: 4.4 µm) and the DSP scales that
-/// by 0.8 to 640x480 (5.5 µm per output pixel): f = 2.8 mm / 5.5 µm = 509 px at VGA, 254.5 px
-/// at QVGA (halved first). The OV2640 sees about 9 % less of the scene than the OV7725 through
-/// the same lens, so its model matters for the range.
+/// Nominal pinhole model of the OV2640 with the same 2.8 mm lens.
+///
+/// The focal length in pixels is the lens focal length over the pitch of one *output* pixel
+/// on the array, which the driver's readout sets (`touchdown_core::sensor::ov2640`):
+///
+/// - the array's 1600x1200 active pixels are 2.2 µm (3.52 mm x 2.64 mm);
+/// - the SVGA mode reads all of it subsampled by two each way: 800x600 at 4.4 µm;
+/// - the DSP's zoom scales that by 0.8 (ZMOW/ZMOH 640x480 from HSIZE/VSIZE 800x600) to VGA:
+///   1600 x 2.2 µm / 640 = 5.5 µm per output pixel, so f = 2.8 mm / 5.5 µm = 509.1 px;
+/// - QVGA halves the 800x600 first (CTRLI) and zooms by 0.8 to 320x240: 11 µm, f = 254.5 px
+///   (half the VGA value, as [`centred_pinhole`] takes it).
+///
+/// Dividing 2.2 µm by 0.8 (2.75 µm) would forget the subsampling: f = 1018 px, twice the
+/// true value, and every range the pose gives twice too long. Both scalings are 4:3 like the
+/// window, so pixels stay square and the principal point stays at the centre. The array is
+/// 8 % narrower than the OV7725's (3.52 mm against 3.84 mm), so the same lens sees 64° across
+/// instead of 69°. OV2640 modules come with many lenses: f scales with the lens focal length,
+/// and a calibration (as for [`CAMERA`]) replaces all of this.
 pub const CAMERA_OV2640: CameraModel = centred_pinhole(509.0);
 
 /// A pinhole model with focal length `f_vga` pixels at 640x480 (half that at QVGA) and the

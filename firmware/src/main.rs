@@ -2,14 +2,14 @@
 //!
 //! Finds the landing pad's fiducial markers in camera frames and streams the pad pose to the
 //! flight controller as MAVLink. All algorithms live in `touchdown-core` (detector, pose,
-//! filter, the companion MAVLink state machine, the OV7725 driver, the exposure loop, the
-//! parameter log format); this crate only owns hardware and wiring. Tasks, on one cooperative
-//! embassy executor:
+//! filter, the companion MAVLink state machine, the OV7725 and OV2640 drivers and the probe
+//! that tells them apart, the exposure loop, the parameter log format); this crate only owns
+//! hardware and wiring. Tasks, on one cooperative embassy executor:
 //!
-//! - [`vision::task`]: the camera (OV7725 or OV2640, probed on the SCCB bus) over DCMI + DMA
-//!   into two frame buffers (capture of frame n+1
-//!   overlaps processing of frame n), detector, pad pose, software auto-exposure, camera
-//!   re-initialisation after repeated capture errors;
+//! - [`vision::task`]: the camera (an OV7725 or an OV2640, whichever answers on the SCCB bus
+//!   at start) over DCMI + DMA into two frame buffers (capture of frame n+1 overlaps
+//!   processing of frame n), detector, pad pose with that sensor's lens model, software
+//!   auto-exposure, camera re-initialisation after repeated capture errors;
 //! - [`link::task`]: the UART to the flight controller and the [`Companion`] state machine
 //!   (HEARTBEAT, LANDING_TARGET, TIMESYNC, parameters, STATUSTEXT);
 //! - [`param_store::task`]: saves changed MAVLink parameters to flash;
@@ -121,6 +121,8 @@ async fn main(spawner: Spawner) {
         "the default tracker configuration is valid"
     );
 
+    // The DCMI set-up is the same for both supported sensors, so it is done before the vision
+    // task has probed the SCCB bus for the one that is fitted.
     capture::configure_dcmi();
     let camera = board.camera;
     let sensor_pins = vision::SensorPins {

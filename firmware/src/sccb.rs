@@ -7,9 +7,13 @@
 //! through a small buffer in AXI SRAM, with D-cache maintenance around the DMA (clean before
 //! a write, invalidate after a read).
 //!
-//! SCCB has no repeated start, and the OV7725 driver never asks for one: it sends one
-//! operation per transaction. A transaction of several operations would need a repeated
-//! start between them, which this adapter does not fake; it refuses it
+//! SCCB has no repeated start, and no sensor driver here asks for one (the OV7725's, the
+//! OV2640's, and the probe that tries both addresses, `touchdown_core::sensor::any`): each
+//! sends one operation per transaction, a register read being a one-byte write of the address
+//! and then a separate one-byte read; the OV2640's bank select is an ordinary two-byte write.
+//! The probe's access to the address of the sensor that is not fitted ends in a NACK
+//! ([`SccbError::I2c`]), which it takes as "not this one". A transaction of several operations
+//! would need a repeated start between them, which this adapter does not fake; it refuses it
 //! ([`SccbError::Unsupported`]), as it refuses a transfer longer than the bounce buffer.
 
 use embassy_stm32::i2c::{self, I2c, Master};

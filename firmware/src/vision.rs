@@ -1,9 +1,18 @@
 //! The vision task: camera frames in, pad fixes out to the MAVLink link.
 //!
 //! Per frame: capture (DMA, [`crate::capture`]) of frame n+1 runs while frame n is searched
-//! for markers ([`Detector`]), the pad pose is solved ([`pad_pose`]) and the result is posted
+//! for markers ([`Detector`]), the pad pose is solved ([`pad_pose()`]) and the result is posted
 //! to the link task with the frame's exposure time. The software auto-exposure
 //! ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
+//!
+//! The sensor: at start the task power-cycles it and asks the SCCB bus which supported sensor
+//! answers ([`Camera::detect`]: an OV7725 at 0x21 or an OV2640 at 0x30), until one does; each
+//! failed round logs, tells the ground station ("camera not responding") and waits
+//! [`INIT_RETRY`]. Then it configures that sensor, drives its exposure and gain, and solves
+//! the pose with that sensor's lens model ([`config::camera_model`]). Both sensors deliver
+//! the same Y-only stream to the same capture set-up; apart from the lens model, only the
+//! line and frame timing the driver reports ([`FrameTiming`]: exposure units, readout time
+//! for the time stamp) differ between them.
 //!
 //! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_EXP_MAX_US,
 //! TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`VisionSettings`]: at boot as the task's argument
@@ -16,8 +25,10 @@
 //!
 //! Faults: a capture error (DCMI overrun, timeout) costs that frame and is counted; after
 //! [`MAX_CONSECUTIVE_ERRORS`] in a row the camera is power-cycled and configured again, and the
-//! ground station gets a STATUSTEXT. Only finished frames feed the watchdog, so a camera that
-//! never comes back ends in a reset.
+//! ground station gets a STATUSTEXT. The sensor found at start is kept: a re-initialisation
+//! that keeps failing (also when the id no longer matches) means no finished frames, and only
+//! finished frames feed the watchdog, so a camera that never comes back ends in a reset and
+//! the probe at the next start.
 //!
 //! Logs: once a second at `info`, frames per second, detection time (mean and max), frames
 //! lost to capture errors, overruns and re-initialisations.
@@ -116,7 +127,7 @@ impl Sensor {
     }
 
     /// The pinhole model of this sensor with the board's lens.
-    fn model(&self) -> &'static CameraModel {
+    fn camera_model(&self) -> &'static CameraModel {
         config::camera_model(self.camera.model())
     }
 }
@@ -183,7 +194,7 @@ pub async fn task(
     settings: VisionSettings,
 ) {
     let mut sensor = Sensor::probe(pins, sccb).await;
-    let camera = sensor.model();
+    let camera = sensor.camera_model();
     let mut detector = Detector::new(DetectorConfig::default());
     let mut applied = Applied::new(settings, &mut detector);
     let [mut front, mut back] = buffers;
