@@ -1,4 +1,4 @@
-//! NUCLEO-H743ZI2 (STM32H743ZI, LQFP144) with an OV7725 module wired to the DCMI pins.
+//! NUCLEO-H743ZI2 (STM32H743ZI, LQFP144) with an OV7725 or OV2640 module wired to the DCMI pins.
 //!
 //! Pin map (alternate functions checked against embassy's `stm32-metapac` pin data; the
 //! wiring table with the module's labels is in `firmware/README.md`):
