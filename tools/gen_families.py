@@ -70,7 +70,7 @@ MAX_GRID = 16
 MAX_BITS = 64
 MAX_FALSE_ACCEPT = 1e-4  # core::family::MAX_FALSE_ACCEPT
 
-# The contract's family names (shared/spec/interfaces.md, "Family names"), in contract order.
+# The contract's family names (docs/interfaces.md, "Family names"), in contract order.
 CONTRACT_NAMES = (
     ["tag16h5", "tag25h9", "tag36h10", "tag36h11"]
     + [f"aruco_{n}x{n}_{m}" for n in (4, 5, 6, 7) for m in (50, 100, 250, 1000)]
@@ -977,7 +977,7 @@ def rust_mod(families: list[Family], command: str, source_dir: str) -> str:
         "    ALL.iter().map(|f| f.name)",
         "}",
         "",
-        "/// The contract's family names (`shared/spec/interfaces.md`), in contract order.",
+        "/// The contract's family names (`docs/interfaces.md`), in contract order.",
         "#[cfg(test)]",
         "const CONTRACT: &[&str] = &[" + ", ".join(f'"{f.name}"' for f in contract) + "];",
     ]

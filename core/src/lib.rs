@@ -1,8 +1,9 @@
 //! # touchdown-core
 //!
 //! Everything of the touchdown landing aid that does not touch hardware: finding fiducial
-//! markers in a grey frame, the marker families, and (as they land) pose, the landing pad,
-//! filters and the MAVLink companion logic.
+//! markers in a grey frame, the marker families, pose, the landing pad, filters, the MAVLink
+//! companion logic, and the camera sensors' register sequences (as data and `async` SCCB
+//! transactions against embedded-hal-async traits: the firmware supplies the bus).
 //!
 //! The crate is `no_std`, allocates nothing and contains no `unsafe`. All working memory is
 //! either owned by a struct with capacities fixed by named constants, or lent by the caller,

@@ -1,4 +1,4 @@
-//! The filter comparison of issue 3: a simulated descent (1 m/s down from 30 m to 1 m, 0.5 m/s
+//! The filter comparison: a simulated descent (1 m/s down from 30 m to 1 m, 0.5 m/s
 //! drift, 30 Hz, range-dependent pose noise, dropped frames, outliers), scored for the raw
 //! pose, the paper's filter (equations 8-14, Table 1) and ours.
 //!

@@ -1,5 +1,5 @@
 //! `touchdown detect` as users and scripts see it: the built binary, its exit status, its
-//! stderr lines and its JSON (the contract in `shared/spec/interfaces.md`).
+//! stderr lines and its JSON (the contract in `docs/interfaces.md`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

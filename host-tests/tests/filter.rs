@@ -1,4 +1,4 @@
-//! Filters and frames (issue 3 items 4 and 5): the simulated descent against the issue's
+//! Filters and frames: the simulated descent against its accuracy
 //! targets, the paper's filter equation by equation, the tracker's lifecycle, gating and
 //! recovery, a randomised check that the covariance stays symmetric positive definite, and the
 //! MAVLink frame conventions.
@@ -42,7 +42,7 @@ fn confirmed(tr: &mut Tracker, p: [f32; 3], frames: u64) -> u64 {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The simulated descent (the issue's "done when").
+// The simulated descent (its accuracy targets).
 
 #[test]
 fn descent_ours_beats_raw_without_lag_and_paper_lags() {

@@ -1,4 +1,4 @@
-//! Issue 3's acceptance on the simulated paper geometry: for every row of the paper's
+//! Acceptance on the simulated paper geometry: for every row of the paper's
 //! Tables 2-4, our mean |error| is at most a quarter of the paper's published error, and the
 //! marker is still found at 40 m.
 //!

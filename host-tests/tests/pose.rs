@@ -1,4 +1,4 @@
-//! Pose accuracy (issue 3): the ViSP AprilTag benchmark, ViSP's AprilTag.png reference poses,
+//! Pose accuracy: the ViSP AprilTag benchmark, ViSP's AprilTag.png reference poses,
 //! round trips at random poses, the landing-pad fit and its covariance, and the shipped pad
 //! designs (TOML files equal to the core's consts).
 //!

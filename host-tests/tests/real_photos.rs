@@ -4,7 +4,7 @@
 //! Data location: `$TOUCHDOWN_DATA`, else `<repo>/../shared/data`; when it is absent each test
 //! prints "skipping: shared data not found at ..." and passes, so the suite runs anywhere.
 //! Run with `--nocapture` to see the per-set figures (found/expected, wrong ids, corner
-//! errors, detection time per image) that go into the issue notes. Times come from the test
+//! errors, detection time per image) that go into reports. Times come from the test
 //! profile (core at opt-level 3 with overflow checks) and are indicative only; use
 //! `scripts/compare_peers.py` with the release build for timing.
 //!

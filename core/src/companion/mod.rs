@@ -226,7 +226,7 @@ pub enum FrameOutcome {
     Invalid,
 }
 
-/// Counters (saturating) and link state, for logs and the issue notes.
+/// Counters (saturating) and link state, for logs and reports.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct CompanionStats {
     /// The receive parser's counters.

@@ -684,7 +684,7 @@ fn insert_unique(
 mod tests {
     use super::*;
 
-    /// Issue 2's budget: work memory beyond the frame, 64 KiB at QVGA and 160 KiB at VGA.
+    /// The memory budget: work memory beyond the frame, 64 KiB at QVGA and 160 KiB at VGA.
     #[test]
     fn working_memory_fits_the_budget() {
         let detector = core::mem::size_of::<Detector>();

@@ -10,7 +10,7 @@
 //! | `shadow` | nested | hover at 20 ... 1 m with a hard shadow edge across the pad on concrete |
 //! | `occlusion` | nested | hover at 20 ... 1 m with a dark object lying across part of the pad |
 //!
-//! The camera is the one issue 3 specifies for the paper's experiments: 640x480 with a 60
+//! The camera is the one of the paper's experiments: 640x480 with a 60
 //! degree horizontal field of view (f = 554.3 px), looking straight down, image top toward
 //! the nose. `paper` keeps it ideal (the paper used Gazebo's distortion-free camera); the
 //! others add a mild barrel distortion, defocus and vignetting of a board camera.

@@ -1,5 +1,5 @@
-//! A simulated precision-landing descent for the filters (issue 3): the truth, the noisy pose
-//! measurements a real detector would give, and the figures the issue asks for (RMS per axis,
+//! A simulated precision-landing descent for the filters: the truth, the noisy pose
+//! measurements a real detector would give, and the figures it is judged by (RMS per axis,
 //! lag). Shared by `tests/filter.rs` and `examples/descent.rs` (included with `#[path]`).
 //!
 //! Geometry. The pad is at the origin of the local NED frame. The vehicle flies a straight

@@ -145,7 +145,7 @@ pub fn names() -> impl Iterator<Item = &'static str> {
     ALL.iter().map(|f| f.name)
 }
 
-/// The contract's family names (`shared/spec/interfaces.md`), in contract order.
+/// The contract's family names (`docs/interfaces.md`), in contract order.
 #[cfg(test)]
 const CONTRACT: &[&str] = &[
     "tag16h5",
