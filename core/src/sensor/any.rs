@@ -80,6 +80,18 @@ pub struct Undetected<I: ErrorType> {
 pub enum Error<E> {
     /// The SCCB/I2C transfer failed (no device, NACK, bus fault).
     Bus(E),
+    /// A register write failed part-way through the set-up (NACK, bus fault): which one, so
+    /// the log says how far it got. (The OV2640 reports these; the OV7725's are [`Error::Bus`].)
+    Write {
+        /// The sensor written to.
+        model: Model,
+        /// The register bank (the OV2640's: 0 DSP, 1 sensor).
+        bank: u8,
+        /// The register (0xFF: the OV2640's bank select).
+        register: u8,
+        /// The bus error.
+        error: E,
+    },
     /// The device no longer reads as the sensor it was detected as (module swapped or a
     /// corrupted read).
     WrongChip {
@@ -112,6 +124,16 @@ impl<E> From<ov2640::Error<E>> for Error<E> {
     fn from(e: ov2640::Error<E>) -> Self {
         match e {
             ov2640::Error::Bus(e) => Error::Bus(e),
+            ov2640::Error::Write {
+                bank,
+                register,
+                error,
+            } => Error::Write {
+                model: Model::Ov2640,
+                bank: bank as u8,
+                register,
+                error,
+            },
             ov2640::Error::WrongChip { pid, ver, .. } => Error::WrongChip {
                 model: Model::Ov2640,
                 pid,
@@ -402,6 +424,17 @@ mod tests {
         assert_eq!(
             block_on(camera.set_manual(10, GainX16::ONE)),
             Err(Error::Bus(Nack))
+        );
+        // An OV2640 write that fails names its register (here the bank select before it).
+        let mut camera = Camera::Ov2640(Ov2640::new(MockBus::default()));
+        assert_eq!(
+            block_on(camera.set_manual(10, GainX16::ONE)),
+            Err(Error::Write {
+                model: Model::Ov2640,
+                bank: 1,
+                register: 0xFF,
+                error: Nack
+            })
         );
     }
 }

@@ -8,13 +8,23 @@
 //! it selects again regardless after the register reset, at every id check (the sensor may
 //! have been reset through its pins since) and after a bank select that failed.
 //!
-//! What this driver sets up, and nothing else (every other register keeps its reset value):
+//! What this driver sets up, and nothing else (every register not named here or in the
+//! [`table`]s keeps its reset value):
 //!
 //! - **Identity**: PIDH/PIDL must read `0x26`/`0x40..=0x42` and MIDH/MIDL `0x7F`/`0xA2`
 //!   before anything but the bank select is written, so a wrong device is an error, not a
 //!   device we scribble on.
 //! - **Reset**: COM7 bit 7 in the sensor bank puts every register back to its default
 //!   ([`RESET_SETTLE_US`]).
+//! - **OmniVision's reference set-up** ([`table`]): the sensor's reserved analog and readout
+//!   registers, the tuning of its own AEC, the SVGA mode's analog timing and the DSP's
+//!   colour-processing block (pixel correction, gamma, white balance, colour matrix), with
+//!   the values every working OV2640 driver writes. Most of these registers are marked
+//!   reserved in the datasheet and their meaning is not published; left at their power-up
+//!   values the sensor is not in the state any of those drivers run it in, and the image is
+//!   likely unusable. The tables leave out every register this driver derives itself (the
+//!   items below), so nothing in them can undo the mode, the window, the clock plan, the
+//!   scaling, the format, the sync polarity or the exposure mode.
 //! - **Sensor window: SVGA.** COM7 selects the 800x600 mode, which reads the whole
 //!   1600x1200 array subsampled by two in each direction: the full field of view, at up to
 //!   30 fps, with a 600-line readout. The UXGA mode reads all 1200 lines, so it tops out at
@@ -28,11 +38,15 @@
 //!   the window, so nothing is cropped and pixels stay square.
 //! - **Format**: YUV 4:2:2 with Y first (`Y0 U0 Y1 V0 ...`): IMAGE_MODE selects YUV 4:2:2
 //!   with its byte-swap bit 0 clear (high byte, Y, first) and CTRL0's V-first bit clear
-//!   (U before V). The camera interface keeps every first byte of a pair: 8-bit grey.
+//!   (U before V), plus the DSP output settings OmniVision pairs with that byte order
+//!   ([`table::YUV422`]). The camera interface keeps every first byte of a pair: 8-bit grey.
 //! - **Frame rate**: the sensor clock is `XCLK x (2 if CLKRC's doubler) / (CLKRC[5:0] + 1)`,
 //!   one SVGA line is 1190 sensor clocks and one frame 672 lines (OmniVision's frame-rate
-//!   note for the SVGA mode: 24 MHz gives 30.01 fps); [`plan_clock`] picks the doubler and
-//!   divider and adds dummy lines (FLL/FLH) to hit the requested rate.
+//!   note for the SVGA mode: 24 MHz gives 30.01 fps; the SVGA banding steps in
+//!   [`table::SVGA_TIMING`], 202 lines per 10 ms, say the same); [`plan_clock`] picks the
+//!   doubler and divider and adds dummy lines (FLL/FLH) to hit the requested rate. The
+//!   output pixel clock is set by hand (R_DVP_SP, automatic mode off), so it is the one
+//!   [`FrameTiming::pclk_hz`] reports.
 //! - **Sync signals**: VSYNC is inverted (COM10 bit 1) so it is high between frames like the
 //!   OV7725's; HREF (high during a line's data) and PCLK (data changes on the falling edge)
 //!   stay as reset. One camera interface set-up then serves both sensors (see
@@ -40,17 +54,26 @@
 //! - **Exposure and gain**: the sensor's own AEC/AGC with a gain ceiling (COM8, COM9), or
 //!   manual exposure (16 bits of line periods split over REG45, AEC and REG04) and gain
 //!   (GAIN). With a hard exposure limit, run [`super::exposure::AutoExposure`] and feed its
-//!   manual settings here.
+//!   manual settings here. The banding filter stays off in both.
+//!
+//! The whole set-up is data: the tables and the values derived here are lists of
+//! [`Setting`]s that one loop writes ([`Ov2640::init`]), so the firmware carries one copy of
+//! the register-write code instead of one per register. A write that fails stops the set-up
+//! with [`Error::Write`], which names the bank and register.
 //!
 //! The bus is SCCB: a register read is a write of the register address, a STOP, then a
 //! separate one-byte read ([`Ov2640::read_register`]), never `write_read`.
 //!
 //! Sources for the register semantics: the OV2640 datasheet's register tables (sensor bank:
-//! GAIN, COM1, REG04, AEC, CLKRC, COM7..COM10, window, REG32, REG45, FLL/FLH, PIDH/PIDL,
-//! MIDH/MIDL; DSP bank: R_BYPASS, CTRLI, size and zoom registers, CTRL0/CTRL2, R_DVP_SP,
-//! IMAGE_MODE, RESET), OmniVision's software application notes (SVGA frame timing, dummy
-//! lines) and the bit definitions documented in the Linux `ov2640` driver. The register
-//! values below are derived here, not copied from any table.
+//! GAIN, COM1, REG04, COM2, AEC, CLKRC, COM7..COM10, window, AEW/AEB/VV, REG32, REG45,
+//! FLL/FLH, COM25, BD50/BD60, PIDH/PIDL, MIDH/MIDL; DSP bank: R_BYPASS, CTRLI, size and zoom
+//! registers, CTRL0/CTRL2/CTRL3, R_DVP_SP, IMAGE_MODE, RESET, MC_BIST), OmniVision's
+//! software application notes (SVGA frame timing, dummy lines) and the bit definitions
+//! documented in the Linux `ov2640` driver. The derived values are computed here. The values
+//! in [`table`] are OmniVision's reference settings as three open drivers carry them (Linux
+//! `drivers/media/i2c/ov2640.c`, OpenMV `drivers/sensors/ov2640.c`, esp32-camera
+//! `sensors/private_include/ov2640_settings.h`); each table says which one it follows where
+//! they differ.
 
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
@@ -99,7 +122,9 @@ pub enum Bank {
     Sensor = 1,
 }
 
-/// Register addresses (the subset this driver touches), with what each one does.
+/// Register addresses: the documented ones this driver or its [`super::table`]s write, with
+/// what each one does. (The tables write further registers by number: those whose meaning
+/// is not published.)
 pub mod reg {
     /// Bank select, in both banks: 0 DSP bank, 1 sensor bank.
     pub const BANK_SEL: u8 = 0xFF;
@@ -117,10 +142,16 @@ pub mod reg {
         /// vertical window start bit 0 (VREF\[0\]), bit 3 horizontal window start bit 0
         /// (HREF\[0\]), bits \[1:0\] exposure AEC\[1:0\].
         pub const REG04: u8 = 0x04;
+        /// COM2: bit 4 standby, bits \[1:0\] output drive strength (00 1x, 01 2x, 10 3x, 11
+        /// 4x).
+        pub const COM2: u8 = 0x09;
         /// Product id MSB, read-only (0x26).
         pub const PIDH: u8 = 0x0A;
         /// Product id LSB, read-only (0x40..=0x42).
         pub const PIDL: u8 = 0x0B;
+        /// COM4: named in OmniVision's register list, its bits not documented. The SVGA
+        /// timing table writes it with the mode's other analog settings.
+        pub const COM4: u8 = 0x0D;
         /// Exposure AEC\[9:2\], in line periods. Written by the AEC when on.
         pub const AEC: u8 = 0x10;
         /// CLKRC: bit 7 internal clock doubler, bits \[5:0\] divider n: sensor clock =
@@ -150,6 +181,12 @@ pub mod reg {
         pub const MIDH: u8 = 0x1C;
         /// Manufacturer id LSB, read-only (0xA2).
         pub const MIDL: u8 = 0x1D;
+        /// AEW: the sensor's AEC/AGC stable region, upper limit (average luminance).
+        pub const AEW: u8 = 0x24;
+        /// AEB: the sensor's AEC/AGC stable region, lower limit.
+        pub const AEB: u8 = 0x25;
+        /// VV: the AEC/AGC fast-mode region, bits \[7:4\] upper and \[3:0\] lower threshold.
+        pub const VV: u8 = 0x26;
         /// REG2A: bits \[7:4\] dummy pixels per line \[11:8\] (longer line; unused, written 0).
         pub const REG2A: u8 = 0x2A;
         /// FRARL: dummy pixels per line \[7:0\].
@@ -157,9 +194,12 @@ pub mod reg {
         /// REG32: bits \[7:6\] PCLK divider (00 none), bits \[5:3\] horizontal window end
         /// \[2:0\], bits \[2:0\] horizontal window start \[2:0\].
         pub const REG32: u8 = 0x32;
+        /// ARCOM2: bit 2 zoom window horizontal start point; the other bits are not
+        /// documented. Part of the SVGA mode's analog timing.
+        pub const ARCOM2: u8 = 0x34;
         /// Reserved in the datasheet. OmniVision's frame-rate note writes 0x38 with the SVGA
         /// mode (0x34 with UXGA) as part of every SVGA clock set-up; it goes with the
-        /// mode's readout timing.
+        /// mode's readout timing, and [`super::super::table::SVGA_TIMING`] writes it.
         pub const REG3D: u8 = 0x3D;
         /// REG45: bits \[7:6\] AGC\[9:8\] (extra gain beyond GAIN; written 0), bits
         /// \[5:0\] exposure AEC\[15:10\].
@@ -168,6 +208,24 @@ pub mod reg {
         pub const FLL: u8 = 0x46;
         /// FLH: dummy lines per frame \[15:8\].
         pub const FLH: u8 = 0x47;
+        /// COM25: bits \[7:6\] 50 Hz banding step \[9:8\], bits \[5:4\] 60 Hz banding step
+        /// \[9:8\] (see [`BD50`], [`BD60`]).
+        pub const COM25: u8 = 0x4E;
+        /// BD50: 50 Hz banding step \[7:0\], in lines: the exposure of 1/100 s, the step the
+        /// banding filter (COM8 bit 5) holds the exposure to under 50 Hz light.
+        pub const BD50: u8 = 0x4F;
+        /// BD60: 60 Hz banding step \[7:0\], in lines: the exposure of 1/120 s.
+        pub const BD60: u8 = 0x50;
+        /// REG5A: bits \[7:4\] most 50 Hz banding steps per frame minus one, bits \[3:0\]
+        /// most 60 Hz banding steps minus one.
+        pub const REG5A: u8 = 0x5A;
+        /// REG5D..REG60: AEC weights of the 16 zones of the image (2 bits each), the
+        /// first of four.
+        pub const REG5D: u8 = 0x5D;
+        /// HISTO_LOW: the AEC histogram algorithm's low level.
+        pub const HISTO_LOW: u8 = 0x61;
+        /// HISTO_HIGH: the AEC histogram algorithm's high level.
+        pub const HISTO_HIGH: u8 = 0x62;
     }
 
     /// DSP bank (BANK_SEL = 0).
@@ -199,9 +257,18 @@ pub mod reg {
         /// ZMHH: bits \[7:4\] zoom speed, bit 2 output height \[8\], bits \[1:0\] output width
         /// \[9:8\].
         pub const ZMHH: u8 = 0x5C;
+        /// BPADDR: address port of the special-digital-effects (SDE) registers, which are
+        /// reached indirectly: write the address here, then the data to [`BPDATA`] (the
+        /// address steps on by one with each data byte).
+        pub const BPADDR: u8 = 0x7C;
+        /// BPDATA: data port of the SDE registers.
+        pub const BPDATA: u8 = 0x7D;
         /// CTRL2: bit 5 down-sampling (DCW) on, bit 4 special digital effects, bit 3 UV
         /// adjust, bit 2 UV average, bit 0 colour matrix (RGB to YUV).
         pub const CTRL2: u8 = 0x86;
+        /// CTRL3: bit 7 black-pixel correction, bit 6 white-pixel correction; bit 4 is set
+        /// by OmniVision's settings and not documented.
+        pub const CTRL3: u8 = 0x87;
         /// SIZEL: bit 6 input width \[11\], bits \[5:3\] input width \[2:0\], bits \[2:0\] input
         /// height \[2:0\].
         pub const SIZEL: u8 = 0x8C;
@@ -221,6 +288,8 @@ pub mod reg {
         pub const IMAGE_MODE: u8 = 0xDA;
         /// RESET: bit 6 microcontroller, bit 4 JPEG, bit 2 DVP (the output port), bit 0 CIF.
         pub const RESET: u8 = 0xE0;
+        /// MC_BIST: bit 7 resets the DSP's microcontroller, bit 6 selects its boot ROM.
+        pub const MC_BIST: u8 = 0xF9;
     }
 }
 
@@ -228,8 +297,6 @@ pub mod reg {
 const COM7_RESET: u8 = 0x80;
 /// COM7 bits \[6:4\] = 100: the SVGA mode (zoom and colour bar off).
 const COM7_SVGA: u8 = 0x40;
-/// REG3D in the SVGA mode (see [`reg::sensor::REG3D`]).
-const REG3D_SVGA: u8 = 0x38;
 /// REG04 bit 7: horizontal mirror.
 const REG04_MIRROR: u8 = 0x80;
 /// REG04 bit 6: vertical flip.
@@ -296,12 +363,433 @@ const IMAGE_MODE_YUV422_Y_FIRST: u8 = 0x00;
 /// unit 137, row unit 2), which skip the array's border.
 pub const SVGA_WINDOW: (u16, u16, u16, u16) = (137, 400, 2, 300);
 
+/// One register write of the set-up: the bank, the register in it, the value.
+///
+/// The set-up is a list of these ([`table`] and the values derived here), written in order by
+/// one loop that selects the bank only when it changes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Setting {
+    /// The bank the register is in.
+    pub bank: Bank,
+    /// The register address in that bank (never [`reg::BANK_SEL`]: the driver selects banks).
+    pub register: u8,
+    /// The value written.
+    pub value: u8,
+}
+
+impl Setting {
+    /// A write to the sensor bank.
+    pub const fn sensor(register: u8, value: u8) -> Self {
+        Setting {
+            bank: Bank::Sensor,
+            register,
+            value,
+        }
+    }
+
+    /// A write to the DSP bank.
+    pub const fn dsp(register: u8, value: u8) -> Self {
+        Setting {
+            bank: Bank::Dsp,
+            register,
+            value,
+        }
+    }
+}
+
+/// OmniVision's reference register values: what the driver writes besides the values it
+/// derives.
+///
+/// The three open drivers that run this sensor (Linux, OpenMV, esp32-camera) write the same
+/// vendor set-up after the reset, most of it to registers the datasheet marks reserved. The
+/// values are facts about the silicon taken from them; the grouping, the order relative to
+/// the derived values and the omissions are this driver's:
+///
+/// - Every register the driver derives is left out (COM7, CLKRC, COM8, COM9, COM10, REG04,
+///   FLL/FLH, the window, the DSP sizes and zoom, R_DVP_SP, IMAGE_MODE, CTRL0, R_BYPASS).
+///   The references write some of them with other values (the UXGA mode with zoom, AEC and
+///   AGC with the banding filter on, 0x22 dummy lines, the automatic PCLK mode, a CTRL0 with
+///   the AEC statistics bits cleared); here the derived value is the only one written.
+///   COM3 (banding auto-detection, written by Linux and OpenMV) keeps its reset value: the
+///   banding filter stays off.
+///   The one overlap is the DSP's RESET: [`DSP_COMMON`] holds the JPEG and output blocks in
+///   reset as the references do, and the derived sequence releases them last.
+/// - The reference set-up is for the UXGA mode; the SVGA mode's analog timing replaces its
+///   UXGA values ([`SVGA_TIMING`]), written after the mode select as esp32-camera, the one
+///   reference that runs the SVGA mode, does.
+/// - Registers named `0x..` without a constant are undocumented: their meaning is unknown
+///   and the value is the vendor's.
+pub mod table {
+    use super::reg::{dsp, sensor};
+    use super::Setting;
+
+    const fn s(register: u8, value: u8) -> Setting {
+        Setting::sensor(register, value)
+    }
+
+    const fn d(register: u8, value: u8) -> Setting {
+        Setting::dsp(register, value)
+    }
+
+    /// Two undocumented DSP registers every reference writes first, before anything in the
+    /// sensor bank. Kept first for that reason (whether the order matters is not documented).
+    pub const DSP_PRELUDE: &[Setting] = &[d(0x2C, 0xFF), d(0x2E, 0xDF)];
+
+    /// The sensor bank's common set-up (the same for every mode; Linux's and OpenMV's
+    /// values, which esp32-camera shares except where noted).
+    pub const SENSOR_COMMON: &[Setting] = &[
+        // Undocumented.
+        s(0x3C, 0x32),
+        // Output drive 3x: the PCLK and data edges stay sharp at 24 MHz over the module's
+        // ribbon and the board's traces.
+        s(sensor::COM2, 0x02),
+        // Undocumented.
+        s(0x2C, 0x0C),
+        s(0x33, 0x78),
+        s(0x3A, 0x33),
+        s(0x3B, 0xFB),
+        s(0x3E, 0x00),
+        s(0x43, 0x11),
+        s(0x16, 0x10),
+        // Undocumented (Linux and OpenMV write them with the AEC settings below).
+        s(0x4A, 0x81),
+        s(0x21, 0x99),
+        // The sensor's own AEC/AGC (used with `Exposure::Auto`): target band of the mean
+        // luminance and the fast-mode band around it.
+        s(sensor::AEW, 0x40),
+        s(sensor::AEB, 0x38),
+        s(sensor::VV, 0x82),
+        // Undocumented.
+        s(0x5C, 0x00),
+        s(0x63, 0x00),
+        // AEC zone weights (a heavier centre) and histogram levels; esp32-camera keeps the
+        // reset values. Only the sensor's AEC reads them.
+        s(sensor::REG5D, 0x55),
+        s(sensor::REG5D + 1, 0x7D),
+        s(sensor::REG5D + 2, 0x7D),
+        s(sensor::REG5D + 3, 0x55),
+        s(sensor::HISTO_LOW, 0x70),
+        s(sensor::HISTO_HIGH, 0x80),
+        // Undocumented.
+        s(0x7C, 0x05),
+        s(0x20, 0x80),
+        s(0x28, 0x30),
+        s(0x6C, 0x00),
+        s(0x6E, 0x00),
+        s(0x70, 0x02),
+        s(0x71, 0x94),
+        s(0x73, 0xC1),
+    ];
+
+    /// The DSP bank's common set-up: Linux's and OpenMV's values (the same table). Where
+    /// esp32-camera differs (no black-pixel correction in CTRL3, other values in the 0x93
+    /// table, no 0xA6/0xA7 table, a CTRL1 write) the older two are followed. Left out: the
+    /// automatic PCLK mode (R_DVP_SP) and CTRL0, which the driver derives.
+    pub const DSP_COMMON: &[Setting] = &[
+        // 0xE5 is written 0x7F here and 0x1F at the end of the block, in every reference:
+        // it looks like an unlock bracket around what follows (undocumented).
+        d(0xE5, 0x7F),
+        // Reset the DSP's microcontroller and boot it from ROM.
+        d(dsp::MC_BIST, 0xC0),
+        // Undocumented.
+        d(0x41, 0x24),
+        // JPEG and output blocks held in reset while the DSP is set up (released at the end
+        // of the derived sequence).
+        d(dsp::RESET, 0x14),
+        // Undocumented.
+        d(0x76, 0xFF),
+        d(0x33, 0xA0),
+        d(0x42, 0x20),
+        d(0x43, 0x18),
+        d(0x4C, 0x00),
+        // Black- and white-pixel correction on: hot and dead pixels would otherwise be
+        // single-pixel specks, candidate edges for the fiducial detector. (Bit 4: vendor's.)
+        d(dsp::CTRL3, 0xD0),
+        // Undocumented.
+        d(0x88, 0x3F),
+        d(0xD7, 0x03),
+        d(0xD9, 0x10),
+        d(0xC8, 0x08),
+        d(0xC9, 0x80),
+        // SDE registers through their address/data ports: address 0 (effect enables: none),
+        // addresses 3-4 (U and V saturation, 0x48 each: the neutral level), addresses 8-10
+        // (undocumented).
+        d(dsp::BPADDR, 0x00),
+        d(dsp::BPDATA, 0x00),
+        d(dsp::BPADDR, 0x03),
+        d(dsp::BPDATA, 0x48),
+        d(dsp::BPDATA, 0x48),
+        d(dsp::BPADDR, 0x08),
+        d(dsp::BPDATA, 0x20),
+        d(dsp::BPDATA, 0x10),
+        d(dsp::BPDATA, 0x0E),
+        // An undocumented indirect table (address port 0x90, data port 0x91, from address
+        // 0). Its 15 rising values look like a tone (gamma) curve; unconfirmed.
+        d(0x90, 0x00),
+        d(0x91, 0x0E),
+        d(0x91, 0x1A),
+        d(0x91, 0x31),
+        d(0x91, 0x5A),
+        d(0x91, 0x69),
+        d(0x91, 0x75),
+        d(0x91, 0x7E),
+        d(0x91, 0x88),
+        d(0x91, 0x8F),
+        d(0x91, 0x96),
+        d(0x91, 0xA3),
+        d(0x91, 0xAF),
+        d(0x91, 0xC4),
+        d(0x91, 0xD7),
+        d(0x91, 0xE8),
+        d(0x91, 0x20),
+        // Another undocumented indirect table (ports 0x92/0x93).
+        d(0x92, 0x00),
+        d(0x93, 0x06),
+        d(0x93, 0xE3),
+        d(0x93, 0x03),
+        d(0x93, 0x03),
+        d(0x93, 0x00),
+        d(0x93, 0x02),
+        d(0x93, 0x00),
+        d(0x93, 0x00),
+        d(0x93, 0x00),
+        d(0x93, 0x00),
+        d(0x93, 0x00),
+        d(0x93, 0x00),
+        d(0x93, 0x00),
+        // Another undocumented indirect table (ports 0x96/0x97).
+        d(0x96, 0x00),
+        d(0x97, 0x08),
+        d(0x97, 0x19),
+        d(0x97, 0x02),
+        d(0x97, 0x0C),
+        d(0x97, 0x24),
+        d(0x97, 0x30),
+        d(0x97, 0x28),
+        d(0x97, 0x26),
+        d(0x97, 0x02),
+        d(0x97, 0x98),
+        d(0x97, 0x80),
+        d(0x97, 0x00),
+        d(0x97, 0x00),
+        // Undocumented; 0xB0..0xC7 hold the white-balance settings (0xC7 = 0x10 selects
+        // the simpler of its two AWB algorithms, by the Linux driver's notes).
+        d(0xA4, 0x00),
+        d(0xA8, 0x00),
+        d(0xC5, 0x11),
+        d(0xC6, 0x51),
+        d(0xBF, 0x80),
+        d(0xC7, 0x10),
+        d(0xB6, 0x66),
+        d(0xB8, 0xA5),
+        d(0xB7, 0x64),
+        d(0xB9, 0x7C),
+        d(0xB3, 0xAF),
+        d(0xB4, 0x97),
+        d(0xB5, 0xFF),
+        d(0xB0, 0xC5),
+        d(0xB1, 0x94),
+        d(0xB2, 0x0F),
+        d(0xC4, 0x5C),
+        // An undocumented indirect table (ports 0xA6/0xA7): three groups of six, one per
+        // colour channel by the look of it.
+        d(0xA6, 0x00),
+        d(0xA7, 0x20),
+        d(0xA7, 0xD8),
+        d(0xA7, 0x1B),
+        d(0xA7, 0x31),
+        d(0xA7, 0x00),
+        d(0xA7, 0x18),
+        d(0xA7, 0x20),
+        d(0xA7, 0xD8),
+        d(0xA7, 0x19),
+        d(0xA7, 0x31),
+        d(0xA7, 0x00),
+        d(0xA7, 0x18),
+        d(0xA7, 0x20),
+        d(0xA7, 0xD8),
+        d(0xA7, 0x19),
+        d(0xA7, 0x31),
+        d(0xA7, 0x00),
+        d(0xA7, 0x18),
+        // Undocumented; 0xE5 closes the bracket opened above. (0xE1 is written again, with
+        // its YUV value, by [`YUV422`].)
+        d(0x7F, 0x00),
+        d(0xE5, 0x1F),
+        d(0xE1, 0x77),
+        d(0xDD, 0x7F),
+    ];
+
+    /// The SVGA mode's analog and readout timing (sensor bank), written after COM7 selects
+    /// the mode and the window is set: esp32-camera's SVGA values, which replace the UXGA
+    /// values of the Linux/OpenMV set-up (0x35 0x88, 0x22 0x0A, 0x37 0x40, 0x39 0x02,
+    /// ARCOM2 0xA0, 0x06 0x02, COM4 0xB7, 0x0E 0x01, 0x42 0x83, 0x3D 0x34, 0x5A 0x57,
+    /// BD50 0xBB, BD60 0x9C, 0x6D 0x80). The order is esp32-camera's, 0x37's two writes
+    /// included (undocumented, so the intermediate value is kept rather than guessed away).
+    pub const SVGA_TIMING: &[Setting] = &[
+        s(0x37, 0xC0),
+        // Banding steps for this mode's line time at the 24 MHz, 30 fps reference clock:
+        // 202 lines = 10.0 ms and 168 lines = 8.33 ms at 49.58 us a line, at most 3 and 4
+        // steps per frame (606 and 672 of its 672 lines). Only the banding filter reads
+        // them, and it stays off; they are also a check of the 1190-clock line and the
+        // 672-line frame (see the tests).
+        s(sensor::COM25, 0x00),
+        s(sensor::BD50, 0xCA),
+        s(sensor::BD60, 0xA8),
+        s(sensor::REG5A, 0x23),
+        // Undocumented.
+        s(0x6D, 0x00),
+        // The SVGA readout timing that goes with the 1190 x 672 frame (see REG3D).
+        s(sensor::REG3D, 0x38),
+        // Undocumented analog settings of the mode.
+        s(0x39, 0x92),
+        s(0x35, 0xDA),
+        s(0x22, 0x1A),
+        s(0x37, 0xC3),
+        s(0x23, 0x00),
+        s(sensor::ARCOM2, 0xC0),
+        s(0x06, 0x88),
+        s(0x07, 0xC0),
+        s(sensor::COM4, 0x87),
+        s(0x0E, 0x41),
+        s(0x42, 0x03),
+        s(0x4C, 0x00),
+    ];
+
+    /// DSP output settings for YUV 4:2:2 with the high byte (Y) first, written after
+    /// IMAGE_MODE. Undocumented; the values are Linux's and OpenMV's for this byte order
+    /// (esp32-camera writes 0xD7 = 0x01, which Linux pairs with the swapped, U-first order).
+    pub const YUV422: &[Setting] = &[d(0xD7, 0x03), d(0x33, 0xA0), d(0xE5, 0x1F), d(0xE1, 0x67)];
+}
+
+/// The SVGA mode select and the window (sensor bank), derived from [`SVGA_WINDOW`]: the
+/// window registers hold the start and end in units of two pixels (HREFST/HREFEND the MSBs,
+/// REG32 the 3 LSBs of each) and two lines (VSTRT/VEND the MSBs, COM1 the 2 LSBs).
+const MODE_AND_WINDOW: [Setting; 7] = {
+    use reg::sensor::*;
+    let (h_start, width, v_start, height) = SVGA_WINDOW;
+    let h_end = h_start + width;
+    let v_end = v_start + height;
+    [
+        Setting::sensor(COM7, COM7_SVGA),
+        Setting::sensor(HREFST, (h_start >> 3) as u8),
+        Setting::sensor(HREFEND, (h_end >> 3) as u8),
+        Setting::sensor(REG32, (((h_end & 0x7) << 3) | (h_start & 0x7)) as u8),
+        Setting::sensor(VSTRT, (v_start >> 2) as u8),
+        Setting::sensor(VEND, (v_end >> 2) as u8),
+        Setting::sensor(COM1, (((v_end & 0x3) << 2) | (v_start & 0x3)) as u8),
+    ]
+};
+
+/// The DSP in bypass (sensor data straight through) while its sizes change, so no
+/// half-configured frame goes out.
+const BYPASS_DSP: [Setting; 1] = [Setting::dsp(reg::dsp::R_BYPASS, R_BYPASS_BYPASS)];
+
+/// The DSP's sizes, scaling, output clock and format for `resolution` (DSP bank).
+///
+/// The output port is held in reset, the DSP is told it receives 800x600 (multiples of 8:
+/// SIZEL's LSB fields are 0), the zoom stage takes all of it with no offset (units of 4),
+/// QVGA halves it first ([`scaling`]), the zoom scales to the output size (units of 4), the
+/// output PCLK divider is set by hand (bit 7, the automatic mode, clear), and the format is
+/// YUV 4:2:2 with Y first.
+const fn dsp_scaling(resolution: Resolution) -> [Setting; 17] {
+    use reg::dsp::*;
+    let (w_in, h_in) = (SVGA_WIDTH, SVGA_HEIGHT);
+    let sizel = (((w_in >> 11) & 0x1) << 6) | ((w_in & 0x7) << 3) | (h_in & 0x7);
+    let (zw, zh) = (w_in / 4, h_in / 4);
+    let vhyx = (((zh >> 8) & 0x1) << 7) | (((zw >> 8) & 0x1) << 3);
+    let (down, dvp_divider) = scaling(resolution);
+    let out_w = (resolution.width() / 4) as u16;
+    let out_h = (resolution.height() / 4) as u16;
+    let zmhh = ((out_w >> 8) & 0x3) | (((out_h >> 8) & 0x1) << 2);
+    [
+        Setting::dsp(RESET, RESET_DVP),
+        Setting::dsp(HSIZE8, (w_in >> 3) as u8),
+        Setting::dsp(VSIZE8, (h_in >> 3) as u8),
+        Setting::dsp(SIZEL, sizel as u8),
+        Setting::dsp(CTRL2, CTRL2_YUV_SCALED),
+        Setting::dsp(CTRLI, CTRLI_LP_DP | (down << 3) | down),
+        Setting::dsp(HSIZE, zw as u8),
+        Setting::dsp(VSIZE, zh as u8),
+        Setting::dsp(XOFFL, 0x00),
+        Setting::dsp(YOFFL, 0x00),
+        Setting::dsp(VHYX, vhyx as u8),
+        Setting::dsp(TEST, (((zw >> 9) & 0x1) << 7) as u8),
+        Setting::dsp(ZMOW, out_w as u8),
+        Setting::dsp(ZMOH, out_h as u8),
+        Setting::dsp(ZMHH, zmhh as u8),
+        Setting::dsp(R_DVP_SP, dvp_divider),
+        Setting::dsp(IMAGE_MODE, IMAGE_MODE_YUV422_Y_FIRST),
+    ]
+}
+
+/// [`dsp_scaling`] for QVGA, computed at compile time.
+const DSP_QVGA: [Setting; 17] = dsp_scaling(Resolution::Qvga);
+/// [`dsp_scaling`] for VGA, computed at compile time.
+const DSP_VGA: [Setting; 17] = dsp_scaling(Resolution::Vga);
+
+/// The clock, frame length, sync polarity and orientation (sensor bank), from the clock plan
+/// and REG04 (orientation bits; the exposure bits \[1:0\] are written with the exposure).
+fn clock_and_sync(plan: &ClockPlan, reg04: u8) -> [Setting; 7] {
+    use reg::sensor::*;
+    let [dummy_lo, dummy_hi] = plan.dummy_lines.to_le_bytes();
+    [
+        Setting::sensor(CLKRC, plan.clkrc()),
+        // Line length: no dummy pixels (the frame rate is set with whole lines).
+        Setting::sensor(REG2A, 0x00),
+        Setting::sensor(FRARL, 0x00),
+        // Frame length: the dummy lines of the plan.
+        Setting::sensor(FLL, dummy_lo),
+        Setting::sensor(FLH, dummy_hi),
+        // VSYNC high between frames (as the OV7725's), HREF and PCLK as reset.
+        Setting::sensor(COM10, COM10_VSYNC_NEGATIVE),
+        Setting::sensor(REG04, reg04),
+    ]
+}
+
+/// The last DSP writes: CTRL0 (as read, with YUV 4:2:2 on, raw off, U before V), then the
+/// output port out of reset and the DSP back in the path.
+const fn dsp_start(ctrl0_as_read: u8) -> [Setting; 3] {
+    use reg::dsp::*;
+    let ctrl0 = (ctrl0_as_read & !(CTRL0_V_FIRST | CTRL0_RAW)) | CTRL0_YUV422;
+    [
+        Setting::dsp(CTRL0, ctrl0),
+        Setting::dsp(RESET, 0x00),
+        Setting::dsp(R_BYPASS, R_BYPASS_USE_DSP),
+    ]
+}
+
+/// REG04 for `config`'s orientation, without the exposure bits.
+const fn orientation(config: &Config) -> u8 {
+    let mut reg04 = REG04_RESERVED | REG04_HREF0;
+    if config.mirror {
+        reg04 |= REG04_MIRROR;
+    }
+    if config.vflip {
+        reg04 |= REG04_VFLIP | REG04_VREF0;
+    }
+    reg04
+}
+
 /// Why the sensor could not be set up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Error<E> {
-    /// The SCCB/I2C transfer failed (no device, NACK, bus fault).
+    /// A register read failed (no device, NACK, bus fault): the id check, or the read of a
+    /// read-modify-write.
     Bus(E),
+    /// A register write failed (NACK, bus fault): the bank and register it was for
+    /// ([`reg::BANK_SEL`] for a failed bank select) and the bus error. The writes before it
+    /// went through, so the sensor is half set up: run [`Ov2640::init`] again.
+    Write {
+        /// The bank of the register.
+        bank: Bank,
+        /// The register.
+        register: u8,
+        /// The bus error.
+        error: E,
+    },
     /// Something answered, but it is not an OV2640 (the ids as read).
     WrongChip {
         /// PIDH as read.
@@ -534,18 +1022,28 @@ impl<I: I2c> Ov2640<I> {
 
     /// Writes one register of `bank`. (To switch banks, pass the bank; a direct write of
     /// [`reg::BANK_SEL`] goes through, and the driver then re-selects before the next access.)
+    /// A failure is [`Error::Write`] naming the register, or [`reg::BANK_SEL`] if the bank
+    /// select before it failed.
     pub async fn write_register(
         &mut self,
         bank: Bank,
         register: u8,
         value: u8,
     ) -> Result<(), Error<I::Error>> {
-        self.select_bank(bank).await.map_err(Error::Bus)?;
+        self.select_bank(bank).await.map_err(|error| Error::Write {
+            bank,
+            register: reg::BANK_SEL,
+            error,
+        })?;
         let result = self
             .i2c
             .write(I2C_ADDRESS, &[register, value])
             .await
-            .map_err(Error::Bus);
+            .map_err(|error| Error::Write {
+                bank,
+                register,
+                error,
+            });
         if register == reg::BANK_SEL {
             // The caller switched banks behind the driver's back: forget which is selected.
             self.bank = None;
@@ -553,15 +1051,31 @@ impl<I: I2c> Ov2640<I> {
         result
     }
 
+    /// Writes every [`Setting`] of every part, in order, stopping at the first failure.
+    ///
+    /// Every multi-register write of the driver goes through here: one loop, one await, so
+    /// the register-write code exists once in the firmware instead of once per register.
+    async fn write_settings(&mut self, parts: &[&[Setting]]) -> Result<(), Error<I::Error>> {
+        for part in parts {
+            for setting in *part {
+                self.write_register(setting.bank, setting.register, setting.value)
+                    .await?;
+            }
+        }
+        Ok(())
+    }
+
     /// Reads PIDH/PIDL and MIDH/MIDL (sensor bank). The bank select before the reads is the
     /// only write; it is always sent, because the sensor may have been reset or power-cycled
     /// through its pins since the driver last selected a bank.
     pub async fn read_id(&mut self) -> Result<ChipId, I::Error> {
+        use reg::sensor::{MIDH, MIDL, PIDH, PIDL};
         self.bank = None;
-        let pid = self.read_raw(Bank::Sensor, reg::sensor::PIDH).await?;
-        let ver = self.read_raw(Bank::Sensor, reg::sensor::PIDL).await?;
-        let midh = self.read_raw(Bank::Sensor, reg::sensor::MIDH).await?;
-        let midl = self.read_raw(Bank::Sensor, reg::sensor::MIDL).await?;
+        let mut id = [0u8; 4];
+        for (value, register) in id.iter_mut().zip([PIDH, PIDL, MIDH, MIDL]) {
+            *value = self.read_raw(Bank::Sensor, register).await?;
+        }
+        let [pid, ver, midh, midl] = id;
         Ok(ChipId {
             pid,
             ver,
@@ -583,9 +1097,25 @@ impl<I: I2c> Ov2640<I> {
         }
     }
 
-    /// Checks the id, resets the sensor and configures it (see the module documentation for
-    /// the sequence). Returns the clock plan in force. The configuration is validated before
-    /// anything is sent.
+    /// Checks the id, resets the sensor and configures it. Returns the clock plan in force.
+    /// The configuration is validated before anything is sent.
+    ///
+    /// The order of the writes after the reset, each part a list of [`Setting`]s:
+    ///
+    /// 1. [`table::DSP_PRELUDE`], [`table::SENSOR_COMMON`], [`table::DSP_COMMON`]: the
+    ///    vendor's common set-up.
+    /// 2. The DSP in bypass, COM7 = SVGA and the window, [`table::SVGA_TIMING`] (after the
+    ///    mode select, as the reference that runs this mode writes it).
+    /// 3. The derived sensor values: CLKRC and the frame length from [`plan_clock`], COM10,
+    ///    REG04.
+    /// 4. The derived DSP values: sizes, scaling, PCLK divider, IMAGE_MODE; then
+    ///    [`table::YUV422`]; then CTRL0 (read, modified, written), the output port out of
+    ///    reset and the DSP back in the path.
+    /// 5. The exposure mode ([`Ov2640::set_exposure`]): COM8 (and COM9) last, so the
+    ///    sensor's AEC/AGC are in the mode asked for whatever came before.
+    ///
+    /// No table holds a register of parts 2-5 (but the DSP's RESET, released in part 4), so
+    /// every derived value is the last written to its register.
     pub async fn init<D: DelayNs>(
         &mut self,
         delay: &mut D,
@@ -606,151 +1136,55 @@ impl<I: I2c> Ov2640<I> {
         self.bank = None;
         delay.delay_us(RESET_SETTLE_US).await;
 
-        self.configure_sensor(config, &plan).await?;
-        self.configure_dsp(config.resolution).await?;
+        self.reg04 = orientation(config);
+        let clock = clock_and_sync(&plan, self.reg04);
+        let dsp: &[Setting] = match config.resolution {
+            Resolution::Qvga => &DSP_QVGA,
+            Resolution::Vga => &DSP_VGA,
+        };
+        self.write_settings(&[
+            table::DSP_PRELUDE,
+            table::SENSOR_COMMON,
+            table::DSP_COMMON,
+            &BYPASS_DSP,
+            &MODE_AND_WINDOW,
+            table::SVGA_TIMING,
+            &clock,
+            dsp,
+            table::YUV422,
+        ])
+        .await?;
+        // CTRL0's AEC statistics bits [7:5] are kept as the sensor has them.
+        let ctrl0 = self.read_register(Bank::Dsp, reg::dsp::CTRL0).await?;
+        self.write_settings(&[&dsp_start(ctrl0)]).await?;
 
         self.max_exposure_lines = u16::try_from(plan.timing.frame_lines).unwrap_or(u16::MAX);
         self.set_exposure(config.exposure).await?;
         Ok(plan)
     }
 
-    /// Sensor bank: mode, window, clock, frame length, sync polarity, orientation.
-    async fn configure_sensor(
-        &mut self,
-        config: &Config,
-        plan: &ClockPlan,
-    ) -> Result<(), Error<I::Error>> {
-        use reg::sensor::*;
-        // The 800x600 mode (full field of view, subsampled by two).
-        self.write_register(Bank::Sensor, COM7, COM7_SVGA).await?;
-        // The window: 400 x 300 units of two pixels, split into the MSB registers and the
-        // LSB fields of REG32 (horizontal, 3 bits) and COM1 (vertical, 2 bits).
-        let (h_start, width, v_start, height) = SVGA_WINDOW;
-        let h_end = h_start + width;
-        let v_end = v_start + height;
-        self.write_register(Bank::Sensor, HREFST, (h_start >> 3) as u8)
-            .await?;
-        self.write_register(Bank::Sensor, HREFEND, (h_end >> 3) as u8)
-            .await?;
-        self.write_register(
-            Bank::Sensor,
-            REG32,
-            (((h_end & 0x7) << 3) | (h_start & 0x7)) as u8,
-        )
-        .await?;
-        self.write_register(Bank::Sensor, VSTRT, (v_start >> 2) as u8)
-            .await?;
-        self.write_register(Bank::Sensor, VEND, (v_end >> 2) as u8)
-            .await?;
-        self.write_register(
-            Bank::Sensor,
-            COM1,
-            (((v_end & 0x3) << 2) | (v_start & 0x3)) as u8,
-        )
-        .await?;
-        // The SVGA readout timing (see REG3D) and the sensor clock.
-        self.write_register(Bank::Sensor, REG3D, REG3D_SVGA).await?;
-        self.write_register(Bank::Sensor, CLKRC, plan.clkrc())
-            .await?;
-        // Line length: no dummy pixels (the frame rate is set with whole lines).
-        self.write_register(Bank::Sensor, REG2A, 0x00).await?;
-        self.write_register(Bank::Sensor, FRARL, 0x00).await?;
-        // Frame length: the dummy lines of the plan.
-        let [dummy_lo, dummy_hi] = plan.dummy_lines.to_le_bytes();
-        self.write_register(Bank::Sensor, FLL, dummy_lo).await?;
-        self.write_register(Bank::Sensor, FLH, dummy_hi).await?;
-        // VSYNC high between frames (as the OV7725's), HREF and PCLK as reset.
-        self.write_register(Bank::Sensor, COM10, COM10_VSYNC_NEGATIVE)
-            .await?;
-        // Orientation; the exposure bits [1:0] are written with the exposure.
-        let mut reg04 = REG04_RESERVED | REG04_HREF0;
-        if config.mirror {
-            reg04 |= REG04_MIRROR;
-        }
-        if config.vflip {
-            reg04 |= REG04_VFLIP | REG04_VREF0;
-        }
-        self.reg04 = reg04;
-        self.write_register(Bank::Sensor, REG04, reg04).await
-    }
-
-    /// DSP bank: input size, down-sampling, zoom to the output size, output clock, format.
-    async fn configure_dsp(&mut self, resolution: Resolution) -> Result<(), Error<I::Error>> {
-        use reg::dsp::*;
-        // Sensor data straight through and the output port held in reset while the DSP's
-        // sizes change, so no half-configured frame goes out.
-        self.write_register(Bank::Dsp, R_BYPASS, R_BYPASS_BYPASS)
-            .await?;
-        self.write_register(Bank::Dsp, RESET, RESET_DVP).await?;
-
-        // The image the DSP receives: 800x600 (multiples of 8: SIZEL's LSB fields are 0).
-        let (w_in, h_in) = (SVGA_WIDTH, SVGA_HEIGHT);
-        self.write_register(Bank::Dsp, HSIZE8, (w_in >> 3) as u8)
-            .await?;
-        self.write_register(Bank::Dsp, VSIZE8, (h_in >> 3) as u8)
-            .await?;
-        let sizel = (((w_in >> 11) & 0x1) << 6) | ((w_in & 0x7) << 3) | (h_in & 0x7);
-        self.write_register(Bank::Dsp, SIZEL, sizel as u8).await?;
-        self.write_register(Bank::Dsp, CTRL2, CTRL2_YUV_SCALED)
-            .await?;
-
-        // The zoom stage's input window: all of it, no offset (units of 4).
-        let (zw, zh) = (w_in / 4, h_in / 4);
-        let (down, dvp_divider) = scaling(resolution);
-        self.write_register(Bank::Dsp, CTRLI, CTRLI_LP_DP | (down << 3) | down)
-            .await?;
-        self.write_register(Bank::Dsp, HSIZE, zw as u8).await?;
-        self.write_register(Bank::Dsp, VSIZE, zh as u8).await?;
-        self.write_register(Bank::Dsp, XOFFL, 0x00).await?;
-        self.write_register(Bank::Dsp, YOFFL, 0x00).await?;
-        let vhyx = (((zh >> 8) & 0x1) << 7) | (((zw >> 8) & 0x1) << 3);
-        self.write_register(Bank::Dsp, VHYX, vhyx as u8).await?;
-        self.write_register(Bank::Dsp, TEST, (((zw >> 9) & 0x1) << 7) as u8)
-            .await?;
-
-        // The output size (units of 4) and its pixel clock.
-        let out_w = (resolution.width() / 4) as u16;
-        let out_h = (resolution.height() / 4) as u16;
-        self.write_register(Bank::Dsp, ZMOW, out_w as u8).await?;
-        self.write_register(Bank::Dsp, ZMOH, out_h as u8).await?;
-        let zmhh = ((out_w >> 8) & 0x3) | (((out_h >> 8) & 0x1) << 2);
-        self.write_register(Bank::Dsp, ZMHH, zmhh as u8).await?;
-        self.write_register(Bank::Dsp, R_DVP_SP, dvp_divider)
-            .await?;
-
-        // YUV 4:2:2, Y first: byte swap off, U before V; CTRL0's statistics bits as read.
-        self.write_register(Bank::Dsp, IMAGE_MODE, IMAGE_MODE_YUV422_Y_FIRST)
-            .await?;
-        let ctrl0 = self.read_register(Bank::Dsp, CTRL0).await?;
-        let ctrl0 = (ctrl0 & !(CTRL0_V_FIRST | CTRL0_RAW)) | CTRL0_YUV422;
-        self.write_register(Bank::Dsp, CTRL0, ctrl0).await?;
-
-        // Output port running, DSP in the path.
-        self.write_register(Bank::Dsp, RESET, 0x00).await?;
-        self.write_register(Bank::Dsp, R_BYPASS, R_BYPASS_USE_DSP)
-            .await
-    }
-
     /// Switches exposure control (sensor AEC/AGC with a gain ceiling, or manual values).
     pub async fn set_exposure(&mut self, exposure: Exposure) -> Result<(), Error<I::Error>> {
+        use reg::sensor::{COM8, COM9};
         match exposure {
             Exposure::Auto { max_gain } => {
                 let ceiling = (gain_ceiling_log2(max_gain) - 1) << 5;
-                let com9 = self.read_register(Bank::Sensor, reg::sensor::COM9).await?;
+                let com9 = self.read_register(Bank::Sensor, COM9).await?;
                 let com9 = (com9 & !COM9_CEILING_MASK) | ceiling;
-                self.write_register(Bank::Sensor, reg::sensor::COM9, com9)
-                    .await?;
-                self.write_register(Bank::Sensor, reg::sensor::COM8, COM8_AUTO)
-                    .await
+                self.write_settings(&[&[
+                    Setting::sensor(COM9, com9),
+                    Setting::sensor(COM8, COM8_AUTO),
+                ]])
+                .await
             }
             Exposure::Manual { lines, gain } => {
                 if lines == 0 {
                     return Err(Error::Config(ConfigError::ZeroExposure));
                 }
-                // AEC/AGC off first, or they overwrite the values below.
-                self.write_register(Bank::Sensor, reg::sensor::COM8, COM8_MANUAL)
-                    .await?;
-                self.set_manual(lines, gain).await
+                // AEC/AGC off first, or they overwrite the values after it.
+                let manual = self.manual_settings(lines, gain);
+                self.write_settings(&[&[Setting::sensor(COM8, COM8_MANUAL)], &manual])
+                    .await
             }
         }
     }
@@ -759,33 +1193,39 @@ impl<I: I2c> Ov2640<I> {
     /// gain (1x ..= 31x) while in manual mode: four register writes (plus a bank select if
     /// the DSP bank was selected), what a software exposure loop calls per adjustment.
     pub async fn set_manual(&mut self, lines: u16, gain: GainX16) -> Result<(), Error<I::Error>> {
+        let manual = self.manual_settings(lines, gain);
+        self.write_settings(&[&manual]).await
+    }
+
+    /// The register writes of a manual exposure and gain ([`Ov2640::set_manual`]).
+    fn manual_settings(&self, lines: u16, gain: GainX16) -> [Setting; 4] {
+        use reg::sensor::{AEC, GAIN, REG04, REG45};
         let lines = lines.clamp(1, self.max_exposure_lines.max(1));
         let (high, middle, low) = exposure_fields(lines);
-        self.write_register(Bank::Sensor, reg::sensor::REG45, high)
-            .await?;
-        self.write_register(Bank::Sensor, reg::sensor::AEC, middle)
-            .await?;
-        self.write_register(Bank::Sensor, reg::sensor::REG04, self.reg04 | low)
-            .await?;
-        // GAIN has the OV7725's encoding (same formula in both datasheets).
-        self.write_register(Bank::Sensor, reg::sensor::GAIN, gain_register(gain))
-            .await
+        [
+            Setting::sensor(REG45, high),
+            Setting::sensor(AEC, middle),
+            Setting::sensor(REG04, self.reg04 | low),
+            // GAIN has the OV7725's encoding (same formula in both datasheets).
+            Setting::sensor(GAIN, gain_register(gain)),
+        ]
     }
 
     /// Reads the exposure (line periods) and gain in force (useful with the sensor's AEC on;
     /// the gain is GAIN's part, which covers the whole range up to the 32x ceiling).
     pub async fn read_exposure(&mut self) -> Result<(u16, GainX16), Error<I::Error>> {
-        let reg45 = self.read_register(Bank::Sensor, reg::sensor::REG45).await?;
-        let aec = self.read_register(Bank::Sensor, reg::sensor::AEC).await?;
-        let reg04 = self.read_register(Bank::Sensor, reg::sensor::REG04).await?;
-        let gain = self.read_register(Bank::Sensor, reg::sensor::GAIN).await?;
+        use reg::sensor::{AEC, GAIN, REG04, REG45};
+        let mut values = [0u8; 4];
+        for (value, register) in values.iter_mut().zip([REG45, AEC, REG04, GAIN]) {
+            *value = self.read_register(Bank::Sensor, register).await?;
+        }
+        let [reg45, aec, reg04, gain] = values;
         Ok((
             exposure_from_fields(reg45, aec, reg04),
             gain_from_register(gain),
         ))
     }
 }
-
 #[cfg(test)]
 mod tests {
     extern crate std;
@@ -796,6 +1236,7 @@ mod tests {
     use super::*;
     use crate::sensor::mock::{Access, Device, MockBus, MockDelay, Nack};
     use embassy_futures::block_on;
+    use embedded_hal_async::i2c::{ErrorType, I2c, Operation};
 
     /// An OV2640 at its address with the datasheet's id registers (and a few reset values
     /// the driver reads back).
@@ -825,8 +1266,181 @@ mod tests {
         w[reset + 1..].to_vec()
     }
 
+    /// The writes after the reset with the bank each went to, bank selects taken out. Fails
+    /// the test if a bank select does not change the bank (the first one after the reset
+    /// excepted: the reset leaves the bank unknown), or if a register is written before any
+    /// bank was selected.
+    fn banked_after_reset(bus: &MockBus) -> Vec<Setting> {
+        let mut selected: Option<Bank> = None;
+        let mut out = Vec::new();
+        for (i, (register, value)) in after_reset(bus).into_iter().enumerate() {
+            if register == BANK_SEL {
+                let b = if value == 0 { Bank::Dsp } else { Bank::Sensor };
+                assert!(
+                    selected != Some(b),
+                    "write {i}: bank {b:?} selected again while selected"
+                );
+                selected = Some(b);
+            } else {
+                let bank = selected.expect("a register written before any bank select");
+                out.push(Setting {
+                    bank,
+                    register,
+                    value,
+                });
+            }
+        }
+        out
+    }
+
+    /// A bus that refuses (NACKs) the `nth` write (0-based) to one register of one bank of
+    /// the OV2640 and passes everything else to the mock.
+    struct Refusing {
+        bus: MockBus,
+        bank: Bank,
+        register: u8,
+        nth: usize,
+        seen: usize,
+    }
+
+    impl ErrorType for Refusing {
+        type Error = Nack;
+    }
+
+    impl I2c for Refusing {
+        async fn transaction(
+            &mut self,
+            address: u8,
+            operations: &mut [Operation<'_>],
+        ) -> Result<(), Nack> {
+            if let [Operation::Write([register, _])] = operations {
+                let bank = self.bus.device(I2C_ADDRESS).bank;
+                if *register == self.register && bank == self.bank as usize {
+                    self.seen += 1;
+                    if self.seen == self.nth + 1 {
+                        return Err(Nack);
+                    }
+                }
+            }
+            self.bus.transaction(address, operations).await
+        }
+    }
+
+    /// What the driver writes after the reset for QVGA, 30 fps from 24 MHz, the sensor's
+    /// AEC with an 8x ceiling (the default configuration), spelled out: the tables by name,
+    /// the derived values as numbers.
+    fn default_sequence() -> Vec<Setting> {
+        let derived_window = [
+            Setting::sensor(sensor::COM7, 0x40),    // SVGA mode
+            Setting::sensor(sensor::HREFST, 0x11),  // 137 >> 3
+            Setting::sensor(sensor::HREFEND, 0x43), // 537 >> 3
+            Setting::sensor(sensor::REG32, 0x09),   // 537 & 7 = 1, 137 & 7 = 1
+            Setting::sensor(sensor::VSTRT, 0x00),   // 2 >> 2
+            Setting::sensor(sensor::VEND, 0x4B),    // 302 >> 2
+            Setting::sensor(sensor::COM1, 0x0A),    // 302 & 3 = 2, 2 & 3 = 2
+        ];
+        let derived_clock = [
+            Setting::sensor(sensor::CLKRC, 0x00), // 24 MHz / 1
+            Setting::sensor(sensor::REG2A, 0x00),
+            Setting::sensor(sensor::FRARL, 0x00),
+            Setting::sensor(sensor::FLL, 0x00), // no dummy lines
+            Setting::sensor(sensor::FLH, 0x00),
+            Setting::sensor(sensor::COM10, 0x02), // VSYNC negative
+            Setting::sensor(sensor::REG04, 0x28), // no flip, reserved + HREF[0]
+        ];
+        let derived_dsp = [
+            Setting::dsp(dsp::RESET, 0x04),
+            Setting::dsp(dsp::HSIZE8, 0x64), // 800 / 8
+            Setting::dsp(dsp::VSIZE8, 0x4B), // 600 / 8
+            Setting::dsp(dsp::SIZEL, 0x00),
+            Setting::dsp(dsp::CTRL2, 0x3D),
+            Setting::dsp(dsp::CTRLI, 0x89), // LP_DP, halve both ways
+            Setting::dsp(dsp::HSIZE, 0xC8), // 800 / 4
+            Setting::dsp(dsp::VSIZE, 0x96), // 600 / 4
+            Setting::dsp(dsp::XOFFL, 0x00),
+            Setting::dsp(dsp::YOFFL, 0x00),
+            Setting::dsp(dsp::VHYX, 0x00),
+            Setting::dsp(dsp::TEST, 0x00),
+            Setting::dsp(dsp::ZMOW, 0x50), // 320 / 4
+            Setting::dsp(dsp::ZMOH, 0x3C), // 240 / 4
+            Setting::dsp(dsp::ZMHH, 0x00),
+            Setting::dsp(dsp::R_DVP_SP, 0x04), // manual, PCLK = 2 x 24 MHz / 4
+            Setting::dsp(dsp::IMAGE_MODE, 0x00), // YUV 4:2:2, Y first
+        ];
+        let derived_end = [
+            Setting::dsp(dsp::CTRL0, 0xCE), // statistics bits kept, U first, YUV 4:2:2
+            Setting::dsp(dsp::RESET, 0x00),
+            Setting::dsp(dsp::R_BYPASS, 0x00),
+            Setting::sensor(sensor::COM9, 0x50), // 8x ceiling (bits 7:5 = 010), bit 4 kept
+            Setting::sensor(sensor::COM8, 0xC5), // AEC + AGC on, banding filter off
+        ];
+        let parts: [&[Setting]; 10] = [
+            table::DSP_PRELUDE,
+            table::SENSOR_COMMON,
+            table::DSP_COMMON,
+            &[Setting::dsp(dsp::R_BYPASS, 0x01)],
+            &derived_window,
+            table::SVGA_TIMING,
+            &derived_clock,
+            &derived_dsp,
+            table::YUV422,
+            &derived_end,
+        ];
+        parts.concat()
+    }
+
+    /// The registers the driver derives: no table may write them (but RESET, see
+    /// [`table`]).
+    const DERIVED: &[(Bank, u8)] = &[
+        (Bank::Sensor, sensor::GAIN),
+        (Bank::Sensor, sensor::COM1),
+        (Bank::Sensor, sensor::REG04),
+        (Bank::Sensor, sensor::AEC),
+        (Bank::Sensor, sensor::CLKRC),
+        (Bank::Sensor, sensor::COM7),
+        (Bank::Sensor, sensor::COM8),
+        (Bank::Sensor, sensor::COM9),
+        (Bank::Sensor, sensor::COM10),
+        (Bank::Sensor, sensor::HREFST),
+        (Bank::Sensor, sensor::HREFEND),
+        (Bank::Sensor, sensor::VSTRT),
+        (Bank::Sensor, sensor::VEND),
+        (Bank::Sensor, sensor::REG2A),
+        (Bank::Sensor, sensor::FRARL),
+        (Bank::Sensor, sensor::REG32),
+        (Bank::Sensor, sensor::REG45),
+        (Bank::Sensor, sensor::FLL),
+        (Bank::Sensor, sensor::FLH),
+        (Bank::Dsp, dsp::R_BYPASS),
+        (Bank::Dsp, dsp::CTRLI),
+        (Bank::Dsp, dsp::HSIZE),
+        (Bank::Dsp, dsp::VSIZE),
+        (Bank::Dsp, dsp::XOFFL),
+        (Bank::Dsp, dsp::YOFFL),
+        (Bank::Dsp, dsp::VHYX),
+        (Bank::Dsp, dsp::TEST),
+        (Bank::Dsp, dsp::ZMOW),
+        (Bank::Dsp, dsp::ZMOH),
+        (Bank::Dsp, dsp::ZMHH),
+        (Bank::Dsp, dsp::CTRL2),
+        (Bank::Dsp, dsp::SIZEL),
+        (Bank::Dsp, dsp::HSIZE8),
+        (Bank::Dsp, dsp::VSIZE8),
+        (Bank::Dsp, dsp::CTRL0),
+        (Bank::Dsp, dsp::R_DVP_SP),
+        (Bank::Dsp, dsp::IMAGE_MODE),
+    ];
+
+    const TABLES: [(&str, &[Setting]); 5] = [
+        ("DSP_PRELUDE", table::DSP_PRELUDE),
+        ("SENSOR_COMMON", table::SENSOR_COMMON),
+        ("DSP_COMMON", table::DSP_COMMON),
+        ("SVGA_TIMING", table::SVGA_TIMING),
+        ("YUV422", table::YUV422),
+    ];
+
     #[test]
-    fn init_qvga_auto_writes_the_documented_sequence() {
+    fn init_qvga_auto_writes_the_tables_and_the_derived_values_in_order() {
         let mut camera = Ov2640::new(ov2640_bus(0x42));
         let mut delay = MockDelay::default();
         let plan = block_on(camera.init(&mut delay, &Config::default())).unwrap();
@@ -843,52 +1457,25 @@ mod tests {
             ]
         );
         assert_eq!(bus.log[5], Access::Write(I2C_ADDRESS, sensor::COM7, 0x80));
-        assert_eq!(
-            after_reset(&bus),
-            [
-                bank(Bank::Sensor),      // re-selected after the reset
-                (sensor::COM7, 0x40),    // SVGA mode
-                (sensor::HREFST, 0x11),  // 137 >> 3
-                (sensor::HREFEND, 0x43), // 537 >> 3
-                (sensor::REG32, 0x09),   // 537 & 7 = 1, 137 & 7 = 1
-                (sensor::VSTRT, 0x00),   // 2 >> 2
-                (sensor::VEND, 0x4B),    // 302 >> 2
-                (sensor::COM1, 0x0A),    // 302 & 3 = 2, 2 & 3 = 2
-                (sensor::REG3D, 0x38),
-                (sensor::CLKRC, 0x00), // 24 MHz / 1
-                (sensor::REG2A, 0x00),
-                (sensor::FRARL, 0x00),
-                (sensor::FLL, 0x00), // no dummy lines
-                (sensor::FLH, 0x00),
-                (sensor::COM10, 0x02), // VSYNC negative
-                (sensor::REG04, 0x28), // no flip, reserved + HREF[0]
-                bank(Bank::Dsp),
-                (dsp::R_BYPASS, 0x01),
-                (dsp::RESET, 0x04),
-                (dsp::HSIZE8, 0x64), // 800 / 8
-                (dsp::VSIZE8, 0x4B), // 600 / 8
-                (dsp::SIZEL, 0x00),
-                (dsp::CTRL2, 0x3D),
-                (dsp::CTRLI, 0x89), // LP_DP, halve both ways
-                (dsp::HSIZE, 0xC8), // 800 / 4
-                (dsp::VSIZE, 0x96), // 600 / 4
-                (dsp::XOFFL, 0x00),
-                (dsp::YOFFL, 0x00),
-                (dsp::VHYX, 0x00),
-                (dsp::TEST, 0x00),
-                (dsp::ZMOW, 0x50), // 320 / 4
-                (dsp::ZMOH, 0x3C), // 240 / 4
-                (dsp::ZMHH, 0x00),
-                (dsp::R_DVP_SP, 0x04),
-                (dsp::IMAGE_MODE, 0x00), // YUV 4:2:2, Y first
-                (dsp::CTRL0, 0xCE),      // statistics bits kept, U first, YUV 4:2:2
-                (dsp::RESET, 0x00),
-                (dsp::R_BYPASS, 0x00),
-                bank(Bank::Sensor),
-                (sensor::COM9, 0x50), // 8x ceiling (bits 7:5 = 010), bit 4 as read
-                (sensor::COM8, 0xC5), // AEC + AGC on, banding filter off
-            ]
-        );
+        assert_eq!(banked_after_reset(&bus), default_sequence());
+        // Bank selects: one after the reset, then one per change of bank in the sequence
+        // (DSP, sensor, DSP, sensor, DSP, sensor).
+        let selects = after_reset(&bus)
+            .iter()
+            .filter(|(r, _)| *r == BANK_SEL)
+            .count();
+        assert_eq!(selects, 6);
+        // The two reads after the reset: CTRL0 in the DSP bank, COM9 in the sensor bank.
+        let reads: Vec<_> = bus
+            .log
+            .iter()
+            .skip(6)
+            .filter_map(|a| match *a {
+                Access::Read(_, r) => Some(r),
+                Access::Write(..) => None,
+            })
+            .collect();
+        assert_eq!(reads, [dsp::CTRL0, sensor::COM9]);
         // The reset was waited for.
         assert!(delay.total_ns >= u64::from(RESET_SETTLE_US) * 1000);
         // 24 MHz sensor clock: 1190 x 672 clocks = 30.01 fps, PCLK 12 MHz at QVGA.
@@ -902,6 +1489,290 @@ mod tests {
         assert_eq!(plan.timing.frame_lines, 672);
         assert_eq!(plan.timing.active_lines, 600);
         assert_eq!(plan.timing.frame_period_us(), 33_319);
+    }
+
+    #[test]
+    fn every_write_goes_to_its_bank_with_one_select_per_change_of_bank() {
+        // Every configuration the firmware can ask for: both sizes, auto and manual, flips.
+        for resolution in [Resolution::Qvga, Resolution::Vga] {
+            for exposure in [
+                Exposure::Auto {
+                    max_gain: GainX16(16 * 32),
+                },
+                Exposure::Manual {
+                    lines: 300,
+                    gain: GainX16(20),
+                },
+            ] {
+                let config = Config {
+                    resolution,
+                    exposure,
+                    vflip: true,
+                    ..Config::default()
+                };
+                let mut camera = Ov2640::new(ov2640_bus(0x41));
+                let plan = block_on(camera.init(&mut MockDelay::default(), &config)).unwrap();
+                let bus = camera.release();
+                let exposure_part = match exposure {
+                    Exposure::Auto { .. } => vec![
+                        Setting::sensor(sensor::COM9, 0x90), // 32x ceiling, bit 4 kept
+                        Setting::sensor(sensor::COM8, COM8_AUTO),
+                    ],
+                    Exposure::Manual { .. } => vec![
+                        Setting::sensor(sensor::COM8, COM8_MANUAL),
+                        Setting::sensor(sensor::REG45, 0x00),
+                        Setting::sensor(sensor::AEC, 75), // 300 >> 2
+                        Setting::sensor(sensor::REG04, 0x78), // flip, VREF[0], 300 & 3 = 0
+                        Setting::sensor(sensor::GAIN, 0x04), // 1.25x
+                    ],
+                };
+                let expected: Vec<Setting> = [
+                    table::DSP_PRELUDE,
+                    table::SENSOR_COMMON,
+                    table::DSP_COMMON,
+                    &BYPASS_DSP,
+                    &MODE_AND_WINDOW,
+                    table::SVGA_TIMING,
+                    &clock_and_sync(&plan, 0x78),
+                    &dsp_scaling(resolution),
+                    table::YUV422,
+                    &dsp_start(0xC0 | CTRL0_V_FIRST),
+                    &exposure_part,
+                ]
+                .concat();
+                // banked_after_reset fails on a select that does not change the bank.
+                assert_eq!(banked_after_reset(&bus), expected);
+                let changes = expected.windows(2).filter(|w| w[0].bank != w[1].bank);
+                let selects = after_reset(&bus)
+                    .iter()
+                    .filter(|(r, _)| *r == BANK_SEL)
+                    .count();
+                assert_eq!(selects, 1 + changes.count());
+            }
+        }
+    }
+
+    #[test]
+    fn the_reserved_registers_of_the_svga_mode_and_yuv_are_written_in_their_banks() {
+        let mut camera = Ov2640::new(ov2640_bus(0x42));
+        block_on(camera.init(&mut MockDelay::default(), &Config::default())).unwrap();
+        let bus = camera.release();
+        let sequence = banked_after_reset(&bus);
+        // The last value written to (bank, register).
+        let last = |bank: Bank, register: u8| {
+            sequence
+                .iter()
+                .rev()
+                .find(|s| s.bank == bank && s.register == register)
+                .map(|s| s.value)
+        };
+        // The SVGA mode's analog timing, banding steps and readout (sensor bank), and the
+        // YUV output settings (DSP bank), with the values they end with.
+        for (register, value) in [
+            (0x35, 0xDA),
+            (0x22, 0x1A),
+            (0x37, 0xC3),
+            (0x39, 0x92),
+            (sensor::ARCOM2, 0xC0),
+            (0x06, 0x88),
+            (0x07, 0xC0),
+            (sensor::COM4, 0x87),
+            (0x0E, 0x41),
+            (0x42, 0x03),
+            (sensor::BD50, 0xCA),
+            (sensor::BD60, 0xA8),
+            (sensor::REG5A, 0x23),
+            (0x6D, 0x00),
+            (sensor::REG3D, 0x38),
+        ] {
+            assert_eq!(
+                last(Bank::Sensor, register),
+                Some(value),
+                "sensor {register:#04x}"
+            );
+        }
+        for (register, value) in [(0xD7, 0x03), (0xE1, 0x67), (0xE5, 0x1F), (0x33, 0xA0)] {
+            assert_eq!(
+                last(Bank::Dsp, register),
+                Some(value),
+                "dsp {register:#04x}"
+            );
+        }
+        // The same addresses in the other bank are other registers, with other values: the
+        // sensor's 0x33 is not the DSP's.
+        assert_eq!(last(Bank::Sensor, 0x33), Some(0x78));
+        assert_eq!(last(Bank::Dsp, 0x42), Some(0x20));
+        // The SVGA values are written after the mode select.
+        let com7 = sequence
+            .iter()
+            .position(|s| *s == Setting::sensor(sensor::COM7, COM7_SVGA))
+            .unwrap();
+        let first_analog = sequence
+            .iter()
+            .position(|s| s.bank == Bank::Sensor && s.register == 0x35)
+            .unwrap();
+        assert!(com7 < first_analog);
+    }
+
+    #[test]
+    fn no_table_writes_a_derived_register_or_the_bank_select() {
+        for (name, t) in TABLES {
+            for s in t {
+                assert_ne!(s.register, BANK_SEL, "{name} selects a bank");
+                assert!(
+                    !DERIVED.contains(&(s.bank, s.register)),
+                    "{name} writes derived register {:?} {:#04x}",
+                    s.bank,
+                    s.register
+                );
+            }
+        }
+        // Each table is in one bank (so its bank selects are one at its start, if any).
+        for (name, t, b) in [
+            ("DSP_PRELUDE", table::DSP_PRELUDE, Bank::Dsp),
+            ("SENSOR_COMMON", table::SENSOR_COMMON, Bank::Sensor),
+            ("DSP_COMMON", table::DSP_COMMON, Bank::Dsp),
+            ("SVGA_TIMING", table::SVGA_TIMING, Bank::Sensor),
+            ("YUV422", table::YUV422, Bank::Dsp),
+        ] {
+            assert!(t.iter().all(|s| s.bank == b), "{name}");
+        }
+    }
+
+    #[test]
+    fn derived_values_are_the_last_written_to_their_registers() {
+        for config in [
+            Config::default(),
+            Config {
+                resolution: Resolution::Vga,
+                xclk_hz: 12_000_000,
+                fps: 25,
+                exposure: Exposure::Manual {
+                    lines: 500,
+                    gain: GainX16(32),
+                },
+                vflip: true,
+                mirror: true,
+            },
+        ] {
+            let mut camera = Ov2640::new(ov2640_bus(0x42));
+            let plan = block_on(camera.init(&mut MockDelay::default(), &config)).unwrap();
+            let sequence = banked_after_reset(&camera.release());
+            let last = |bank: Bank, register: u8| {
+                sequence
+                    .iter()
+                    .rev()
+                    .find(|s| s.bank == bank && s.register == register)
+                    .map(|s| s.value)
+            };
+            let manual = matches!(config.exposure, Exposure::Manual { .. });
+            let [fll, flh] = plan.dummy_lines.to_le_bytes();
+            assert_eq!(last(Bank::Sensor, sensor::COM7), Some(COM7_SVGA));
+            assert_eq!(last(Bank::Sensor, sensor::CLKRC), Some(plan.clkrc()));
+            assert_eq!(last(Bank::Sensor, sensor::FLL), Some(fll));
+            assert_eq!(last(Bank::Sensor, sensor::FLH), Some(flh));
+            assert_eq!(last(Bank::Sensor, sensor::COM10), Some(0x02));
+            assert_eq!(
+                last(Bank::Sensor, sensor::COM8),
+                Some(if manual { 0xC0 } else { 0xC5 })
+            );
+            assert_eq!(last(Bank::Sensor, sensor::REG32), Some(0x09));
+            assert_eq!(last(Bank::Sensor, sensor::COM1), Some(0x0A));
+            assert_eq!(last(Bank::Dsp, dsp::R_DVP_SP), Some(plan.dvp_divider));
+            assert_eq!(last(Bank::Dsp, dsp::IMAGE_MODE), Some(0x00));
+            assert_eq!(last(Bank::Dsp, dsp::RESET), Some(0x00));
+            assert_eq!(last(Bank::Dsp, dsp::R_BYPASS), Some(0x00));
+            assert_eq!(last(Bank::Dsp, dsp::CTRL0), Some(0xCE));
+            let (w, h) = (config.resolution.width(), config.resolution.height());
+            assert_eq!(last(Bank::Dsp, dsp::ZMOW), Some((w / 4) as u8));
+            assert_eq!(last(Bank::Dsp, dsp::ZMOH), Some((h / 4) as u8));
+            // Every register of the derived parts ends with its derived value.
+            let derived: [&[Setting]; 4] = [
+                &MODE_AND_WINDOW,
+                &clock_and_sync(&plan, orientation(&config)),
+                &dsp_scaling(config.resolution),
+                &dsp_start(0xC0 | CTRL0_V_FIRST),
+            ];
+            for s in derived.concat() {
+                if s.bank == Bank::Dsp && s.register == dsp::RESET {
+                    continue; // held, then released: checked above
+                }
+                if s.bank == Bank::Sensor && s.register == sensor::REG04 {
+                    continue; // gains the exposure bits: checked below
+                }
+                assert_eq!(last(s.bank, s.register), Some(s.value), "{s:?}");
+            }
+            let reg04 = last(Bank::Sensor, sensor::REG04).unwrap();
+            assert_eq!(reg04 & !REG04_AEC_MASK, orientation(&config));
+        }
+    }
+
+    #[test]
+    fn a_refused_write_is_an_error_naming_its_register_and_nothing_follows_it() {
+        // The whole set-up on a bus that acknowledges everything.
+        let mut camera = Ov2640::new(ov2640_bus(0x42));
+        block_on(camera.init(&mut MockDelay::default(), &Config::default())).unwrap();
+        let full = camera.release().log;
+        // (bank selected when the write is refused, register, which of its writes in that
+        // bank is refused, the error's bank).
+        for (bank, register, nth, named_bank) in [
+            (Bank::Sensor, 0x35, 0, Bank::Sensor),  // mid SVGA_TIMING
+            (Bank::Dsp, dsp::BPDATA, 3, Bank::Dsp), // mid DSP_COMMON, a data port
+            (Bank::Dsp, 0xE1, 1, Bank::Dsp),        // YUV422 (DSP_COMMON wrote it first)
+            (Bank::Sensor, sensor::CLKRC, 0, Bank::Sensor), // a derived value
+            // The select of the DSP bank right after the reset (the sensor bank still
+            // selected): named as a write of BANK_SEL for the DSP bank.
+            (Bank::Sensor, BANK_SEL, 0, Bank::Dsp),
+        ] {
+            let mut camera = Ov2640::new(Refusing {
+                bus: ov2640_bus(0x42),
+                bank,
+                register,
+                nth,
+                seen: 0,
+            });
+            let r = block_on(camera.init(&mut MockDelay::default(), &Config::default()));
+            assert_eq!(
+                r,
+                Err(Error::Write {
+                    bank: named_bank,
+                    register,
+                    error: Nack
+                }),
+                "{register:#04x}"
+            );
+            // What went through is the set-up up to the refused write, and nothing after it.
+            let log = camera.release().bus.log;
+            assert_eq!(log[..], full[..log.len()], "{register:#04x}");
+            assert!(
+                matches!(full[log.len()], Access::Write(_, r, _) if r == register),
+                "{register:#04x}: {:?}",
+                full[log.len()]
+            );
+        }
+    }
+
+    #[test]
+    fn the_svga_banding_steps_match_the_planned_line_time() {
+        // The vendor's SVGA banding steps are 1/100 s and 1/120 s in lines of the reference
+        // timing (24 MHz, 30 fps): the same line time plan_clock derives from 1190 clocks.
+        let plan = plan_clock(24_000_000, Resolution::Qvga, 30).unwrap();
+        let line_ns = u64::from(plan.timing.line_ns);
+        let find = |register: u8| {
+            table::SVGA_TIMING
+                .iter()
+                .find(|s| s.register == register)
+                .map(|s| u64::from(s.value))
+                .unwrap()
+        };
+        assert_eq!((10_000_000 + line_ns / 2) / line_ns, find(sensor::BD50));
+        assert_eq!((8_333_333 + line_ns / 2) / line_ns, find(sensor::BD60));
+        // The most steps per frame fit in one frame: 3 x 202 = 606 and 4 x 168 = 672 of its
+        // 672 lines.
+        let steps = find(sensor::REG5A);
+        let frame = u64::from(plan.timing.frame_lines);
+        assert!(((steps >> 4) + 1) * find(sensor::BD50) <= frame);
+        assert_eq!(((steps & 0xF) + 1) * find(sensor::BD60), frame);
     }
 
     #[test]
