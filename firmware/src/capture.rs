@@ -27,9 +27,36 @@
 //! end of the frame. The vision task joins the capture of frame n+1 (into one buffer) with
 //! the processing of frame n (the other buffer), capture polled first: while the detector
 //! runs on the CPU, the DMA fills the other buffer. Then the buffers swap. The DCMI runs in
-//! snapshot mode (one frame per capture) and is re-armed within microseconds of the
+//! snapshot mode (one frame per capture: once the CAPTURE bit is set it waits for the next
+//! frame start; RM0433's DCMI chapter, "Capture modes") and is re-armed within microseconds of the
 //! previous frame's end, inside the sensor's vertical blanking, so no frame is lost as long
-//! as processing takes less than a frame period.
+//! as processing takes less than a frame period. Anything slow between two captures (the
+//! SCCB writes of an exposure change) would push the re-arm past the next frame start and
+//! cost a frame, so the vision task does that work while the next capture runs.
+//!
+//! # Faults and how embassy reports them
+//!
+//! embassy's `Dcmi::capture` (embassy-stm32 0.6, `dcmi.rs`) joins the DMA transfer with a
+//! wait for the DCMI's flags and returns only when *both* are done. On a FIFO overrun
+//! (OVR_RIS) the frame's remaining data never reaches the DMA, so the transfer never
+//! completes and the capture never returns: without more, an overrun looks exactly like a
+//! dead camera and ends in the timeout. The same holds for a frame that ends (FRAME_RIS)
+//! before the buffer is full (a short frame: fewer lines than configured, as just after
+//! the set-up). It returns `Err(Overrun)` only if the DMA got its words anyway. So
+//! [`FrameStamp`], which runs in the DCMI interrupt right after embassy's handler (which
+//! masks the flag's interrupt but leaves the flag set), reads DCMI_RIS itself: an overrun
+//! (or a synchronisation error) ends the capture at once through [`DCMI_FAULT`], and a
+//! frame-complete flag is remembered with its time stamp, so a capture that then times out
+//! is told apart as a short frame ([`CaptureError::ShortFrame`]) from one that saw no frame
+//! end at all ([`CaptureError::Timeout`]). Either way the capture future is dropped (which
+//! stops the DMA stream: embassy's `Transfer` drop disables it and waits), and [`stop_dcmi`]
+//! disables the DCMI and clears its flags. DMA transfer errors (TEIF) never get here:
+//! embassy's DMA interrupt handler panics on them. The timeout is the sensor's: two frame
+//! periods and a margin ([`FrameTiming::capture_timeout_us`]), not a fixed time that a slower
+//! frame rate would exceed on every frame.
+//!
+//! (Reasoned from embassy's sources and RM0433, not yet observed on hardware: see the
+//! first-hardware-run checklist in `firmware/README.md`.)
 //!
 //! # Cache coherence
 //!
@@ -46,19 +73,37 @@
 //!
 //! [`FrameStamp`] runs in the DCMI interrupt (it is bound next to embassy's own handler) and
 //! notes `Instant::now()` when the frame-complete flag rises, i.e. at the end of the frame's
-//! last line, even while the detector keeps the thread busy. The vision task turns that into
-//! the frame's mid-exposure time with the sensor timing.
+//! last captured line, even while the detector keeps the thread busy (with the VGA crop that is the
+//! crop's last line, 40 rows before the sensor's last: RM0433 §34.5.3 DCMI_RIS FRAME_RIS).
+//! The vision task turns that into the frame's mid-exposure time with
+//! [`FrameTiming::mid_exposure_before_frame_end_us`], from the rows kept ([`HEIGHT`]) of the
+//! rows the sensor sends ([`SENSOR_RESOLUTION`]).
+//!
+//! [`FrameTiming::capture_timeout_us`]: touchdown_core::sensor::FrameTiming::capture_timeout_us
+//! [`FrameTiming::mid_exposure_before_frame_end_us`]:
+//!     touchdown_core::sensor::FrameTiming::mid_exposure_before_frame_end_us
 
 use core::cell::Cell;
 
+use embassy_futures::select::{select3, Either3};
 use embassy_stm32::dcmi::{self, Dcmi};
 use embassy_stm32::interrupt;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::DCMI;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_time::{with_timeout, Duration, Instant};
+use embassy_sync::signal::Signal;
+use embassy_time::{Duration, Instant, Timer};
+use touchdown_core::sensor::Resolution;
 
+/// What the sensor is asked to send (the DCMI keeps all of it, or with `camera-vga` the
+/// middle [`HEIGHT`] rows).
+#[cfg(not(feature = "camera-vga"))]
+pub const SENSOR_RESOLUTION: Resolution = Resolution::Qvga;
+/// What the sensor is asked to send (the DCMI keeps all of it, or with `camera-vga` the
+/// middle [`HEIGHT`] rows).
+#[cfg(feature = "camera-vga")]
+pub const SENSOR_RESOLUTION: Resolution = Resolution::Vga;
 /// Frame width in pixels.
 #[cfg(not(feature = "camera-vga"))]
 pub const WIDTH: usize = 320;
@@ -86,10 +131,16 @@ const _: () = assert!(
 );
 // Cache maintenance by address works on whole 32-byte lines.
 const _: () = assert!(FRAME_BYTES.is_multiple_of(32));
-
-/// How long a capture may take before the camera counts as stalled: three frame periods at
-/// 30 fps (a capture waits up to one frame for the next VSYNC, then one frame of readout).
-pub const CAPTURE_TIMEOUT: Duration = Duration::from_millis(100);
+// The frame is the sensor's, whole or (VGA) cropped symmetrically top and bottom.
+#[cfg(not(feature = "camera-vga"))]
+const _: () = assert!(
+    WIDTH == SENSOR_RESOLUTION.width() as usize && HEIGHT == SENSOR_RESOLUTION.height() as usize
+);
+#[cfg(feature = "camera-vga")]
+const _: () = assert!(
+    WIDTH == SENSOR_RESOLUTION.width() as usize
+        && HEIGHT + 2 * CROP_TOP == SENSOR_RESOLUTION.height() as usize
+);
 
 /// One 8-bit grey frame, aligned to the Cortex-M7's 32-byte cache line.
 ///
@@ -161,27 +212,47 @@ pub fn configure_dcmi() {
     }
 }
 
-/// Stops the DCMI after an abandoned capture (timeout): RM0433 §34.5.1 DCMI_CR bit 0 CAPTURE
-/// and bit 14 ENABLE cleared. embassy re-enables both at the next capture.
+/// Stops the DCMI after an abandoned capture (fault or timeout; the DMA stream was already
+/// stopped by dropping embassy's capture future): RM0433 §34.5.1 DCMI_CR bit 0 CAPTURE and
+/// bit 14 ENABLE cleared, then RM0433 §34.5.6 DCMI_ICR FRAME_ISC, OVR_ISC, ERR_ISC written to
+/// clear the flags the abandoned capture left. embassy enables the DCMI, clears the flags and
+/// unmasks their interrupts again at the next capture.
 fn stop_dcmi() {
     pac::DCMI.cr().modify(|w| {
         w.set_capture(false);
         w.set_enable(false);
     });
+    pac::DCMI.icr().write(|w| {
+        w.set_frame_isc(true);
+        w.set_ovr_isc(true);
+        w.set_err_isc(true);
+    });
 }
 
-/// When the last frame-complete flag rose (set in the interrupt, taken by the vision task).
+/// When the last frame-complete flag rose (set in the interrupt, taken by the capture).
 static FRAME_END: Mutex<CriticalSectionRawMutex, Cell<Option<Instant>>> =
     Mutex::new(Cell::new(None));
 
+/// An overrun or synchronisation error the interrupt saw during the current capture.
+static DCMI_FAULT: Signal<CriticalSectionRawMutex, CaptureError> = Signal::new();
+
 /// Second handler on the DCMI interrupt (after embassy's, which masks the flag it saw but
-/// leaves it set until the capture future clears it): time-stamps the end of each frame.
+/// leaves it set until the capture future clears it): time-stamps the end of each frame and
+/// reports faults the capture future would not return (see the module docs).
 pub struct FrameStamp;
 
 impl interrupt::typelevel::Handler<interrupt::typelevel::DCMI> for FrameStamp {
     unsafe fn on_interrupt() {
-        // Read only: RM0433 §34.5.3 DCMI_RIS bit 0 FRAME_RIS, the frame-complete flag.
-        if pac::DCMI.ris().read().frame_ris() {
+        // Read only (clearing is the capture's job): RM0433 §34.5.3 DCMI_RIS bit 0 FRAME_RIS
+        // (frame complete), bit 1 OVR_RIS (FIFO overrun), bit 2 ERR_RIS (synchronisation
+        // error; only with embedded sync codes, which this set-up does not use).
+        let ris = pac::DCMI.ris().read();
+        if ris.ovr_ris() {
+            DCMI_FAULT.signal(CaptureError::Overrun);
+        } else if ris.err_ris() {
+            DCMI_FAULT.signal(CaptureError::SyncError);
+        }
+        if ris.frame_ris() {
             let now = Instant::now();
             FRAME_END.lock(|t| {
                 if t.get().is_none() {
@@ -195,9 +266,17 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::DCMI> for FrameStamp {
 /// Why a capture failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
 pub enum CaptureError {
-    /// The DCMI's FIFO overflowed (the DMA fell behind), or a synchronisation error.
-    Dcmi(dcmi::Error),
-    /// No complete frame within [`CAPTURE_TIMEOUT`] (camera stopped, clock lost, wiring).
+    /// The DCMI's FIFO overflowed (OVR_RIS: the DMA fell behind the pixel clock); the frame
+    /// is lost.
+    Overrun,
+    /// The DCMI saw a synchronisation error (ERR_RIS). Only possible with embedded sync
+    /// codes; with the hardware HSYNC/VSYNC used here it points at a DCMI set-up gone wrong.
+    SyncError,
+    /// The frame ended (FRAME_RIS) before it filled the buffer: the sensor sent fewer lines
+    /// or pixels than [`WIDTH`] x [`HEIGHT`] (a frame while the sensor settles, or a window
+    /// that does not match).
+    ShortFrame,
+    /// No frame ended within the timeout (camera stopped, clock lost, sync wiring).
     Timeout,
 }
 
@@ -212,8 +291,17 @@ impl Capture {
         Capture { dcmi }
     }
 
-    /// Captures the next whole frame into `buffer`; returns when the frame ended.
-    pub async fn capture(&mut self, buffer: &mut FrameBuffer) -> Result<Instant, CaptureError> {
+    /// Captures the next whole frame into `buffer`; returns when the frame ended (the time
+    /// its frame-complete flag rose). Gives up after `timeout` (see
+    /// [`FrameTiming::capture_timeout_us`]) or at once on a DCMI fault.
+    ///
+    /// [`FrameTiming::capture_timeout_us`]:
+    ///     touchdown_core::sensor::FrameTiming::capture_timeout_us
+    pub async fn capture(
+        &mut self,
+        buffer: &mut FrameBuffer,
+        timeout: Duration,
+    ) -> Result<Instant, CaptureError> {
         // SAFETY: stealing the core peripherals only for D-cache maintenance by address on
         // `buffer`, which this function borrows exclusively; no other state is touched.
         let mut scb = unsafe { cortex_m::Peripherals::steal() }.SCB;
@@ -221,19 +309,41 @@ impl Capture {
         scb.clean_dcache_by_slice(&buffer.0);
         // SAFETY: the lines were just cleaned, so invalidating loses nothing.
         unsafe { scb.invalidate_dcache_by_slice(&mut buffer.0) };
+        // Forget the previous capture's end and faults (the DCMI is off between captures, so
+        // its interrupt cannot set them again before this one is armed).
         FRAME_END.lock(|t| t.set(None));
+        DCMI_FAULT.reset();
 
-        let result = with_timeout(CAPTURE_TIMEOUT, self.dcmi.capture(&mut buffer.0)).await;
+        // Polled in this order: the capture first, so it is armed at once.
+        let result = select3(
+            self.dcmi.capture(&mut buffer.0),
+            DCMI_FAULT.wait(),
+            Timer::after(timeout),
+        )
+        .await;
 
         // Drop lines fetched speculatively while the DMA was writing.
-        // SAFETY: the CPU has not written the buffer since the clean above; the DMA is done.
+        // SAFETY: the CPU has not written the buffer since the clean above; the DMA is done
+        // (finished, or stopped when the capture future was dropped).
         unsafe { scb.invalidate_dcache_by_slice(&mut buffer.0) };
+        let frame_end = FRAME_END.lock(|t| t.take());
         match result {
-            Ok(Ok(())) => Ok(FRAME_END.lock(|t| t.take()).unwrap_or_else(Instant::now)),
-            Ok(Err(e)) => Err(CaptureError::Dcmi(e)),
-            Err(_) => {
+            Either3::First(Ok(())) => Ok(frame_end.unwrap_or_else(Instant::now)),
+            // Overrun after the DMA had every word anyway; embassy's driver has stopped the
+            // DCMI and cleared the flag itself.
+            Either3::First(Err(dcmi::Error::Overrun)) => Err(CaptureError::Overrun),
+            // embassy's only other error (PeripheralError) is ERR_RIS.
+            Either3::First(Err(_)) => Err(CaptureError::SyncError),
+            Either3::Second(fault) => {
                 stop_dcmi();
-                Err(CaptureError::Timeout)
+                Err(fault)
+            }
+            Either3::Third(()) => {
+                stop_dcmi();
+                Err(match frame_end {
+                    Some(_) => CaptureError::ShortFrame,
+                    None => CaptureError::Timeout,
+                })
             }
         }
     }

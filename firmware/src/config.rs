@@ -8,11 +8,12 @@
 //! your lens and pad, then rebuild.
 
 use touchdown_core::camera::CameraModel;
+use touchdown_core::companion::VisionSettings;
 use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::sensor::any::Model;
-use touchdown_core::sensor::{Config, Exposure, GainX16, Resolution};
+use touchdown_core::sensor::{Config, Exposure, GainX16};
 
-use crate::capture::{HEIGHT, WIDTH};
+use crate::capture::{HEIGHT, SENSOR_RESOLUTION, WIDTH};
 
 /// Frames per second asked of the sensor.
 pub const FPS: u32 = 30;
@@ -22,11 +23,7 @@ pub const FPS: u32 = 30;
 /// the limits of the TD_EXP_MAX_US / TD_GAIN_MAX parameters.
 pub fn sensor_config() -> Config {
     Config {
-        resolution: if cfg!(feature = "camera-vga") {
-            Resolution::Vga
-        } else {
-            Resolution::Qvga
-        },
+        resolution: SENSOR_RESOLUTION,
         xclk_hz: crate::board::XCLK_HZ,
         fps: FPS,
         exposure: Exposure::Manual {
@@ -95,6 +92,12 @@ pub const fn camera_model(model: Model) -> &'static CameraModel {
 /// the size it is built with. A pad printed at another scale is set with TD_TAG_SIZE (the
 /// edge of its largest marker as printed: the whole layout is scaled to it), no rebuild.
 pub const PAD: &PadLayout<'static> = &designs::NESTED;
+
+/// The size `settings` (TD_TAG_SIZE) scales [`PAD`] to, in whole percent of its built size
+/// (for logs and STATUSTEXT; saturates, NaN gives 0).
+pub fn pad_scale_percent(settings: &VisionSettings) -> u32 {
+    (settings.pad_scale(PAD) * 100.0 + 0.5) as u32
+}
 
 /// Default UART baud rate; TD_BAUD overrides it at boot.
 pub const DEFAULT_BAUD: u32 = 921_600;

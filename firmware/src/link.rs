@@ -1,11 +1,12 @@
 //! The MAVLink link to the flight controller: the UART and the companion state machine.
 //!
 //! One task owns the [`Companion`] (touchdown-core's sans-IO MAVLink state machine) and the
-//! UART; everything else talks to it through the [`EVENTS`] channel: the vision task posts
-//! each processed frame ([`LinkEvent::Frame`]) and faults ([`LinkEvent::Status`]). One owner
-//! and a channel keeps it simple: no lock around the companion, no task ever waits on
-//! another's critical section, and the vision task never blocks on the link ([`post`] drops
-//! and counts an event when the channel is full rather than stall a frame).
+//! UART; everything else talks to it through the [`LINK_EVENTS`] channel
+//! ([`crate::channels`]): the vision task posts each processed frame ([`LinkEvent::Frame`])
+//! and faults ([`LinkEvent::Status`]), the parameter store its faults. One owner and a channel
+//! keeps it simple: no lock around the companion, no task ever waits on another's critical
+//! section, and the vision task never blocks on the link (a full channel drops and counts the
+//! event rather than stall a frame).
 //!
 //! The loop waits for whichever comes first: bytes from the UART, an event, or a 5 ms tick
 //! (heartbeats, TIMESYNC, parameter streaming, target expiry are driven by
@@ -17,55 +18,27 @@
 //! port carries the interrupt load is small.
 //!
 //! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
-//! stable for two seconds ([`persist::SaveDebounce`]) by the [`param_store`] task. Those of the
-//! camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure limits) take effect at once: after
-//! every input the link converts the parameters with [`VisionSettings::from_params`] and, when
-//! the result differs from what it last published, signals [`vision::SETTINGS`] (the vision
-//! task started with the settings of the parameters restored at boot). A changed TD_TAG_SIZE
-//! is confirmed to the ground station with a STATUSTEXT giving the pad's scale, so a size
-//! typed for the wrong marker shows before the flight.
+//! stable for two seconds ([`persist::SaveDebounce`]): the link signals [`SAVE`] to the
+//! parameter store task. Those of the camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure
+//! limits) take effect at once: after every input the link converts the parameters with
+//! [`VisionSettings::from_params`] and, when the result differs from what it last published,
+//! signals [`VISION_SETTINGS`] (the vision task started with the settings of the parameters
+//! restored at boot). A changed TD_TAG_SIZE is confirmed to the ground station with a
+//! STATUSTEXT giving the pad's scale, so a size typed for the wrong marker shows before the
+//! flight.
 
 use core::fmt::Write as _;
-use core::sync::atomic::{AtomicU32, Ordering};
 
 use defmt::{info, warn};
 use embassy_futures::select::{select3, Either3};
 use embassy_stm32::usart::BufferedUart;
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::channel::Channel;
 use embassy_time::{Duration, Instant, Ticker};
 use embedded_io_async::{Read, Write};
 use touchdown_core::companion::persist::SaveDebounce;
-use touchdown_core::companion::{
-    Companion, FrameResult, MavSeverity, VisionSettings, MAX_FRAME_LEN,
-};
+use touchdown_core::companion::{Companion, MavSeverity, ParamId, VisionSettings, MAX_FRAME_LEN};
 
-use crate::param_store;
-use crate::watchdog;
-use crate::{config, vision};
-
-/// What other tasks send the link. (A frame is ~220 bytes, a status ~12: the channel holds
-/// four events of the larger size, under 1 KiB; boxing is not an option without a heap.)
-#[allow(clippy::large_enum_variant)]
-pub enum LinkEvent {
-    /// A processed frame (exposure time and pad fix, if any).
-    Frame(FrameResult),
-    /// A fault or notice for the ground station (STATUSTEXT).
-    Status(MavSeverity, &'static str),
-}
-
-/// Events for the link task. Four frames is 130 ms at 30 fps: more means the link is stuck.
-static EVENTS: Channel<CriticalSectionRawMutex, LinkEvent, 4> = Channel::new();
-/// Events dropped because the channel was full.
-static DROPPED_EVENTS: AtomicU32 = AtomicU32::new(0);
-
-/// Hands an event to the link task without waiting; drops (and counts) it when the channel is
-/// full.
-pub fn post(event: LinkEvent) {
-    if EVENTS.try_send(event).is_err() {
-        DROPPED_EVENTS.fetch_add(1, Ordering::Relaxed);
-    }
-}
+use crate::channels::{self, LinkEvent, LINK_EVENTS, SAVE, VISION_SETTINGS};
+use crate::config;
 
 /// How often the link runs its periodic work without any input.
 const TICK: Duration = Duration::from_millis(5);
@@ -95,16 +68,12 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
     info!(
         "link: profile {}, sysid {}, compid {}",
         companion.profile(),
-        companion
-            .params()
-            .get_int(touchdown_core::companion::ParamId::SysId),
-        companion
-            .params()
-            .get_int(touchdown_core::companion::ParamId::CompId)
+        companion.params().get_int(ParamId::SysId),
+        companion.params().get_int(ParamId::CompId)
     );
 
     loop {
-        match select3(rx.read(&mut rx_buf), EVENTS.receive(), ticker.next()).await {
+        match select3(rx.read(&mut rx_buf), LINK_EVENTS.receive(), ticker.next()).await {
             Either3::First(Ok(n)) => companion.receive(rx_buf.get(..n).unwrap_or(&[]), now_us()),
             Either3::First(Err(e)) => {
                 // Framing/noise/overrun: the parser resynchronises on the next frame start.
@@ -124,7 +93,7 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
             if settings.tag_size_m != vision_settings.tag_size_m {
                 announce_pad_scale(&mut companion, &settings);
             }
-            vision::SETTINGS.signal(settings);
+            VISION_SETTINGS.signal(settings);
             vision_settings = settings;
         }
         while let Some(n) = companion.poll_transmit(now_us(), &mut tx_buf) {
@@ -133,10 +102,10 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
             }
         }
         if let Some(params) = debounce.poll(companion.params(), now_us()) {
-            param_store::SAVE.signal(params);
+            SAVE.signal(params);
             debounce.saved(&params);
         }
-        watchdog::link_alive();
+        channels::link_alive();
 
         if Instant::now() >= next_summary {
             next_summary += SUMMARY_PERIOD;
@@ -150,7 +119,7 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
                 s.link.bad_crc,
                 uart_errors,
                 s.autopilot,
-                DROPPED_EVENTS.load(Ordering::Relaxed)
+                channels::dropped_link_events()
             );
         }
     }
@@ -165,7 +134,7 @@ fn announce_pad_scale(companion: &mut Companion, settings: &VisionSettings) {
         Some(_) => write!(
             text,
             "touchdown: TD_TAG_SIZE: pad at {}% of built size",
-            vision::percent(settings.pad_scale(config::PAD))
+            config::pad_scale_percent(settings)
         ),
         None => write!(text, "touchdown: TD_TAG_SIZE 0: pad as built"),
     };

@@ -16,6 +16,9 @@
 //! - [`watchdog::task`]: feeds the independent watchdog while both vision and link progress;
 //! - [`heartbeat::task`]: blinks the user LED.
 //!
+//! They talk only through the channels, signals and progress counters of [`channels`], whose
+//! docs draw the task graph.
+//!
 //! Boards ([`board`]): NUCLEO-H743ZI2 (default feature `board-nucleo`) or OpenMV Cam H7
 //! (`board-openmv`). Memory (see the root `memory.x` and `firmware/README.md`): stack,
 //! `.data`, `.bss` and the task futures in DTCM (fast, not DMA-reachable); frame buffers,
@@ -32,6 +35,7 @@
 mod axisram;
 mod board;
 mod capture;
+mod channels;
 mod clocks;
 mod config;
 mod families;

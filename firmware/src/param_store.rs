@@ -14,13 +14,11 @@
 
 use defmt::{info, warn};
 use embassy_stm32::flash::{Async, Flash, FLASH_SIZE};
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::signal::Signal;
 use touchdown_core::companion::params::ParamSet;
 use touchdown_core::companion::persist::{self, Restore, ScanResult, SLOT_LEN};
 use touchdown_core::companion::MavSeverity;
 
-use crate::link::{self, LinkEvent};
+use crate::channels::{self, LinkEvent, SAVE};
 
 /// Size of the parameter sector.
 pub const SECTOR_SIZE: u32 = 128 * 1024;
@@ -28,9 +26,6 @@ pub const SECTOR_SIZE: u32 = 128 * 1024;
 pub const SECTOR_OFFSET: u32 = FLASH_SIZE as u32 - SECTOR_SIZE;
 /// Slots in the sector.
 pub const SLOTS: usize = SECTOR_SIZE as usize / SLOT_LEN;
-
-/// The parameter set to save (the newest one wins if saves pile up).
-pub static SAVE: Signal<CriticalSectionRawMutex, ParamSet> = Signal::new();
 
 /// Reads the log at boot: the restored parameters (defaults if none) and where the next save
 /// goes. Reports a corrupt log as a STATUSTEXT once the link runs.
@@ -56,7 +51,7 @@ pub fn load(flash: &mut Flash<'static, Async>) -> (ParamSet, Option<usize>) {
                 slot, report, bad_slots
             );
             if bad_slots > 0 {
-                link::post(LinkEvent::Status(
+                channels::post_to_link(LinkEvent::Status(
                     MavSeverity::MAV_SEVERITY_WARNING,
                     "touchdown: params restored, damaged saves skipped",
                 ));
@@ -67,7 +62,7 @@ pub fn load(flash: &mut Flash<'static, Async>) -> (ParamSet, Option<usize>) {
                 "params: {} slot(s), none valid ({}): defaults",
                 bad_slots, error
             );
-            link::post(LinkEvent::Status(
+            channels::post_to_link(LinkEvent::Status(
                 MavSeverity::MAV_SEVERITY_ERROR,
                 "touchdown: saved params bad (CRC), using defaults",
             ));
@@ -92,7 +87,7 @@ pub async fn task(mut flash: Flash<'static, Async>, mut next_free: Option<usize>
                     .await
                 {
                     warn!("params: erase failed: {}", e);
-                    link::post(LinkEvent::Status(
+                    channels::post_to_link(LinkEvent::Status(
                         MavSeverity::MAV_SEVERITY_ERROR,
                         "touchdown: flash erase failed, params not saved",
                     ));
@@ -112,7 +107,7 @@ pub async fn task(mut flash: Flash<'static, Async>, mut next_free: Option<usize>
                 warn!("params: write failed: {}", e);
                 // Never write a flash word twice: move on, the next save erases if needed.
                 next_free = Some(index + 1);
-                link::post(LinkEvent::Status(
+                channels::post_to_link(LinkEvent::Status(
                     MavSeverity::MAV_SEVERITY_ERROR,
                     "touchdown: flash write failed, params not saved",
                 ));

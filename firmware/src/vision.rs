@@ -17,27 +17,51 @@
 //! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_EXP_MAX_US,
 //! TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`VisionSettings`]: at boot as the task's argument
 //! (from the parameters restored from flash, before the first frame), afterwards through
-//! [`SETTINGS`], which the link task signals whenever a PARAM_SET changed them. They are
-//! taken between frames, never during one: the detector's correction cap
+//! [`VISION_SETTINGS`], which the link task signals whenever a PARAM_SET changed them. They are
+//! taken before a frame is processed, never during it: the detector's correction cap
 //! ([`Detector::set_config`]), the pad (the built [`config::PAD`], scaled to TD_TAG_SIZE) and
 //! the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
 //! current exposure is outside them). No restart, no lost frame.
 //!
-//! Faults: a capture error (DCMI overrun, timeout) costs that frame and is counted; after
-//! [`MAX_CONSECUTIVE_ERRORS`] in a row the camera is power-cycled and configured again, and the
-//! ground station gets a STATUSTEXT. The sensor found at start is kept: a re-initialisation
-//! that keeps failing (also when the id no longer matches) means no finished frames, and only
-//! finished frames feed the watchdog, so a camera that never comes back ends in a reset and
-//! the probe at the next start.
+//! # Keeping the capture armed
 //!
-//! Logs: once a second at `info`, frames per second, detection time (mean and max), frames
-//! lost to capture errors, overruns and re-initialisations.
+//! The DCMI captures in snapshot mode: once armed, it waits for the next frame start. So
+//! nothing slow may sit between the end of one capture and the arming of the next, or the
+//! sensor's vertical blanking passes and the next frame is lost. Each pass of the loop joins
+//! the capture of frame n+1 (polled first, so the DMA is armed at once) with everything else:
+//! taking new settings, processing frame n, and writing exposure or gain changes to the
+//! sensor over SCCB (three to five register writes, about 0.3 ms at 400 kHz). All of that
+//! runs while the DMA fills the other buffer. The sensor applies new exposure registers at a
+//! frame boundary of its own; the writes land somewhere in frame n+1, as they landed just
+//! after it before.
+//!
+//! # Settling and faults
+//!
+//! After each set-up the task waits [`FrameTiming::settling_time_us`] (ten frame periods, at
+//! least 300 ms) before the first capture: the OV7725's first frames after its register
+//! set-up may be short or badly exposed, and a short frame never completes the DMA transfer,
+//! so without the wait the first captures would time out and the error count would restart
+//! the camera (and with it the settling) over and over. A capture gives up after
+//! [`FrameTiming::capture_timeout_us`] (two frame periods and a margin), or at once on a DCMI
+//! overrun ([`crate::capture`] tells overrun, short frame, synchronisation error and timeout
+//! apart). A capture error costs that frame and is counted; after [`MAX_CONSECUTIVE_ERRORS`]
+//! in a row the camera is power-cycled and configured again, and the ground station gets a
+//! STATUSTEXT. The sensor found at start is kept: a re-initialisation that keeps failing (also
+//! when the id no longer matches) means no finished frames, and only finished frames feed the
+//! watchdog, so a camera that never comes back ends in a reset and the probe at the next
+//! start. From the last finished frame to the first after a restart (three failed captures of
+//! at most 76 ms, power cycle 15 ms, set-up, settling 334 ms at 30 fps, first frame) is
+//! about 0.7 s, well inside the watchdog's 2 s stall limit.
+//!
+//! Logs: once a second at `info`, frames per second, detection time (mean and max), and the
+//! frames lost: `dropped` is the sum of the frames the sensor sent between two successful
+//! captures without being captured (`skipped`: processing overran a frame period, or a
+//! capture was armed late) and the failed captures by cause (overrun, short frame, timeout,
+//! synchronisation error); then re-initialisations.
 
 use defmt::{debug, info, warn};
 use embassy_futures::join::join;
 use embassy_stm32::gpio::Output;
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Timer};
 use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::{FrameResult, MavSeverity, VisionSettings};
@@ -46,15 +70,14 @@ use touchdown_core::image::GrayImage;
 use touchdown_core::pad::PadLayout;
 use touchdown_core::pose::pad_pose;
 use touchdown_core::sensor::any::{self, Camera};
-use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure};
+use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, ExposureSetting};
 use touchdown_core::sensor::FrameTiming;
 
-use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, WIDTH};
+use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, SENSOR_RESOLUTION, WIDTH};
+use crate::channels::{self, LinkEvent, VISION_SETTINGS};
 use crate::config;
 use crate::families::SEARCHED;
-use crate::link::{self, LinkEvent};
-use crate::sccb::Sccb;
-use crate::watchdog;
+use crate::sccb::{Sccb, SccbError};
 use crate::Workspace;
 
 /// Capture errors in a row that trigger a camera re-initialisation.
@@ -65,9 +88,6 @@ const INIT_RETRY: Duration = Duration::from_millis(500);
 const SUMMARY_PERIOD: Duration = Duration::from_secs(1);
 /// Sample every 8th pixel of every 8th row for the exposure loop.
 const BRIGHTNESS_STEP: usize = 8;
-
-/// New settings from the link task (the newest wins if several arrive within one frame).
-pub static SETTINGS: Signal<CriticalSectionRawMutex, VisionSettings> = Signal::new();
 
 /// The sensor's control pins.
 pub struct SensorPins {
@@ -109,7 +129,7 @@ impl Sensor {
                 }
                 Err(undetected) => {
                     warn!("vision: no camera: {}", undetected.error);
-                    link::post(LinkEvent::Status(
+                    channels::post_to_link(LinkEvent::Status(
                         MavSeverity::MAV_SEVERITY_CRITICAL,
                         "touchdown: camera not responding",
                     ));
@@ -121,7 +141,7 @@ impl Sensor {
     }
 
     /// Power-cycles the sensor through its pins and configures it.
-    async fn start(&mut self) -> Result<FrameTiming, any::Error<crate::sccb::SccbError>> {
+    async fn start(&mut self) -> Result<FrameTiming, any::Error<SccbError>> {
         self.pins.power_cycle().await;
         self.camera.init(&mut Delay, &config::sensor_config()).await
     }
@@ -132,15 +152,25 @@ impl Sensor {
     }
 }
 
+/// Writes an exposure and gain to the sensor; a failed write is logged and the loop goes on
+/// (the next change writes again, and a bus that stays dead shows as capture errors).
+async fn write_exposure(camera: &mut Camera<Sccb>, setting: ExposureSetting) {
+    if let Err(e) = camera.set_manual(setting.lines, setting.gain).await {
+        warn!("vision: exposure: {}", e);
+    }
+}
+
 /// Counters of one summary period.
 #[derive(Default)]
 struct Summary {
     frames: u32,
     markers: u32,
     fixes: u32,
-    capture_errors: u32,
+    skipped: u32,
     overruns: u32,
+    short_frames: u32,
     timeouts: u32,
+    sync_errors: u32,
     reinits: u32,
     total_detect: Duration,
     max_detect: Duration,
@@ -170,20 +200,15 @@ impl Applied {
             "vision: max hamming {}, pad '{}' at {} % of its built size, exposure {}",
             settings.max_hamming,
             pad.name(),
-            percent(settings.pad_scale(config::PAD)),
+            config::pad_scale_percent(&settings),
             settings.exposure
         );
         Applied { settings, pad }
     }
 }
 
-/// `factor` in whole percent (for logs and STATUSTEXT; saturates, NaN gives 0).
-pub fn percent(factor: f32) -> u32 {
-    (factor * 100.0 + 0.5) as u32
-}
-
 /// Runs the camera and the detector forever, starting with `settings` (the parameters
-/// restored at boot) and following [`SETTINGS`].
+/// restored at boot) and following [`VISION_SETTINGS`].
 #[embassy_executor::task]
 pub async fn task(
     pins: SensorPins,
@@ -215,7 +240,7 @@ pub async fn task(
                 Ok(timing) => break timing,
                 Err(e) => {
                     warn!("vision: camera init failed: {}", e);
-                    link::post(LinkEvent::Status(
+                    channels::post_to_link(LinkEvent::Status(
                         MavSeverity::MAV_SEVERITY_CRITICAL,
                         "touchdown: camera not responding",
                     ));
@@ -223,26 +248,30 @@ pub async fn task(
                 }
             }
         };
+        let settle = Duration::from_micros(u64::from(timing.settling_time_us()));
+        let timeout = Duration::from_micros(u64::from(timing.capture_timeout_us()));
         info!(
-            "vision: {} up, PCLK {} Hz, {} lines of {} ns, {} fps",
+            "vision: {} up, PCLK {} Hz, {} lines of {} ns, {} fps; settling {} ms, capture timeout {} ms",
             sensor.camera.model().name(),
             timing.pclk_hz,
             timing.frame_lines,
             timing.line_ns,
-            timing.fps()
+            timing.fps(),
+            settle.as_millis(),
+            timeout.as_millis()
         );
         let mut exposure = AutoExposure::new(
             applied.settings.exposure,
             timing.line_ns,
             timing.frame_lines,
         );
-        let setting = exposure.setting();
-        if let Err(e) = sensor.camera.set_manual(setting.lines, setting.gain).await {
-            warn!("vision: exposure: {}", e);
-        }
+        // No capture is armed yet, so this write costs no frame.
+        write_exposure(&mut sensor.camera, exposure.setting()).await;
+        // The first frames after the set-up are not to be trusted (see the module docs).
+        Timer::after(settle).await;
 
         // The first frame has nothing to overlap with.
-        let mut front_end = match capture.capture(front).await {
+        let mut front_end = match capture.capture(front, timeout).await {
             Ok(end) => Some(end),
             Err(e) => {
                 count_error(&mut summary, e);
@@ -251,35 +280,35 @@ pub async fn task(
         };
         let mut consecutive_errors = 0u32;
         while consecutive_errors < MAX_CONSECUTIVE_ERRORS {
-            // Parameter changes, between frames.
-            if let Some(settings) = SETTINGS.try_take() {
-                applied = Applied::new(settings, &mut detector);
-                if let Some(setting) =
-                    exposure.set_limits(settings.exposure, timing.line_ns, timing.frame_lines)
-                {
-                    if let Err(e) = sensor.camera.set_manual(setting.lines, setting.gain).await {
-                        warn!("vision: exposure: {}", e);
+            // Capture into `back` (polled first, so the DMA is armed before anything else
+            // runs) while the rest of the frame's work overlaps it: see the module docs.
+            let (captured, processed) = join(capture.capture(back, timeout), async {
+                if let Some(settings) = VISION_SETTINGS.try_take() {
+                    applied = Applied::new(settings, &mut detector);
+                    if let Some(setting) =
+                        exposure.set_limits(settings.exposure, timing.line_ns, timing.frame_lines)
+                    {
+                        write_exposure(&mut sensor.camera, setting).await;
                     }
                 }
-            }
-            // Capture into `back` (polled first, so the DMA is armed before the detector
-            // takes the CPU) while `front` is processed.
-            let (captured, processed) = join(capture.capture(back), async {
-                front_end.map(|end| {
-                    let geometry = Geometry {
-                        pad: &applied.pad,
-                        camera,
-                    };
-                    process(
-                        front,
-                        end,
-                        &timing,
-                        &exposure,
-                        &geometry,
-                        &mut detector,
-                        workspace,
-                    )
-                })
+                let end = front_end?;
+                let geometry = Geometry {
+                    pad: &applied.pad,
+                    camera,
+                };
+                let processed = process(
+                    front,
+                    end,
+                    &timing,
+                    &exposure,
+                    &geometry,
+                    &mut detector,
+                    workspace,
+                );
+                if let Some(setting) = exposure.update(processed.mean) {
+                    write_exposure(&mut sensor.camera, setting).await;
+                }
+                Some(processed)
             })
             .await;
 
@@ -289,16 +318,19 @@ pub async fn task(
                 summary.fixes += u32::from(p.fix);
                 summary.total_detect += p.detect;
                 summary.max_detect = summary.max_detect.max(p.detect);
-                watchdog::frame_done();
-                if let Some(setting) = exposure.update(p.mean) {
-                    if let Err(e) = sensor.camera.set_manual(setting.lines, setting.gain).await {
-                        warn!("vision: exposure: {}", e);
-                    }
-                }
+                channels::frame_done();
             }
             front_end = match captured {
                 Ok(end) => {
                     consecutive_errors = 0;
+                    // Frames the sensor sent between the two captures (only between two
+                    // successful ones: a failed capture is counted as such).
+                    if let Some(previous) = front_end {
+                        let interval = end.as_micros().saturating_sub(previous.as_micros());
+                        summary.skipped = summary
+                            .skipped
+                            .saturating_add(timing.frames_skipped(interval));
+                    }
                     Some(end)
                 }
                 Err(e) => {
@@ -319,7 +351,7 @@ pub async fn task(
             "vision: {} capture errors in a row, restarting the camera",
             consecutive_errors
         );
-        link::post(LinkEvent::Status(
+        channels::post_to_link(LinkEvent::Status(
             MavSeverity::MAV_SEVERITY_ERROR,
             "touchdown: camera capture failing, restarting it",
         ));
@@ -328,11 +360,15 @@ pub async fn task(
 }
 
 fn count_error(summary: &mut Summary, e: CaptureError) {
-    summary.capture_errors += 1;
     match e {
-        CaptureError::Dcmi(embassy_stm32::dcmi::Error::Overrun) => summary.overruns += 1,
+        CaptureError::Overrun => summary.overruns += 1,
+        CaptureError::ShortFrame => summary.short_frames += 1,
         CaptureError::Timeout => summary.timeouts += 1,
-        CaptureError::Dcmi(_) => {}
+        CaptureError::SyncError => {
+            // Cannot happen with hardware sync signals; if it does, the DCMI set-up is wrong.
+            warn!("vision: DCMI synchronisation error");
+            summary.sync_errors += 1;
+        }
     }
     debug!("vision: capture {}", e);
 }
@@ -363,12 +399,15 @@ fn process(
     detector: &mut Detector,
     workspace: &mut Workspace,
 ) -> Processed {
-    // Mid-exposure of the middle row: the frame ended when its last row was read out; the
-    // middle row was read half a readout earlier, and exposed for the exposure time before
-    // its read.
-    let exposure_us = u64::from(exposure.setting().lines) * u64::from(timing.line_ns) / 1000;
-    let back_us = u64::from(timing.readout_us()) / 2 + exposure_us / 2;
-    let exposure_at = frame_end.as_micros().saturating_sub(back_us);
+    // The frame's time: the captured image's middle row at mid-exposure.
+    let before_end_us = timing.mid_exposure_before_frame_end_us(
+        exposure.setting().lines,
+        HEIGHT as u32,
+        SENSOR_RESOLUTION.height(),
+    );
+    let exposure_at = frame_end
+        .as_micros()
+        .saturating_sub(u64::from(before_end_us));
 
     let Ok(image) = GrayImage::new(frame.pixels(), WIDTH, HEIGHT) else {
         // Unreachable: the buffer has exactly WIDTH x HEIGHT bytes.
@@ -393,7 +432,7 @@ fn process(
     };
     let detect = started.elapsed();
     let has_fix = fix.is_some();
-    link::post(LinkEvent::Frame(FrameResult {
+    channels::post_to_link(LinkEvent::Frame(FrameResult {
         exposure_us: exposure_at,
         fix,
     }));
@@ -411,16 +450,20 @@ fn log_summary(s: &Summary) {
         .as_micros()
         .checked_div(u64::from(s.frames))
         .unwrap_or(0);
+    let dropped = s.skipped + s.overruns + s.short_frames + s.timeouts + s.sync_errors;
     info!(
-        "vision: {} fps, {} markers, {} fixes, detect mean {} us max {} us; dropped {} (overrun {}, timeout {}), reinit {}",
+        "vision: {} fps, {} markers, {} fixes, detect mean {} us max {} us; dropped {} (skipped {}, overrun {}, short {}, timeout {}, sync {}), reinit {}",
         s.frames,
         s.markers,
         s.fixes,
         mean_us,
         s.max_detect.as_micros(),
-        s.capture_errors,
+        dropped,
+        s.skipped,
         s.overruns,
+        s.short_frames,
         s.timeouts,
+        s.sync_errors,
         s.reinits
     );
 }

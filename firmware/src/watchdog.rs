@@ -4,9 +4,13 @@
 //! The IWDG runs from the 32 kHz LSI, independent of the PLL, so it also catches a clock
 //! failure. A task pets it every [`PET_PERIOD`], but only while the vision task has finished a
 //! frame within the last [`STALL_LIMIT`] and the link task has run its loop within the same
-//! limit (it runs at least every 5 ms): a hung executor (a task that never yields), a stalled
+//! limit (it runs at least every 5 ms); both report through the progress counters in
+//! [`crate::channels`] ([`FRAMES_DONE`], [`LINK_LOOPS`]): a hung executor (a task that never yields), a stalled
 //! camera that re-initialisation cannot revive, and a wedged link all end in a reset after at
-//! most `STALL_LIMIT + TIMEOUT`. The flight controller sees the companion's heartbeat stop and
+//! most `STALL_LIMIT + TIMEOUT`. A camera restart (the failed captures before it, power cycle,
+//! set-up, settling, first frame: about 0.7 s at 30 fps, see [`crate::vision`]) fits well
+//! inside the limit. The
+//! flight controller sees the companion's heartbeat stop and
 //! resume, which is what it is built to handle.
 //!
 //! Once started the IWDG cannot be stopped, and it keeps counting while a debugger halts the
@@ -18,27 +22,14 @@ use embassy_stm32::peripherals::IWDG1;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, Ticker};
 
+use crate::channels::{FRAMES_DONE, LINK_LOOPS};
+
 /// Hardware timeout: the reset comes this long after the last pet.
 pub const TIMEOUT: Duration = Duration::from_millis(1000);
 /// How often the task pets the watchdog.
 pub const PET_PERIOD: Duration = Duration::from_millis(250);
 /// How long the vision task may go without finishing a frame before petting stops.
 pub const STALL_LIMIT: Duration = Duration::from_millis(2000);
-
-/// Frames the vision task has finished (it calls [`frame_done`]).
-static FRAMES_DONE: AtomicU32 = AtomicU32::new(0);
-/// Passes of the link task's loop (it calls [`link_alive`]).
-static LINK_LOOPS: AtomicU32 = AtomicU32::new(0);
-
-/// Reports one finished frame (called by the vision task).
-pub fn frame_done() {
-    FRAMES_DONE.fetch_add(1, Ordering::Relaxed);
-}
-
-/// Reports one pass of the MAVLink loop (called by the link task).
-pub fn link_alive() {
-    LINK_LOOPS.fetch_add(1, Ordering::Relaxed);
-}
 
 /// Progress of one counter.
 struct Progress {

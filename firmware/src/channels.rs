@@ -1,0 +1,101 @@
+//! Every channel, signal and progress counter between the tasks, in one place.
+//!
+//! Tasks talk only through what is defined here: no task module imports another task module
+//! to reach its queue, so each task can be read (and replaced) on its own. The task graph:
+//!
+//! ```text
+//!   vision ────── LinkEvent::Frame, LinkEvent::Status ──┐
+//!                                                       ├─► LINK_EVENTS ──► link ──► UART
+//!   param_store ─ LinkEvent::Status ────────────────────┘   (Channel, 4)     │   (to the FC)
+//!       ▲                                                                    │
+//!       └──────────────── SAVE (Signal<ParamSet>) ───────────────────────────┤
+//!   vision ◄───────────── VISION_SETTINGS (Signal<VisionSettings>) ──────────┘
+//!
+//!   vision ── FRAMES_DONE ──┐
+//!                           ├──► watchdog ──► IWDG1 (petted while both counters move)
+//!   link ──── LINK_LOOPS ───┘
+//! ```
+//!
+//! - [`LINK_EVENTS`]: processed frames and faults for the MAVLink link. A channel, because
+//!   every frame matters to the tracker in order. Four events hold 133 ms of frames at 30 fps
+//!   (a [`LinkEvent`] is about 220 bytes, so under 1 KiB of DTCM); the link takes each one as
+//!   soon as it runs (it waits on the channel), so the queue only fills when the link is
+//!   stuck, e.g. blocked on a UART that does not drain. (Events posted at boot before the
+//!   link runs, the restore report of the parameter store and the camera probe's, wait in
+//!   it.) Then [`post_to_link`] drops the event
+//!   and counts it ([`dropped_link_events`], in the link's summary) rather than make the
+//!   vision task wait: a late frame is worth nothing to the flight controller, a stalled
+//!   camera loop costs every frame after it.
+//! - [`VISION_SETTINGS`]: the camera-side parameters, from the link (which sees PARAM_SET) to
+//!   the vision task. A signal: only the newest settings matter, and a burst of PARAM_SETs
+//!   within one frame collapses into one update the vision task applies once.
+//! - [`SAVE`]: the whole parameter set to write to flash, from the link (after its debounce)
+//!   to the parameter store. A signal: each set is complete, so a newer one supersedes an
+//!   unsaved older one while a slow erase is in progress.
+//! - [`frame_done`] / [`link_alive`]: progress counters the watchdog compares between its
+//!   pets (atomics: nobody waits on them, and a counter cannot fill up).
+//!
+//! Hand-overs between an interrupt handler and its own driver (the DCMI's frame time stamp
+//! and fault flags in [`crate::capture`]) stay with that driver: they are not between tasks.
+
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
+use touchdown_core::companion::params::ParamSet;
+use touchdown_core::companion::{FrameResult, MavSeverity, VisionSettings};
+
+/// What the other tasks send the link. (A frame is ~220 bytes, a status ~12; boxing the
+/// larger variant is not an option without a heap.)
+#[allow(clippy::large_enum_variant)]
+pub enum LinkEvent {
+    /// A processed frame (exposure time and pad fix, if any).
+    Frame(FrameResult),
+    /// A fault or notice for the ground station (STATUSTEXT).
+    Status(MavSeverity, &'static str),
+}
+
+/// Events queued for the link (see the module docs for the capacity).
+pub const LINK_EVENTS_CAPACITY: usize = 4;
+
+/// Events for the link task, received only by it.
+pub static LINK_EVENTS: Channel<CriticalSectionRawMutex, LinkEvent, LINK_EVENTS_CAPACITY> =
+    Channel::new();
+
+/// Events [`post_to_link`] dropped because [`LINK_EVENTS`] was full.
+static DROPPED_LINK_EVENTS: AtomicU32 = AtomicU32::new(0);
+
+/// Hands an event to the link task without waiting; drops (and counts) it when the queue is
+/// full.
+pub fn post_to_link(event: LinkEvent) {
+    if LINK_EVENTS.try_send(event).is_err() {
+        DROPPED_LINK_EVENTS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Events dropped since boot because the link's queue was full.
+pub fn dropped_link_events() -> u32 {
+    DROPPED_LINK_EVENTS.load(Ordering::Relaxed)
+}
+
+/// New camera-side settings from the link task for the vision task (the newest wins).
+pub static VISION_SETTINGS: Signal<CriticalSectionRawMutex, VisionSettings> = Signal::new();
+
+/// The parameter set for the parameter store to save (the newest wins if saves pile up).
+pub static SAVE: Signal<CriticalSectionRawMutex, ParamSet> = Signal::new();
+
+/// Frames the vision task has finished (it calls [`frame_done`]; the watchdog reads it).
+pub static FRAMES_DONE: AtomicU32 = AtomicU32::new(0);
+/// Passes of the link task's loop (it calls [`link_alive`]; the watchdog reads it).
+pub static LINK_LOOPS: AtomicU32 = AtomicU32::new(0);
+
+/// Reports one finished frame (called by the vision task).
+pub fn frame_done() {
+    FRAMES_DONE.fetch_add(1, Ordering::Relaxed);
+}
+
+/// Reports one pass of the MAVLink loop (called by the link task).
+pub fn link_alive() {
+    LINK_LOOPS.fetch_add(1, Ordering::Relaxed);
+}
