@@ -41,7 +41,6 @@ mod config;
 mod families;
 mod heartbeat;
 mod link;
-mod mavlink_check;
 mod param_store;
 mod sccb;
 // Generated table of the user's own marker family; searched with the `user-family` feature
