@@ -137,15 +137,20 @@ impl FrameTiming {
         captured_rows: u32,
         output_rows: u32,
     ) -> u32 {
-        let line_ns = u128::from(self.line_ns);
-        let readout_ns = line_ns * u128::from(self.active_lines);
+        // u32 x u32 and u32 x u16 products fit a u64.
+        let line_ns = u64::from(self.line_ns);
+        let readout_ns = line_ns * u64::from(self.active_lines);
         let band_readout_ns = if output_rows == 0 || captured_rows >= output_rows {
             readout_ns
         } else {
-            readout_ns * u128::from(captured_rows) / u128::from(output_rows)
+            // readout x captured / output without the u64 overflow of the product (and
+            // without u128 division, a library call on the Cortex-M7): both terms are exact
+            // and the sum is at most `readout_ns`.
+            let (output, captured) = (u64::from(output_rows), u64::from(captured_rows));
+            readout_ns / output * captured + readout_ns % output * captured / output
         };
-        let exposure_ns = line_ns * u128::from(exposure_lines);
-        let before_ns = (band_readout_ns + exposure_ns) / 2;
+        let exposure_ns = line_ns * u64::from(exposure_lines);
+        let before_ns = band_readout_ns.saturating_add(exposure_ns) / 2;
         u32::try_from(before_ns / 1000).unwrap_or(u32::MAX)
     }
 
