@@ -73,15 +73,36 @@ fn read(path: &Path, what: &str) -> Result<String, ConfigError> {
 }
 
 /// A toml/serde error as one line with its line number.
+///
+/// A missing key has no line of its own: toml points its span at the whole table (line 1
+/// of the file, or the `[[marker]]` header), which would send the user to the wrong place,
+/// so that error names the key and the table's header line only.
 fn toml_error(text: &str, e: toml::de::Error) -> ParseError {
-    let line = e
-        .span()
-        .map(|span| text.get(..span.start).unwrap_or(text).matches('\n').count() + 1);
-    ParseError {
-        line,
-        key: None,
-        reason: e.message().trim().replace('\n', " "),
+    let reason = e.message().trim().replace('\n', " ");
+    let line_at = |offset: usize| text.get(..offset).unwrap_or(text).matches('\n').count() + 1;
+    if let Some(key) = missing_field(&reason) {
+        // The span of a table that lacks the key starts at its header, if it has one.
+        let header = e
+            .span()
+            .map(|span| span.start)
+            .filter(|&start| text.get(start..).is_some_and(|rest| rest.starts_with('[')));
+        return ParseError {
+            line: header.map(line_at),
+            key: None,
+            reason: format!("missing key `{key}`"),
+        };
     }
+    ParseError {
+        line: e.span().map(|span| line_at(span.start)),
+        key: None,
+        reason,
+    }
+}
+
+/// The key of serde's "missing field `name`" message.
+fn missing_field(message: &str) -> Option<&str> {
+    let rest = message.strip_prefix("missing field `")?;
+    rest.split('`').next()
 }
 
 /// Line of `key = ...`, searching the whole file (`table = None`) or the `n`-th
@@ -343,6 +364,17 @@ mod tests {
                 .starts_with("CAMERA.toml: line 7: distortion: "),
             "{e}"
         );
+    }
+
+    #[test]
+    fn missing_keys_are_named_without_a_wrong_line() {
+        let e = parse_camera(&CAMERA.replace("fy = 554.3\n", "")).unwrap_err();
+        assert_eq!((e.line, e.reason.as_str()), (None, "missing key `fy`"));
+        let e = e.at(Path::new("CAMERA.toml"));
+        assert_eq!(e.to_string(), "CAMERA.toml: missing key `fy`");
+        // In a [[marker]] table: that table's header line.
+        let e = parse_pad(&PAD.replace("size = 0.2\n", "")).unwrap_err();
+        assert_eq!((e.line, e.reason.as_str()), (Some(9), "missing key `size`"));
     }
 
     const PAD: &str = "name = \"t\"\n[[marker]]\nfamily = \"tag36h11\"\nid = 1\nsize = 0.5\nx = 0.0\ny = 0.0\n\n[[marker]]\nfamily = \"tag36h11\"\nid = 2\nsize = 0.2\nx = 1.0\ny = 0.0\nyaw_deg = 90.0\n";

@@ -128,6 +128,68 @@ fn corrupt_image_exits_2_naming_the_file() {
 }
 
 #[test]
+fn truncated_jpeg_exits_2_instead_of_reading_as_no_markers() {
+    // Textured, so that most of the file is scan data and a third of it ends inside it.
+    let (width, height) = (320u32, 240u32);
+    let pixels: Vec<u8> = (0..width * height)
+        .map(|i| ((i % width) * 7 + (i / width) * 13 + i.wrapping_mul(2_654_435_761) % 31) as u8)
+        .collect();
+    let whole = scratch("whole.jpg");
+    image::save_buffer(&whole, &pixels, width, height, image::ExtendedColorType::L8)
+        .expect("write");
+    let bytes = std::fs::read(&whole).expect("read");
+    assert_eq!(
+        exit_code(&touchdown(&["detect", path_str(&whole)])),
+        Some(0)
+    );
+    let cut = scratch("first-third.jpg");
+    std::fs::write(&cut, &bytes[..bytes.len() / 3]).expect("write");
+    let output = touchdown(&["detect", path_str(&cut)]);
+    assert_fails_with_one_line(&output, &["first-third.jpg", "truncated JPEG"]);
+}
+
+#[test]
+fn oversized_image_exits_2_stating_the_limit() {
+    let path = scratch("too-wide.png");
+    image::save_buffer(&path, &[0u8; 9000], 9000, 1, image::ExtendedColorType::L8).expect("write");
+    let output = touchdown(&["detect", path_str(&path)]);
+    assert_fails_with_one_line(&output, &["too-wide.png", "9000x1", "8192x8192"]);
+}
+
+#[test]
+fn usage_errors_are_one_line() {
+    let output = touchdown(&["detect", "--tag-size", "-1", "a.png"]);
+    assert_fails_with_one_line(&output, &["--tag-size", "positive"]);
+    assert!(!text(&output.stderr).contains("-- -1"));
+    let output = touchdown(&["detect", "--bogus", "a.png"]);
+    assert_fails_with_one_line(&output, &["--bogus"]);
+    let output = touchdown(&["frobnicate"]);
+    assert_fails_with_one_line(&output, &["frobnicate"]);
+}
+
+#[test]
+fn camera_file_without_fy_names_the_key_not_line_1() {
+    let camera = scratch("no-fy.toml");
+    std::fs::write(
+        &camera,
+        "width = 640\nheight = 480\nfx = 554.3\ncx = 319.5\ncy = 239.5\n",
+    )
+    .expect("write");
+    let image = scratch("no-fy.pgm");
+    save_pgm(&image, &GrayFrame::filled(16, 16, 255)).expect("write");
+    let output = touchdown(&[
+        "detect",
+        "--camera",
+        path_str(&camera),
+        "--tag-size",
+        "0.2",
+        path_str(&image),
+    ]);
+    assert_fails_with_one_line(&output, &["no-fy.toml", "missing key `fy`"]);
+    assert!(!text(&output.stderr).contains("line 1"));
+}
+
+#[test]
 fn missing_image_exits_2() {
     let path = scratch("does-not-exist.png");
     let output = touchdown(&["detect", path_str(&path)]);
@@ -167,6 +229,12 @@ fn bad_family_file_exits_2_with_its_line() {
     std::fs::write(&family, "00000000\n0x000000\n").expect("write");
     let output = touchdown(&["detect", "--family", path_str(&family), path_str(&image)]);
     assert_fails_with_one_line(&output, &["bad-family.txt: line 1"]);
+
+    // One all-black 8x8 code: not "two codes are equal" (there is one), but why it can't work.
+    std::fs::write(&family, format!("# cells 8\n{}\n", "0".repeat(64))).expect("write");
+    let output = touchdown(&["detect", "--family", path_str(&family), path_str(&image)]);
+    assert_fails_with_one_line(&output, &["bad-family.txt: line 2", "orientation"]);
+    assert!(!text(&output.stderr).contains("two codes"));
 }
 
 #[test]

@@ -44,6 +44,9 @@ pub enum FamilyErrorKind {
     BadCorrection,
     /// Two ids have the same code (or one is a rotation of another).
     DuplicateCode,
+    /// A code equals its own rotation by 90 or 180 degrees, so the marker's orientation (and
+    /// with it the order of its corners) cannot be told from its image.
+    SymmetricCode,
 }
 
 /// A family file error: what and on which line (1-based; 0 when it concerns the whole file).
@@ -79,6 +82,10 @@ impl core::fmt::Display for FamilyErrorKind {
             FamilyErrorKind::BadCorrection => "correction bound above half the minimum distance",
             FamilyErrorKind::DuplicateCode => {
                 "two codes are equal or rotations of each other (minimum distance 0)"
+            }
+            FamilyErrorKind::SymmetricCode => {
+                "code looks the same turned by 90 or 180 degrees (e.g. all black), so its \
+                 orientation cannot be told: change some cells"
             }
         };
         f.write_str(text)
@@ -233,10 +240,13 @@ pub fn parse_family<'t>(
     }
     // Pass 2: pack the data bits.
     let mut id = 0usize;
-    for raw in text.lines() {
+    for (line_index, raw) in text.lines().enumerate() {
         let line = raw.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
+        }
+        if is_rotation_symmetric(line.as_bytes(), n) {
+            return Err(err(line_index + 1, FamilyErrorKind::SymmetricCode));
         }
         let mut code = 0u64;
         for (k, ch) in line.bytes().enumerate() {
@@ -258,6 +268,15 @@ pub fn parse_family<'t>(
         count,
         min_hamming,
     })
+}
+
+/// Whether the `n` x `n` cell grid `cells` (row-major) reads the same turned by 90 or 180
+/// degrees (a grid equal to its 90-degree turn also equals its 180-degree one).
+fn is_rotation_symmetric(cells: &[u8], n: usize) -> bool {
+    let at = |r: usize, c: usize| cells.get(r * n + c);
+    let half_turn = (0..n).all(|r| (0..n).all(|c| at(r, c) == at(n - 1 - r, n - 1 - c)));
+    let quarter_turn = (0..n).all(|r| (0..n).all(|c| at(r, c) == at(c, n - 1 - r)));
+    half_turn || quarter_turn
 }
 
 impl<'t> FamilyHeader<'t> {
@@ -405,6 +424,15 @@ mod tests {
             FamilyError {
                 line: 4,
                 kind: FamilyErrorKind::TooManyCodes
+            }
+        );
+        let all_black = "# cells 8\n\
+            0000000000000000000000000000000000000000000000000000000000000000\n";
+        assert_eq!(
+            parse_family(all_black, "x", &mut codes).unwrap_err(),
+            FamilyError {
+                line: 2,
+                kind: FamilyErrorKind::SymmetricCode
             }
         );
         let dup = "0000000001100110011111100100001001011010011001100100001000000000\n".repeat(2);

@@ -46,7 +46,13 @@ pub struct CompanionArgs {
     pub serial: Option<PathBuf>,
 
     /// Baud rate of --serial (ArduPilot SERIALn_BAUD 921 = 921600)
-    #[arg(long, value_name = "N", default_value_t = 921_600, requires = "serial")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        default_value_t = 921_600,
+        requires = "serial"
+    )]
     pub baud: u32,
 
     /// Recording directory (camera.toml, pad.toml, frames/, frames.csv) to replay
@@ -58,11 +64,21 @@ pub struct CompanionArgs {
     pub profile: ProfileArg,
 
     /// Seconds of MAVLink before the first frame (time sync, stream requests)
-    #[arg(long, value_name = "S", default_value_t = 2.0)]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "S",
+        default_value_t = 2.0
+    )]
     pub lead: f64,
 
     /// Seconds to keep the link up after the last frame
-    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "S",
+        default_value_t = 1.0
+    )]
     pub linger: f64,
 }
 

@@ -77,7 +77,7 @@ pub struct DetectArgs {
     pub camera: Option<PathBuf>,
 
     /// Marker size for poses: edge of the outer black border, metres; needs --camera
-    #[arg(long, value_name = "M", value_parser = parse_tag_size)]
+    #[arg(long, allow_negative_numbers = true, value_name = "M", value_parser = parse_tag_size)]
     pub tag_size: Option<f64>,
 
     /// Print one JSON object per image per line instead of text

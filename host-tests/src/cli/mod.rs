@@ -97,10 +97,17 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
     }
 }
 
-/// The binary's entry point: parse (clap exits 2 on usage errors, 0 for `--help`), run,
-/// and turn the result into the exit status.
+/// The binary's entry point: parse (`--help` and `--version` print and exit 0; a usage
+/// error is one line and exit 2), run, and turn the result into the exit status.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) => {
+            let _ = writeln!(io::stderr(), "{}", usage_error_line(&e));
+            return ExitCode::from(EXIT_FAILURE);
+        }
+    };
     let stdout = io::stdout();
     let stderr = io::stderr();
     let mut out = stdout.lock();
@@ -116,6 +123,26 @@ pub fn main() -> ExitCode {
     }
 }
 
+/// A clap usage error as the contract's one line: clap's message and its tips, without the
+/// usage block (`--help` shows that).
+pub fn usage_error_line(error: &clap::Error) -> String {
+    let rendered = error.render().to_string();
+    let mut lines = rendered.lines().map(str::trim).filter(|l| !l.is_empty());
+    let mut line = lines
+        .next()
+        .unwrap_or("error: bad command line")
+        .to_string();
+    for tip in lines.filter_map(|l| l.strip_prefix("tip:")) {
+        line.push_str("; ");
+        line.push_str(tip.trim());
+    }
+    if !line.starts_with("error:") {
+        line.insert_str(0, "error: ");
+    }
+    line.push_str(" (see --help)");
+    line
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,6 +151,20 @@ mod tests {
     #[test]
     fn command_line_definition_is_consistent() {
         Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn usage_errors_are_one_line_with_their_tips() {
+        let error = Cli::try_parse_from(["touchdown", "detect", "--fmaily", "x", "a.png"])
+            .expect_err("misspelt option");
+        let line = usage_error_line(&error);
+        assert!(!line.contains('\n'), "{line}");
+        assert!(
+            line.starts_with("error: unexpected argument '--fmaily'"),
+            "{line}"
+        );
+        assert!(line.contains("--family"), "the tip is kept: {line}");
+        assert!(!line.contains("Usage"), "{line}");
     }
 
     #[test]

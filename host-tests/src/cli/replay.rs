@@ -119,11 +119,11 @@ pub struct ReplayArgs {
     pub scenario: Option<String>,
 
     /// Seed of the scenario's randomness (texture, wobble, noise) [default: 1]
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     pub seed: Option<u64>,
 
     /// Replay only the first N frames
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     pub frames: Option<usize>,
 
     /// Directory for the figures [default: replay-<NAME>]
@@ -135,7 +135,12 @@ pub struct ReplayArgs {
     pub no_plots: bool,
 
     /// Rendering threads for --scenario [default: all cores]
-    #[arg(long, value_name = "N", help_heading = "Advanced")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        help_heading = "Advanced"
+    )]
     pub threads: Option<usize>,
 }
 

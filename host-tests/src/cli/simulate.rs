@@ -42,7 +42,12 @@ pub struct SimulateArgs {
     pub scenario: String,
 
     /// Seed of everything random (texture, wobble, noise)
-    #[arg(long, value_name = "N", default_value_t = 1)]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        default_value_t = 1
+    )]
     pub seed: u64,
 
     /// Recording directory to write [default: sim-<SCENARIO>]
@@ -50,7 +55,7 @@ pub struct SimulateArgs {
     pub out: Option<PathBuf>,
 
     /// Render only the first N frames
-    #[arg(long, value_name = "N")]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
     pub frames: Option<usize>,
 
     /// Write into DIR even if it already holds files
@@ -58,7 +63,12 @@ pub struct SimulateArgs {
     pub force: bool,
 
     /// Rendering threads [default: all cores]
-    #[arg(long, value_name = "N", help_heading = "Advanced")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        help_heading = "Advanced"
+    )]
     pub threads: Option<usize>,
 }
 

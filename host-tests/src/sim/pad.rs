@@ -194,6 +194,7 @@ impl PrintedPad {
                 rotation: (yaw.cos(), yaw.sin()),
             });
         }
+        check_clearance(&markers)?;
         let mut sheet = Rect {
             x0: f64::INFINITY,
             x1: f64::NEG_INFINITY,
@@ -232,6 +233,53 @@ impl PrintedPad {
             .find(|l| l.name().eq_ignore_ascii_case(name))?;
         Self::from_layout(layout).ok()
     }
+}
+
+/// Refuses a layout in which a marker's black border reaches into another marker's paper
+/// square (its grid, quiet rings included, plus its white margin): printed over each other,
+/// neither decodes, since a marker needs its cells and the white around its border intact.
+/// Squares touching along an edge are fine.
+fn check_clearance(markers: &[PrintedMarker]) -> Result<(), PadBuildError> {
+    for (j, black) in markers.iter().enumerate() {
+        for (k, paper) in markers.iter().enumerate() {
+            if j != k && squares_overlap(black, 0.5 * black.size, paper, paper.paper_half()) {
+                let (first, second) = if j < k { (j, k) } else { (k, j) };
+                let name = |i: usize| {
+                    let m = &markers[i];
+                    format!("marker[{i}] ({} #{})", m.family, m.id)
+                };
+                return Err(PadBuildError(format!(
+                    "{} and {} overlap (each needs its cells and the white around its border \
+                     clear of the other): move them apart or make them smaller",
+                    name(first),
+                    name(second)
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether the square of half-edge `ha` centred and turned like `a` overlaps the one of
+/// half-edge `hb` placed like `b` by more than a micrometre (separating-axis test: two convex
+/// shapes are apart exactly when their projections are apart on one of their edge normals).
+fn squares_overlap(a: &PrintedMarker, ha: f64, b: &PrintedMarker, hb: f64) -> bool {
+    const TOUCH: f64 = 1e-6;
+    let axes = |m: &PrintedMarker| {
+        let (c, s) = m.rotation;
+        [(c, s), (-s, c)]
+    };
+    let (axes_a, axes_b) = (axes(a), axes(b));
+    let radius = |axes: &[(f64, f64); 2], half: f64, (nx, ny): (f64, f64)| {
+        half * axes
+            .iter()
+            .map(|(ux, uy)| (ux * nx + uy * ny).abs())
+            .sum::<f64>()
+    };
+    axes_a.iter().chain(axes_b.iter()).all(|&axis| {
+        let gap = ((b.x - a.x) * axis.0 + (b.y - a.y) * axis.1).abs();
+        gap < radius(&axes_a, ha, axis) + radius(&axes_b, hb, axis) - TOUCH
+    })
 }
 
 /// The names of the shipped designs.
@@ -340,6 +388,49 @@ mod tests {
             (c[0] + 0.5).abs() < 1e-12 && (c[1] + 0.5).abs() < 1e-12,
             "{c:?}"
         );
+    }
+
+    #[test]
+    fn overlapping_markers_are_refused_and_clear_ones_accepted() {
+        let mut config = config_of_layout(&touchdown_core::pad::designs::NESTED);
+        // Every shipped design keeps its markers apart.
+        for layout in touchdown_core::pad::designs::ALL {
+            assert!(PrintedPad::from_layout(layout).is_ok(), "{}", layout.name());
+        }
+        // The small centre marker (id 5, 0.16 m) moved onto a medium one's corner.
+        config.markers[5].x = 0.2;
+        config.markers[5].y = 0.2;
+        let e = PrintedPad::from_config(&config).unwrap_err();
+        assert!(e.0.contains("overlap") && e.0.contains("#5"), "{e}");
+        // Inside the large marker (a marker printed in another's cells).
+        config.markers[5].x = 0.0;
+        config.markers[5].y = 1.4;
+        assert!(PrintedPad::from_config(&config).is_err());
+        // Turned by 45 degrees, a square reaches further along its diagonal: two 0.4 m markers
+        // 0.5 m apart (their 0.5 m grids touch) stop being clear.
+        let two = |yaw_deg: f64| PadConfig {
+            name: "two".into(),
+            markers: vec![
+                MarkerConfig {
+                    family: "tag36h11".into(),
+                    id: 1,
+                    size: 0.4,
+                    x: 0.0,
+                    y: 0.0,
+                    yaw_deg: 0.0,
+                },
+                MarkerConfig {
+                    family: "tag36h11".into(),
+                    id: 2,
+                    size: 0.4,
+                    x: 0.5,
+                    y: 0.0,
+                    yaw_deg,
+                },
+            ],
+        };
+        assert!(PrintedPad::from_config(&two(0.0)).is_ok());
+        assert!(PrintedPad::from_config(&two(45.0)).is_err());
     }
 
     #[test]
