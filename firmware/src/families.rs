@@ -12,6 +12,8 @@
 //! [`MAX_FAMILIES`](touchdown_core::detect::MAX_FAMILIES) families are searched at once, and
 //! each extra family costs decode time on every candidate quad. Only the families named here
 //! end up in flash: the link-time optimiser drops every other generated table.
+//!
+//! [`tables::DEFAULT`]: touchdown_core::family::tables::DEFAULT
 
 use touchdown_core::family::Family;
 

@@ -18,7 +18,7 @@
 //! port carries the interrupt load is small.
 //!
 //! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
-//! stable for two seconds ([`persist::SaveDebounce`]): the link signals [`SAVE`] to the
+//! stable for two seconds ([`SaveDebounce`]): the link signals [`SAVE`] to the
 //! parameter store task. Those of the camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure
 //! limits) take effect at once: after every input the link converts the parameters with
 //! [`VisionSettings::from_params`] and, when the result differs from what it last published,

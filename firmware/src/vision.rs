@@ -31,9 +31,11 @@
 //! the capture of frame n+1 (polled first, so the DMA is armed at once) with everything else:
 //! taking new settings, processing frame n, and writing exposure or gain changes to the
 //! sensor over SCCB (three to five register writes, about 0.3 ms at 400 kHz). All of that
-//! runs while the DMA fills the other buffer. The sensor applies new exposure registers at a
-//! frame boundary of its own; the writes land somewhere in frame n+1, as they landed just
-//! after it before.
+//! runs while the DMA fills the other buffer. The writes now land inside frame n+1 rather
+//! than in the blanking after it; the sensor latches exposure registers at a frame boundary
+//! of its own, so a change takes effect no later than before (whether a change can straddle
+//! that boundary and give one frame a mixed setting is on the first-hardware-run checklist
+//! in `firmware/README.md`).
 //!
 //! # Settling and faults
 //!
