@@ -6,7 +6,8 @@
 //! pipelines; any families; any pixels), single-marker pose (IPPE + refinement), pad pose and
 //! the level pad fix, the trackers inside the companion, the companion's MAVLink parse
 //! (any received bytes) and encode (draining `poll_transmit`), and the vision task's exposure
-//! loop and parameter hand-over (`VisionSettings`, `AutoExposure::set_limits`).
+//! loop and parameter hand-over (`VisionSettings`, `AutoExposure::set_limits`) and its frame
+//! timing (`FrameTiming`: exposure time stamp, capture timeout, settling, skipped frames).
 //!
 //! Not covered: `PoseMethod::PaperHomography`, the paper's homography decomposition, which
 //! only reproduces the paper's tables on the host; it uses nalgebra's SVD, whose internal
@@ -38,6 +39,7 @@ use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::pose::{level_pad_fix, marker_pose, pad_pose_with_prediction, PoseMethod};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, AutoExposureLimits};
+use touchdown_core::sensor::FrameTiming;
 
 /// QVGA, the firmware's frame size.
 const WIDTH: usize = 320;
@@ -135,6 +137,20 @@ fn per_frame(
     pipeline
         .exposure
         .set_limits(settings.exposure, line_ns, frame_lines);
+    // The vision task's frame timing: the exposure time stamp, the capture timeout, the
+    // settling wait and the skipped-frame count, on any timing a sensor driver could report.
+    let timing = FrameTiming {
+        pclk_hz: black_box(9_600_000),
+        line_ns: black_box(line_ns),
+        frame_lines: black_box(frame_lines),
+        active_lines: black_box(240),
+    };
+    let lines = black_box(pipeline.exposure.setting().lines);
+    let _ =
+        black_box(timing.mid_exposure_before_frame_end_us(lines, black_box(240), black_box(240)));
+    let _ = black_box(timing.capture_timeout_us());
+    let _ = black_box(timing.settling_time_us());
+    let _ = black_box(timing.frames_skipped(black_box(now_us)));
 }
 
 /// The entry point (lld's default `_start`): builds the pipeline and runs frames forever.
