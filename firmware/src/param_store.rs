@@ -1,9 +1,17 @@
 //! MAVLink parameters in flash: loaded at boot, saved after a change.
 //!
-//! The last 128 KiB sector of flash bank 2 (offset 0x1E_0000 of the 2 MiB) holds an
-//! append-only log of parameter slots (`touchdown_core::companion::persist`: format, scan
-//! and debounce logic, host-tested). `memory.x` ends the FLASH region before this sector, so
-//! code can never land in it.
+//! The last two 128 KiB sectors of flash bank 2 (offsets 0x1C_0000 and 0x1E_0000 of the
+//! 2 MiB) hold a log of parameter slots that survives a power cut at any point of a save:
+//! slots are appended to one sector, and only when it is full is the other (older) one erased
+//! and written. The format, the scan, which sector and slot come next, when to erase and what
+//! to do after a failed write are all `touchdown_core::companion::persist::Store`
+//! (host-tested against a flash model that cuts the power at every program and erase step);
+//! this module only gives it the flash driver ([`ParamFlash`]) and reports what happened.
+//! `memory.x` ends the FLASH region before these sectors, so code can never land in them.
+//!
+//! On an OpenMV Cam H7 the last sector held OpenMV's ROMFS (and a board that ran other
+//! firmware may hold anything there): a sector with data but no valid slot is erased when
+//! [`task`] starts, or saving would never find room.
 //!
 //! Why bank 2: the STM32H743's two banks are read-while-write capable, so erasing or
 //! programming bank 2 does not stall instruction fetches from bank 1, where the code runs.
@@ -15,41 +23,92 @@
 use defmt::{info, warn};
 use embassy_stm32::flash::{Async, Flash, FLASH_SIZE};
 use touchdown_core::companion::params::ParamSet;
-use touchdown_core::companion::persist::{self, Restore, ScanResult, SLOT_LEN};
+use touchdown_core::companion::persist::{
+    Boot, FlashFailed, Geometry, SaveError, SlotFlash, SlotKey, Store, SECTORS,
+};
 use touchdown_core::companion::MavSeverity;
 
 use crate::channels::{self, LinkEvent, SAVE};
 
-/// Size of the parameter sector.
+/// Size of each parameter sector.
 pub const SECTOR_SIZE: u32 = 128 * 1024;
-/// Offset of the parameter sector from the start of flash: the last sector of bank 2.
-pub const SECTOR_OFFSET: u32 = FLASH_SIZE as u32 - SECTOR_SIZE;
-/// Slots in the sector.
-pub const SLOTS: usize = SECTOR_SIZE as usize / SLOT_LEN;
+/// Offsets of the parameter sectors from the start of flash: the last two sectors of bank 2
+/// (0x081C_0000 and 0x081E_0000; the second is where the one-sector log of older firmware
+/// lived, which `Store` still reads).
+pub const SECTOR_OFFSETS: [u32; SECTORS] = [
+    FLASH_SIZE as u32 - 2 * SECTOR_SIZE,
+    FLASH_SIZE as u32 - SECTOR_SIZE,
+];
+/// The sectors, checked at compile time.
+const GEOMETRY: Geometry = match Geometry::new(SECTOR_SIZE) {
+    Some(g) => g,
+    None => panic!("SECTOR_SIZE cannot hold the parameter log"),
+};
 
-/// Reads the log at boot: the restored parameters (defaults if none) and where the next save
-/// goes. Reports a corrupt log as a STATUSTEXT once the link runs.
-pub fn load(flash: &mut Flash<'static, Async>) -> (ParamSet, Option<usize>) {
+/// The offset from the start of flash of `offset` in parameter sector `sector`.
+fn flash_offset(sector: usize, offset: u32) -> Option<u32> {
+    SECTOR_OFFSETS.get(sector)?.checked_add(offset)
+}
+
+/// The flash driver as `Store` wants it: per-sector offsets, async erase and write (the
+/// H7 driver programs 32-byte flash words in ascending order and stops at the first error,
+/// which the power-loss argument relies on).
+pub struct ParamFlash<'a>(pub &'a mut Flash<'static, Async>);
+
+impl SlotFlash for ParamFlash<'_> {
+    async fn erase(&mut self, sector: usize) -> Result<(), FlashFailed> {
+        let from = flash_offset(sector, 0).ok_or(FlashFailed)?;
+        info!("params: erasing sector at 0x{:x}", from);
+        self.0.erase(from, from + SECTOR_SIZE).await.map_err(|e| {
+            warn!("params: erase at 0x{:x} failed: {}", from, e);
+            FlashFailed
+        })
+    }
+
+    async fn write(&mut self, sector: usize, offset: u32, bytes: &[u8]) -> Result<(), FlashFailed> {
+        let at = flash_offset(sector, offset).ok_or(FlashFailed)?;
+        self.0.write(at, bytes).await.map_err(|e| {
+            warn!("params: write at 0x{:x} failed: {}", at, e);
+            FlashFailed
+        })
+    }
+}
+
+/// Scans both parameter sectors at boot (256 KiB of reads and CRCs, a few ms; no erase, that
+/// is the task's): the restored parameters (defaults if none) and the [`Store`] that [`task`]
+/// continues from. Reports damaged or lost parameters as a STATUSTEXT once the link runs.
+pub fn load(flash: &mut Flash<'static, Async>) -> (ParamSet, Store) {
     let mut params = ParamSet::default();
-    let ScanResult { restore, next_free } = persist::scan(
-        SLOTS,
-        |slot, buf| {
-            let offset = SECTOR_OFFSET + (slot * SLOT_LEN) as u32;
-            flash.blocking_read(offset, buf).is_ok()
+    let (store, boot) = Store::open(
+        GEOMETRY,
+        |sector, offset, buf| match flash_offset(sector, offset) {
+            Some(at) => flash.blocking_read(at, buf).is_ok(),
+            None => false,
         },
         &mut params,
     );
-    match restore {
-        Restore::Empty => info!("params: none saved, defaults"),
-        Restore::Restored {
-            slot,
-            report,
-            bad_slots,
-        } => {
+    let Boot {
+        restored,
+        bad_slots,
+        foreign,
+    } = boot;
+    if foreign.iter().any(|&f| f) {
+        info!(
+            "params: sectors holding data but no parameters (erased next): {}",
+            foreign
+        );
+    }
+    match restored {
+        None if bad_slots == 0 => info!("params: none saved, defaults"),
+        Some(r) => {
             info!(
-                "params: restored slot {} ({}), {} bad slot(s)",
-                slot, report, bad_slots
+                "params: restored {} from sector {} ({}), {} bad slot(s)",
+                r.key, r.sector, r.report, bad_slots
             );
+            if let SlotKey::Legacy(_) = r.key {
+                // Kept as it is; the next save goes to the other sector in the new format.
+                info!("params: read from the format-1 log of an older firmware");
+            }
             if bad_slots > 0 {
                 channels::post_to_link(LinkEvent::Status(
                     MavSeverity::MAV_SEVERITY_WARNING,
@@ -57,59 +116,55 @@ pub fn load(flash: &mut Flash<'static, Async>) -> (ParamSet, Option<usize>) {
                 ));
             }
         }
-        Restore::Corrupt { error, bad_slots } => {
-            warn!(
-                "params: {} slot(s), none valid ({}): defaults",
-                bad_slots, error
-            );
+        None => {
+            warn!("params: {} slot(s), none valid: defaults", bad_slots);
             channels::post_to_link(LinkEvent::Status(
                 MavSeverity::MAV_SEVERITY_ERROR,
                 "touchdown: saved params bad (CRC), using defaults",
             ));
         }
     }
-    (params, next_free)
+    (params, store)
 }
 
-/// Writes each parameter set signalled on [`SAVE`] into the next free slot, erasing the
-/// sector when it is full.
+/// Erases the sectors [`load`] found holding foreign data, then saves each parameter set
+/// signalled on [`SAVE`] (the newest wins if saves pile up) with `Store::save`: at most one
+/// erase (async: the other tasks run meanwhile) and one slot write per save. A failed save is
+/// reported; the next save retries (an erase) or goes after the failed words (a write).
 #[embassy_executor::task]
-pub async fn task(mut flash: Flash<'static, Async>, mut next_free: Option<usize>) {
-    let mut slot = [0u8; SLOT_LEN];
+pub async fn task(mut flash: Flash<'static, Async>, mut store: Store) {
+    let mut flash = ParamFlash(&mut flash);
+    let cleanup = store.boot_cleanup(&mut flash).await;
+    if cleanup.failed.iter().any(|&f| f) {
+        channels::post_to_link(LinkEvent::Status(
+            MavSeverity::MAV_SEVERITY_ERROR,
+            "touchdown: param flash erase failed",
+        ));
+    }
     loop {
         let params = SAVE.wait().await;
-        let index = match next_free {
-            Some(i) if i < SLOTS => i,
-            _ => {
-                info!("params: sector full, erasing");
-                if let Err(e) = flash
-                    .erase(SECTOR_OFFSET, SECTOR_OFFSET + SECTOR_SIZE)
-                    .await
-                {
-                    warn!("params: erase failed: {}", e);
-                    channels::post_to_link(LinkEvent::Status(
-                        MavSeverity::MAV_SEVERITY_ERROR,
-                        "touchdown: flash erase failed, params not saved",
-                    ));
-                    continue;
+        match store.save(&mut flash, &params).await {
+            Ok(saved) => info!(
+                "params: saved in sector {} at 0x{:x}{}",
+                saved.sector,
+                saved.offset,
+                if saved.erased {
+                    " (sector erased first)"
+                } else {
+                    ""
                 }
-                0
-            }
-        };
-        persist::encode_slot(&params, &mut slot);
-        let offset = SECTOR_OFFSET + (index * SLOT_LEN) as u32;
-        match flash.write(offset, &slot).await {
-            Ok(()) => {
-                info!("params: saved to slot {}", index);
-                next_free = Some(index + 1);
-            }
+            ),
             Err(e) => {
-                warn!("params: write failed: {}", e);
-                // Never write a flash word twice: move on, the next save erases if needed.
-                next_free = Some(index + 1);
+                warn!("params: not saved: {}", e);
                 channels::post_to_link(LinkEvent::Status(
                     MavSeverity::MAV_SEVERITY_ERROR,
-                    "touchdown: flash write failed, params not saved",
+                    match e {
+                        SaveError::EraseFailed => "touchdown: flash erase failed, params not saved",
+                        SaveError::WriteFailed => "touchdown: flash write failed, params not saved",
+                        SaveError::NoRoom | SaveError::SequenceExhausted => {
+                            "touchdown: param flash unusable, params not saved"
+                        }
+                    },
                 ));
             }
         }
