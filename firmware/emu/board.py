@@ -1,0 +1,31 @@
+"""The two boards as the emulator sees them: which UART the link uses, the HSE, and what the
+clock tree must come out as (see `firmware/src/clocks.rs` and `firmware/src/board/`)."""
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Board:
+    name: str
+    hse_hz: int
+    bypass: bool
+    uart_base: int
+    uart_irq: int
+    uart_name: str
+
+    def expected_clocks(self, cpu_mhz):
+        """The tree clocks.rs asks for: a 4 MHz PLL1 reference, VCO = 2 x CPU, VOS1 at 400 MHz,
+        VOS0 at 480 MHz."""
+        return {
+            "bypass": self.bypass,
+            "divm": self.hse_hz // 4_000_000,
+            "divn": cpu_mhz * 2 // 4,
+            "vos": 0 if cpu_mhz > 400 else 1,
+            "cpu_hz": cpu_mhz * 1_000_000,
+        }
+
+
+BOARDS = {
+    "nucleo": Board("NUCLEO-H743ZI2", 8_000_000, True, 0x4001_1400, 71, "USART6"),
+    "openmv": Board("OpenMV Cam H7", 12_000_000, False, 0x4000_4800, 39, "USART3"),
+}
