@@ -13,7 +13,7 @@ import struct
 import time
 
 from unicorn import (
-    Uc, UcError, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_CODE, UC_HOOK_MEM_WRITE,
+    Uc, UcError, UC_ARCH_ARM, UC_MODE_THUMB, UC_HOOK_CODE, UC_HOOK_MEM_WRITE,
     UC_HOOK_MEM_UNMAPPED, UC_HOOK_MEM_PROT, UC_HOOK_INTR, UC_PROT_READ, UC_PROT_EXEC, UC_PROT_ALL,
 )
 from unicorn.arm_const import UC_CPU_ARM_CORTEX_M7, UC_ARM_REG_PC, UC_ARM_REG_SP
@@ -24,9 +24,15 @@ from .system import Exceptions, Scs, Dwt, DWT_BASE
 from .rcc import switch_problems
 
 WFE, WFI, SEV = 0xBF20, 0xBF30, 0xBF40
-# unicorn (QEMU) raises its internal "exception exit" when an M-profile core branches to
-# 0xFFFF_FF00 or above; the emulator performs the return itself (system.Exceptions).
-EXCP_EXCEPTION_EXIT = 8
+# The emulator implements WFE/WFI/SEV by replacing them, in its copy of flash, with BKPT
+# instructions (a debugger's software breakpoints; the ELF is not changed): a trap costs only
+# when executed, whereas a code hook slows every instruction of a counted run.
+TRAP_WAIT, TRAP_SEV = 0xBEE0, 0xBEE1
+EXCP_BKPT = 7
+# A branch to an EXC_RETURN value (0xFFFF_FF00 and above) ends in unicorn (QEMU) as a
+# prefetch abort (3) or its internal "exception exit" (8); the emulator then performs the
+# exception return itself (system.Exceptions).
+EXCP_RETURNS = (3, 8)
 EXC_RETURN_MIN = 0xFFFF_FF00
 STACK_PAINT = 0x5AC3_A55C
 AXI_FILL = 0xA5  # uninitialised RAM is not zero on the chip
@@ -38,7 +44,10 @@ class Machine:
     def __init__(self, elf, slice_len=20_000, spin_bound=100_000):
         self.elf = elf
         self.slice_len = slice_len
-        self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
+        # Not UC_MODE_MCLASS: with it unicorn 2.1 always builds a Cortex-M33, whose FPU has
+        # no double precision (the firmware's libm needs it). The Cortex-M7 model is an
+        # M-profile core of its own.
+        self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB)
         self.uc.ctl_set_cpu_model(UC_CPU_ARM_CORTEX_M7)
         self.failure = None
         self.finished = None
@@ -50,7 +59,7 @@ class Machine:
         self.stop_at_first_idle = True
         self.first_idle_ns = None
         self.first_idle_instructions = None
-        self.idle_handlers = []
+        self.traps = {}
         self.exc = Exceptions(self)
         self.scb = Scs(self.exc)
         self.periph = Bus(self, spin_bound)
@@ -103,10 +112,10 @@ class Machine:
         uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped)
         uc.hook_add(UC_HOOK_MEM_PROT, self._on_protected)
         uc.hook_add(UC_HOOK_INTR, self._on_interrupt)
-        for addr in self.elf.thumb_hint_addresses(WFE) + self.elf.thumb_hint_addresses(WFI):
-            uc.hook_add(UC_HOOK_CODE, self._on_wait, begin=addr, end=addr)
-        for addr in self.elf.thumb_hint_addresses(SEV):
-            uc.hook_add(UC_HOOK_CODE, self._on_sev, begin=addr, end=addr)
+        for hint, trap in ((WFE, TRAP_WAIT), (WFI, TRAP_WAIT), (SEV, TRAP_SEV)):
+            for addr in self.elf.thumb_hint_addresses(hint):
+                uc.mem_write(addr, trap.to_bytes(2, "little"))
+                self.traps[addr] = trap
         flash = memmap.FLASH
         self._boot_hooks = [
             uc.hook_add(UC_HOOK_CODE, self._count_pre_main, begin=flash.base, end=flash.end - 1),
@@ -192,8 +201,15 @@ class Machine:
 
     def _on_interrupt(self, uc, intno, _ud):
         pc = self.pc()
-        if intno == EXCP_EXCEPTION_EXIT and pc >= EXC_RETURN_MIN:
+        if intno in EXCP_RETURNS and pc >= EXC_RETURN_MIN:
             self.exc.exception_return(pc | 1)
+            return
+        if intno == EXCP_BKPT and pc in self.traps:
+            uc.reg_write(UC_ARM_REG_PC, (pc + 2) | 1)
+            if self.traps[pc] == TRAP_SEV:
+                self.event = True
+            else:
+                self._wait(pc + 2)
             return
         self.fail(f"CPU exception {intno} (UDF/BKPT/SVC or a fault: unicorn's EXCP number)")
 
@@ -215,13 +231,9 @@ class Machine:
             uc.hook_del(hook)
         self._boot_hooks = []
 
-    def _on_sev(self, uc, addr, size, _ud):
-        self.event = True
-
-    def _on_wait(self, uc, addr, size, _ud):
+    def _wait(self, resume):
         """WFE/WFI: returns at once if an event is latched; else the CPU sleeps until an
         interrupt: time jumps to the next peripheral event."""
-        uc.reg_write(UC_ARM_REG_PC, (addr + 2) | 1)
         if self.event:
             self.event = False
             return
@@ -229,7 +241,7 @@ class Machine:
         self.system.reset_spin()
         while True:
             self.advance_peripherals()
-            if self.exc.maybe_take(addr + 2):
+            if self.exc.maybe_take(resume):
                 return
             if self.first_idle_ns is None:
                 self.first_idle_ns = self.time_ns
@@ -237,14 +249,14 @@ class Machine:
                 if self.stop_at_first_idle:
                     self.finish("idle: every task at an await, no interrupt pending")
                     return
-            for handler in self.idle_handlers:
-                if handler(self):
-                    return
             when = [t for t in (b.next_event_ns() for b in self.periph.blocks) if t is not None]
             if not when:
                 self.finish("idle: no interrupt pending and no peripheral event to come")
                 return
-            self.time_ns = max(self.time_ns, min(when))
+            if min(when) <= self.time_ns:
+                self.fail("a peripheral model reports an event in the past (emulator bug)")
+                return
+            self.time_ns = min(when)
 
     # --- running ------------------------------------------------------------------------
 
