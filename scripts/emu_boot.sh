@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
-# Emulated boot test (firmware/emu/README.md): builds the release firmware for every board,
-# frame size and clock variant, and runs each ELF, unchanged, on the emulated STM32H743 from
-# its reset vector until every task waits at its first await. Then a self-test: the same run
-# with a PLL that never locks must fail, so a passing result means something.
+# Emulated boot test and firmware-in-the-loop (firmware/emu/README.md): builds the release
+# firmware for every board, frame size and clock variant, and runs each ELF, unchanged, on the
+# emulated STM32H743 from its reset vector until every task waits at its first await, then
+# for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
+# checking the LANDING_TARGETs it sends. Then two self-tests that must fail: a PLL that never
+# locks (the boot) and a camera that never answers (the watchdog must reset the board).
 #
 # Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
-# EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/.
+# EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
+# the boot test only.
 #
 # The builds share one target directory, one after the other: the NUCLEO variants first (the
 # default build is usually there already), then the OpenMV ones (another chip feature, so
@@ -19,13 +22,15 @@ readonly TARGET=thumbv7em-none-eabihf
 readonly TARGET_DIR="${CARGO_TARGET_DIR:-target}"
 readonly OUT="${TARGET_DIR}/emu"
 
-# name board MHz cargo-features...
+readonly FIL_SECONDS="${EMU_FIL_SECONDS:-2}"
+
+# name board MHz camera cargo-features...
 readonly VARIANTS=(
-    "nucleo-qvga nucleo 400"
-    "nucleo-vga nucleo 400 --features camera-vga"
-    "nucleo-qvga-480 nucleo 480 --features clk-480mhz"
-    "openmv-qvga openmv 400 --no-default-features --features board-openmv"
-    "openmv-vga openmv 400 --no-default-features --features board-openmv,camera-vga"
+    "nucleo-qvga nucleo 400 qvga"
+    "nucleo-vga nucleo 400 vga --features camera-vga"
+    "nucleo-qvga-480 nucleo 480 qvga --features clk-480mhz"
+    "openmv-qvga openmv 400 qvga --no-default-features --features board-openmv"
+    "openmv-vga openmv 400 vga --no-default-features --features board-openmv,camera-vga"
 )
 
 selected() {
@@ -41,7 +46,7 @@ selected() {
 
 build() {
     local name=$1
-    shift 3
+    shift 4
     local t0
     t0=$(date +%s)
     cargo build --quiet --release -p touchdown-firmware --target "${TARGET}" "$@" || return
@@ -53,6 +58,19 @@ emulate() {
     PYTHONPATH=firmware python3 -m emu "$@"
 }
 
+# expect_failure LABEL ARGS...: the run must fail (the emulator catches the broken chip).
+expect_failure() {
+    local label=$1
+    shift
+    echo
+    echo "self-test: ${label}: the run must FAIL"
+    if emulate "$@" --label "${label}"; then
+        echo "self-test FAILED: the emulator passed a firmware/chip that cannot work"
+        return 1
+    fi
+    echo "self-test ok: caught"
+}
+
 mkdir -p "${OUT}"
 failed=0
 for variant in "${VARIANTS[@]}"; do
@@ -61,19 +79,19 @@ for variant in "${VARIANTS[@]}"; do
     if [ "${EMU_SKIP_BUILD:-0}" != 1 ]; then
         build "${v[@]}" || { echo "build of ${v[0]} FAILED"; failed=1; continue; }
     fi
-    emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" || failed=1
+    fil=()
+    if [ "${FIL_SECONDS}" != 0 ]; then
+        fil=(--fil "${FIL_SECONDS}" --camera "${v[3]}")
+    fi
+    emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" \
+        "${fil[@]}" || failed=1
 done
 
-first=$(find "${OUT}" -maxdepth 1 -name 'nucleo-qvga' -print -quit)
-if [ -n "${first}" ]; then
-    echo
-    echo "self-test: PLL1 never locks, the boot test must FAIL"
-    if emulate "${first}" --board nucleo --label "nucleo-qvga, PLL1RDY stuck at 0" \
-        --inject no-pll1rdy --spin-bound 20000; then
-        echo "self-test FAILED: the emulator passed a firmware that cannot boot"
-        failed=1
-    else
-        echo "self-test ok: the stuck PLL was caught"
-    fi
+readonly DEFAULT_ELF="${OUT}/nucleo-qvga"
+if [ -f "${DEFAULT_ELF}" ]; then
+    expect_failure "nucleo-qvga, PLL1RDY stuck at 0" "${DEFAULT_ELF}" --board nucleo \
+        --inject no-pll1rdy --spin-bound 20000 || failed=1
+    expect_failure "nucleo-qvga, no camera on the SCCB bus" "${DEFAULT_ELF}" --board nucleo \
+        --inject no-camera --fil 4 || failed=1
 fi
 exit "${failed}"

@@ -27,10 +27,13 @@ def parse(argv):
     parser.add_argument("--spin-bound", type=int, default=100_000,
                         help="reads of one register from one pc without a change that count "
                              "as a hang")
-    parser.add_argument("--inject", choices=("no-pll1rdy",),
-                        help="break the chip model on purpose (shows the test can fail)")
+    parser.add_argument("--inject", choices=("no-pll1rdy", "no-camera"),
+                        help="break the chip model on purpose (shows the test can fail): "
+                             "PLL1 never locks / nothing answers on the SCCB bus")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
+    parser.add_argument("--camera", choices=("qvga", "vga"), default="qvga",
+                        help="FIL: the build's frame size (feature camera-vga)")
     parser.add_argument("--frame", default=None,
                         help="FIL: the camera frame (PGM) with its truth (.txt next to it); "
                              "default: frames/ in this package")

@@ -147,7 +147,8 @@ class Ov7725:
     IDS = {0x0A: 0x77, 0x0B: 0x21, 0x1C: 0x7F, 0x1D: 0xA2}
     COM7 = 0x12
 
-    def __init__(self):
+    def __init__(self, present=True):
+        self.present = present  # False: nothing answers (every transfer is NACKed)
         self.regs = {}
         self.pointer = 0
         self.writes = 0
@@ -233,7 +234,7 @@ class I2c(Block):
         address = (cr2 >> 1) & 0x7F
         nbytes = (cr2 >> 16) & 0xFF
         reading = bool(cr2 >> 10 & 1)
-        if address != self.device.ADDRESS:
+        if address != self.device.ADDRESS or not self.device.present:
             self.isr = (self.isr | self.NACKF | self.STOPF) & ~self.BUSY
             self.transactions.append((address, "nack", b""))
             return

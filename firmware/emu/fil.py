@@ -18,7 +18,7 @@ import os
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 FRAMES_DIR = os.path.join(os.path.dirname(__file__), "frames")
-DEFAULT_FRAME = {"qvga": "nested-qvga.pgm"}
+DEFAULT_FRAME = {"qvga": "nested-qvga.pgm", "vga": "nested-vga.pgm"}
 AUTOPILOT_SYSID = 1
 HEARTBEAT_PERIOD_NS = 1e9
 # How far the firmware's pose may be from the truth: distance within this fraction, each
@@ -81,7 +81,7 @@ class Fil:
 
     def __init__(self, args, board):
         self.seconds = args.fil
-        name = args.frame or os.path.join(FRAMES_DIR, DEFAULT_FRAME["qvga"])
+        name = args.frame or os.path.join(FRAMES_DIR, DEFAULT_FRAME[args.camera])
         self.frame = read_pgm(name)
         self.truth = read_truth(os.path.splitext(name)[0] + ".txt")
         self.board = board
@@ -130,6 +130,9 @@ class Fil:
             counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
         print(f"  UART: {len(sent)} bytes at {machine.uart.baud():.0f} baud, "
               f"{len(messages)} MAVLink messages: {counts}")
+        texts = sorted({m.text for m in messages if m.get_type() == "STATUSTEXT"})
+        for text in texts:
+            print(f"  STATUSTEXT: {text}")
         problems = self._check_heartbeats(messages)
         problems += self._check_targets(messages)
         return problems

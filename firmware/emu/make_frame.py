@@ -4,7 +4,9 @@ firmware's nominal OV7725 pinhole model (firmware/src/config.rs: f = 467 px at 6
 QVGA, principal point at the centre), plus its truth: the pad centre in the camera frame
 (x right, y down, z forward), from frames.csv's camera pose in the pad frame.
 
-    python3 -m emu.make_frame RECORDING_DIR INDEX OUT.pgm
+    python3 -m emu.make_frame RECORDING_DIR INDEX OUT.pgm [qvga|vga]
+
+(VGA: the sensor's whole 640x480 frame; the firmware's DCMI crops it to 640x400 itself.)
 
 Pixels outside the simulated view are mid grey. Run once; the result is committed.
 """
@@ -17,7 +19,7 @@ import sys
 from .fil import read_pgm
 
 FIRMWARE_F_VGA = 467.0
-QVGA = (320, 240)
+SIZES = {"qvga": (320, 240), "vga": (640, 480)}
 
 
 def read_camera(path):
@@ -89,15 +91,16 @@ def truth_of(recording, index):
 
 def main(argv):
     recording, index, out = argv[0], int(argv[1]), argv[2]
+    size = SIZES[argv[3] if len(argv) > 3 else "qvga"]
     cam = read_camera(os.path.join(recording, "camera.toml"))
     frame = read_pgm(os.path.join(recording, "frames", f"{index:06d}.pgm"))
-    pixels = resample(cam, frame, QVGA)
+    pixels = resample(cam, frame, size)
     with open(out, "wb") as f:
-        f.write(b"P5\n%d %d\n255\n" % QVGA + pixels)
+        f.write(b"P5\n%d %d\n255\n" % size + pixels)
     pos, pad = truth_of(recording, index)
     with open(os.path.splitext(out)[0] + ".txt", "w") as f:
         f.write(f"# {os.path.basename(recording)} frame {index}, resampled to the firmware's "
-                f"QVGA pinhole (f {FIRMWARE_F_VGA / 2} px)\n")
+                f"{size[0]}x{size[1]} pinhole (f {FIRMWARE_F_VGA * size[0] / 640} px)\n")
         f.write(f"# camera in the pad frame: {pos[0]:.4f} {pos[1]:.4f} {pos[2]:.4f} m, range "
                 f"{math.sqrt(sum(p * p for p in pos)):.4f} m\n")
         for axis, value in zip("xyz", pad):
