@@ -13,6 +13,7 @@ class Board:
     uart_irq: int
     uart_name: str
     uart_clock: str  # the RCC clock that feeds the UART at reset (D2CCIP2R = 0)
+    led: str         # the heartbeat LED's pin
 
     def expected_clocks(self, cpu_mhz):
         """The tree clocks.rs asks for: a 4 MHz PLL1 reference, VCO = 2 x CPU, VOS1 at 400 MHz,
@@ -27,6 +28,6 @@ class Board:
 
 
 BOARDS = {
-    "nucleo": Board("NUCLEO-H743ZI2", 8_000_000, True, 0x4001_1400, 71, "USART6", "pclk2"),
-    "openmv": Board("OpenMV Cam H7", 12_000_000, False, 0x4000_4800, 39, "USART3", "pclk1"),
+    "nucleo": Board("NUCLEO-H743ZI2", 8_000_000, True, 0x4001_1400, 71, "USART6", "pclk2", "PB0"),
+    "openmv": Board("OpenMV Cam H7", 12_000_000, False, 0x4000_4800, 39, "USART3", "pclk1", "PC1"),
 }

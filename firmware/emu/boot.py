@@ -78,6 +78,11 @@ def run_boot(machine, board, args):
         machine.rcc, machine.pwr, machine.flash, machine.syscfg,
         board.expected_clocks(args.cpu_mhz))
     print(f"  clock tree {'OK' if not clock_problems else 'WRONG'}: {summary}")
+    writes = sum(len(b.log) for b in (machine.rcc, machine.pwr, machine.flash, machine.syscfg))
+    print(f"  {writes} RCC/PWR/FLASH/SYSCFG writes; the chip ignores part of "
+          f"{len(machine.rcc.ignored)} (PLL fields written while that PLL runs)"
+          + "".join(f"\n    RCC.{machine.rcc.names.get(off, hex(off))} = {value:#010x} at "
+                    f"{machine.elf.where(pc)}" for pc, off, value in machine.rcc.ignored))
     problems += [f"clock tree: {p}" for p in clock_problems]
     states = tasks.states()
     if not states:

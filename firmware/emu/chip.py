@@ -21,8 +21,8 @@ def build_chip(elf, board, args, frames=((320, 240, bytes(320 * 240)),)):
     machine.syscfg = machine.add_block(Syscfg())
     if args.inject == "no-pll1rdy":
         machine.rcc.inject_no_pll1rdy()
-    for i, letter in enumerate("ABCDEFGHIJK"):
-        machine.add_block(Gpio(GPIO_BASE + 0x400 * i, letter))
+    machine.gpios = [machine.add_block(Gpio(GPIO_BASE + 0x400 * i, letter))
+                     for i, letter in enumerate("ABCDEFGHIJK")]
     machine.add_block(Tim2())
     machine.iwdg = machine.add_block(Iwdg())
     machine.add_block(RegisterFile(0x5800_0000, "EXTI"))

@@ -108,8 +108,18 @@ class Fil:
             problems.append(f"FIL stopped early: {machine.finished}")
         print(f"  FIL: {self.seconds:g} s emulated after the boot")
         self._report_hardware(machine)
+        problems += self._check_led(machine, start)
         problems += self._check_link(machine)
         return problems
+
+    def _check_led(self, machine, start):
+        """The heartbeat task toggles the LED every 500 ms."""
+        toggles = [t for gpio in machine.gpios for t, pin, _ in gpio.changes
+                   if pin == self.board.led and t >= start]
+        print(f"  LED {self.board.led}: {len(toggles)} toggles")
+        want = 2 * int(self.seconds)
+        return [] if want - 1 <= len(toggles) <= want + 1 else \
+            [f"LED {self.board.led} toggled {len(toggles)} times in {self.seconds:g} s (2 Hz expected)"]
 
     @staticmethod
     def _report_hardware(machine):

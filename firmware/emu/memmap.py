@@ -41,7 +41,6 @@ SRAM4 = Region("SRAM4", 0x3800_0000, 64 * KIB)
 BACKUP_SRAM = Region("backup SRAM", 0x3880_0000, 4 * KIB)
 
 MEMORIES = (ITCM, FLASH, DTCM, AXISRAM, SRAM1, SRAM2, SRAM3, SRAM4, BACKUP_SRAM)
-RAMS = tuple(r for r in MEMORIES if r is not FLASH)
 
 PERIPHERALS = Region("peripherals", 0x4000_0000, 0x2000_0000)
 SYSTEM = Region("system", 0xE000_0000, 0x0010_0000)
