@@ -15,7 +15,6 @@ from .board import BOARDS
 from .boot import report_stack, run_boot
 from .chip import build_chip
 from .elfimage import ElfImage
-from .fil import Fil
 
 
 def parse(argv):
@@ -45,7 +44,10 @@ def main(argv=None):
     board = BOARDS[args.board]
     t0 = time.monotonic()
     elf = ElfImage(args.elf)
-    fil = Fil(args, board) if args.fil else None
+    fil = None
+    if args.fil:
+        from .fil import Fil  # needs pymavlink, which the boot test alone does not
+        fil = Fil(args, board)
     machine = build_chip(elf, board, args, **(fil.chip_options() if fil else {}))
     print(f"== {args.label or args.elf} ({board.name}, {args.cpu_mhz} MHz)")
     problems = run_boot(machine, board, args)

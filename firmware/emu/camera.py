@@ -95,20 +95,27 @@ class Dma(Block):
         `count` items out of memory (returned as bytes). Stops at NDTR = 0."""
         cr = self.reg(stream, 0)
         size = 1 << ((cr >> 13) & 3)
+        if (cr >> 11) & 3 != (cr >> 13) & 3:
+            self.machine.fail(f"{self.name} stream {stream}: PSIZE != MSIZE (FIFO packing) is "
+                              "not modelled", self.base + 0x10 + 0x18 * stream)
+            return b""
         ndtr = self.reg(stream, 0x04) & 0xFFFF
         start = self.items_at_start[stream]
         addr = self.reg(stream, 0x0C) + (start - ndtr) * size * (cr >> 10 & 1)
+        items = min(ndtr, len(data) // size if data is not None else count)
         if addr < 0x2400_0000:
             self.machine.fail(f"{self.name} stream {stream} addresses {addr:#x}: DMA1/DMA2 cannot "
                               "reach ITCM/DTCM (RM0433 bus matrix)", addr)
             return b""
+        if not self.machine.mapped(addr, items * size):
+            self.machine.fail(f"{self.name} stream {stream}: {items * size} bytes at {addr:#x} are "
+                              "not in (clocked) RAM", addr)
+            return b""
         uc = self.machine.uc
         if data is not None:
-            items = min(ndtr, len(data) // size)
             uc.mem_write(addr, bytes(data[:items * size]))
             out = None
         else:
-            items = min(ndtr, count)
             out = bytes(uc.mem_read(addr, items * size))
         left = ndtr - items
         self.set_reg(stream, 0x04, left)

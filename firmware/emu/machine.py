@@ -171,6 +171,18 @@ class Machine:
                 self.uc.mem_unmap(region.base, region.size)
                 self._mapped_sram.discard(region)
 
+    def mapped(self, addr, size):
+        """Whether [addr, addr + size) is RAM the bus can reach now (SRAM1-3 only while
+        clocked)."""
+        end = addr + size
+        while addr < end:
+            region = memmap.region_of(addr)
+            if region is None or region is memmap.FLASH or \
+                    (region.clock_bit is not None and region not in self._mapped_sram):
+                return False
+            addr = region.end
+        return True
+
     def clock_switch_check(self, sw):
         for problem in switch_problems(self.rcc, self.pwr, self.flash, self.syscfg, sw):
             self.fail(f"SYSCLK switch to source {sw}: {problem}", self.rcc.base + 0x10)
