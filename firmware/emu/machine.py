@@ -10,7 +10,6 @@ peripheral event (timer compare, end of an I2C transfer or a frame, a UART byte)
 """
 
 import struct
-import time
 
 from unicorn import (
     Uc, UcError, UC_ARCH_ARM, UC_MODE_THUMB, UC_HOOK_CODE, UC_HOOK_MEM_WRITE,
@@ -57,8 +56,7 @@ class Machine:
         self.instructions = 0
         self.main_at = None
         self.stop_at_first_idle = True
-        self.first_idle_ns = None
-        self.first_idle_instructions = None
+        self.idled = False  # the executor has slept in WFE with nothing to do at least once
         self.traps = {}
         self.exc = Exceptions(self)
         self.scb = Scs(self.exc)
@@ -255,9 +253,8 @@ class Machine:
             self.advance_peripherals()
             if self.exc.maybe_take(resume):
                 return
-            if self.first_idle_ns is None:
-                self.first_idle_ns = self.time_ns
-                self.first_idle_instructions = self.instructions
+            if not self.idled:
+                self.idled = True
                 if self.stop_at_first_idle:
                     self.finish("idle: every task at an await, no interrupt pending")
                     return
@@ -283,8 +280,7 @@ class Machine:
         return reset
 
     def run(self, until_ns, start_pc):
-        """Runs until emulated time `until_ns`, a failure or `finish`; returns wall seconds."""
-        t0 = time.monotonic()
+        """Runs from `start_pc` until emulated time `until_ns`, a failure or `finish`."""
         pc = start_pc
         while self.failure is None and self.finished is None and self.time_ns < until_ns:
             if self.exc.maybe_take(pc):
@@ -301,5 +297,4 @@ class Machine:
             self.time_ns += self.slice_len * 1e9 / hz
             self.advance_peripherals()
             pc = self.pc()
-        return time.monotonic() - t0
 
