@@ -12,10 +12,12 @@ from unicorn.arm_const import UC_ARM_REG_R0
 
 from .rcc import check_clock_tree
 
-BOOT_LIMIT_NS = 2e9
+BOOT_LIMIT_NS = 2e9  # emulated time the boot may take before it counts as stuck
 # Bytes of a task's header searched for its poll function pointer (embassy's TaskHeader is
 # not repr(C): its field order is the compiler's, so the pointer is looked for, not read).
-HEADER_SCAN = 64  # emulated time the boot may take before it counts as stuck
+HEADER_SCAN = 64
+# embassy's per-task poll functions (one monomorph per task, entered with the task in r0).
+POLL_FN = "embassy_executor::raw::TaskStorage<F>::poll"
 
 
 class TaskWatch:
@@ -31,7 +33,7 @@ class TaskWatch:
         self.polls = dict.fromkeys(self.pools, 0)
         self.hooks = [
             machine.uc.hook_add(UC_HOOK_CODE, self._on_poll, begin=addr, end=addr)
-            for addr in machine.elf.function_addresses("embassy_executor::raw::TaskStorage<F>::poll")
+            for addr in machine.elf.function_addresses(POLL_FN)
         ]
 
     def detach(self):
@@ -51,7 +53,8 @@ class TaskWatch:
         out = []
         for addr, name in sorted(self.pools.items()):
             header = self.machine.uc.mem_read(addr, HEADER_SCAN)
-            words = {int.from_bytes(header[i:i + 4], "little") & ~1 for i in range(0, HEADER_SCAN, 4)}
+            words = {int.from_bytes(header[i:i + 4], "little") & ~1
+                     for i in range(0, HEADER_SCAN, 4)}
             out.append((name, self.polls[addr], bool(words & set(exited))))
         return out
 

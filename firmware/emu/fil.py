@@ -118,8 +118,10 @@ class Fil:
                    if pin == self.board.led and t >= start]
         print(f"  LED {self.board.led}: {len(toggles)} toggles")
         want = 2 * int(self.seconds)
-        return [] if want - 1 <= len(toggles) <= want + 1 else \
-            [f"LED {self.board.led} toggled {len(toggles)} times in {self.seconds:g} s (2 Hz expected)"]
+        if want - 1 <= len(toggles) <= want + 1:
+            return []
+        return [f"LED {self.board.led} toggled {len(toggles)} times in {self.seconds:g} s "
+                "(2 Hz expected)"]
 
     @staticmethod
     def _report_hardware(machine):
@@ -165,8 +167,8 @@ class Fil:
     def _check_targets(self, messages):
         targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
         want = expected_target(self.truth)
-        print(f"  truth: pad at x {want['x']:.2f} y {want['y']:.2f} z {want['z']:.2f} m (body FRD), "
-              f"distance {want['distance']:.2f} m")
+        print(f"  truth: pad at x {want['x']:.2f} y {want['y']:.2f} z {want['z']:.2f} m "
+              f"(body FRD), distance {want['distance']:.2f} m")
         if not targets:
             return ["no LANDING_TARGET sent"]
         last = targets[-1]

@@ -256,8 +256,8 @@ def switch_problems(rcc, pwr, flash, syscfg, sw):
     needed = flash_wait_states(vos, clocks["hclk"])
     latency, _ = flash.latency()
     if needed is None or latency < needed[0]:
-        problems.append(f"flash LATENCY {latency} for HCLK {clocks['hclk'] / 1e6:.0f} MHz at VOS{vos} "
-                        f"(RM0433 Table 17 needs {needed[0] if needed else '?'})")
+        problems.append(f"flash LATENCY {latency} for HCLK {clocks['hclk'] / 1e6:.0f} MHz at "
+                        f"VOS{vos} (RM0433 Table 17 needs {needed[0] if needed else '?'})")
     return problems
 
 
@@ -289,7 +289,8 @@ def check_clock_tree(rcc, pwr, flash, syscfg, expect):
     problems = [f"{k} = {got[k]}, expected {v}" for k, v in want.items() if got[k] != v]
     ref, vco, p, q, _ = rcc.pll(1)
     if abs(clocks["cpu"] - expect["cpu_hz"]) > 1:
-        problems.append(f"CPU clock {clocks['cpu'] / 1e6:.3f} MHz, expected {expect['cpu_hz'] / 1e6:.0f}")
+        problems.append(f"CPU clock {clocks['cpu'] / 1e6:.3f} MHz, "
+                        f"expected {expect['cpu_hz'] / 1e6:.0f}")
     if not 1e6 <= ref <= 16e6:
         problems.append(f"PLL1 reference {ref / 1e6:.3f} MHz outside 1-16 MHz")
     summary = (f"HSE {rcc.hse_hz / 1e6:g} MHz{' bypass' if got['HSEBYP'] else ''} / M{got['DIVM1']}"

@@ -78,7 +78,8 @@ class Usart(Block):
         if off == 0x28:
             self.advance(self.machine.time_ns)
             if len(self.tx) >= FIFO:
-                self.machine.fail(f"{self.name}: TDR written with the TX FIFO full", self.base + off)
+                self.machine.fail(f"{self.name}: TDR written with the TX FIFO full",
+                                  self.base + off)
             start = max(self.machine.time_ns, self.tx[-1] if self.tx else 0)
             self.tx.append(start + self.frame_ns())
             self.tx_bytes.append(value & 0xFF)
