@@ -22,9 +22,10 @@ DEFAULT_FRAME = {"qvga": "nested-qvga.pgm", "vga": "nested-vga.pgm"}
 AUTOPILOT_SYSID = 1
 HEARTBEAT_PERIOD_NS = 1e9
 # How far the firmware's pose may be from the truth: distance within this fraction, each
-# position component within this fraction of the distance.
+# position component within this fraction of the distance, the angles within this (rad).
 DISTANCE_TOLERANCE = 0.10
 POSITION_TOLERANCE = 0.10
+ANGLE_TOLERANCE = 0.02
 
 
 def read_pgm(path):
@@ -65,9 +66,11 @@ def read_truth(path):
 def expected_target(truth):
     """The pad centre as the firmware should report it (ArduPilot profile, MAV_FRAME_BODY_FRD
     through the camera mount: looking down, image top toward the nose): body x forward =
-    -camera y, body y right = camera x, body z down = camera z."""
+    -camera y, body y right = camera x, body z down = camera z; angle_x/angle_y are the
+    target's angles from the optical axis along the image's x and y."""
     cx, cy, cz = truth["pad_cam_x"], truth["pad_cam_y"], truth["pad_cam_z"]
-    return {"x": -cy, "y": cx, "z": cz, "distance": math.sqrt(cx * cx + cy * cy + cz * cz)}
+    return {"x": -cy, "y": cx, "z": cz, "distance": math.sqrt(cx * cx + cy * cy + cz * cz),
+            "angle_x": math.atan2(cx, cz), "angle_y": math.atan2(cy, cz)}
 
 
 def heartbeat_bytes(mav):
@@ -168,7 +171,8 @@ class Fil:
         targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
         want = expected_target(self.truth)
         print(f"  truth: pad at x {want['x']:.2f} y {want['y']:.2f} z {want['z']:.2f} m "
-              f"(body FRD), distance {want['distance']:.2f} m")
+              f"(body FRD), distance {want['distance']:.2f} m, angle_x {want['angle_x']:.3f} "
+              f"angle_y {want['angle_y']:.3f} rad")
         if not targets:
             return ["no LANDING_TARGET sent"]
         last = targets[-1]
@@ -186,4 +190,8 @@ class Fil:
             if abs(getattr(last, axis) - want[axis]) > POSITION_TOLERANCE * d:
                 problems.append(f"LANDING_TARGET {axis} {getattr(last, axis):.2f} m, "
                                 f"truth {want[axis]:.2f} m")
+        for angle in ("angle_x", "angle_y"):
+            if abs(getattr(last, angle) - want[angle]) > ANGLE_TOLERANCE:
+                problems.append(f"LANDING_TARGET {angle} {getattr(last, angle):.3f} rad, "
+                                f"truth {want[angle]:.3f} rad")
         return problems
