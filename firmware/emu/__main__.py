@@ -1,0 +1,68 @@
+"""Runs one touchdown firmware ELF on the emulated STM32H743 and prints a summary.
+
+    python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS]
+
+Without --fil: the boot test (boot.py). With --fil: the boot test, then firmware-in-the-loop
+(fil.py) for SECONDS of emulated time. Exit status 0 when every check passed, 1 on a failure
+(the message names the pc, the function and the address), 2 on bad usage.
+"""
+
+import argparse
+import sys
+import time
+
+from .board import BOARDS
+from .boot import report_stack, run_boot
+from .chip import build_chip
+from .elfimage import ElfImage
+
+
+def parse(argv):
+    parser = argparse.ArgumentParser(prog="emu", description=__doc__.split("\n")[0])
+    parser.add_argument("elf")
+    parser.add_argument("--board", choices=sorted(BOARDS), required=True)
+    parser.add_argument("--cpu-mhz", type=int, choices=(400, 480), default=400)
+    parser.add_argument("--label", help="name of this build in the summary")
+    parser.add_argument("--spin-bound", type=int, default=100_000,
+                        help="reads of one register from one pc without a change that count "
+                             "as a hang")
+    parser.add_argument("--inject", choices=("no-pll1rdy", "no-camera"),
+                        help="break the chip model on purpose (shows the test can fail): "
+                             "PLL1 never locks / nothing answers on the SCCB bus")
+    parser.add_argument("--fil", type=float, metavar="SECONDS",
+                        help="after the boot, run firmware-in-the-loop this long (emulated)")
+    parser.add_argument("--camera", choices=("qvga", "vga"), default="qvga",
+                        help="FIL: the build's frame size (feature camera-vga)")
+    parser.add_argument("--frame", default=None,
+                        help="FIL: the camera frame (PGM) with its truth (.txt next to it); "
+                             "default: frames/ in this package")
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    args = parse(argv)
+    board = BOARDS[args.board]
+    t0 = time.monotonic()
+    elf = ElfImage(args.elf)
+    fil = None
+    if args.fil:
+        from .fil import Fil  # needs pymavlink, which the boot test alone does not
+        fil = Fil(args, board)
+    machine = build_chip(elf, board, args, **(fil.chip_options() if fil else {}))
+    print(f"== {args.label or args.elf} ({board.name}, {args.cpu_mhz} MHz)")
+    problems = run_boot(machine, board, args)
+    if fil and not problems:
+        problems += fil.run(machine)
+    problems += report_stack(machine)
+    taken = dict(sorted(machine.exc.taken.items()))
+    print(f"  {machine.instructions} instructions, {machine.time_ns / 1e6:.1f} ms emulated, "
+          f"interrupts taken (exception number: count) {taken or 'none'}")
+    print(f"  wall time {time.monotonic() - t0:.2f} s")
+    for p in problems:
+        print(f"  FAIL: {p}")
+    print(f"  {'PASS' if not problems else 'FAIL'}")
+    return 0 if not problems else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

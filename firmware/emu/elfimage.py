@@ -1,0 +1,116 @@
+"""The firmware ELF as the emulator needs it: loadable segments, linker symbols, and a lookup
+from an address to the (demangled) function it lies in, so every failure can name its code.
+
+Rust's legacy symbol mangling (`_ZN` ... `E`, the default of the toolchain we use) is decoded
+here rather than with an external tool: length-prefixed path segments, the trailing `h<hash>`
+segment dropped, `$..$` escapes and `..` (for `::`) replaced. Other names are shown as they are.
+"""
+
+import bisect
+import re
+
+from elftools.elf.elffile import ELFFile
+
+_ESCAPES = {
+    "$SP$": "@", "$BP$": "*", "$RF$": "&", "$LT$": "<", "$GT$": ">", "$LP$": "(",
+    "$RP$": ")", "$C$": ",",
+}
+
+
+def _unescape(segment):
+    segment = re.sub(r"\$u([0-9a-f]+)\$", lambda m: chr(int(m.group(1), 16)), segment)
+    for escape, char in _ESCAPES.items():
+        segment = segment.replace(escape, char)
+    return segment.replace("..", "::")
+
+
+def demangle(name):
+    """Demangles a legacy Rust symbol; returns any other name unchanged."""
+    if not name.startswith("_ZN") or not name.endswith("E"):
+        return name
+    body, segments, i = name[3:-1], [], 0
+    while i < len(body) and body[i].isdigit():
+        j = i
+        while body[j].isdigit():
+            j += 1
+        n = int(body[i:j])
+        segments.append(body[j:j + n])
+        i = j + n
+    if segments and re.fullmatch(r"h[0-9a-f]{16}", segments[-1]):
+        segments.pop()
+    text = "::".join(_unescape(s) for s in segments)
+    return text[1:] if text.startswith("_$") else text
+
+
+class ElfImage:
+    """Segments and symbols of one firmware ELF."""
+
+    def __init__(self, path):
+        self.path = path
+        with open(path, "rb") as f:
+            elf = ELFFile(f)
+            self.segments = [
+                (seg["p_paddr"], seg.data())
+                for seg in elf.iter_segments()
+                if seg["p_type"] == "PT_LOAD" and seg["p_filesz"] > 0
+            ]
+            self.symbols = {}
+            functions = []
+            for sym in elf.get_section_by_name(".symtab").iter_symbols():
+                if sym.name:
+                    self.symbols.setdefault(sym.name, sym["st_value"])
+                if sym["st_info"]["type"] == "STT_FUNC" and sym["st_value"]:
+                    functions.append((sym["st_value"] & ~1, sym["st_size"], sym.name))
+            self.text = self._section(elf, ".text")
+        functions.sort()
+        self._func_addrs = [f[0] for f in functions]
+        self._funcs = functions
+
+    @staticmethod
+    def _section(elf, name):
+        sec = elf.get_section_by_name(name)
+        return (sec["sh_addr"], sec.data()) if sec else (0, b"")
+
+    def sym(self, name):
+        """Address of a symbol that must exist (a linker symbol or `main`)."""
+        if name not in self.symbols:
+            raise KeyError(f"{self.path}: no symbol {name}")
+        return self.symbols[name]
+
+    def function_at(self, addr):
+        """`name+0xoff` of the function containing `addr`, or `?`."""
+        i = bisect.bisect_right(self._func_addrs, addr & ~1) - 1
+        if i < 0:
+            return "?"
+        start, size, name = self._funcs[i]
+        if size and addr >= start + size:
+            return "?"
+        return f"{demangle(name)}+{addr - start:#x}"
+
+    def where(self, pc):
+        """A pc with its function, for messages."""
+        return f"pc {pc:#010x} ({self.function_at(pc)})"
+
+    def thumb_hint_addresses(self, opcode):
+        """Addresses in .text where the 16-bit hint `opcode` (WFE, WFI, SEV) starts an
+        instruction, if it is executed. A match inside a literal pool or in the second half of a
+        32-bit instruction is never executed as an instruction, so a code hook on it never fires."""
+        base, data = self.text
+        return [
+            base + i for i in range(0, len(data) - 1, 2)
+            if data[i] | (data[i + 1] << 8) == opcode
+        ]
+
+    def function_addresses(self, demangled):
+        """Start addresses of every function whose demangled name is `demangled`."""
+        return [start for start, _, name in self._funcs if demangle(name) == demangled]
+
+    def pools(self):
+        """Embassy task pools: demangled name -> address (one TaskStorage each; its first word
+        is the task's state: byte 0 spawned, byte 1 queued to run)."""
+        out = {}
+        for name, addr in self.symbols.items():
+            d = demangle(name)
+            if d.endswith("::POOL"):
+                out[d[: -len("::POOL")]] = addr
+        return out

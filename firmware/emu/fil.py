@@ -1,0 +1,197 @@
+"""Stage 2, firmware-in-the-loop: after the boot, the firmware runs against emulated hardware
+for a given emulated time: the OV7725 on the SCCB bus (probe, reset, configuration), the DCMI
+delivering a recorded frame with the firmware's pad in view (30 fps), and an ArduPilot
+autopilot on the UART sending HEARTBEAT at 1 Hz (generated with pymavlink). Everything the
+firmware transmits is decoded with pymavlink: its HEARTBEATs must be well-formed and about
+1 Hz, and its LANDING_TARGETs must agree with the frame's truth (distance and position).
+
+The frame (`frames/*.pgm` in this package, with its truth in the `.txt` beside it) was
+rendered by the simulator (`touchdown simulate`) and resampled into the firmware's own pinhole
+model (`make_frame.py`), so the firmware's pose must reproduce the truth up to the detector's
+pixel noise. The IWDG is modelled: a firmware that stops finishing frames is reset, which
+here is a failure.
+"""
+
+import math
+import os
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+FRAMES_DIR = os.path.join(os.path.dirname(__file__), "frames")
+DEFAULT_FRAME = {"qvga": "nested-qvga.pgm", "vga": "nested-vga.pgm"}
+AUTOPILOT_SYSID = 1
+HEARTBEAT_PERIOD_NS = 1e9
+# How far the firmware's pose may be from the truth: distance within this fraction, each
+# position component within this fraction of the distance, the angles within this (rad).
+DISTANCE_TOLERANCE = 0.10
+POSITION_TOLERANCE = 0.10
+ANGLE_TOLERANCE = 0.02
+
+
+def read_pgm(path):
+    """(width, height, bytes) of a binary 8-bit PGM."""
+    with open(path, "rb") as f:
+        data = f.read()
+    fields, pos = [], 0
+    while len(fields) < 4:
+        while data[pos:pos + 1].isspace():
+            pos += 1
+        if data[pos:pos + 1] == b"#":
+            pos = data.index(b"\n", pos)
+            continue
+        end = pos
+        while not data[end:end + 1].isspace():
+            end += 1
+        fields.append(data[pos:end])
+        pos = end
+    if fields[0] != b"P5" or fields[3] != b"255":
+        raise ValueError(f"{path}: not an 8-bit binary PGM")
+    width, height = int(fields[1]), int(fields[2])
+    pixels = data[pos + 1:pos + 1 + width * height]
+    return width, height, pixels
+
+
+def read_truth(path):
+    """The `key = value` lines of a frame's truth file, as floats."""
+    truth = {}
+    with open(path) as f:
+        for line in f:
+            line = line.split("#")[0].strip()
+            if line:
+                key, value = (s.strip() for s in line.split("="))
+                truth[key] = float(value)
+    return truth
+
+
+def expected_target(truth):
+    """The pad centre as the firmware should report it (ArduPilot profile, MAV_FRAME_BODY_FRD
+    through the camera mount: looking down, image top toward the nose): body x forward =
+    -camera y, body y right = camera x, body z down = camera z; angle_x/angle_y are the
+    target's angles from the optical axis along the image's x and y."""
+    cx, cy, cz = truth["pad_cam_x"], truth["pad_cam_y"], truth["pad_cam_z"]
+    return {"x": -cy, "y": cx, "z": cz, "distance": math.sqrt(cx * cx + cy * cy + cz * cz),
+            "angle_x": math.atan2(cx, cz), "angle_y": math.atan2(cy, cz)}
+
+
+def heartbeat_bytes(mav):
+    return mav.heartbeat_encode(
+        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, mavlink.MAV_STATE_ACTIVE).pack(mav)
+
+
+class Fil:
+    """One FIL run: the frame, the autopilot, the checks."""
+
+    def __init__(self, args, board):
+        self.seconds = args.fil
+        name = args.frame or os.path.join(FRAMES_DIR, DEFAULT_FRAME[args.camera])
+        self.frame = read_pgm(name)
+        self.truth = read_truth(os.path.splitext(name)[0] + ".txt")
+        self.board = board
+
+    def chip_options(self):
+        return {"frames": [self.frame]}
+
+    def _schedule_autopilot(self, machine, start_ns, end_ns):
+        mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
+        t = start_ns
+        while t < end_ns:
+            machine.uart.feed(heartbeat_bytes(mav), t)
+            t += HEARTBEAT_PERIOD_NS
+
+    def run(self, machine):
+        start = machine.time_ns
+        end = start + self.seconds * 1e9
+        self._schedule_autopilot(machine, start + 0.1e9, end)
+        machine.stop_at_first_idle = False
+        machine.finished = None
+        machine.run(end, machine.pc())
+        problems = [machine.failure] if machine.failure else []
+        if machine.finished:
+            problems.append(f"FIL stopped early: {machine.finished}")
+        print(f"  FIL: {self.seconds:g} s emulated after the boot")
+        self._report_hardware(machine)
+        problems += self._check_led(machine, start)
+        problems += self._check_link(machine)
+        return problems
+
+    def _check_led(self, machine, start):
+        """The heartbeat task toggles the LED every 500 ms."""
+        toggles = [t for gpio in machine.gpios for t, pin, _ in gpio.changes
+                   if pin == self.board.led and t >= start]
+        print(f"  LED {self.board.led}: {len(toggles)} toggles")
+        want = 2 * int(self.seconds)
+        if want - 1 <= len(toggles) <= want + 1:
+            return []
+        return [f"LED {self.board.led} toggled {len(toggles)} times in {self.seconds:g} s "
+                "(2 Hz expected)"]
+
+    @staticmethod
+    def _report_hardware(machine):
+        i2c = machine.i2c.transactions
+        nacks = sum(1 for _, kind, _ in i2c if kind == "nack")
+        print(f"  sensor: {len(i2c)} SCCB transfers ({nacks} NACKed), {machine.sensor.writes} "
+              f"register writes, {machine.sensor.resets} reset(s)")
+        print(f"  DCMI: {machine.dcmi.delivered} frames delivered, {machine.dcmi.overruns} "
+              f"overruns; IWDG fed {machine.iwdg.feeds} times")
+
+    def _check_link(self, machine):
+        sent = bytes(b for _, b in machine.uart.sent)
+        mav = mavlink.MAVLink(None)
+        mav.robust_parsing = True
+        messages = [m for m in (mav.parse_buffer(sent) or []) if m.get_type() != "BAD_DATA"]
+        counts = {}
+        for m in messages:
+            counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+        print(f"  UART: {len(sent)} bytes at {machine.uart.baud():.0f} baud, "
+              f"{len(messages)} MAVLink messages: {counts}")
+        texts = sorted({m.text for m in messages if m.get_type() == "STATUSTEXT"})
+        for text in texts:
+            print(f"  STATUSTEXT: {text}")
+        problems = self._check_heartbeats(messages)
+        problems += self._check_targets(messages)
+        return problems
+
+    def _check_heartbeats(self, messages):
+        beats = [m for m in messages if m.get_type() == "HEARTBEAT"]
+        problems = []
+        want = int(self.seconds)
+        if not want <= len(beats) <= want + 2:
+            problems.append(f"{len(beats)} HEARTBEATs in {self.seconds:g} s (1 Hz expected)")
+        for m in beats[:1]:
+            print(f"  HEARTBEAT: type {m.type}, autopilot {m.autopilot}, "
+                  f"system_status {m.system_status}, sysid {m.get_srcSystem()}, "
+                  f"compid {m.get_srcComponent()}")
+            if m.type != mavlink.MAV_TYPE_ONBOARD_CONTROLLER or \
+                    m.autopilot != mavlink.MAV_AUTOPILOT_INVALID:
+                problems.append(f"HEARTBEAT type/autopilot {m.type}/{m.autopilot}")
+        return problems
+
+    def _check_targets(self, messages):
+        targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
+        want = expected_target(self.truth)
+        print(f"  truth: pad at x {want['x']:.2f} y {want['y']:.2f} z {want['z']:.2f} m "
+              f"(body FRD), distance {want['distance']:.2f} m, angle_x {want['angle_x']:.3f} "
+              f"angle_y {want['angle_y']:.3f} rad")
+        if not targets:
+            return ["no LANDING_TARGET sent"]
+        last = targets[-1]
+        print(f"  LANDING_TARGET x{len(targets)}, last: frame {last.frame}, x {last.x:.2f} "
+              f"y {last.y:.2f} z {last.z:.2f} m, distance {last.distance:.2f} m, angle_x "
+              f"{last.angle_x:.3f} angle_y {last.angle_y:.3f} rad, position_valid "
+              f"{last.position_valid}")
+        problems = []
+        if last.frame != mavlink.MAV_FRAME_BODY_FRD:
+            problems.append(f"LANDING_TARGET frame {last.frame}, expected BODY_FRD")
+        d = want["distance"]
+        if abs(last.distance - d) > DISTANCE_TOLERANCE * d:
+            problems.append(f"LANDING_TARGET distance {last.distance:.2f} m, truth {d:.2f} m")
+        for axis in ("x", "y", "z"):
+            if abs(getattr(last, axis) - want[axis]) > POSITION_TOLERANCE * d:
+                problems.append(f"LANDING_TARGET {axis} {getattr(last, axis):.2f} m, "
+                                f"truth {want[axis]:.2f} m")
+        for angle in ("angle_x", "angle_y"):
+            if abs(getattr(last, angle) - want[angle]) > ANGLE_TOLERANCE:
+                problems.append(f"LANDING_TARGET {angle} {getattr(last, angle):.3f} rad, "
+                                f"truth {want[angle]:.3f} rad")
+        return problems

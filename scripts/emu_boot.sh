@@ -1,0 +1,97 @@
+#!/usr/bin/env bash
+# Emulated boot test and firmware-in-the-loop (firmware/emu/README.md): builds the release
+# firmware for every board, frame size and clock variant, and runs each ELF, unchanged, on the
+# emulated STM32H743 from its reset vector until every task waits at its first await, then
+# for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
+# checking the LANDING_TARGETs it sends. Then two self-tests that must fail: a PLL that never
+# locks (the boot) and a camera that never answers (the watchdog must reset the board).
+#
+# Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
+# EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
+# the boot test only.
+#
+# The builds share one target directory, one after the other: the NUCLEO variants first (the
+# default build is usually there already), then the OpenMV ones (another chip feature, so
+# embassy-stm32 is rebuilt once). Each ELF is copied to target/emu/<variant> before the next
+# build overwrites it.
+set -euo pipefail
+
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+readonly TARGET=thumbv7em-none-eabihf
+readonly TARGET_DIR="${CARGO_TARGET_DIR:-target}"
+readonly OUT="${TARGET_DIR}/emu"
+
+readonly FIL_SECONDS="${EMU_FIL_SECONDS:-2}"
+
+# name board MHz camera cargo-features...
+readonly VARIANTS=(
+    "nucleo-qvga nucleo 400 qvga"
+    "nucleo-vga nucleo 400 vga --features camera-vga"
+    "nucleo-qvga-480 nucleo 480 qvga --features clk-480mhz"
+    "openmv-qvga openmv 400 qvga --no-default-features --features board-openmv"
+    "openmv-vga openmv 400 vga --no-default-features --features board-openmv,camera-vga"
+)
+
+selected() {
+    local name=$1
+    shift
+    [ "$#" -eq 0 ] && return 0
+    local want
+    for want in "$@"; do
+        [ "$want" = "$name" ] && return 0
+    done
+    return 1
+}
+
+build() {
+    local name=$1
+    shift 4
+    local t0
+    t0=$(date +%s)
+    cargo build --quiet --release -p touchdown-firmware --target "${TARGET}" "$@" || return
+    cp "${TARGET_DIR}/${TARGET}/release/touchdown-firmware" "${OUT}/${name}"
+    echo "built ${name} in $(($(date +%s) - t0)) s"
+}
+
+emulate() {
+    PYTHONPATH=firmware python3 -m emu "$@"
+}
+
+# expect_failure LABEL ARGS...: the run must fail (the emulator catches the broken chip).
+expect_failure() {
+    local label=$1
+    shift
+    echo
+    echo "self-test: ${label}: the run must FAIL"
+    if emulate "$@" --label "${label}"; then
+        echo "self-test FAILED: the emulator passed a firmware/chip that cannot work"
+        return 1
+    fi
+    echo "self-test ok: caught"
+}
+
+mkdir -p "${OUT}"
+failed=0
+for variant in "${VARIANTS[@]}"; do
+    read -r -a v <<<"${variant}"
+    selected "${v[0]}" "$@" || continue
+    if [ "${EMU_SKIP_BUILD:-0}" != 1 ]; then
+        build "${v[@]}" || { echo "build of ${v[0]} FAILED"; failed=1; continue; }
+    fi
+    fil=()
+    if [ "${FIL_SECONDS}" != 0 ]; then
+        fil=(--fil "${FIL_SECONDS}" --camera "${v[3]}")
+    fi
+    emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" \
+        "${fil[@]}" || failed=1
+done
+
+readonly DEFAULT_ELF="${OUT}/nucleo-qvga"
+if [ -f "${DEFAULT_ELF}" ]; then
+    expect_failure "nucleo-qvga, PLL1RDY stuck at 0" "${DEFAULT_ELF}" --board nucleo \
+        --inject no-pll1rdy --spin-bound 20000 || failed=1
+    expect_failure "nucleo-qvga, no camera on the SCCB bus" "${DEFAULT_ELF}" --board nucleo \
+        --inject no-camera --fil 4 || failed=1
+fi
+exit "${failed}"
