@@ -13,7 +13,8 @@
 //! The data path is one straight line:
 //! frame ([`image::GrayImage`]) -> candidates ([`detect`]) -> decoded markers
 //! ([`detect::Detection`]) -> pose ([`pose`], with the [`camera`] model and the [`pad`]
-//! layout) -> filter ([`filter`]) -> vehicle frames ([`frames`]) -> messages.
+//! layout) -> filter ([`filter`]) -> vehicle frames ([`frames`]) -> messages. The camera side
+//! of it, up to the pad fix, is one type that every caller uses: [`pipeline::FramePipeline`].
 //!
 //! Conventions (the project's contract, see `README.md`): pixel (0, 0) is the centre of the
 //! top-left pixel, x right, y down; marker corners are the outer corners of the black border,
@@ -42,5 +43,6 @@ pub mod frames;
 pub mod geometry;
 pub mod image;
 pub mod pad;
+pub mod pipeline;
 pub mod pose;
 pub mod sensor;

@@ -1,9 +1,9 @@
 //! The vision task: camera frames in, pad fixes out to the MAVLink link.
 //!
-//! Per frame: capture (DMA, [`crate::capture`]) of frame n+1 runs while frame n is searched
-//! for markers ([`Detector`]), the pad pose is solved ([`pad_pose()`]) and the result is posted
-//! to the link task with the frame's exposure time. The software auto-exposure
-//! ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
+//! Per frame: capture (DMA, [`crate::capture`]) of frame n+1 runs while frame n goes through
+//! core's [`FramePipeline`] (markers, then the pad fix: the very code the host tools run) and
+//! the result is posted to the link task with the frame's exposure time. The software
+//! auto-exposure ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
 //!
 //! The sensor: at start the task power-cycles it and asks the SCCB bus which supported sensor
 //! answers ([`Camera::detect`]: an OV7725 at 0x21 or an OV2640 at 0x30), until one does; each
@@ -18,9 +18,9 @@
 //! TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`VisionSettings`]: at boot as the task's argument
 //! (from the parameters restored from flash, before the first frame), afterwards through
 //! [`VISION_SETTINGS`], which the link task signals whenever a PARAM_SET changed them. They are
-//! taken before a frame is processed, never during it: the detector's correction cap
-//! ([`Detector::set_config`]), the pad (the built [`config::PAD`], scaled to TD_TAG_SIZE) and
-//! the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
+//! taken before a frame is processed, never during it: the detector's correction cap and the
+//! pad (the built [`config::PAD`], scaled to TD_TAG_SIZE), both by [`FramePipeline::apply`],
+//! and the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
 //! current exposure is outside them). No restart, no lost frame.
 //!
 //! # Keeping the capture armed
@@ -66,11 +66,10 @@ use embassy_futures::join::join;
 use embassy_stm32::gpio::Output;
 use embassy_time::{Delay, Duration, Instant, Timer};
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{FrameResult, MavSeverity, VisionSettings};
-use touchdown_core::detect::{Detector, DetectorConfig};
+use touchdown_core::companion::{MavSeverity, VisionSettings};
+use touchdown_core::detect::DetectorConfig;
 use touchdown_core::image::GrayImage;
-use touchdown_core::pad::PadLayout;
-use touchdown_core::pose::pad_pose;
+use touchdown_core::pipeline::FramePipeline;
 use touchdown_core::sensor::any::{self, Camera};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, ExposureSetting};
 use touchdown_core::sensor::FrameTiming;
@@ -178,35 +177,21 @@ struct Summary {
     max_detect: Duration,
 }
 
-/// What the vision task applies from the parameters: the detector and the pad (the exposure
-/// loop is rebuilt with each camera start and updated in place).
-struct Applied {
-    settings: VisionSettings,
-    pad: PadLayout<'static>,
-}
-
-impl Applied {
-    /// Applies `settings` to the detector and the pad (the caller updates the exposure loop).
-    fn new(settings: VisionSettings, detector: &mut Detector) -> Self {
-        detector.set_config(settings.detector_config(DetectorConfig::default()));
-        let pad = match settings.pad(config::PAD) {
-            Ok(pad) => pad,
-            Err(e) => {
-                // Only an empty built pad cannot be scaled, and a test keeps the shipped pads
-                // non-empty; searching the pad as built is the best left to do.
-                warn!("vision: pad '{}' not scaled: {}", config::PAD.name(), e);
-                *config::PAD
-            }
-        };
-        info!(
-            "vision: max hamming {}, pad '{}' at {} % of its built size, exposure {}",
-            settings.max_hamming,
-            pad.name(),
-            config::pad_scale_percent(&settings),
-            settings.exposure
-        );
-        Applied { settings, pad }
+/// Hands `settings` to the pipeline (the caller updates the exposure loop) and logs what
+/// they do.
+fn apply_settings(pipeline: &mut FramePipeline<'static>, settings: VisionSettings) {
+    if let Err(e) = pipeline.apply(settings) {
+        // Only an empty built pad cannot be scaled, and a test keeps the shipped pads
+        // non-empty; the pipeline then searches the pad as built.
+        warn!("vision: pad '{}' not scaled: {}", config::PAD.name(), e);
     }
+    info!(
+        "vision: max hamming {}, pad '{}' at {} % of its built size, exposure {}",
+        settings.max_hamming,
+        pipeline.pad().name(),
+        config::pad_scale_percent(&settings),
+        settings.exposure
+    );
 }
 
 /// Runs the camera and the detector forever, starting with `settings` (the parameters
@@ -221,9 +206,14 @@ pub async fn task(
     settings: VisionSettings,
 ) {
     let mut sensor = Sensor::probe(pins, sccb).await;
-    let camera = sensor.camera_model();
-    let mut detector = Detector::new(DetectorConfig::default());
-    let mut applied = Applied::new(settings, &mut detector);
+    let mut pipeline = FramePipeline::new(
+        SEARCHED,
+        config::PAD,
+        *sensor.camera_model(),
+        DetectorConfig::default(),
+        settings,
+    );
+    apply_settings(&mut pipeline, settings);
     let [mut front, mut back] = buffers;
     info!(
         "vision: {}x{} grey, searching {} famil(ies), pad '{}'",
@@ -263,7 +253,7 @@ pub async fn task(
             timeout.as_millis()
         );
         let mut exposure = AutoExposure::new(
-            applied.settings.exposure,
+            pipeline.settings().exposure,
             timing.line_ns,
             timing.frame_lines,
         );
@@ -286,7 +276,7 @@ pub async fn task(
             // runs) while the rest of the frame's work overlaps it: see the module docs.
             let (captured, processed) = join(capture.capture(back, timeout), async {
                 if let Some(settings) = VISION_SETTINGS.try_take() {
-                    applied = Applied::new(settings, &mut detector);
+                    apply_settings(&mut pipeline, settings);
                     if let Some(setting) =
                         exposure.set_limits(settings.exposure, timing.line_ns, timing.frame_lines)
                     {
@@ -294,19 +284,7 @@ pub async fn task(
                     }
                 }
                 let end = front_end?;
-                let geometry = Geometry {
-                    pad: &applied.pad,
-                    camera,
-                };
-                let processed = process(
-                    front,
-                    end,
-                    &timing,
-                    &exposure,
-                    &geometry,
-                    &mut detector,
-                    workspace,
-                );
+                let processed = process(front, end, &timing, &exposure, &mut pipeline, workspace);
                 if let Some(setting) = exposure.update(processed.mean) {
                     write_exposure(&mut sensor.camera, setting).await;
                 }
@@ -383,22 +361,14 @@ struct Processed {
     mean: u8,
 }
 
-/// What the pose is solved against: the pad (scaled by TD_TAG_SIZE) seen through the found
-/// sensor's camera model.
-struct Geometry<'a> {
-    pad: &'a PadLayout<'a>,
-    camera: &'a CameraModel,
-}
-
-/// Detects, solves the pose of the pad and posts the frame to the link. Runs on the CPU without
-/// yielding (the capture of the next frame proceeds by DMA meanwhile).
+/// Runs the frame through the pipeline and posts the result to the link. Runs on the CPU
+/// without yielding (the capture of the next frame proceeds by DMA meanwhile).
 fn process(
     frame: &FrameBuffer,
     frame_end: Instant,
     timing: &FrameTiming,
     exposure: &AutoExposure,
-    geometry: &Geometry<'_>,
-    detector: &mut Detector,
+    pipeline: &mut FramePipeline<'static>,
     workspace: &mut Workspace,
 ) -> Processed {
     // The frame's time: the captured image's middle row at mid-exposure.
@@ -422,24 +392,15 @@ fn process(
     };
     let mean = mean_brightness(&image, BRIGHTNESS_STEP);
     let started = Instant::now();
-    let (markers, fix) = match detector.detect(&image, SEARCHED, &mut workspace.buffers()) {
-        Ok(detections) => {
-            let fix = pad_pose(detections, SEARCHED, geometry.pad, geometry.camera).ok();
-            (detections.len() as u32, fix)
-        }
-        Err(e) => {
-            debug!("vision: detect failed: {}", e);
-            (0, None)
-        }
-    };
+    let report = pipeline.process(&image, exposure_at, &mut workspace.buffers());
     let detect = started.elapsed();
-    let has_fix = fix.is_some();
-    channels::post_to_link(LinkEvent::Frame(FrameResult {
-        exposure_us: exposure_at,
-        fix,
-    }));
+    if let Some(e) = report.detect_error {
+        debug!("vision: detect failed: {}", e);
+    }
+    let has_fix = report.result.fix.is_some();
+    channels::post_to_link(LinkEvent::Frame(report.result));
     Processed {
-        markers,
+        markers: u32::try_from(report.markers).unwrap_or(u32::MAX),
         fix: has_fix,
         detect,
         mean,

@@ -1,6 +1,7 @@
 //! `touchdown companion`: the board's MAVLink companion logic against a real endpoint.
 //!
-//! Runs the same pipeline as the camera board (detector, pad pose, then
+//! Runs the same per-frame path as the camera board (`touchdown_core::pipeline::FramePipeline`,
+//! with the TD_* parameters applied between frames as the board applies them, then
 //! `touchdown_core::companion::Companion`) on a recording, in real time at the recording's
 //! frame times, and exchanges MAVLink with a flight controller or SITL over UDP or a serial
 //! port: with `--udp HOST:PORT` a datagram socket sends there (for example MAVProxy's
@@ -18,11 +19,11 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameOutcome, FrameResult, Profile, MAX_FRAME_LEN,
+    Companion, CompanionConfig, FrameOutcome, Profile, VisionSettings, MAX_FRAME_LEN,
 };
-use touchdown_core::detect::{Detector, DetectorConfig};
+use touchdown_core::detect::DetectorConfig;
 use touchdown_core::family::Family;
-use touchdown_core::pose::pad_pose;
+use touchdown_core::pipeline::FramePipeline;
 
 use super::{CliError, Outcome};
 use crate::families::{self, SelectedFamily};
@@ -198,7 +199,16 @@ pub fn run(
     };
     let mut companion = Companion::new(CompanionConfig::with_profile(profile))
         .map_err(|e| CliError(format!("companion configuration: {e:?}")))?;
-    let mut detector = Detector::new(DetectorConfig::default());
+    // The camera board's per-frame path, with the parameters applied between frames exactly
+    // as its vision task applies them (TD_TAG_SIZE, TD_MAX_HAMMING over MAVLink included).
+    let mut vision_settings = VisionSettings::from_params(companion.params());
+    let mut pipeline = FramePipeline::new(
+        &family_refs,
+        &layout,
+        reader.camera,
+        DetectorConfig::default(),
+        vision_settings,
+    );
     let mut workspace = HostWorkspace::new();
 
     let start = Instant::now();
@@ -221,6 +231,16 @@ pub fn run(
                 Err(e) => return Err(CliError(format!("{endpoint_name}: {e}"))),
             }
         }
+        let settings = VisionSettings::from_params(companion.params());
+        if settings != vision_settings {
+            if let Err(e) = pipeline.apply(settings) {
+                let _ = writeln!(
+                    err,
+                    "warning: pad not scaled ({e:?}): searching it as built"
+                );
+            }
+            vision_settings = settings;
+        }
         if let Some(entry) = reader.entries.get(next) {
             let exposure_us = lead_us + (entry.t_us - t0);
             if now_us() >= exposure_us {
@@ -228,16 +248,11 @@ pub fn run(
                 let frame = reader.frame(next - 1).map_err(CliError::new)?;
                 let view = frame.image.view();
                 let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
-                let fix = match detector.detect(&view, &family_refs, &mut buffers) {
-                    Ok(detections) => {
-                        pad_pose(detections, &family_refs, &layout, &reader.camera).ok()
-                    }
-                    Err(e) => {
-                        let _ = writeln!(err, "warning: frame {}: {e:?}", frame.index);
-                        None
-                    }
-                };
-                let outcome = companion.on_frame(FrameResult { exposure_us, fix }, now_us());
+                let report = pipeline.process(&view, exposure_us, &mut buffers);
+                if let Some(e) = report.detect_error {
+                    let _ = writeln!(err, "warning: frame {}: {e:?}", frame.index);
+                }
+                let outcome = companion.on_frame(report.result, now_us());
                 if outcome == FrameOutcome::TargetQueued {
                     targets += 1;
                 }
