@@ -23,7 +23,8 @@
 //! (`board-openmv`). Memory (see the root `memory.x` and `firmware/README.md`): stack,
 //! `.data`, `.bss` and the task futures in DTCM (fast, not DMA-reachable); frame buffers,
 //! detector work memory and the SCCB bounce buffer in AXI SRAM ([`axisram`]); code and the
-//! marker tables in flash, parameters in flash bank 2's last sector.
+//! marker tables in flash, parameters in flash bank 2's last two sectors (used alternately,
+//! see [`param_store`]).
 //!
 //! Build and flash: `cd firmware && cargo run --release` (or `cargo fw` from the root); see
 //! `firmware/README.md` for the wiring.
@@ -100,7 +101,7 @@ async fn main(spawner: Spawner) {
 
     // Parameters from flash, then the UART at the stored baud rate.
     let mut flash = board.flash;
-    let (params, next_free) = param_store::load(&mut flash);
+    let (params, store) = param_store::load(&mut flash);
     let baud = params.get_int(ParamId::Baud) as u32;
     if baud != config::DEFAULT_BAUD {
         if let Err(e) = board.uart.set_baudrate(baud) {
@@ -140,7 +141,7 @@ async fn main(spawner: Spawner) {
     // its pool busy.
     spawner.spawn(unwrap!(watchdog::task(board.watchdog)));
     spawner.spawn(unwrap!(heartbeat::task(board.led)));
-    spawner.spawn(unwrap!(param_store::task(flash, next_free)));
+    spawner.spawn(unwrap!(param_store::task(flash, store)));
     spawner.spawn(unwrap!(link::task(board.uart, companion)));
     spawner.spawn(unwrap!(vision::task(
         sensor_pins,

@@ -36,7 +36,7 @@ use touchdown_core::companion::mavlink::dialects::common::{
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::params::name_str;
-use touchdown_core::companion::persist::{self, Restore, ERASED, SLOT_LEN};
+use touchdown_core::companion::persist::{self, FlashFailed, SlotFlash, ERASED, SLOT_LEN};
 use touchdown_core::companion::{
     Companion, CompanionConfig, CompanionStats, FrameParser, FrameResult, ParamId, ParamSet,
     Profile, VisionSettings, MAX_FRAME_LEN, PARAM_COUNT,
@@ -1185,32 +1185,23 @@ fn camera_params_are_range_checked_applied_and_persisted() {
     assert_eq!(defaults.exposure, AutoExposureLimits::default());
     assert_eq!(defaults.pad(&designs::NESTED), Ok(designs::NESTED));
 
-    // Saved to the flash log (after a first save of the defaults), restored at the next boot.
-    let mut sector = [[ERASED; SLOT_LEN]; 4];
-    persist::encode_slot(&ParamSet::default(), &mut sector[0]);
-    persist::encode_slot(companion.params(), &mut sector[1]);
+    // Saved to the flash log the way the firmware saves (core's `Store`, after a first save
+    // of the defaults), restored at the next boot.
+    let geometry = persist::Geometry::new(8 * SLOT_LEN as u32).unwrap();
+    let mut flash = RamSectors::new(geometry);
+    let mut fresh = ParamSet::default();
+    let (mut store, boot) =
+        persist::Store::open(geometry, |s, o, b| flash.read(s, o, b), &mut fresh);
+    assert_eq!(boot.restored, None);
+    block_on(store.save(&mut flash, &ParamSet::default())).unwrap();
+    block_on(store.save(&mut flash, companion.params())).unwrap();
     let mut restored = ParamSet::default();
-    let scan = persist::scan(
-        sector.len(),
-        |i, buf| {
-            *buf = sector[i];
-            true
-        },
-        &mut restored,
-    );
-    assert_eq!(scan.next_free, Some(2));
-    match scan.restore {
-        Restore::Restored {
-            slot,
-            report,
-            bad_slots,
-        } => {
-            assert_eq!((slot, bad_slots), (1, 0));
-            assert_eq!(usize::from(report.applied), PARAM_COUNT);
-            assert_eq!((report.rejected, report.unknown), (0, 0));
-        }
-        other => panic!("{other:?}"),
-    }
+    let (_, boot) = persist::Store::open(geometry, |s, o, b| flash.read(s, o, b), &mut restored);
+    let found = boot.restored.expect("a valid slot");
+    assert_eq!(found.key, persist::SlotKey::Seq(1));
+    assert_eq!(usize::from(found.report.applied), PARAM_COUNT);
+    assert_eq!((found.report.rejected, found.report.unknown), (0, 0));
+    assert_eq!(boot.bad_slots, 0);
     assert_eq!(&restored, companion.params());
     assert_eq!(VisionSettings::from_params(&restored), settings);
 
@@ -1240,5 +1231,60 @@ fn camera_params_are_range_checked_applied_and_persisted() {
             ground_station(&mut rebooted, &mut seq, ParamAction::ReadIndex(i), 200_000),
             vec![(id.def().name.to_string(), want)]
         );
+    }
+}
+
+/// Two flash sectors in RAM for [`persist::Store`]: erased is 0xFF, a program may only go to
+/// erased bytes (what the H7 requires; the test fails if the store ever programs over data).
+struct RamSectors {
+    len: usize,
+    bytes: Vec<u8>,
+}
+
+impl RamSectors {
+    fn new(geometry: persist::Geometry) -> Self {
+        let len = geometry.sector_len() as usize;
+        RamSectors {
+            len,
+            bytes: vec![ERASED; persist::SECTORS * len],
+        }
+    }
+
+    fn read(&self, sector: usize, offset: u32, buf: &mut [u8]) -> bool {
+        let start = sector * self.len + offset as usize;
+        match self.bytes.get(start..start + buf.len()) {
+            Some(src) => {
+                buf.copy_from_slice(src);
+                true
+            }
+            None => false,
+        }
+    }
+}
+
+impl SlotFlash for RamSectors {
+    async fn erase(&mut self, sector: usize) -> Result<(), FlashFailed> {
+        let start = sector * self.len;
+        self.bytes[start..start + self.len].fill(ERASED);
+        Ok(())
+    }
+
+    async fn write(&mut self, sector: usize, offset: u32, bytes: &[u8]) -> Result<(), FlashFailed> {
+        let start = sector * self.len + offset as usize;
+        let dst = &mut self.bytes[start..start + bytes.len()];
+        assert!(dst.iter().all(|&b| b == ERASED), "programmed over data");
+        dst.copy_from_slice(bytes);
+        Ok(())
+    }
+}
+
+/// Runs a future that never waits (the RAM flash is ready at once) to completion.
+fn block_on<F: std::future::Future>(future: F) -> F::Output {
+    use std::task::{Context, Poll, Waker};
+    let mut future = std::pin::pin!(future);
+    let mut cx = Context::from_waker(Waker::noop());
+    match future.as_mut().poll(&mut cx) {
+        Poll::Ready(output) => output,
+        Poll::Pending => panic!("the RAM flash never waits"),
     }
 }
