@@ -9,20 +9,19 @@
 //! finding anything is visible. Frame names start with the resolution (`qvga-`, `vga-`).
 //!
 //! Stages today:
-//! - `detect`: [`Detector::detect`], called as `firmware/src/vision.rs` does: the default
-//!   families, a static [`QvgaWorkspace`] / [`VgaWorkspace`], a detector kept across frames,
-//!   the default configuration.
-//! - `fix`: [`pad_pose`] (IPPE + Levenberg-Marquardt), as the vision task calls it, with
-//!   the simulator's camera, on a one-marker pad made of the frame's first detection (the
-//!   benchmark frames are not pad layouts; a multi-marker pad adds four corners per marker
-//!   to the one refinement).
-//! - `filter`: [`Companion::on_frame`] with that fix, as the link task calls it: the
-//!   trackers' predict and update, the ArduPilot profile's target.
+//! - `pipeline`: [`FramePipeline::process`], called as `firmware/src/vision.rs` does: the
+//!   default families, a static [`QvgaWorkspace`] / [`VgaWorkspace`], the pipeline in static
+//!   storage, the default configuration with the default parameters applied (TD_MAX_HAMMING,
+//!   the pad as built). That is detection, then the pad fix
+//!   ([`pad_pose`](touchdown_core::pose::pad_pose): IPPE + Levenberg-Marquardt) with the
+//!   simulator's camera, on the frame's pad ([`Frame::pad`]).
+//! - `filter`: [`Companion::on_frame`] with the frame's result, as the link task calls it:
+//!   the trackers' predict and update, the ArduPilot profile's target.
 //! - `encode`: draining [`Companion::poll_transmit`] into a UART buffer (MAVLink 2 framing,
 //!   CRC), as the link task does after each frame.
 //!
-//! Frames without a detection run `fix`, `filter` and `encode` too (the empty fix is what
-//! the firmware posts then).
+//! Frames without a detection run `filter` and `encode` too (the empty fix is what the
+//! firmware posts then).
 //!
 //! Frames ([`FRAMES`]): the typical ones are rendered by the simulator
 //! (`cargo run --release -p touchdown-host --example m7_frames` writes `frames/*.pgm`); the
@@ -45,12 +44,14 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{Companion, CompanionConfig, FrameResult, Profile, MAX_FRAME_LEN};
-use touchdown_core::detect::{DetectStats, Detector, DetectorConfig, QvgaWorkspace, VgaWorkspace};
+use touchdown_core::companion::{
+    Companion, CompanionConfig, FrameResult, Profile, VisionSettings, MAX_FRAME_LEN,
+};
+use touchdown_core::detect::{DetectStats, DetectorConfig, QvgaWorkspace, VgaWorkspace};
 use touchdown_core::family::tables;
 use touchdown_core::image::GrayImage;
-use touchdown_core::pad::{PadLayout, PadMarker};
-use touchdown_core::pose::pad_pose;
+use touchdown_core::pad::{designs, PadLayout, PadMarker};
+use touchdown_core::pipeline::{FramePipeline, FrameReport};
 
 use frames::{FrameBuffer, Source};
 
@@ -78,6 +79,10 @@ struct Frame {
     width: usize,
     height: usize,
     source: Source,
+    /// The pad the pipeline searches for: one marker the frame shows (the benchmark frames
+    /// are not pad layouts; a multi-marker pad adds four corners per marker to the one
+    /// refinement), the firmware's pad for frames without markers.
+    pad: &'static PadLayout<'static>,
     /// Markers the frame contains (typical frames); `None` for frames without markers, whose
     /// detections are printed but not checked.
     expected: Option<usize>,
@@ -91,9 +96,29 @@ const WARM_UP_FRAMES: usize = 6;
 /// 30 Hz.
 const FRAME_PERIOD_US: u64 = 33_333;
 
-/// Edge of the printed markers for the pose stage, metres (any positive size: the count does
-/// not depend on it).
-const MARKER_SIZE_M: f32 = 0.16;
+/// A pad of one tag36h11 marker, 0.16 m (any positive size: the count does not depend on
+/// it), centred on the landing point.
+const fn one_tag(name: &'static str, id: u16) -> PadLayout<'static> {
+    let marker = PadMarker {
+        family: "tag36h11",
+        id,
+        size: 0.16,
+        x: 0.0,
+        y: 0.0,
+        yaw_deg: 0.0,
+    };
+    match PadLayout::new(name, &[marker]) {
+        Ok(pad) => pad,
+        Err(_) => panic!("a one-marker pad is valid"),
+    }
+}
+
+/// The pads of the typical frames: the marker the detector reports first in each (the one
+/// the fix of earlier baselines was computed on, so the pose costs the same).
+const PAD_LANDING_1: PadLayout<'static> = one_tag("landing-1", 7);
+const PAD_MULTI_6: PadLayout<'static> = one_tag("multi-6", 0);
+const PAD_FAR_1: PadLayout<'static> = one_tag("far-1", 11);
+const PAD_VGA_LANDING_3: PadLayout<'static> = one_tag("vga-landing-3", 22);
 
 /// The simulator's camera for a frame (`PinholeCamera::for_frame` in host-tests' renderer):
 /// focal length = the larger dimension, principal point at the centre, no distortion.
@@ -116,6 +141,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Pgm(include_bytes!("../frames/qvga-landing-1.pgm")),
+        pad: &PAD_LANDING_1,
         expected: Some(1),
     },
     Frame {
@@ -123,6 +149,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Pgm(include_bytes!("../frames/qvga-multi-6.pgm")),
+        pad: &PAD_MULTI_6,
         expected: Some(6),
     },
     Frame {
@@ -130,6 +157,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Pgm(include_bytes!("../frames/qvga-far-1.pgm")),
+        pad: &PAD_FAR_1,
         expected: Some(1),
     },
     Frame {
@@ -137,6 +165,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Flat(128),
+        pad: &designs::NESTED,
         expected: Some(0),
     },
     Frame {
@@ -144,6 +173,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Noise { seed: 0x2545_f491 },
+        pad: &designs::NESTED,
         expected: None,
     },
     Frame {
@@ -151,6 +181,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Checker { cell: 2 },
+        pad: &designs::NESTED,
         expected: None,
     },
     Frame {
@@ -158,6 +189,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Checker { cell: 8 },
+        pad: &designs::NESTED,
         expected: None,
     },
     Frame {
@@ -165,6 +197,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Squares { side: 4, pitch: 7 },
+        pad: &designs::NESTED,
         expected: None,
     },
     Frame {
@@ -172,6 +205,7 @@ const FRAMES: &[Frame] = &[
         width: QVGA.0,
         height: QVGA.1,
         source: Source::Squares { side: 8, pitch: 12 },
+        pad: &designs::NESTED,
         expected: None,
     },
     Frame {
@@ -183,6 +217,7 @@ const FRAMES: &[Frame] = &[
             pitch: 32,
             seed: 0x1234_5678,
         },
+        pad: &designs::NESTED,
         expected: None,
     },
     Frame {
@@ -190,6 +225,7 @@ const FRAMES: &[Frame] = &[
         width: VGA.0,
         height: VGA.1,
         source: Source::Pgm(include_bytes!("../frames/vga-landing-3.pgm")),
+        pad: &PAD_VGA_LANDING_3,
         expected: Some(3),
     },
     Frame {
@@ -197,6 +233,7 @@ const FRAMES: &[Frame] = &[
         width: VGA.0,
         height: VGA.1,
         source: Source::Flat(128),
+        pad: &designs::NESTED,
         expected: Some(0),
     },
     Frame {
@@ -204,6 +241,7 @@ const FRAMES: &[Frame] = &[
         width: VGA.0,
         height: VGA.1,
         source: Source::Noise { seed: 0x9e37_79b9 },
+        pad: &designs::NESTED,
         expected: None,
     },
 ];
@@ -213,8 +251,9 @@ static mut FRAME: FrameBuffer = FrameBuffer::new();
 /// Work memory as the firmware's `main` provides it (QVGA); VGA for the VGA frames.
 static mut QVGA_WORKSPACE: QvgaWorkspace = QvgaWorkspace::new();
 static mut VGA_WORKSPACE: VgaWorkspace = VgaWorkspace::new();
-/// The detector lives in static storage in the firmware too (the vision task's future).
-static mut DETECTOR: MaybeUninit<Detector> = MaybeUninit::uninit();
+/// The pipeline lives in static storage in the firmware too (the vision task's future). Each
+/// frame is its own scene (camera, pad), so each gets a new pipeline, written here.
+static mut PIPELINE: MaybeUninit<FramePipeline<'static>> = MaybeUninit::uninit();
 
 /// Runs `f` as one counted region labelled `<frame>: <stage>`, with the stack below the
 /// current stack pointer painted first, and prints the stack depth `f` reached.
@@ -241,8 +280,8 @@ fn region<R>(frame: &str, stage: &str, f: impl FnOnce() -> R) -> R {
 }
 
 /// What the benchmark keeps across frames.
-struct Pipeline {
-    detector: &'static mut Detector,
+struct Bench {
+    pipeline: &'static mut MaybeUninit<FramePipeline<'static>>,
     qvga: &'static mut QvgaWorkspace,
     vga: &'static mut VgaWorkspace,
     companion: Companion,
@@ -252,49 +291,43 @@ struct Pipeline {
 
 /// The per-frame path on one frame: one region per stage. Returns false when the frame's
 /// detections differ from what it contains.
-fn run_frame(pipeline: &mut Pipeline, frame: &Frame, image: &GrayImage<'_>) -> bool {
-    let Pipeline {
-        detector,
+fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
+    let Bench {
+        pipeline,
         qvga,
         vga,
         companion,
         now_us,
-    } = pipeline;
+    } = bench;
+    // Set up outside the regions, as the vision task does before its first frame.
+    let pipeline = pipeline.write(FramePipeline::new(
+        tables::DEFAULT,
+        frame.pad,
+        camera_for(frame.width, frame.height),
+        DetectorConfig::default(),
+        VisionSettings::default(),
+    ));
+    // The tracker confirms a track over a few frames; the benchmark frames are unrelated
+    // scenes, so each is first shown to the companion a few times outside the regions (as a
+    // hover would), and the counted frame is the one that sends its LANDING_TARGET. Its time
+    // is the exposure time the pipeline stamps.
+    let t = *now_us + (WARM_UP_FRAMES as u64 + 1) * FRAME_PERIOD_US;
     let vga_frame = (frame.width, frame.height) == VGA;
-    // Stage 1: detection, as firmware/src/vision.rs calls it.
-    let detected = region(frame.name, "detect", || {
-        let result = if vga_frame {
-            detector.detect(image, tables::DEFAULT, &mut vga.buffers())
+    // Stage 1: detection and the pad fix, as firmware/src/vision.rs runs them.
+    let FrameReport {
+        result,
+        markers,
+        detect_error,
+    } = region(frame.name, "pipeline", || {
+        if vga_frame {
+            pipeline.process(image, t, &mut vga.buffers())
         } else {
-            detector.detect(image, tables::DEFAULT, &mut qvga.buffers())
-        };
-        result.map(|detections| detections.len())
+            pipeline.process(image, t, &mut qvga.buffers())
+        }
     });
-    let ok = report(frame, detected, detector);
-    let camera = camera_for(frame.width, frame.height);
-    let detections = detector.detections();
-    // Stage 2: the pad fix (pose), on a one-marker pad of the first detection.
-    let first = detections.first().and_then(|d| {
-        let family = tables::DEFAULT.get(usize::from(d.family))?;
-        Some(PadMarker {
-            family: family.name,
-            id: d.id,
-            size: MARKER_SIZE_M,
-            x: 0.0,
-            y: 0.0,
-            yaw_deg: 0.0,
-        })
-    });
-    let layout = first.and_then(|m| PadLayout::new("bench", &[m]).ok());
-    let fix = region(frame.name, "fix", || {
-        layout
-            .as_ref()
-            .and_then(|layout| pad_pose(detections, tables::DEFAULT, layout, &camera).ok())
-    });
-    // Stages 3 and 4: the link task's filter and MAVLink output for this frame. The tracker
-    // confirms a track over a few frames; the benchmark frames are unrelated scenes, so each
-    // is first shown to the companion a few times outside the regions (as a hover would),
-    // and the counted frame is the one that sends its LANDING_TARGET.
+    let ok = report(frame, detect_error.map_or(Ok(markers), Err), pipeline);
+    let fix = result.fix;
+    // Stages 2 and 3: the link task's filter and MAVLink output for this frame.
     for _ in 0..WARM_UP_FRAMES {
         *now_us += FRAME_PERIOD_US;
         companion.on_frame(
@@ -309,17 +342,8 @@ fn run_frame(pipeline: &mut Pipeline, frame: &Frame, image: &GrayImage<'_>) -> b
             .is_some()
         {}
     }
-    *now_us += FRAME_PERIOD_US;
-    let t = *now_us;
-    let outcome = region(frame.name, "filter", || {
-        companion.on_frame(
-            FrameResult {
-                exposure_us: t,
-                fix,
-            },
-            t,
-        )
-    });
+    *now_us = t;
+    let outcome = region(frame.name, "filter", || companion.on_frame(result, t));
     let mut uart = [0u8; MAX_FRAME_LEN];
     let (messages, bytes) = region(frame.name, "encode", || {
         let (mut messages, mut bytes) = (0u32, 0usize);
@@ -348,8 +372,9 @@ fn run_frame(pipeline: &mut Pipeline, frame: &Frame, image: &GrayImage<'_>) -> b
 fn report(
     frame: &Frame,
     detected: Result<usize, impl core::fmt::Debug>,
-    detector: &Detector,
+    pipeline: &FramePipeline<'_>,
 ) -> bool {
+    let detector = pipeline.detector();
     let DetectStats {
         contours,
         quads,
@@ -409,11 +434,11 @@ fn report(
 #[entry]
 fn main() -> ! {
     // SAFETY: `main` runs once, without interrupts; each static is borrowed exactly once here
-    // and the borrows live in `pipeline` (and `frame_buffer`) only.
-    let (mut pipeline, frame_buffer) = unsafe {
+    // and the borrows live in `bench` (and `frame_buffer`) only.
+    let (mut bench, frame_buffer) = unsafe {
         (
-            Pipeline {
-                detector: (*addr_of_mut!(DETECTOR)).write(Detector::new(DetectorConfig::default())),
+            Bench {
+                pipeline: &mut *addr_of_mut!(PIPELINE),
                 qvga: &mut *addr_of_mut!(QVGA_WORKSPACE),
                 vga: &mut *addr_of_mut!(VGA_WORKSPACE),
                 companion: match Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)) {
@@ -449,7 +474,7 @@ fn main() -> ! {
                 continue;
             }
         };
-        ok &= run_frame(&mut pipeline, frame, &image);
+        ok &= run_frame(&mut bench, frame, &image);
     }
     hprintln!("m7bench: {}", if ok { "done" } else { "FAILED" });
     debug::exit(if ok {
