@@ -152,19 +152,20 @@ mod tests {
     use crate::family::tables;
     use crate::pad::designs;
 
-    fn camera() -> CameraModel {
-        CameraModel::pinhole(320, 240, 233.5, 233.5, 159.5, 119.5)
+    /// The firmware's set-up: the default families, the nested pad, a QVGA pinhole camera.
+    fn nested_pipeline() -> FramePipeline<'static> {
+        FramePipeline::new(
+            tables::DEFAULT,
+            &designs::NESTED,
+            CameraModel::pinhole(320, 240, 233.5, 233.5, 159.5, 119.5),
+            DetectorConfig::default(),
+            VisionSettings::default(),
+        )
     }
 
     #[test]
     fn settings_scale_the_pad_and_cap_the_correction() {
-        let mut pipeline = FramePipeline::new(
-            tables::DEFAULT,
-            &designs::NESTED,
-            camera(),
-            DetectorConfig::default(),
-            VisionSettings::default(),
-        );
+        let mut pipeline = nested_pipeline();
         assert_eq!(*pipeline.pad(), designs::NESTED);
         assert_eq!(pipeline.detector().config().max_hamming, 1);
 
@@ -185,13 +186,7 @@ mod tests {
 
     #[test]
     fn a_blank_frame_has_no_fix_and_keeps_its_time() {
-        let mut pipeline = FramePipeline::new(
-            tables::DEFAULT,
-            &designs::NESTED,
-            camera(),
-            DetectorConfig::default(),
-            VisionSettings::default(),
-        );
+        let mut pipeline = nested_pipeline();
         let pixels = [200u8; 320 * 240];
         let image = GrayImage::new(&pixels, 320, 240).unwrap();
         let mut workspace = crate::detect::QvgaWorkspace::new();
