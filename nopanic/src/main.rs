@@ -2,12 +2,15 @@
 //!
 //! This image is never run. It is built for the firmware's target with the firmware's release
 //! profile (see Cargo.toml), and its entry point calls the whole per-frame path on inputs the
-//! optimiser cannot see through ([`black_box`]): detection (any configuration, so both
-//! pipelines; any families; any pixels), single-marker pose (IPPE + refinement), pad pose and
-//! the level pad fix, the trackers inside the companion, the companion's MAVLink parse
-//! (any received bytes) and encode (draining `poll_transmit`), and the vision task's exposure
-//! loop and parameter hand-over (`VisionSettings`, `AutoExposure::set_limits`) and its frame
-//! timing (`FrameTiming`: exposure time stamp, capture timeout, settling, skipped frames).
+//! optimiser cannot see through ([`black_box`]): the vision task's [`FramePipeline`]
+//! (`process`: detection with any configuration, so both detection pipelines, any families,
+//! any pixels, then the pad fix; `apply`: the parameter hand-over), the trackers inside the
+//! companion, the companion's MAVLink parse (any received bytes) and encode (draining
+//! `poll_transmit`), the vision task's exposure loop (`AutoExposure::set_limits` included)
+//! and its frame timing (`FrameTiming`: exposure time stamp, capture timeout, settling,
+//! skipped frames). Also, off the firmware's path but public and run by the host tools:
+//! single-marker pose (IPPE + refinement), the pad pose with a prediction and the level pad
+//! fix.
 //!
 //! Not covered: `PoseMethod::PaperHomography`, the paper's homography decomposition, which
 //! only reproduces the paper's tables on the host; it uses nalgebra's SVD, whose internal
@@ -33,10 +36,11 @@ use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::{
     Companion, CompanionConfig, FrameResult, VisionSettings, MAX_FRAME_LEN,
 };
-use touchdown_core::detect::{Detector, DetectorConfig, QvgaWorkspace};
+use touchdown_core::detect::{DetectorConfig, QvgaWorkspace};
 use touchdown_core::family::{tables, Family};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout};
+use touchdown_core::pipeline::FramePipeline;
 use touchdown_core::pose::{level_pad_fix, marker_pose, pad_pose_with_prediction, PoseMethod};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, AutoExposureLimits};
 use touchdown_core::sensor::FrameTiming;
@@ -54,60 +58,62 @@ static mut RX: [u8; 256] = [0; 256];
 
 /// Everything the per-frame path keeps across frames.
 struct Pipeline<'a> {
-    detector: Detector,
+    /// The vision task's: detector, families, pad, camera.
+    vision: FramePipeline<'a>,
     workspace: &'a mut QvgaWorkspace,
     companion: Companion,
     exposure: AutoExposure,
 }
 
-/// One frame: detection, pose, pad fix, filter (inside the companion), MAVLink in and out.
-/// Every input comes through `black_box`, so no branch can be decided at compile time.
+/// One frame: the vision pipeline (detection, pad fix), the host tools' poses, filter
+/// (inside the companion), MAVLink in and out, the settings hand-over. Every input comes
+/// through `black_box`, so no branch can be decided at compile time.
 #[inline(never)]
 fn per_frame(
     pipeline: &mut Pipeline<'_>,
     pixels: &[u8],
+    // The pipeline's families (it does not lend them), for the host tools' poses.
     families: &[&Family<'_>],
-    layout: &PadLayout<'_>,
-    camera: &CameraModel,
     rx: &[u8],
     now_us: u64,
 ) {
-    let fix = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
+    let exposure_us = black_box(now_us.wrapping_sub(25_000));
+    let result = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
         Ok(image) => {
-            match pipeline
-                .detector
-                .detect(&image, families, &mut pipeline.workspace.buffers())
-            {
-                Ok(detections) => {
-                    for d in detections {
-                        let size = black_box(0.16);
-                        let _ = black_box(marker_pose(&d.corners, size, camera, PoseMethod::Ippe));
-                    }
-                    let predicted = black_box(None);
-                    match pad_pose_with_prediction(detections, families, layout, camera, predicted)
-                    {
-                        Ok(fix) => {
-                            let camera_from_level: Matrix3<f32> = black_box(Matrix3::identity());
-                            Some(
-                                level_pad_fix(
-                                    &fix,
-                                    detections,
-                                    families,
-                                    layout,
-                                    camera,
-                                    &camera_from_level,
-                                )
-                                .unwrap_or(fix),
-                            )
-                        }
-                        Err(_) => None,
-                    }
-                }
-                Err(_) => None,
-            }
+            pipeline
+                .vision
+                .process(&image, exposure_us, &mut pipeline.workspace.buffers())
+                .result
         }
-        Err(_) => None,
+        Err(_) => FrameResult {
+            exposure_us,
+            fix: None,
+        },
     };
+    // Not on the firmware's path (the pipeline runs `pad_pose` alone), but public core
+    // functions the host tools call on the same detections: covered here.
+    let vision = &pipeline.vision;
+    let (detections, layout, camera) = (
+        vision.detector().detections(),
+        vision.pad(),
+        vision.camera(),
+    );
+    for d in detections {
+        let size = black_box(0.16);
+        let _ = black_box(marker_pose(&d.corners, size, camera, PoseMethod::Ippe));
+    }
+    let predicted = black_box(None);
+    if let Ok(fix) = pad_pose_with_prediction(detections, families, layout, camera, predicted) {
+        let camera_from_level: Matrix3<f32> = black_box(Matrix3::identity());
+        let _ = black_box(level_pad_fix(
+            &fix,
+            detections,
+            families,
+            layout,
+            camera,
+            &camera_from_level,
+        ));
+    }
     #[cfg(feature = "canary")]
     {
         // A deliberate bug: indexes one past the frame. The canary build must not link.
@@ -116,23 +122,20 @@ fn per_frame(
     }
     let companion = &mut pipeline.companion;
     companion.receive(rx, now_us);
-    let exposure_us = black_box(now_us.wrapping_sub(25_000));
-    let _ = black_box(companion.on_frame(FrameResult { exposure_us, fix }, now_us));
+    let _ = black_box(companion.on_frame(result, now_us));
     let mut tx = [0u8; MAX_FRAME_LEN];
     while let Some(n) = companion.poll_transmit(now_us, &mut tx) {
         black_box(tx.get(..n));
     }
     let _ = black_box(companion.stats());
     // The vision task's exposure step and, after a PARAM_SET, its settings hand-over: the
-    // detector's correction cap, the scaled pad and the exposure limits.
+    // pipeline's (the detector's correction cap, the scaled pad) and the exposure limits.
     if let Ok(image) = GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
         let mean = mean_brightness(&image, black_box(8));
         let _ = black_box(pipeline.exposure.update(mean));
     }
     let settings = VisionSettings::from_params(pipeline.companion.params());
-    let base = black_box(DetectorConfig::default());
-    pipeline.detector.set_config(settings.detector_config(base));
-    let _ = black_box(settings.pad(layout));
+    let _ = black_box(pipeline.vision.apply(settings));
     let (line_ns, frame_lines) = (black_box(120_000), black_box(278));
     pipeline
         .exposure
@@ -174,12 +177,6 @@ pub extern "C" fn _start() -> ! {
         black_box(120_000),
         black_box(278),
     );
-    let mut pipeline = Pipeline {
-        detector: Detector::new(black_box(DetectorConfig::default())),
-        workspace,
-        companion,
-        exposure,
-    };
     let families: &[&Family<'static>] = black_box(tables::DEFAULT);
     let layout: &PadLayout<'static> = black_box(&designs::NESTED);
     let camera = black_box(CameraModel::pinhole(
@@ -190,21 +187,25 @@ pub extern "C" fn _start() -> ! {
         159.5,
         119.5,
     ));
+    let mut pipeline = Pipeline {
+        vision: FramePipeline::new(
+            families,
+            layout,
+            camera,
+            black_box(DetectorConfig::default()),
+            black_box(VisionSettings::default()),
+        ),
+        workspace,
+        companion,
+        exposure,
+    };
     let mut now_us = 0u64;
     loop {
         now_us = now_us.wrapping_add(black_box(33_333));
         let pixels: &[u8] = black_box(&frame[..]);
         let rx_len = black_box(0usize).min(rx.len());
         let rx_bytes = rx.get(..rx_len).unwrap_or(&[]);
-        per_frame(
-            &mut pipeline,
-            pixels,
-            families,
-            layout,
-            &camera,
-            black_box(rx_bytes),
-            now_us,
-        );
+        per_frame(&mut pipeline, pixels, families, black_box(rx_bytes), now_us);
     }
 }
 
