@@ -25,13 +25,14 @@ use touchdown_core::companion::mavlink::{
 };
 use touchdown_core::companion::{
     Companion, CompanionConfig, CompanionStats, FrameResult, ParamId, ParamSet, Profile,
-    MAX_FRAME_LEN, PARAMS, PARAM_COUNT,
+    VisionSettings, MAX_FRAME_LEN, PARAMS, PARAM_COUNT,
 };
-use touchdown_core::detect::{Detection, Detector, DetectorConfig, QvgaWorkspace, VgaWorkspace};
+use touchdown_core::detect::{Detection, DetectorConfig, QvgaWorkspace, VgaWorkspace};
 use touchdown_core::family::{parse_family, tables, Family};
 use touchdown_core::image::GrayImage;
-use touchdown_core::pad::designs;
-use touchdown_core::pose::{marker_pose, pad_pose, PadFix, Pose, PoseMethod};
+use touchdown_core::pad::{designs, PadLayout, PadMarker};
+use touchdown_core::pipeline::FramePipeline;
+use touchdown_core::pose::{marker_pose, PadFix, Pose, PoseMethod};
 use touchdown_host::config::{parse_camera, parse_pad};
 use touchdown_host::recording::{parse_frames_csv, parse_pgm};
 
@@ -138,13 +139,12 @@ pub static FAMILY_SETS: &[&[&Family<'static>]] = &[
     ],
 ];
 
-/// Work memory and detectors of the `detect` target (allocated once per process, as the
-/// firmware keeps them static).
+/// Work memory and the frame of the `detect` target (allocated once per process, as the
+/// firmware keeps them static). The pipelines are made per input: their camera follows the
+/// frame size.
 #[derive(Debug)]
 pub struct DetectState {
     workspace: Box<VgaWorkspace>,
-    robust: Box<Detector>,
-    paper: Box<Detector>,
     frame: Vec<u8>,
 }
 
@@ -152,8 +152,6 @@ impl Default for DetectState {
     fn default() -> Self {
         DetectState {
             workspace: Box::new(VgaWorkspace::new()),
-            robust: Box::new(Detector::new(DetectorConfig::default())),
-            paper: Box::new(Detector::new(DetectorConfig::paper())),
             frame: Vec::with_capacity(DETECT_MAX_WIDTH * DETECT_MAX_HEIGHT),
         }
     }
@@ -187,7 +185,9 @@ pub fn check_detections(detections: &[Detection], families: &[&Family<'_>]) {
     }
 }
 
-fn run_pose(detections: &[Detection], families: &[&Family<'_>], camera: &CameraModel) {
+/// Marker pose of every detection with both methods (the host tools' single-marker pose; the
+/// pipeline runs only the pad fix).
+fn run_marker_pose(detections: &[Detection], camera: &CameraModel) {
     for d in detections {
         for method in [PoseMethod::Ippe, PoseMethod::PaperHomography] {
             if let Ok(pose) = marker_pose(&d.corners, 0.16, camera, method) {
@@ -204,14 +204,10 @@ fn run_pose(detections: &[Detection], families: &[&Family<'_>], camera: &CameraM
             }
         }
     }
-    for layout in designs::ALL {
-        if let Ok(fix) = pad_pose(detections, families, layout, camera) {
-            assert!(fix.pose.is_valid(), "pad fix {fix:?}");
-        }
-    }
 }
 
-/// The detector on an arbitrary frame, then pose on whatever it found.
+/// The per-frame path ([`FramePipeline`]) on an arbitrary frame, then marker pose on
+/// whatever it found.
 ///
 /// Input: bytes 0-1 width-1 (little endian, modulo 640), bytes 2-3 height-1 (modulo 480),
 /// byte 4 the family set ([`FAMILY_SETS`]), the rest pixels, row-major. A frame needs up
@@ -219,8 +215,9 @@ fn run_pose(detections: &[Detection], families: &[&Family<'_>], camera: &CameraM
 /// fill it: short inputs still make full-size frames with periodic content (stripes,
 /// checkerboards, grids of blobs: the structures that stress contour tracing).
 ///
-/// Both pipelines run (the default and the paper's), then marker pose (IPPE and the paper's
-/// homography decomposition) of every detection and pad pose with both shipped designs.
+/// Both detection pipelines (the default and the paper's) each search for both shipped pad
+/// designs, then marker pose (IPPE and the paper's homography decomposition) of every
+/// detection.
 pub fn detect(state: &mut DetectState, data: &[u8]) {
     let Some((header, pixels)) = data.split_first_chunk::<5>() else {
         return;
@@ -246,21 +243,45 @@ pub fn detect(state: &mut DetectState, data: &[u8]) {
         (width as f32 - 1.0) * 0.5,
         (height as f32 - 1.0) * 0.5,
     );
-    for detector in [&mut state.robust, &mut state.paper] {
-        let detections = detector
-            .detect(&image, families, &mut state.workspace.buffers())
-            .expect("valid families and VGA buffers");
-        check_detections(detections, families);
-        let stats = *detector.stats();
-        let budget = ((detector.config().work_budget_per_pixel * (width * height) as f32) as u32)
-            .max(touchdown_core::detect::MIN_WORK_BUDGET);
-        assert!(
-            stats.work <= budget && stats.trace_steps <= stats.work,
-            "{} work units ({} trace steps) over a budget of {budget}",
-            stats.work,
-            stats.trace_steps
-        );
-        run_pose(detector.detections(), families, &camera);
+    for config in [DetectorConfig::default(), DetectorConfig::paper()] {
+        for (k, layout) in designs::ALL.into_iter().enumerate() {
+            // Boxed: the detector inside holds a contour buffer of tens of KiB.
+            // The configuration's correction cap as it is (not TD_MAX_HAMMING's default), so
+            // every bound a family allows is fuzzed.
+            let settings = VisionSettings {
+                max_hamming: config.max_hamming,
+                ..VisionSettings::default()
+            };
+            let mut pipeline = Box::new(FramePipeline::new(
+                families, layout, camera, config, settings,
+            ));
+            let exposure_us = 1_000_000;
+            let report = pipeline.process(&image, exposure_us, &mut state.workspace.buffers());
+            assert_eq!(report.detect_error, None, "valid families and VGA buffers");
+            assert_eq!(report.result.exposure_us, exposure_us);
+            let detector = pipeline.detector();
+            let detections = detector.detections();
+            assert_eq!(report.markers, detections.len());
+            check_detections(detections, families);
+            let stats = *detector.stats();
+            let budget = ((detector.config().work_budget_per_pixel * (width * height) as f32)
+                as u32)
+                .max(touchdown_core::detect::MIN_WORK_BUDGET);
+            assert!(
+                stats.work <= budget && stats.trace_steps <= stats.work,
+                "{} work units ({} trace steps) over a budget of {budget}",
+                stats.work,
+                stats.trace_steps
+            );
+            if let Some(fix) = report.result.fix {
+                assert!(fix.pose.is_valid(), "pad fix {fix:?}");
+            }
+            // The detections do not depend on the pad: their marker pose once per
+            // configuration.
+            if k == 0 {
+                run_marker_pose(detections, &camera);
+            }
+        }
     }
 }
 
@@ -276,9 +297,10 @@ const FAMILY_CHECKED_IDS: usize = 32;
 ///
 /// Byte 0 sizes the caller's code buffer (1 to 1021 codes, so "too many codes" is reached),
 /// the rest is the file. When the file parses into a family: each of the first ids decodes
-/// back to itself from its own code in every rotation, and the detector, given the family
-/// alone, runs on an image of marker 0 drawn axis-aligned and reports only ids of the
-/// family.
+/// back to itself from its own code in every rotation, and the per-frame path
+/// ([`FramePipeline`]), given the family alone and a pad of its marker 0, runs on an image of
+/// that marker drawn axis-aligned and reports only ids of the family (and a valid fix, if
+/// any).
 pub fn family_file(data: &[u8]) {
     let Some((&size, text)) = data.split_first() else {
         return;
@@ -323,12 +345,36 @@ pub fn family_file(data: &[u8]) {
         }
     }
     let image = GrayImage::new(&pixels, side, side).expect("a valid size");
+    let families = [&family];
+    let marker = PadMarker {
+        family: family.name,
+        id: 0,
+        size: 0.16,
+        x: 0.0,
+        y: 0.0,
+        yaw_deg: 0.0,
+    };
+    let pad = PadLayout::new("fuzz", &[marker]).expect("a one-marker pad of a named family");
+    let focal = side as f32;
+    let centre = (side as f32 - 1.0) * 0.5;
+    let camera = CameraModel::pinhole(side as u32, side as u32, focal, focal, centre, centre);
     let mut workspace = Box::new(QvgaWorkspace::new());
-    let mut detector = Box::new(Detector::new(DetectorConfig::default()));
-    let detections = detector
-        .detect(&image, &[&family], &mut workspace.buffers())
-        .expect("a validated family and QVGA buffers");
-    check_detections(detections, &[&family]);
+    let mut pipeline = Box::new(FramePipeline::new(
+        &families,
+        &pad,
+        camera,
+        DetectorConfig::default(),
+        VisionSettings::default(),
+    ));
+    let report = pipeline.process(&image, 0, &mut workspace.buffers());
+    assert_eq!(
+        report.detect_error, None,
+        "a validated family and QVGA buffers"
+    );
+    check_detections(pipeline.detector().detections(), &families);
+    if let Some(fix) = report.result.fix {
+        assert!(fix.pose.is_valid(), "pad fix {fix:?}");
+    }
 }
 
 // ---------------------------------------------------------------------------------------
