@@ -26,7 +26,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;
 use std::process::Command;
 
-use nalgebra::{Matrix3, Matrix6, Vector3};
+use nalgebra::{Matrix3, Matrix6, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use serde_json::Value;
 use touchdown_core::companion::mavlink::dialects::common::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavState, MavType,
@@ -121,6 +121,18 @@ struct Scenario {
     corrupt: bool,
     params: Vec<(u64, ParamAction)>,
     vpe: bool,
+    /// TD_PROFILE auto (the default) instead of forcing `profile`; the simulated autopilot's
+    /// HEARTBEAT then says `profile`'s autopilot.
+    auto: bool,
+    /// A MAVLink gimbal (component 154, MAV_AUTOPILOT_GENERIC) heartbeats too, just before
+    /// each of the autopilot's.
+    gimbal: bool,
+    /// The autopilot's first HEARTBEAT (and everything else of it) from this time on.
+    autopilot_from_us: u64,
+    /// The pad turned about its z axis by this, radians (0: pad x east, pad y north).
+    pad_yaw: f32,
+    /// TD_CAM_YAW, degrees (the simulated camera is turned the same way).
+    cam_yaw_deg: f32,
 }
 
 impl Scenario {
@@ -135,6 +147,11 @@ impl Scenario {
             corrupt: false,
             params: Vec::new(),
             vpe: false,
+            auto: false,
+            gimbal: false,
+            autopilot_from_us: 0,
+            pad_yaw: 0.0,
+            cam_yaw_deg: 0.0,
         }
     }
 }
@@ -169,6 +186,9 @@ struct Autopilot {
     outbox: VecDeque<(u64, Vec<u8>)>,
     acks_sent: u32,
     timesync_answers: u32,
+    /// HEARTBEAT.autopilot.
+    kind: MavAutopilot,
+    gimbal: bool,
 }
 
 impl Autopilot {
@@ -187,6 +207,8 @@ impl Autopilot {
             outbox: VecDeque::new(),
             acks_sent: 0,
             timesync_answers: 0,
+            kind: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            gimbal: false,
         }
     }
 
@@ -258,12 +280,28 @@ impl Autopilot {
         let boot_ms = (self.clock_us(now) / 1000) as u32;
         if now >= self.next_hb {
             self.next_hb = now + 1_000_000;
+            if self.gimbal {
+                let bytes = encode(
+                    &mut self.seq,
+                    1,
+                    154,
+                    &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                        custom_mode: 0,
+                        mavtype: MavType::MAV_TYPE_GIMBAL,
+                        autopilot: MavAutopilot::MAV_AUTOPILOT_GENERIC,
+                        base_mode: MavModeFlag::empty(),
+                        system_status: MavState::MAV_STATE_ACTIVE,
+                        mavlink_version: 3,
+                    }),
+                );
+                self.outbox.push_back((now + DOWNLINK_DELAY_US, bytes));
+            }
             self.send(
                 now,
                 MavMessage::HEARTBEAT(HEARTBEAT_DATA {
                     custom_mode: 0,
                     mavtype: MavType::MAV_TYPE_QUADROTOR,
-                    autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    autopilot: self.kind,
                     base_mode: MavModeFlag::empty(),
                     system_status: MavState::MAV_STATE_ACTIVE,
                     mavlink_version: 3,
@@ -367,6 +405,9 @@ fn gcs_message(seq: &mut u8, action: ParamAction) -> Vec<u8> {
 struct Truth {
     rel_body: Vector3<f32>,
     distance: f32,
+    /// The pad's orientation in the target's frame: pad to body FRD, and pad to NED.
+    pad_body: UnitQuaternion<f32>,
+    pad_ned: UnitQuaternion<f32>,
 }
 
 /// What the autopilot's stream suffered.
@@ -393,14 +434,29 @@ fn in_window(w: Option<(u64, u64)>, t: u64) -> bool {
 }
 
 fn simulate(s: &Scenario) -> Run {
-    let mut config = CompanionConfig::with_profile(s.profile);
+    let mut config = if s.auto {
+        CompanionConfig::default()
+    } else {
+        CompanionConfig::with_profile(s.profile)
+    };
+    config.params.set(ParamId::CamYaw, s.cam_yaw_deg).unwrap();
     if s.vpe {
         config.params.set(ParamId::VpeEnable, 1.0).unwrap();
     }
-    let mount = CameraMount::downward();
-    config.mount = mount;
+    // What TD_CAM_YAW means: the downward camera turned about its optical axis.
+    let mount = CameraMount::downward_rotated(s.cam_yaw_deg.to_radians()).unwrap();
+    // The mount before TD_CAM_YAW: the companion applies the turn itself.
+    config.mount = CameraMount::downward();
     let mut companion = Companion::new(config).unwrap();
     let mut ap = Autopilot::new();
+    ap.kind = match s.profile {
+        Profile::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        Profile::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
+    };
+    ap.gimbal = s.gimbal;
+    ap.next_hb = s.autopilot_from_us;
+    ap.next_systime = ap.next_systime.max(s.autopilot_from_us);
+    ap.next_timesync = ap.next_timesync.max(s.autopilot_from_us);
     let mut rng = Rng(0x5EED_0000 + s.name.len() as u64);
     let mut uplink: VecDeque<(u64, Vec<u8>)> = VecDeque::new();
     let mut tx = Vec::new();
@@ -499,11 +555,20 @@ fn simulate(s: &Scenario) -> Run {
             let r_cam_ned = camera_to_ned_matrix(&att, &mount).transpose();
             let t_cam = r_cam_ned * rel_ned;
             let d = t_cam.norm();
+            // Pad x east, pad y north, pad z up; then turned about its z by `pad_yaw`.
+            let r_ned_pad = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0)
+                * Rotation3::from_axis_angle(&Vector3::z_axis(), s.pad_yaw).into_inner();
+            let pad_ned_q =
+                UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r_ned_pad));
+            let [w, x, y, z] = att.quaternion_wxyz();
+            let body_to_ned = UnitQuaternion::new_normalize(Quaternion::new(w, x, y, z));
             truth.insert(
                 te,
                 Truth {
                     rel_body: att.ned_to_body(&rel_ned),
                     distance: d,
+                    pad_body: body_to_ned.inverse() * pad_ned_q,
+                    pad_ned: pad_ned_q,
                 },
             );
             let fix = if in_window(s.lost, te) {
@@ -512,7 +577,6 @@ fn simulate(s: &Scenario) -> Run {
                 let (sl, sr) = (SIGMA_LATERAL * d, SIGMA_RANGE * d);
                 let noisy =
                     t_cam + Vector3::new(sl * rng.gauss(), sl * rng.gauss(), sr * rng.gauss());
-                let r_ned_pad = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
                 let mut cov = Matrix6::<f32>::zeros();
                 for k in 0..3 {
                     cov[(k, k)] = 1e-6;
@@ -627,6 +691,8 @@ struct Target {
     angle_x: f32,
     angle_y: f32,
     distance: f32,
+    /// The pad's orientation, decoded (normalised).
+    q: UnitQuaternion<f32>,
 }
 
 /// Checks the LANDING_TARGETs' invariants and matches each to the frame it came from.
@@ -644,7 +710,6 @@ fn landing_targets(run: &Run, msgs: &[Value], profile: Profile) -> Vec<Target> {
         assert_eq!(m["_mlen"], 60, "extension fields missing: {m}");
         assert_eq!(m["type"], 2, "LANDING_TARGET_TYPE_VISION_FIDUCIAL: {m}");
         assert_eq!(m["position_valid"], 1, "{m}");
-        assert_eq!(m["q"], serde_json::json!([1.0, 0.0, 0.0, 0.0]), "{m}");
         assert!(f(m, "distance") > 0.0, "{m}");
         // The frame: processed at most ~200 ms before transmission, and time_usec is its
         // exposure in one of the clocks it may be in (ours, the autopilot's, the rebooted
@@ -670,6 +735,10 @@ fn landing_targets(run: &Run, msgs: &[Value], profile: Profile) -> Vec<Target> {
             angle_x: f(m, "angle_x") as f32,
             angle_y: f(m, "angle_y") as f32,
             distance: f(m, "distance") as f32,
+            q: {
+                let q: Vec<f32> = (0..4).map(|k| m["q"][k].as_f64().unwrap() as f32).collect();
+                UnitQuaternion::new_normalize(Quaternion::new(q[0], q[1], q[2], q[3]))
+            },
         });
     }
     out
@@ -693,12 +762,28 @@ fn accuracy(run: &Run, targets: &[Target], profile: Profile) -> (Vector3<f32>, f
         sq += err.component_mul(&err);
         // angle_x/angle_y/distance consistent with x/y/z (default mount: camera x = body y,
         // camera y = -body x, camera z = body z).
+        // ArduPilot's line of sight from the angles (AC_PrecLand_MAVLink, position_valid 0):
+        // (-tan(angle_y), tan(angle_x), 1) normalised, body FRD, whatever the mount.
+        let los = Vector3::new(-t.angle_y.tan(), t.angle_x.tan(), 1.0).normalize();
+        // The pad's orientation: its yaw within a degree (the whole rotation too).
+        let want_q = match profile {
+            Profile::ArduPilot => truth.pad_body,
+            Profile::Px4 => truth.pad_ned,
+        };
+        let yaw_err = (t.q.euler_angles().2 - want_q.euler_angles().2).to_degrees();
+        let yaw_err = (yaw_err + 540.0).rem_euclid(360.0) - 180.0;
+        assert!(yaw_err.abs() < 1.0, "q yaw off by {yaw_err} deg: {t:?}");
+        assert!(t.q.angle_to(&want_q).to_degrees() < 1.0, "{t:?}");
         if profile == Profile::ArduPilot {
             let b = t.xyz;
-            assert!((t.angle_x - b.y.atan2(b.z)).abs() < 1e-4, "{t:?}");
-            assert!((t.angle_y - (-b.x).atan2(b.z)).abs() < 1e-4, "{t:?}");
+            assert!((los - b / t.distance).amax() < 1e-4, "{los} {t:?}");
             assert!((t.distance - b.norm()).abs() < 1e-3, "{t:?}");
         } else {
+            // The angles are the body vector at the exposure (the autopilot's attitude).
+            assert!(
+                (los - truth.rel_body.normalize()).amax() < 0.02,
+                "{los} {t:?}"
+            );
             assert!(
                 (t.distance - truth.distance).abs() < 0.1 * truth.distance,
                 "{t:?}"
@@ -924,6 +1009,163 @@ fn px4_profile_pymavlink() {
         requested.contains(&31.0) && requested.contains(&32.0),
         "{requested:?}"
     );
+    // Every answer to PX4's TIMESYNC requests goes out in the millisecond its request
+    // arrived (tc1 is our time at receipt, in ns), whatever else was waiting.
+    let answers: Vec<(u64, i64)> = run
+        .tx
+        .iter()
+        .zip(&msgs)
+        .filter(|(_, m)| m["_type"] == "TIMESYNC" && m["tc1"].as_i64() != Some(0))
+        .map(|((t, _), m)| (*t, m["tc1"].as_i64().unwrap()))
+        .collect();
+    assert!(answers.len() >= 7, "{answers:?}");
+    for (tx_us, tc1) in answers {
+        assert_eq!(tx_us as i64, tc1 / 1000, "answered late");
+    }
+}
+
+/// The STATUSTEXTs sent, in order.
+fn status_texts(msgs: &[Value]) -> Vec<String> {
+    msgs.iter()
+        .filter(|m| m["_type"] == "STATUSTEXT")
+        .map(|m| {
+            m["text"]
+                .as_str()
+                .unwrap()
+                .trim_end_matches('\0')
+                .to_string()
+        })
+        .collect()
+}
+
+#[test]
+fn auto_profile_follows_the_autopilot_heartbeat_not_a_gimbal() {
+    for profile in [Profile::ArduPilot, Profile::Px4] {
+        let (name, announcement) = match profile {
+            Profile::ArduPilot => (
+                "auto-ardupilot",
+                "touchdown: profile auto: ArduPilot (BODY_FRD)",
+            ),
+            Profile::Px4 => ("auto-px4", "touchdown: profile auto: PX4 (LOCAL_NED)"),
+        };
+        let mut s = Scenario::new(name, profile);
+        s.auto = true;
+        // A gimbal heartbeats from the start (before the autopilot is heard, and just before
+        // each of its heartbeats); the autopilot's first heartbeat comes at 1 s.
+        s.gimbal = true;
+        s.autopilot_from_us = 1_000_000;
+        // A pad turned by 30 degrees under a camera turned by 90 (TD_CAM_YAW).
+        s.pad_yaw = 30f32.to_radians();
+        s.cam_yaw_deg = 90.0;
+        let run = simulate(&s);
+        let Some(msgs) = decode_with_pymavlink(s.name, &run.tx) else {
+            return;
+        };
+        report(s.name, &run, &msgs);
+        // The frame each stack takes (checked per target by `landing_targets`), and the pad's
+        // orientation and the angles (checked per target by `accuracy`).
+        let targets = landing_targets(&run, &msgs, profile);
+        assert!(targets.len() > 180, "{} targets", targets.len());
+        let (_, worst) = accuracy(&run, &targets, profile);
+        assert!(worst <= 1.0);
+        // Nothing until the autopilot said what it is (its heartbeat arrives at 1.003 s).
+        let first = targets.first().unwrap().tx_us;
+        assert!(
+            first >= 1_003_000,
+            "target at {first} us before the autopilot"
+        );
+        assert!(run.stats.no_profile >= 20, "{}", run.stats.no_profile);
+        // The autopilot is 1/1, the gimbal never took over, the choice announced once.
+        assert_eq!(run.stats.autopilot, Some((1, 1)));
+        assert_eq!(status_texts(&msgs), vec![announcement.to_string()]);
+        println!(
+            "[{name}] first target at {:.3} s; {} frames with a fix before the autopilot was \
+             identified; announced: {announcement}",
+            first as f64 * 1e-6,
+            run.stats.no_profile
+        );
+        heartbeats_ok(&run, &msgs, s.duration_us);
+    }
+}
+
+/// A TIMESYNC request is answered by the very next frame out, ahead of a pending target and a
+/// parameter list being streamed.
+#[test]
+fn timesync_reply_goes_ahead_of_the_queue() {
+    let mut companion = Companion::new(CompanionConfig::default()).unwrap();
+    let mut ap_seq = 0u8;
+    let mut gcs_seq = 0u8;
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    });
+    companion.receive(&encode(&mut ap_seq, 1, 1, &heartbeat), 0);
+    assert_eq!(companion.profile(), Some(Profile::ArduPilot));
+    let mut tx: Vec<(u64, Vec<u8>)> = Vec::new();
+    let drain = |c: &mut Companion, now: u64, tx: &mut Vec<(u64, Vec<u8>)>, out: &mut [u8]| {
+        while let Some(n) = c.poll_transmit(now, out) {
+            tx.push((now, out[..n].to_vec()));
+        }
+    };
+    drain(&mut companion, 0, &mut tx, &mut out);
+    // Frames of a pad straight below until a target is pending (no attitude: camera-frame
+    // tracker), a parameter list requested, nothing drained.
+    let fix = PadFix {
+        pose: Pose {
+            rotation: Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+            translation: Vector3::new(0.1, 0.2, 5.0),
+        },
+        covariance: Matrix6::identity() * 1e-4,
+        markers_used: 1,
+        reprojection_rms_px: 0.3,
+        alternative_rms_px: f32::INFINITY,
+    };
+    let mut now = 10_000;
+    let mut queued = false;
+    for _ in 0..30 {
+        now += FRAME_PERIOD_US;
+        let outcome = companion.on_frame(
+            FrameResult {
+                exposure_us: now - PROCESS_DELAY_US,
+                fix: Some(fix),
+            },
+            now,
+        );
+        queued = outcome == touchdown_core::companion::FrameOutcome::TargetQueued;
+        if queued {
+            break;
+        }
+        drain(&mut companion, now, &mut tx, &mut out);
+    }
+    assert!(queued);
+    companion.receive(&gcs_message(&mut gcs_seq, ParamAction::RequestList), now);
+    // Let the list start filling the queue (paced), then the autopilot's TIMESYNC request.
+    let ts1 = 123_456_789_000i64;
+    let request = MavMessage::TIMESYNC(TIMESYNC_DATA {
+        tc1: 0,
+        ts1,
+        target_system: 0,
+        target_component: 0,
+    });
+    companion.receive(&encode(&mut ap_seq, 1, 1, &request), now);
+    let first = tx.len();
+    drain(&mut companion, now, &mut tx, &mut out);
+    let Some(msgs) = decode_with_pymavlink("timesync-first", &tx) else {
+        return;
+    };
+    let after: Vec<&Value> = msgs[first..].iter().collect();
+    assert!(after.len() >= 3, "{after:?}");
+    assert_eq!(after[0]["_type"], "TIMESYNC", "{after:?}");
+    assert_eq!(after[0]["ts1"].as_i64(), Some(ts1));
+    assert_eq!(after[0]["tc1"].as_i64(), Some(now as i64 * 1000));
+    // The rest still goes out: the target, then the queue (parameters among it).
+    assert_eq!(after[1]["_type"], "LANDING_TARGET", "{after:?}");
+    assert!(after.iter().any(|m| m["_type"] == "PARAM_VALUE"));
 }
 
 #[test]

@@ -24,10 +24,17 @@
 //!   confirmed estimate at that frame's exposure time whose last measurement is at most
 //!   [`TrackerConfig::max_coast_us`] old, and a target not transmitted within
 //!   [`CompanionConfig::max_target_latency_us`] of its frame is dropped, not sent late. A newer
-//!   target replaces an unsent older one.
+//!   target replaces an unsent older one. The format follows TD_PROFILE; with TD_PROFILE auto
+//!   (the default) the autopilot's HEARTBEAT chooses it and, until one has been heard, no
+//!   target is sent ([`FrameOutcome::NoProfile`]); the choice is announced by STATUSTEXT.
+//!
+//! The autopilot is the sender of HEARTBEATs from our system id (TD_SYSID) and component 1
+//! whose `autopilot` is not MAV_AUTOPILOT_INVALID; the vehicle state, TIMESYNC answers and
+//! the profile come from it alone.
 //! - VISION_POSITION_ESTIMATE (optional, TD_VPE_EN): the vehicle in a pad-centred NED frame,
 //!   with covariance.
-//! - TIMESYNC requests (1 Hz) and answers to the autopilot's requests ([`timesync`]).
+//! - TIMESYNC requests (1 Hz) and answers to the autopilot's requests ([`timesync`]), the
+//!   answers ahead of everything else waiting (PX4 discards round trips of 10 ms or more).
 //! - COMMAND_LONG `MAV_CMD_SET_MESSAGE_INTERVAL` for the vehicle state it needs
 //!   (ATTITUDE_QUATERNION; LOCAL_POSITION_NED too for PX4), repeated every second while that
 //!   stream is not arriving, so a rebooted autopilot gets asked again.
@@ -76,7 +83,7 @@ pub use mavlink;
 pub use link::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
 pub use mavlink::dialects::common::MavSeverity;
 pub use params::{ParamError, ParamId, ParamSet, PARAMS, PARAM_COUNT};
-pub use profile::{Profile, TargetFields, TargetFrame};
+pub use profile::{Profile, ProfileSetting, TargetFields, TargetFrame};
 pub use timesync::{TimeSource, TimeSync};
 pub use vehicle::{PositionSample, VehicleState};
 pub use vision::VisionSettings;
@@ -108,6 +115,12 @@ pub const TX_QUEUE_CAPACITY: usize = 16;
 pub const STATUS_QUEUE_CAPACITY: usize = 4;
 /// Longest STATUSTEXT text, bytes (MAVLink's field; longer text is cut).
 pub const STATUS_TEXT_LEN: usize = 50;
+/// LANDING_TARGET `q` when the fix's rotation is unusable (not finite, not a rotation): NaN in
+/// the first element, MAVLink's usual "unknown" for a quaternion; identity would claim an
+/// orientation. Neither autopilot reads `q` today.
+const UNKNOWN_Q: [f32; 4] = [f32::NAN, 0.0, 0.0, 0.0];
+/// MAV_COMP_ID_AUTOPILOT1: the flight controller's component id.
+const MAV_COMP_ID_AUTOPILOT1: u8 = 1;
 /// MAVLink message id of ATTITUDE_QUATERNION.
 const MSG_ATTITUDE_QUATERNION: u32 = 31;
 /// MAVLink message id of LOCAL_POSITION_NED.
@@ -220,6 +233,10 @@ pub enum FrameOutcome {
     NoEstimate,
     /// PX4 profile: no attitude or local position at the exposure time.
     NoVehicleState,
+    /// TD_PROFILE auto and no autopilot identified yet (no HEARTBEAT from it, or one whose
+    /// `autopilot` is neither ArduPilot nor PX4): a target in the wrong frame would be
+    /// refused, so none is sent.
+    NoProfile,
     /// Within TD_RATE_HZ's interval of the previous target.
     RateLimited,
     /// The estimate gave no valid target (not finite, behind the camera).
@@ -259,6 +276,8 @@ pub struct CompanionStats {
     pub no_estimate: u32,
     /// Frames with a fix but no vehicle state (PX4).
     pub no_vehicle_state: u32,
+    /// Frames with a fix but no profile yet (TD_PROFILE auto, autopilot not identified).
+    pub no_profile: u32,
     /// Autopilot reboots detected.
     pub autopilot_reboots: u32,
     /// Accepted PARAM_SETs.
@@ -346,12 +365,21 @@ struct State {
     vehicle: VehicleState,
     timesync: TimeSync,
     queue: Deque<Pending, TX_QUEUE_CAPACITY>,
+    /// The answer to the latest TIMESYNC request, sent before anything else: PX4 discards
+    /// samples whose round trip is 10 ms or more (and wants hundreds of good ones), so it
+    /// must not wait behind targets and parameters. One slot: a newer request supersedes an
+    /// unanswered older one, whose round trip is already long.
+    timesync_reply: Option<Pending>,
     status: Deque<StatusText, STATUS_QUEUE_CAPACITY>,
     target: Option<PendingTarget>,
     vpe: Option<PendingVpe>,
     sequence: u8,
     autopilot: Option<(u8, u8)>,
     autopilot_rx_us: Option<u64>,
+    /// The profile the latched autopilot's HEARTBEAT asks for (TD_PROFILE auto).
+    detected: Option<Profile>,
+    /// The auto profile last announced by STATUSTEXT.
+    announced: Option<Profile>,
     next_heartbeat_us: u64,
     next_timesync_us: u64,
     streams: [Stream; 2],
@@ -390,12 +418,15 @@ impl Companion {
                 vehicle: VehicleState::new(),
                 timesync: TimeSync::new(),
                 queue: Deque::new(),
+                timesync_reply: None,
                 status: Deque::new(),
                 target: None,
                 vpe: None,
                 sequence: 0,
                 autopilot: None,
                 autopilot_rx_us: None,
+                detected: None,
+                announced: None,
                 next_heartbeat_us: 0,
                 next_timesync_us: 0,
                 streams: [
@@ -441,27 +472,7 @@ impl Companion {
     /// Queues a STATUSTEXT with `text` (cut to [`STATUS_TEXT_LEN`] bytes at a character
     /// boundary). Returns `false`, and counts an overflow, when the queue is full.
     pub fn queue_status_text(&mut self, severity: MavSeverity, text: &str) -> bool {
-        let mut end = text.len().min(STATUS_TEXT_LEN);
-        while !text.is_char_boundary(end) {
-            end -= 1;
-        }
-        let mut bytes = [0u8; STATUS_TEXT_LEN];
-        if let (Some(dst), Some(src)) = (bytes.get_mut(..end), text.as_bytes().get(..end)) {
-            dst.copy_from_slice(src);
-        }
-        let state = &mut self.state;
-        if state
-            .status
-            .push_back(StatusText {
-                severity,
-                text: bytes,
-            })
-            .is_err()
-        {
-            state.stats.queue_overflows = state.stats.queue_overflows.saturating_add(1);
-            return false;
-        }
-        true
+        self.state.queue_status_text(severity, text)
     }
 
     /// Counters and link state.
@@ -488,8 +499,9 @@ impl Companion {
         self.state.set_param(id, value)
     }
 
-    /// The active profile (TD_PROFILE).
-    pub fn profile(&self) -> Profile {
+    /// The profile in force: TD_PROFILE's forced one, or with TD_PROFILE auto the one the
+    /// autopilot's HEARTBEAT asks for; `None` while auto has not identified it (no targets).
+    pub fn profile(&self) -> Option<Profile> {
         self.state.profile()
     }
 
@@ -505,8 +517,60 @@ impl Companion {
 }
 
 impl State {
-    fn profile(&self) -> Profile {
-        Profile::from_param(self.params.get_int(ParamId::Profile))
+    fn profile_setting(&self) -> ProfileSetting {
+        ProfileSetting::from_param(self.params.get_int(ParamId::Profile))
+    }
+
+    fn profile(&self) -> Option<Profile> {
+        self.profile_setting().resolve(self.detected)
+    }
+
+    /// Announces the auto profile by STATUSTEXT when it is first known or changes, so the
+    /// pilot sees which frame the targets are in; a forced profile is the user's own choice
+    /// and is not announced. A pending target formatted for the previous profile is dropped
+    /// (the other stack would refuse it).
+    fn refresh_profile(&mut self) {
+        if self.profile_setting() != ProfileSetting::Auto {
+            // Back to auto later: announce again.
+            self.announced = None;
+            return;
+        }
+        if let Some(p) = self.detected {
+            if self.announced != Some(p) {
+                if self.announced.is_some() {
+                    self.target = None;
+                }
+                self.announced = Some(p);
+                let text = match p {
+                    Profile::ArduPilot => "touchdown: profile auto: ArduPilot (BODY_FRD)",
+                    Profile::Px4 => "touchdown: profile auto: PX4 (LOCAL_NED)",
+                };
+                self.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, text);
+            }
+        }
+    }
+
+    fn queue_status_text(&mut self, severity: MavSeverity, text: &str) -> bool {
+        let mut end = text.len().min(STATUS_TEXT_LEN);
+        while !text.is_char_boundary(end) {
+            end -= 1;
+        }
+        let mut bytes = [0u8; STATUS_TEXT_LEN];
+        if let (Some(dst), Some(src)) = (bytes.get_mut(..end), text.as_bytes().get(..end)) {
+            dst.copy_from_slice(src);
+        }
+        if self
+            .status
+            .push_back(StatusText {
+                severity,
+                text: bytes,
+            })
+            .is_err()
+        {
+            self.stats.queue_overflows = self.stats.queue_overflows.saturating_add(1);
+            return false;
+        }
+        true
     }
 
     fn sysid(&self) -> u8 {
@@ -520,8 +584,9 @@ impl State {
     fn time_base(&self) -> TimeBase {
         match TimeBase::from_param(self.params.get_int(ParamId::TimeBase)) {
             TimeBase::ByProfile => match self.profile() {
-                Profile::ArduPilot => TimeBase::Autopilot,
-                Profile::Px4 => TimeBase::Companion,
+                // No profile: no target either; the autopilot clock is the contract's default.
+                Some(Profile::ArduPilot) | None => TimeBase::Autopilot,
+                Some(Profile::Px4) => TimeBase::Companion,
             },
             other => other,
         }
@@ -540,6 +605,9 @@ impl State {
             // Measurements before and after a mount change are in different frames.
             self.level.reset();
             self.camera.reset();
+        }
+        if id == ParamId::Profile && old != self.params.get(id) {
+            self.refresh_profile();
         }
         Ok(())
     }
@@ -601,11 +669,18 @@ impl State {
             }
         };
         if let MavMessage::HEARTBEAT(h) = &msg {
-            let is_autopilot = h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID
-                && h.mavtype != MavType::MAV_TYPE_GCS
-                && h.mavtype != MavType::MAV_TYPE_ONBOARD_CONTROLLER;
+            // The autopilot is component 1 (MAV_COMP_ID_AUTOPILOT1) of our own system (a
+            // companion shares the vehicle's system id, TD_SYSID). Anything else (a MAVLink
+            // gimbal or camera the flight controller forwards, often MAV_AUTOPILOT_GENERIC; a
+            // ground station; another companion) must not take its place, nor choose the
+            // profile.
+            let is_autopilot = frame.system_id == self.sysid()
+                && frame.component_id == MAV_COMP_ID_AUTOPILOT1
+                && h.autopilot != MavAutopilot::MAV_AUTOPILOT_INVALID;
             if is_autopilot {
                 self.autopilot = Some((frame.system_id, frame.component_id));
+                self.detected = Profile::from_autopilot(h.autopilot);
+                self.refresh_profile();
             }
         }
         let from_autopilot = self.is_from_autopilot(frame);
@@ -650,9 +725,10 @@ impl State {
             }
             MavMessage::TIMESYNC(t) => {
                 if t.tc1 == 0 {
-                    // A request (from the autopilot, or anyone): answer with our time.
+                    // A request (from the autopilot, or anyone): answer with our time, ahead
+                    // of everything queued (see `timesync_reply`).
                     let tc1 = i64::try_from(now_us.saturating_mul(1000)).unwrap_or(i64::MAX);
-                    self.enqueue(Pending::TimesyncResponse {
+                    self.timesync_reply = Some(Pending::TimesyncResponse {
                         tc1,
                         ts1: t.ts1,
                         target: (frame.system_id, frame.component_id),
@@ -754,8 +830,17 @@ impl State {
             self.level.update(&level_measurement(&m, att, &self.mount));
         }
         let level = attitude.and_then(|att| self.level.estimate(t).map(|e| (e, att)));
+        // The pad's orientation from this frame's fix (the position is filtered, the
+        // orientation is this frame's: the tracker filters positions only).
+        let pad_q = |att: Option<&Attitude>| {
+            profile::pad_orientation(&fix.pose.rotation, &self.mount, att).unwrap_or(UNKNOWN_Q)
+        };
         let fields = match self.profile() {
-            Profile::ArduPilot => {
+            None => {
+                self.stats.no_profile = self.stats.no_profile.saturating_add(1);
+                return FrameOutcome::NoProfile;
+            }
+            Some(Profile::ArduPilot) => {
                 let rel_body = match &level {
                     Some((e, att)) => Some(att.ned_to_body(&e.position)),
                     None => self
@@ -767,9 +852,10 @@ impl State {
                     self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
                     return FrameOutcome::NoEstimate;
                 };
-                profile::ardupilot_fields(&rel_body, &self.mount)
+                // Body FRD needs no attitude: the camera is fixed to the body.
+                profile::ardupilot_fields(&rel_body, pad_q(None))
             }
-            Profile::Px4 => {
+            Some(Profile::Px4) => {
                 let (Some(att), Some(pos)) = (attitude, self.vehicle.position_at(t)) else {
                     self.stats.no_vehicle_state = self.stats.no_vehicle_state.saturating_add(1);
                     return FrameOutcome::NoVehicleState;
@@ -778,7 +864,7 @@ impl State {
                     self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
                     return FrameOutcome::NoEstimate;
                 };
-                profile::px4_fields(&pos.position, &e.position, &att, &self.mount)
+                profile::px4_fields(&pos.position, &e.position, &att, pad_q(Some(&att)))
             }
         };
         let Some(fields) = fields else {
@@ -812,7 +898,7 @@ impl State {
             x: fields.position.x,
             y: fields.position.y,
             z: fields.position.z,
-            q: [1.0, 0.0, 0.0, 0.0],
+            q: fields.q,
             mavtype: LandingTargetType::LANDING_TARGET_TYPE_VISION_FIDUCIAL,
             position_valid: MavBool::MAV_BOOL_TRUE,
         };
@@ -850,7 +936,7 @@ impl State {
                 self.enqueue(Pending::TimesyncRequest { ts1, target });
                 self.next_timesync_us = now_us.saturating_add(self.config.timesync_period_us);
             }
-            let wants_position = self.profile() == Profile::Px4;
+            let wants_position = self.profile() == Some(Profile::Px4);
             let (timeout, period) = (
                 self.config.stream_timeout_us,
                 self.config.interval_request_period_us,
@@ -902,6 +988,11 @@ impl State {
             return None;
         }
         self.tick(now_us);
+        // TIMESYNC answers first: their round trip is what the autopilot measures.
+        if let Some(p) = self.timesync_reply.take() {
+            let msg = self.message(p);
+            return self.emit(&msg, out);
+        }
         let latency = self.config.max_target_latency_us;
         while let Some(p) = self.target.take() {
             if now_us.saturating_sub(p.created_us) > latency {

@@ -63,7 +63,8 @@ pub struct ParamDef {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum ParamId {
-    /// Output profile: 0 ArduPilot (BODY_FRD), 1 PX4 (LOCAL_NED).
+    /// Output profile: 0 ArduPilot (BODY_FRD), 1 PX4 (LOCAL_NED), 2 auto (from the
+    /// autopilot's HEARTBEAT).
     Profile = 0,
     /// Most LANDING_TARGETs per second.
     RateHz,
@@ -100,11 +101,13 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
     ParamDef {
         name: "TD_PROFILE",
         kind: ParamKind::Int,
-        default: 0.0,
+        // Auto by default: a forced profile the autopilot refuses (PX4 drops BODY_FRD) loses
+        // every target; the autopilot's HEARTBEAT says which one it takes.
+        default: 2.0,
         min: 0.0,
-        max: 1.0,
+        max: 2.0,
         zero_is_unset: false,
-        help: "0 ArduPilot (LANDING_TARGET in BODY_FRD), 1 PX4 (LOCAL_NED)",
+        help: "0 ArduPilot (LANDING_TARGET in BODY_FRD), 1 PX4 (LOCAL_NED), 2 auto (HEARTBEAT)",
     },
     ParamDef {
         name: "TD_RATE_HZ",
