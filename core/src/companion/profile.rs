@@ -5,7 +5,8 @@
 //!   the line of sight; without it, it falls back to `angle_x`/`angle_y`. It time-stamps the
 //!   message on receipt and drops the target after 1 s without messages; so the pad relative
 //!   to the vehicle, body axes, every frame, and nothing once the pad is gone. Its own vehicle
-//!   state does the rest, so no vehicle state is needed here. It refuses any other frame.
+//!   state does the rest, so no vehicle state is needed here. It reads `x, y, z` in no
+//!   other frame.
 //! - **PX4** (`mavlink_receiver` to `landing_target_pose`): only `MAV_FRAME_LOCAL_NED` with
 //!   `position_valid = 1`, read as the pad's **absolute** position in the local frame: the
 //!   vehicle's LOCAL_POSITION_NED at the exposure plus the pad offset in NED axes. It converts
