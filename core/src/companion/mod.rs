@@ -1209,6 +1209,59 @@ mod tests {
         assert_eq!(c.state.status.front().unwrap().text[48..], [0xC3, 0xA9]);
     }
 
+    fn heartbeat_from(c: &mut Companion, sys: u8, comp: u8, autopilot: MavAutopilot) {
+        let mut out = [0u8; MAX_FRAME_LEN];
+        let data = HEARTBEAT_DATA {
+            custom_mode: 0,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot,
+            base_mode: MavModeFlag::empty(),
+            system_status: MavState::MAV_STATE_ACTIVE,
+            mavlink_version: 3,
+        };
+        let n = link::write_v2_frame(&mut out, 0, sys, comp, &data).unwrap();
+        c.receive(&out[..n], 0);
+    }
+
+    #[test]
+    fn auto_profile_latches_on_the_autopilot_only() {
+        let mut c = Companion::new(CompanionConfig::default()).unwrap();
+        assert_eq!(c.profile(), None);
+        let fix = FrameResult {
+            exposure_us: 0,
+            fix: Some(PadFix {
+                pose: crate::pose::Pose {
+                    rotation: nalgebra::Matrix3::identity(),
+                    translation: Vector3::new(0.0, 0.0, 5.0),
+                },
+                covariance: nalgebra::Matrix6::identity() * 1e-4,
+                markers_used: 1,
+                reprojection_rms_px: 0.3,
+                alternative_rms_px: f32::INFINITY,
+            }),
+        };
+        assert_eq!(c.on_frame(fix, 1000), FrameOutcome::NoProfile);
+        assert_eq!(c.stats().no_profile, 1);
+        // A gimbal (component 154), another system's autopilot: ignored.
+        heartbeat_from(&mut c, 1, 154, MavAutopilot::MAV_AUTOPILOT_GENERIC);
+        heartbeat_from(&mut c, 2, 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+        assert_eq!((c.profile(), c.stats().autopilot), (None, None));
+        heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+        assert_eq!(c.profile(), Some(Profile::Px4));
+        assert_eq!(c.stats().autopilot, Some((1, 1)));
+        heartbeat_from(&mut c, 1, 154, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+        assert_eq!(c.profile(), Some(Profile::Px4));
+        // Announced once; again when the autopilot changes.
+        heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+        assert_eq!(c.state.status.len(), 1);
+        heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+        assert_eq!(c.profile(), Some(Profile::ArduPilot));
+        assert_eq!(c.state.status.len(), 2);
+        // A forced profile wins.
+        c.set_param(ParamId::Profile, 1.0).unwrap();
+        assert_eq!(c.profile(), Some(Profile::Px4));
+    }
+
     #[test]
     fn footprint_is_small() {
         // The firmware keeps one in static RAM: stay well under 8 KiB.
