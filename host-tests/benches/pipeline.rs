@@ -1,37 +1,42 @@
-//! Host benchmarks (criterion) of the per-frame path, stage by stage and whole, on the same
-//! frames as the Cortex-M7 instruction counts (`bench/m7/frames`, rendered by the simulator):
+//! Host benchmarks (criterion) of the per-frame path, on the same frames as the Cortex-M7
+//! instruction counts (`bench/m7/frames`, rendered by the simulator):
 //!
 //! ```text
 //! cargo bench -p touchdown-host --bench pipeline [-- FILTER]
 //! ```
 //!
-//! Stages: `detect` (the default families, the firmware's configuration), `pose` (the pad
-//! fix of a one-marker pad of the first detection, as `bench/m7` does), `filter` (the
-//! companion's trackers on that fix) and `encode` (draining the companion's MAVLink output),
-//! then `frame`: all four, as the camera board runs them. Speed goals are judged on the
-//! instruction counts of `scripts/m7_check.sh`; these host timings are for profiling and for
-//! the side-by-side with AprilTag 3 and OpenCV (`scripts/compare_peers.py`).
+//! Benches, per frame: `pipeline` ([`FramePipeline::process`]: detection with the default
+//! families and the firmware's configuration, then the pad fix, on a one-marker pad of the
+//! marker `bench/m7` fixes on), `filter+encode` (the companion's trackers on that fix and
+//! draining its MAVLink output), then `frame`: both, as the camera board runs them. Speed
+//! goals are judged on the instruction counts of `scripts/m7_check.sh`; these host timings
+//! are for profiling and for the side-by-side with AprilTag 3 and OpenCV
+//! (`scripts/compare_peers.py`).
 
 use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{Companion, CompanionConfig, FrameResult, Profile, MAX_FRAME_LEN};
-use touchdown_core::detect::{Detection, Detector, DetectorConfig};
+use touchdown_core::companion::{
+    Companion, CompanionConfig, FrameResult, Profile, VisionSettings, MAX_FRAME_LEN,
+};
+use touchdown_core::detect::DetectorConfig;
 use touchdown_core::family::tables;
 use touchdown_core::pad::{PadLayout, PadMarker};
-use touchdown_core::pose::{pad_pose, PadFix};
+use touchdown_core::pipeline::FramePipeline;
+use touchdown_core::pose::PadFix;
 use touchdown_host::image_io::GrayFrame;
 use touchdown_host::recording::parse_pgm;
 use touchdown_host::workspace::HostWorkspace;
 
-/// The benchmark frames (committed with the M7 benchmark).
-const FRAMES: [&str; 4] = [
-    "qvga-landing-1",
-    "qvga-multi-6",
-    "qvga-far-1",
-    "vga-landing-3",
+/// The benchmark frames (committed with the M7 benchmark), each with the tag36h11 id its pad
+/// is made of: the marker `bench/m7` fixes on, so both measure the same pose.
+const FRAMES: [(&str, u16); 4] = [
+    ("qvga-landing-1", 7),
+    ("qvga-multi-6", 0),
+    ("qvga-far-1", 11),
+    ("vga-landing-3", 22),
 ];
 /// Marker edge for the pose, metres (any positive size costs the same).
 const MARKER_SIZE_M: f32 = 0.16;
@@ -59,15 +64,13 @@ fn camera_for(frame: &GrayFrame) -> CameraModel {
     )
 }
 
-/// A one-marker pad made of the first detection.
-fn layout_of(detections: &[Detection]) -> PadLayout<'static> {
-    let d = detections.first().expect("the frame has a marker");
-    let family = tables::DEFAULT[usize::from(d.family)];
+/// A pad of one tag36h11 marker, centred on the landing point.
+fn one_tag(id: u16) -> PadLayout<'static> {
     PadLayout::new(
         "bench",
         &[PadMarker {
-            family: family.name,
-            id: d.id,
+            family: "tag36h11",
+            id,
             size: MARKER_SIZE_M,
             x: 0.0,
             y: 0.0,
@@ -97,30 +100,30 @@ fn warmed_companion(fix: PadFix, now_us: &mut u64) -> Companion {
 }
 
 fn stages(c: &mut Criterion) {
-    for name in FRAMES {
+    for (name, id) in FRAMES {
         let frame = load(name);
         let image = frame.view();
-        let camera = camera_for(&frame);
+        let pad = one_tag(id);
+        // As the vision task sets it up: the default configuration, the default parameters.
+        let mut pipeline = FramePipeline::new(
+            tables::DEFAULT,
+            &pad,
+            camera_for(&frame),
+            DetectorConfig::default(),
+            VisionSettings::default(),
+        );
         let mut workspace = HostWorkspace::new();
-        let mut detector = Detector::new(DetectorConfig::default());
-        let detections = workspace
-            .detect(&mut detector, &image, tables::DEFAULT)
-            .expect("valid frame");
-        let layout = layout_of(&detections);
-        let fix = pad_pose(&detections, tables::DEFAULT, &layout, &camera).expect("pose");
+        let fix = pipeline
+            .process(&image, 0, &mut workspace.buffers(frame.width, frame.height))
+            .result
+            .fix
+            .expect("the frame shows its pad's marker");
 
-        c.bench_function(&format!("{name}/detect"), |b| {
+        c.bench_function(&format!("{name}/pipeline"), |b| {
             b.iter(|| {
                 let mut buffers = workspace.buffers(frame.width, frame.height);
-                black_box(
-                    detector
-                        .detect(black_box(&image), tables::DEFAULT, &mut buffers)
-                        .map(|d| d.len()),
-                )
+                black_box(pipeline.process(black_box(&image), 0, &mut buffers))
             })
-        });
-        c.bench_function(&format!("{name}/pose"), |b| {
-            b.iter(|| pad_pose(black_box(&detections), tables::DEFAULT, &layout, &camera))
         });
         let mut now_us = 0u64;
         let mut companion = warmed_companion(fix, &mut now_us);
@@ -144,19 +147,10 @@ fn stages(c: &mut Criterion) {
         });
         c.bench_function(&format!("{name}/frame"), |b| {
             b.iter(|| {
-                let mut buffers = workspace.buffers(frame.width, frame.height);
-                let fix = detector
-                    .detect(black_box(&image), tables::DEFAULT, &mut buffers)
-                    .ok()
-                    .and_then(|d| pad_pose(d, tables::DEFAULT, &layout, &camera).ok());
                 now_us += FRAME_PERIOD_US;
-                companion.on_frame(
-                    FrameResult {
-                        exposure_us: now_us,
-                        fix,
-                    },
-                    now_us,
-                );
+                let mut buffers = workspace.buffers(frame.width, frame.height);
+                let report = pipeline.process(black_box(&image), now_us, &mut buffers);
+                companion.on_frame(report.result, now_us);
                 let mut bytes = 0usize;
                 while let Some(n) = companion.poll_transmit(now_us, &mut uart) {
                     bytes += n;
