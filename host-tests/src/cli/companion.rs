@@ -60,8 +60,9 @@ pub struct CompanionArgs {
     #[arg(long, value_name = "DIR")]
     pub recording: PathBuf,
 
-    /// LANDING_TARGET format
-    #[arg(long, value_enum, default_value_t = ProfileArg::Ardupilot)]
+    /// LANDING_TARGET format: from the autopilot's HEARTBEAT (auto, as the board does by
+    /// default: TD_PROFILE 2), or forced
+    #[arg(long, value_enum, default_value_t = ProfileArg::Auto)]
     pub profile: ProfileArg,
 
     /// Seconds of MAVLink before the first frame (time sync, stream requests)
@@ -86,6 +87,9 @@ pub struct CompanionArgs {
 /// `--profile`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ProfileArg {
+    /// ArduPilot's or PX4's format, whichever the autopilot's HEARTBEAT names (nothing is sent
+    /// until it is heard).
+    Auto,
     /// LANDING_TARGET in MAV_FRAME_BODY_FRD (ArduPilot).
     Ardupilot,
     /// LANDING_TARGET in MAV_FRAME_LOCAL_NED (PX4; needs its attitude and local position).
@@ -193,12 +197,13 @@ pub fn run(
 
     let (mut endpoint, endpoint_name) = Endpoint::open(args)?;
 
-    let profile = match args.profile {
-        ProfileArg::Ardupilot => Profile::ArduPilot,
-        ProfileArg::Px4 => Profile::Px4,
+    let config = match args.profile {
+        ProfileArg::Auto => CompanionConfig::default(),
+        ProfileArg::Ardupilot => CompanionConfig::with_profile(Profile::ArduPilot),
+        ProfileArg::Px4 => CompanionConfig::with_profile(Profile::Px4),
     };
-    let mut companion = Companion::new(CompanionConfig::with_profile(profile))
-        .map_err(|e| CliError(format!("companion configuration: {e:?}")))?;
+    let mut companion =
+        Companion::new(config).map_err(|e| CliError(format!("companion configuration: {e:?}")))?;
     // The camera board's per-frame path, with the parameters applied between frames exactly
     // as its vision task applies them (TD_TAG_SIZE, TD_MAX_HAMMING over MAVLink included).
     let mut vision_settings = VisionSettings::from_params(companion.params());
