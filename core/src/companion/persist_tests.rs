@@ -7,6 +7,9 @@
 //! one *step*, and a test can cut the power at any step: the word being programmed is left
 //! torn (garbage, half programmed, or some of its bits), the sector being erased is left
 //! partly erased (some words erased, others old or garbage), and nothing happens after.
+//!
+//! Test code only: `persist.rs` includes this file under `#[cfg(test)]`, so the `std`, the
+//! `Vec`s and the `unwrap`s below never reach the firmware.
 extern crate std;
 
 use std::format;
