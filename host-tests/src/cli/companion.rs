@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameOutcome, Profile, VisionSettings, MAX_FRAME_LEN,
+    Companion, CompanionConfig, FrameOutcome, Profile, TimeSource, VisionSettings, MAX_FRAME_LEN,
 };
 use touchdown_core::detect::DetectorConfig;
 use touchdown_core::family::Family;
@@ -94,6 +94,27 @@ pub enum ProfileArg {
     Ardupilot,
     /// LANDING_TARGET in MAV_FRAME_LOCAL_NED (PX4; needs its attitude and local position).
     Px4,
+}
+
+/// The autopilot as the summary names it.
+fn autopilot_summary(autopilot: Option<(u8, u8)>) -> String {
+    match autopilot {
+        Some((system, component)) => format!("autopilot {system}/{component}"),
+        None => "no autopilot heard".to_string(),
+    }
+}
+
+/// The clock offset as the summary gives it: autopilot minus our clock, and where it is from.
+fn clock_summary(offset_us: Option<i64>, source: Option<TimeSource>) -> String {
+    match (offset_us, source) {
+        (Some(offset), Some(TimeSource::Timesync)) => {
+            format!("autopilot clock {offset:+} us from ours (TIMESYNC)")
+        }
+        (Some(offset), Some(TimeSource::SystemTime)) => {
+            format!("autopilot clock {offset:+} us from ours (SYSTEM_TIME, coarse)")
+        }
+        _ => "autopilot clock unknown (no TIMESYNC or SYSTEM_TIME answer)".to_string(),
+    }
 }
 
 /// Where MAVLink goes: a UDP socket or a serial port, both non-blocking.
@@ -273,17 +294,17 @@ pub fn run(
     let s = companion.stats();
     writeln!(
         out,
-        "{} frames, {targets} LANDING_TARGET queued, {} sent; tx {} frames ({} send errors); \
-         rx {} frames, {} bad CRC; autopilot {:?}, clock offset {:?} us ({:?})",
-        next,
+        "{next} frames, {targets} LANDING_TARGET queued, {} sent; tx {} frames ({send_errors} \
+         send errors); rx {} frames ({} with a bad CRC, {} of messages outside the \
+         common dialect, skipped; {} garbage bytes); {}; {}",
         s.landing_targets,
         s.tx_frames,
-        send_errors,
         s.link.frames,
         s.link.bad_crc,
-        s.autopilot,
-        s.clock_offset_us,
-        s.time_source
+        s.link.unknown,
+        s.link.garbage_bytes,
+        autopilot_summary(s.autopilot),
+        clock_summary(s.clock_offset_us, s.time_source)
     )
     .map_err(CliError::new)?;
     Ok(Outcome::Success)
