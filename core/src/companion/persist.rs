@@ -54,7 +54,9 @@
 
 use core::future::Future;
 
-use super::params::{ImportError, ImportReport, ParamSet, EXPORT_LEN};
+#[cfg(test)]
+use super::params::ImportError;
+use super::params::{ImportReport, ParamSet, EXPORT_LEN};
 
 /// Flash programming unit of the STM32H7 (256 bits).
 pub const FLASH_WORD: usize = 32;
@@ -660,8 +662,13 @@ const CRC32_NIBBLES: [u32; 16] = {
     t
 };
 
-// ---- Format 1 (the single-sector log before slot format 2) ----
+// ---- Format 1 (the single-sector log before slot format 2), for the tests ----
+//
+// `Store::open` reads a format-1 log itself (`scan_sector`). What follows is the old design's
+// own reader and writer, kept only so that the tests can build format-1 logs and show what
+// the old design lost on a power cut; it is not part of the firmware.
 
+#[cfg(test)]
 /// What [`scan`] found in a format-1 log.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -686,6 +693,7 @@ pub enum Restore {
     },
 }
 
+#[cfg(test)]
 /// The result of [`scan`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -697,14 +705,11 @@ pub struct ScanResult {
     pub next_free: Option<usize>,
 }
 
+#[cfg(test)]
 /// Reads a format-1 log (one sector of bare export blobs, appended up to the first erased
 /// slot) of `slots` slots through `read` (slot index, buffer; `false` on a read error, which
 /// counts as a bad slot) and imports the newest valid slot into `params` (unchanged when there
-/// is none). The firmware no longer writes this format ([`Store::open`] reads it); kept for
-/// tools and tests that handle old logs.
-///
-/// The buffer is `N` bytes (normally [`LEGACY_SLOT_LEN`]; any length holding an export blob
-/// works, which is what older callers with their own slot arrays rely on).
+/// is none). The buffer is `N` bytes ([`LEGACY_SLOT_LEN`] for a real format-1 log).
 pub fn scan<const N: usize>(
     slots: usize,
     mut read: impl FnMut(usize, &mut [u8; N]) -> bool,
@@ -748,6 +753,7 @@ pub fn scan<const N: usize>(
     ScanResult { restore, next_free }
 }
 
+#[cfg(test)]
 /// Fills `out` with a format-1 slot for `params` (export blob, zero padding): what the
 /// firmware wrote before slot format 2, for tests of the upgrade path.
 ///
