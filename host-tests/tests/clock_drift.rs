@@ -14,20 +14,22 @@
 //! companion's mapping of the autopilot's time stamps to ours is within a few ms of the truth.
 //! Figures are printed (`--nocapture`).
 
+mod autopilot_sim;
+
 use std::collections::VecDeque;
 
-use nalgebra::{Matrix3, Matrix6, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use touchdown_core::companion::mavlink::dialects::common::{
-    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavState, MavType,
-    ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA,
-    SYSTEM_TIME_DATA, TIMESYNC_DATA,
+    MavAutopilot, MavCmd, MavMessage, MavResult, ATTITUDE_QUATERNION_DATA, COMMAND_ACK_DATA,
+    LOCAL_POSITION_NED_DATA, SYSTEM_TIME_DATA, TIMESYNC_DATA,
 };
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::{
     Companion, CompanionConfig, FrameOutcome, FrameParser, FrameResult, Profile, MAX_FRAME_LEN,
 };
 use touchdown_core::frames::{camera_to_ned_matrix, Attitude, CameraMount};
-use touchdown_core::pose::{PadFix, Pose};
+use touchdown_core::pose::PadFix;
+
+use autopilot_sim::{encode, heartbeat, pad_fix, pad_ned, Rng};
 
 const STEP_US: u64 = 1_000;
 const FRAME_PERIOD_US: u64 = 33_333;
@@ -38,9 +40,6 @@ const AP_START_US: f64 = 200.0e6;
 /// confirmation): not judged.
 const SETTLE_US: u64 = 3_000_000;
 
-fn pad_ned() -> Vector3<f32> {
-    Vector3::new(4.0, 1.0, 0.0)
-}
 fn vehicle_position(t: f32) -> Vector3<f32> {
     Vector3::new(
         2.0 + 0.02 * t,
@@ -60,37 +59,9 @@ fn vehicle_attitude(t: f32) -> Attitude {
     .unwrap()
 }
 
-/// splitmix64: deterministic, no dependency.
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// A link delay, 0.5-4 ms.
-    fn delay_us(&mut self) -> u64 {
-        500 + (self.uniform() * 3500.0) as u64
-    }
-}
-
-fn encode(seq: &mut u8, sys: u8, comp: u8, msg: &MavMessage) -> Vec<u8> {
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(
-        MavHeader {
-            system_id: u32::from(sys),
-            component_id: comp,
-            sequence: *seq,
-        },
-        msg,
-    );
-    *seq = seq.wrapping_add(1);
-    raw.raw_bytes().to_vec()
+/// A link delay, 0.5-4 ms.
+fn delay_us(rng: &mut Rng) -> u64 {
+    500 + (rng.uniform() * 3500.0) as u64
 }
 
 /// A one-way link: random delay per message, delivered in order.
@@ -107,7 +78,7 @@ impl Link {
     }
     /// `tag`: the autopilot time stamp (µs, exact) carried, for the mapping check.
     fn send(&mut self, rng: &mut Rng, now: u64, bytes: Vec<u8>, tag: Option<u64>) {
-        let at = (now + rng.delay_us()).max(self.last);
+        let at = (now + delay_us(rng)).max(self.last);
         self.last = at;
         self.queue.push_back((at, bytes, tag));
     }
@@ -226,14 +197,7 @@ impl Autopilot {
         let boot_ms = (ap_us / 1000) as u32;
         if now >= self.next_hb {
             self.next_hb = now + 1_000_000;
-            let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode: 0,
-                mavtype: MavType::MAV_TYPE_QUADROTOR,
-                autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
-                base_mode: MavModeFlag::empty(),
-                system_status: MavState::MAV_STATE_ACTIVE,
-                mavlink_version: 3,
-            });
+            let hb = heartbeat(MavAutopilot::MAV_AUTOPILOT_PX4);
             self.send(link, rng, now, hb, None);
         }
         if now >= self.next_systime {
@@ -296,24 +260,7 @@ fn fix_at(te: u64, mount: &CameraMount) -> PadFix {
     let t_cam = r_cam_ned * rel_ned;
     let d = t_cam.norm();
     let r_ned_pad = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
-    let mut cov = Matrix6::<f32>::zeros();
-    for k in 0..3 {
-        cov[(k, k)] = 1e-6;
-    }
-    let sl = 0.002 * d;
-    cov[(3, 3)] = sl * sl;
-    cov[(4, 4)] = sl * sl;
-    cov[(5, 5)] = (0.006 * d) * (0.006 * d);
-    PadFix {
-        pose: Pose {
-            rotation: r_cam_ned * r_ned_pad,
-            translation: t_cam,
-        },
-        covariance: cov,
-        markers_used: 1,
-        reprojection_rms_px: 0.3,
-        alternative_rms_px: f32::INFINITY,
-    }
+    pad_fix(r_cam_ned * r_ned_pad, t_cam, d)
 }
 
 #[derive(Debug, Default)]

@@ -22,6 +22,8 @@
 //! station's PARAM_SETs are range-checked, the resulting vision settings are what the
 //! firmware's vision task applies, and the values survive the flash log across a reboot.
 
+mod autopilot_sim;
+
 use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;
 use std::process::Command;
@@ -34,7 +36,6 @@ use touchdown_core::companion::mavlink::dialects::common::{
     PARAM_REQUEST_LIST_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, SYSTEM_TIME_DATA,
     TIMESYNC_DATA,
 };
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::params::name_str;
 use touchdown_core::companion::persist::{self, FlashFailed, SlotFlash, ERASED, SLOT_LEN};
 use touchdown_core::companion::{
@@ -48,10 +49,8 @@ use touchdown_core::pose::{PadFix, Pose};
 use touchdown_core::sensor::exposure::AutoExposureLimits;
 use touchdown_core::sensor::GainX16;
 
-/// The pad, LOCAL_NED, metres.
-fn pad_ned() -> Vector3<f32> {
-    Vector3::new(4.0, 1.0, 0.0)
-}
+use autopilot_sim::{encode, heartbeat, pad_fix, pad_ned, Rng, SIGMA_LATERAL, SIGMA_RANGE};
+
 /// The autopilot booted this long before the companion (its clock = ours + this).
 const AP_AHEAD_US: u64 = 1_000_000_000;
 const STEP_US: u64 = 1_000;
@@ -60,9 +59,6 @@ const PROCESS_DELAY_US: u64 = 25_000;
 const UPLINK_DELAY_US: u64 = 2_000; // companion -> autopilot
 const DOWNLINK_DELAY_US: u64 = 3_000; // autopilot -> companion
 const REBOOT_DOWN_US: u64 = 1_500_000;
-/// Lateral and range noise of a fix, as a fraction of the distance.
-const SIGMA_LATERAL: f32 = 0.002;
-const SIGMA_RANGE: f32 = 0.006;
 
 fn vehicle_position(t: f32) -> Vector3<f32> {
     Vector3::new(2.0 + 0.2 * t, -1.0 + 0.3 * (0.5 * t).sin(), -12.0 + 0.3 * t)
@@ -77,26 +73,6 @@ fn vehicle_attitude(t: f32) -> Attitude {
         0.5 + 0.05 * t,
     )
     .unwrap()
-}
-
-/// splitmix64 + Box-Muller: deterministic, no dependency.
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f32 {
-        let u1 = self.uniform().max(1e-12);
-        let u2 = self.uniform();
-        ((-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()) as f32
-    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -154,20 +130,6 @@ impl Scenario {
             cam_yaw_deg: 0.0,
         }
     }
-}
-
-fn encode(seq: &mut u8, sys: u8, comp: u8, msg: &MavMessage) -> Vec<u8> {
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(
-        MavHeader {
-            system_id: u32::from(sys),
-            component_id: comp,
-            sequence: *seq,
-        },
-        msg,
-    );
-    *seq = seq.wrapping_add(1);
-    raw.raw_bytes().to_vec()
 }
 
 /// The simulated autopilot (system 1, component 1).
@@ -296,17 +258,7 @@ impl Autopilot {
                 );
                 self.outbox.push_back((now + DOWNLINK_DELAY_US, bytes));
             }
-            self.send(
-                now,
-                MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                    custom_mode: 0,
-                    mavtype: MavType::MAV_TYPE_QUADROTOR,
-                    autopilot: self.kind,
-                    base_mode: MavModeFlag::empty(),
-                    system_status: MavState::MAV_STATE_ACTIVE,
-                    mavlink_version: 3,
-                }),
-            );
+            self.send(now, heartbeat(self.kind));
         }
         if now >= self.next_systime {
             self.next_systime = now + 1_000_000;
@@ -577,23 +529,7 @@ fn simulate(s: &Scenario) -> Run {
                 let (sl, sr) = (SIGMA_LATERAL * d, SIGMA_RANGE * d);
                 let noisy =
                     t_cam + Vector3::new(sl * rng.gauss(), sl * rng.gauss(), sr * rng.gauss());
-                let mut cov = Matrix6::<f32>::zeros();
-                for k in 0..3 {
-                    cov[(k, k)] = 1e-6;
-                }
-                cov[(3, 3)] = sl * sl;
-                cov[(4, 4)] = sl * sl;
-                cov[(5, 5)] = sr * sr;
-                Some(PadFix {
-                    pose: Pose {
-                        rotation: r_cam_ned * r_ned_pad,
-                        translation: noisy,
-                    },
-                    covariance: cov,
-                    markers_used: 1,
-                    reprojection_rms_px: 0.3,
-                    alternative_rms_px: f32::INFINITY,
-                })
+                Some(pad_fix(r_cam_ned * r_ned_pad, noisy, d))
             };
             pending_frames.push_back((
                 te + PROCESS_DELAY_US,
@@ -1096,15 +1032,8 @@ fn timesync_reply_goes_ahead_of_the_queue() {
     let mut ap_seq = 0u8;
     let mut gcs_seq = 0u8;
     let mut out = [0u8; MAX_FRAME_LEN];
-    let heartbeat = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_QUADROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    });
-    companion.receive(&encode(&mut ap_seq, 1, 1, &heartbeat), 0);
+    let ardupilot = heartbeat(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+    companion.receive(&encode(&mut ap_seq, 1, 1, &ardupilot), 0);
     assert_eq!(companion.profile(), Some(Profile::ArduPilot));
     let mut tx: Vec<(u64, Vec<u8>)> = Vec::new();
     let drain = |c: &mut Companion, now: u64, tx: &mut Vec<(u64, Vec<u8>)>, out: &mut [u8]| {

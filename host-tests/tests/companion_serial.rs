@@ -10,6 +10,8 @@
 
 #![cfg(unix)]
 
+mod autopilot_sim;
+
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -18,34 +20,24 @@ use std::time::{Duration, Instant};
 use rustix::pty::{grantpt, openpt, ptsname, unlockpt, OpenptFlags};
 use serde_json::Value;
 use touchdown_core::companion::mavlink::dialects::common::{
-    MavAutopilot, MavMessage, MavModeFlag, MavParamType, MavState, MavType, HEARTBEAT_DATA,
-    PARAM_SET_DATA,
+    MavAutopilot, MavMessage, MavParamType, PARAM_SET_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+
+use autopilot_sim::{encode, heartbeat};
 
 fn touchdown() -> Command {
     Command::new(env!("CARGO_BIN_EXE_touchdown"))
 }
 
 /// An autopilot HEARTBEAT (system 1, component 1) as MAVLink 2 bytes.
-fn autopilot_heartbeat(seq: u8) -> Vec<u8> {
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(
-        MavHeader {
-            system_id: 1,
-            component_id: 1,
-            sequence: seq,
-        },
-        &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: 0,
-            mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-            base_mode: MavModeFlag::empty(),
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-        }),
-    );
-    raw.raw_bytes().to_vec()
+fn autopilot_heartbeat(seq: &mut u8) -> Vec<u8> {
+    encode(
+        seq,
+        1,
+        1,
+        &heartbeat(MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA),
+    )
 }
 
 /// A simulated descent of `frames` frames, written to a fresh directory named after `name`.
@@ -140,12 +132,11 @@ fn run_over_pty(recording: &Path, first: &[u8]) -> Option<Vec<Value>> {
         if let Some(status) = child.try_wait().expect("wait") {
             break status;
         }
-        let _ = port.write_all(&autopilot_heartbeat(seq));
-        if !sent_first && seq >= 1 {
+        let _ = port.write_all(&autopilot_heartbeat(&mut seq));
+        if !sent_first && seq >= 2 {
             let _ = port.write_all(first);
             sent_first = true;
         }
-        seq = seq.wrapping_add(1);
         std::thread::sleep(Duration::from_millis(250));
     };
     let mut stderr = String::new();

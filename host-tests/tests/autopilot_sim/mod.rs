@@ -1,0 +1,102 @@
+//! What the integration tests that play the flight controller share: a deterministic random
+//! source, MAVLink 2 encoding, an autopilot's HEARTBEAT, the pad's place and a pad fix as the
+//! camera side would report it (with the covariance of a typical fix).
+//!
+//! `tests/companion.rs` (the companion against a simulated autopilot), `tests/clock_drift.rs`
+//! (the same with a drifting autopilot clock) and `tests/companion_serial.rs` (the host tool
+//! over a pty) each use part of it, hence the `dead_code` allowance: a part one test binary
+//! does not call is still used by another.
+#![allow(dead_code)]
+
+use nalgebra::{Matrix3, Matrix6, Vector3};
+use touchdown_core::companion::mavlink::dialects::common::{
+    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
+};
+use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::pose::{PadFix, Pose};
+
+/// Lateral noise of a fix, as a fraction of the distance.
+pub const SIGMA_LATERAL: f32 = 0.002;
+/// Range noise of a fix, as a fraction of the distance.
+pub const SIGMA_RANGE: f32 = 0.006;
+
+/// splitmix64 + Box-Muller: deterministic, no dependency.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Standard normal.
+    pub fn gauss(&mut self) -> f32 {
+        let u1 = self.uniform().max(1e-12);
+        let u2 = self.uniform();
+        ((-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()) as f32
+    }
+}
+
+/// `msg` from (`sys`, `comp`) as MAVLink 2 bytes, with the next sequence number of `seq`.
+pub fn encode(seq: &mut u8, sys: u8, comp: u8, msg: &MavMessage) -> Vec<u8> {
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(
+        MavHeader {
+            system_id: u32::from(sys),
+            component_id: comp,
+            sequence: *seq,
+        },
+        msg,
+    );
+    *seq = seq.wrapping_add(1);
+    raw.raw_bytes().to_vec()
+}
+
+/// A multicopter autopilot's HEARTBEAT of the given stack.
+pub fn heartbeat(autopilot: MavAutopilot) -> MavMessage {
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    })
+}
+
+/// The pad, LOCAL_NED, metres.
+pub fn pad_ned() -> Vector3<f32> {
+    Vector3::new(4.0, 1.0, 0.0)
+}
+
+/// A one-marker pad fix at `translation` (camera frame, metres) turned by `rotation` (pad to
+/// camera), with the covariance of a fix `distance` away: [`SIGMA_LATERAL`] and
+/// [`SIGMA_RANGE`] of the distance on the position, a tight rotation.
+pub fn pad_fix(rotation: Matrix3<f32>, translation: Vector3<f32>, distance: f32) -> PadFix {
+    let (lateral, range) = (SIGMA_LATERAL * distance, SIGMA_RANGE * distance);
+    let mut covariance = Matrix6::<f32>::zeros();
+    for k in 0..3 {
+        covariance[(k, k)] = 1e-6;
+    }
+    covariance[(3, 3)] = lateral * lateral;
+    covariance[(4, 4)] = lateral * lateral;
+    covariance[(5, 5)] = range * range;
+    PadFix {
+        pose: Pose {
+            rotation,
+            translation,
+        },
+        covariance,
+        markers_used: 1,
+        reprojection_rms_px: 0.3,
+        alternative_rms_px: f32::INFINITY,
+    }
+}
