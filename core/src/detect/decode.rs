@@ -12,9 +12,6 @@
 //! so a shadow edge or a brightness gradient across the marker moves the threshold with it.
 //! A candidate whose border is not black or whose margin is not white is dropped before any
 //! look-up, which is what keeps random quads from ever reaching the code table.
-//!
-//! The paper's variant reads each cell as the mean over its whole area ("resized to 8x8"),
-//! thresholds at the mean of all cells, and accepts only an exact match of border and code.
 
 use super::DetectorConfig;
 use crate::family::{CellRole, Decoded, Family, MAX_GRID};
@@ -150,18 +147,6 @@ fn read_cell(image: &GrayImage<'_>, h: &Homography, u: f32, v: f32, multi: bool)
     Some(acc / 5.0)
 }
 
-/// Reads a cell as the mean over its area (4x4 points), the paper's "resize".
-fn read_cell_area(image: &GrayImage<'_>, h: &Homography, u0: f32, v0: f32) -> Option<f32> {
-    let mut acc = 0.0;
-    for i in 0..4 {
-        for j in 0..4 {
-            let p = h.map(u0 + (i as f32 + 0.5) / 4.0, v0 + (j as f32 + 0.5) / 4.0)?;
-            acc += image.sample(p.x, p.y);
-        }
-    }
-    Some(acc / 16.0)
-}
-
 /// The homography from the family grid to the image for a clockwise quad whose first corner
 /// is taken as the grid's top-left.
 pub(crate) fn grid_homography(family: &Family<'_>, quad: &[Point; 4]) -> Option<Homography> {
@@ -210,6 +195,20 @@ pub(crate) struct GridRead {
     contrast: f32,
     /// Data cells read too close to the threshold to trust.
     uncertain: u8,
+}
+
+impl GridRead {
+    /// A read without a notion of certainty (the paper's, [`super::paper`]): every cell
+    /// counts as clear, the decision margin is 1.
+    pub(crate) fn certain(h: Homography, readings: [u64; 4], contrast: f32) -> Self {
+        GridRead {
+            h,
+            readings,
+            margin: 1.0,
+            contrast,
+            uncertain: 0,
+        }
+    }
 }
 
 /// Looks a read grid up in `family` (which must have the layout it was read with).
@@ -622,64 +621,6 @@ pub(crate) fn uniform_grid_decodes(family: &Family<'_>) -> bool {
     [0u64, ones]
         .iter()
         .any(|&code| family.decode(&[code; 4], family.max_correction).is_some())
-}
-
-/// Reads a candidate's cells with the paper's method (normal families only); the look-up
-/// must then be exact (`max_hamming` 0).
-pub(crate) fn read_paper(
-    image: &GrayImage<'_>,
-    family: &Family<'_>,
-    quad: &[Point; 4],
-) -> Option<GridRead> {
-    if family.reversed() {
-        return None;
-    }
-    let h = grid_homography(family, quad)?;
-    let n = family.grid as usize;
-    let b = family.border_ring as usize;
-    let mut values = [0.0f32; MAX_GRID * MAX_GRID];
-    let mut sum = 0.0f32;
-    let mut count = 0usize;
-    for r in b..n - b {
-        for c in b..n - b {
-            let z = read_cell_area(image, &h, c as f32, r as f32)?;
-            if let Some(slot) = values.get_mut(r * n + c) {
-                *slot = z;
-            }
-            sum += z;
-            count += 1;
-        }
-    }
-    let level = sum / count.max(1) as f32;
-    let mut cells = [false; MAX_GRID * MAX_GRID];
-    let (mut dark_sum, mut dark_n, mut light_sum, mut light_n) = (0.0f32, 0usize, 0.0f32, 0usize);
-    for r in b..n - b {
-        for c in b..n - b {
-            let z = values.get(r * n + c).copied().unwrap_or(0.0);
-            let white = z > level;
-            if family.role(r, c) == CellRole::Border && white {
-                return None; // the template's border must match exactly
-            }
-            if let Some(cell) = cells.get_mut(r * n + c) {
-                *cell = white;
-            }
-            if white {
-                light_sum += z;
-                light_n += 1;
-            } else {
-                dark_sum += z;
-                dark_n += 1;
-            }
-        }
-    }
-    Some(GridRead {
-        h,
-        readings: family.codes_of_grid(cells.get(..n * n)?),
-        margin: 1.0,
-        contrast: light_sum / light_n.max(1) as f32 - dark_sum / dark_n.max(1) as f32,
-        // The paper's method accepts exact matches only and has no notion of certainty.
-        uncertain: 0,
-    })
 }
 
 /// Calls `f(row, col)` for every cell of ring `ring` of an `n x n` grid; the ring may lie

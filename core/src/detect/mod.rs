@@ -42,6 +42,7 @@
 
 mod contour;
 mod decode;
+mod paper;
 mod quad;
 mod refine;
 mod threshold;
@@ -400,13 +401,16 @@ impl Detector {
             detections,
             stats,
         } = self;
-        match config.method {
-            Method::Robust => threshold::local_threshold(image, config.min_contrast, bitmap, tiles),
-            Method::Paper => threshold::paper_edges(image, bitmap, tiles),
-        }
+        // The one place the method is looked at: everything after asks the strategy.
+        let strategy: &dyn Strategy = match config.method {
+            Method::Robust => &Robust,
+            Method::Paper => &paper::Paper,
+        };
+        strategy.binarise(image, config, bitmap, tiles);
         contour::clear_border(bitmap, wpr, width);
         visited.fill(0);
         let candidates = Candidates {
+            strategy,
             image,
             families,
             config,
@@ -419,13 +423,7 @@ impl Detector {
             uniform_decodes: families.iter().any(|f| decode::uniform_grid_decodes(f)),
             quiet_margins: families.iter().all(|f| f.quiet_rings >= f.border_ring),
         };
-        // Hole boundaries are only candidates for white-on-black families and in the paper's
-        // pipeline; everywhere else following them is wasted time (see `contour`).
-        let rule = if config.method == Method::Paper || families.iter().any(|f| f.reversed()) {
-            contour::StartRule::AllBoundaries
-        } else {
-            contour::StartRule::OuterOnly
-        };
+        let rule = strategy.start_rule(families);
         let bitmap: &[u32] = bitmap;
         let budget = work_budget(config.work_budget_per_pixel, width * height);
         let mut tracer = contour::Tracer::new(bitmap, visited, wpr, budget);
@@ -486,8 +484,155 @@ impl Detector {
     }
 }
 
+/// What the two methods ([`Method`]) do differently, as the steps they share ask it: the
+/// binary image, which boundaries are followed, which quads are candidates for which family,
+/// the quick look, the corners the cells are read through, the cell reading and the look-up's
+/// error bound. [`Detector::detect`] picks one per frame ([`Robust`], [`paper::Paper`]), so
+/// the shared steps have no branches on the method and the paper's choices stay in
+/// [`paper`].
+trait Strategy {
+    /// Step 1: the bitmap whose boundaries are traced. `tiles` is the frame's scratch memory
+    /// ([`Buffers::tiles`]).
+    fn binarise(
+        &self,
+        image: &GrayImage<'_>,
+        config: &DetectorConfig,
+        bitmap: &mut [u32],
+        tiles: &mut [u8],
+    );
+    /// Which boundaries of the bitmap start a trace when searching for `families`.
+    fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule;
+    /// Whether `quad` can be a marker of `family`.
+    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool;
+    /// The quick look at a candidate's rough corners before it is refined and read, charging
+    /// its work to `tracer`.
+    fn quick_look(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> Look;
+    /// The corners the cells are read through, adding the image reads to `samples`.
+    fn corners(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        samples: &mut u32,
+    ) -> [Point; 4];
+    /// Reads the cells of `family`'s layout through `corners`, adding the image reads to
+    /// `samples`.
+    fn read(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        family: &Family<'_>,
+        corners: &[Point; 4],
+        samples: &mut u32,
+    ) -> Option<decode::GridRead>;
+    /// Most bits the code look-up may correct.
+    fn max_hamming(&self, config: &DetectorConfig) -> u8;
+}
+
+/// What the quick look ([`Strategy::quick_look`]) made of a candidate.
+enum Look {
+    /// Refine and read it.
+    Candidate,
+    /// Not a marker.
+    Rejected,
+    /// The work budget ran out.
+    OutOfBudget,
+}
+
+/// touchdown's method ([`Method::Robust`]).
+struct Robust;
+
+impl Strategy for Robust {
+    fn binarise(
+        &self,
+        image: &GrayImage<'_>,
+        config: &DetectorConfig,
+        bitmap: &mut [u32],
+        tiles: &mut [u8],
+    ) {
+        threshold::local_threshold(image, config.min_contrast, bitmap, tiles);
+    }
+
+    /// Hole boundaries are only candidates for white-on-black families; for the others
+    /// following them is wasted time (see `contour`).
+    fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule {
+        if families.iter().any(|f| f.reversed()) {
+            contour::StartRule::AllBoundaries
+        } else {
+            contour::StartRule::OuterOnly
+        }
+    }
+
+    /// The binarisation knows polarity: a hole is a light region, which only the reversed
+    /// families are detected by.
+    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool {
+        family.reversed() == quad.hole
+    }
+
+    /// [`decode::precheck`], for dark-on-light families with a quiet margin (a hole is a
+    /// white-on-black one's).
+    fn quick_look(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> Look {
+        if quad.hole || !candidates.quiet_margins {
+            return Look::Candidate;
+        }
+        if !tracer.charge(WORK_PRECHECK) {
+            return Look::OutOfBudget;
+        }
+        let rough = refine::half_pixel_adjusted(quad);
+        let flat_rejects = !candidates.uniform_decodes;
+        let cells = candidates.max_quad_cells;
+        let min_contrast = candidates.config.min_contrast;
+        match decode::precheck(candidates.image, cells, &rough, min_contrast, flat_rejects) {
+            decode::Precheck::Candidate => Look::Candidate,
+            decode::Precheck::Flat | decode::Precheck::NoBorder => Look::Rejected,
+        }
+    }
+
+    fn corners(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        samples: &mut u32,
+    ) -> [Point; 4] {
+        if !candidates.config.refine_edges {
+            return refine::half_pixel_adjusted(quad);
+        }
+        let c = &quad.corners;
+        let shortest = (0..4)
+            .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
+            .fold(f32::MAX, f32::min);
+        let radius = (0.5 * shortest / candidates.max_quad_cells as f32).clamp(0.75, 4.0);
+        refine::refine_corners(candidates.image, quad, radius, samples)
+    }
+
+    fn read(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        family: &Family<'_>,
+        corners: &[Point; 4],
+        samples: &mut u32,
+    ) -> Option<decode::GridRead> {
+        let (image, config) = (candidates.image, candidates.config);
+        decode::read_robust(image, family, corners, config, samples)
+    }
+
+    fn max_hamming(&self, config: &DetectorConfig) -> u8 {
+        config.max_hamming
+    }
+}
+
 /// What every candidate of a frame is checked against.
 struct Candidates<'f, 'i, 'a> {
+    /// The method's choices.
+    strategy: &'f dyn Strategy,
     image: &'f GrayImage<'i>,
     families: &'f [&'f Family<'a>],
     config: &'f DetectorConfig,
@@ -525,35 +670,15 @@ impl Candidates<'_, '_, '_> {
         let Some(quad) = quad::fit(boundary, &screened, config.min_edge_px) else {
             return true;
         };
-        let paper = config.method == Method::Paper;
-        // The paper traces every contour of its edge map, outer and hole alike (OpenCV's
-        // findContours); the edge band around a marker's outline leaves a hole just inside
-        // it. Our binarisation knows polarity: a hole is a light region, which only the
-        // reversed families are detected by.
-        let wanted = |f: &Family<'_>| {
-            if paper {
-                !f.reversed()
-            } else {
-                f.reversed() == quad.hole
-            }
-        };
-        if !self.families.iter().any(|f| wanted(f)) {
+        let strategy = self.strategy;
+        if !self.families.iter().any(|f| strategy.wanted(f, &quad)) {
             return true;
         }
         stats.quads += 1;
-        // The quick look is for dark-on-light families with a quiet margin (a hole is a
-        // white-on-black one's).
-        if !paper && !quad.hole && self.quiet_margins {
-            if !tracer.charge(WORK_PRECHECK) {
-                return false;
-            }
-            let rough = refine::half_pixel_adjusted(&quad);
-            let flat_rejects = !self.uniform_decodes;
-            let cells = self.max_quad_cells;
-            match decode::precheck(self.image, cells, &rough, config.min_contrast, flat_rejects) {
-                decode::Precheck::Candidate => {}
-                decode::Precheck::Flat | decode::Precheck::NoBorder => return true,
-            }
+        match strategy.quick_look(self, &quad, tracer) {
+            Look::Candidate => {}
+            Look::Rejected => return true,
+            Look::OutOfBudget => return false,
         }
         // The candidate's work is counted as it is done (image samples) and charged after;
         // it starts only while some budget is left, so a frame overruns its budget by at most
@@ -563,20 +688,7 @@ impl Candidates<'_, '_, '_> {
         }
         stats.refined += 1;
         let mut samples = 0u32;
-        let corners = if paper {
-            // The edge map's outline runs along the outside of the gradient band around the
-            // marker's edge (its holes along the inside): step back onto the edge itself.
-            refine::offset_quad(&quad, -threshold::PAPER_EDGE_BAND_HALF_WIDTH)
-        } else if config.refine_edges {
-            let c = &quad.corners;
-            let shortest = (0..4)
-                .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
-                .fold(f32::MAX, f32::min);
-            let radius = (0.5 * shortest / self.max_quad_cells as f32).clamp(0.75, 4.0);
-            refine::refine_corners(self.image, &quad, radius, &mut samples)
-        } else {
-            refine::half_pixel_adjusted(&quad)
-        };
+        let corners = strategy.corners(self, &quad, &mut samples);
         if !quad::check_shape(&corners, 0.8 * config.min_edge_px) {
             return tracer.charge(candidate_work(samples));
         }
@@ -585,17 +697,13 @@ impl Candidates<'_, '_, '_> {
         // (the default tag36h11 + aruco_6x6_250 pair) sample and threshold the cells once.
         let mut last: Option<(&Family<'_>, Option<decode::GridRead>)> = None;
         for (index, family) in self.families.iter().enumerate() {
-            if !wanted(family) {
+            if !strategy.wanted(family, &quad) {
                 continue;
             }
             let grid = match last {
                 Some((seen, grid)) if seen.same_layout(family) => grid,
                 _ => {
-                    let grid = if paper {
-                        decode::read_paper(self.image, family, &corners)
-                    } else {
-                        decode::read_robust(self.image, family, &corners, config, &mut samples)
-                    };
+                    let grid = strategy.read(self, family, &corners, &mut samples);
                     last = Some((family, grid));
                     grid
                 }
@@ -604,7 +712,7 @@ impl Candidates<'_, '_, '_> {
                 continue;
             };
             bordered = true;
-            let max_hamming = if paper { 0 } else { config.max_hamming };
+            let max_hamming = strategy.max_hamming(config);
             let Some(read) = decode::lookup(family, &grid, max_hamming) else {
                 continue;
             };

@@ -1,14 +1,10 @@
 //! Step 1: binarisation into a 1-bit-per-pixel bitmap.
 //!
-//! [`local_threshold`] (ours): per 4x4 tile the min and max grey level, spread to the 3x3
+//! [`local_threshold`]: per 4x4 tile the min and max grey level, spread to the 3x3
 //! neighbouring tiles (a 12x12 window), and a pixel is dark when it lies below the window's
 //! mid-level. The threshold follows shadows and vignetting across the frame. Where the window
 //! has less than `min_contrast` there is no edge to find, so nothing there is dark: uniform
 //! areas (sky, tarmac, the inside of a big black cell) cost nothing downstream.
-//!
-//! [`paper_edges`] (the paper's variant): normalise the frame to the full 0..255 range, blur
-//! it with a 5x5 Gaussian, take 3x3 Sobel gradients and mark pixels whose gradient magnitude
-//! exceeds a fixed level. Contours of that edge map are what the paper's method traces.
 //!
 //! Bitmap layout: row `y` starts at word `y * words_per_row(width)`; pixel `x` is bit `x % 32`
 //! of word `x / 32` (least significant bit = leftmost pixel), so "left neighbour" is a shift.
@@ -239,82 +235,6 @@ fn spread(grid: &mut [u8], tw: usize, th: usize, pick: fn(u8, u8) -> u8) {
                 *cell = pick(pick(previous, current), next);
             }
             previous = current;
-        }
-    }
-}
-
-/// Gradient magnitude (|gx| + |gy| of the 3x3 Sobel on the normalised, blurred frame) above
-/// which a pixel is an edge in the paper's variant.
-pub(crate) const PAPER_EDGE_LEVEL: i32 = 160;
-
-/// How far, in pixels, the outermost edge pixels of a sharp step lie from the step after the
-/// 5x5 blur and the 3x3 gradient at [`PAPER_EDGE_LEVEL`] (measured on rendered markers).
-pub(crate) const PAPER_EDGE_BAND_HALF_WIDTH: f32 = 1.5;
-
-/// The paper's binarisation: normalise, 5x5 Gaussian blur, 3x3 Sobel, fixed edge level.
-/// `scratch` holds at least `3 * width` bytes (three blurred rows).
-pub(crate) fn paper_edges(image: &GrayImage<'_>, bitmap: &mut [u32], scratch: &mut [u8]) {
-    let (w, h) = (image.width(), image.height());
-    let wpr = words_per_row(w);
-    bitmap.iter_mut().take(wpr * h).for_each(|word| *word = 0);
-    let Some(rows) = scratch.get_mut(..3 * w) else {
-        return;
-    };
-    // Normalisation: stretch [min, max] to [0, 255].
-    let (mut lo, mut hi) = (255u8, 0u8);
-    for y in 0..h {
-        for &p in image.row(y) {
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-    }
-    let range = (hi.saturating_sub(lo)).max(1) as i32;
-    // `checked_div`: range >= 1, but the optimiser loses that inside the closure and would
-    // keep a division-by-zero panic path (see nopanic/).
-    let norm = |p: u8| -> i32 {
-        (p.saturating_sub(lo) as i32 * 255)
-            .checked_div(range)
-            .unwrap_or(0)
-    };
-    // Blurred row y into ring slot y % 3.
-    const KERNEL: [i32; 5] = [1, 4, 6, 4, 1];
-    let blur_row = |y: usize, out: &mut [u8]| {
-        for (x, o) in out.iter_mut().enumerate() {
-            let mut acc = 0i32;
-            for (ky, wy) in KERNEL.iter().enumerate() {
-                let yy = y as isize + ky as isize - 2;
-                for (kx, wx) in KERNEL.iter().enumerate() {
-                    let xx = x as isize + kx as isize - 2;
-                    acc += wy * wx * norm(image.pixel_clamped(xx, yy));
-                }
-            }
-            *o = (acc / 256).clamp(0, 255) as u8;
-        }
-    };
-    if h < 3 || w < 3 {
-        return;
-    }
-    for y in 0..2usize {
-        if let Some(slot) = rows.get_mut(y * w..y * w + w) {
-            blur_row(y, slot);
-        }
-    }
-    for y in 1..h - 1 {
-        let next = (y + 1) % 3;
-        if let Some(slot) = rows.get_mut(next * w..next * w + w) {
-            blur_row(y + 1, slot);
-        }
-        let at = |yy: usize, x: usize| -> i32 {
-            rows.get((yy % 3) * w + x).copied().unwrap_or(0) as i32
-        };
-        for x in 1..w - 1 {
-            let gx = (at(y - 1, x + 1) + 2 * at(y, x + 1) + at(y + 1, x + 1))
-                - (at(y - 1, x - 1) + 2 * at(y, x - 1) + at(y + 1, x - 1));
-            let gy = (at(y + 1, x - 1) + 2 * at(y + 1, x) + at(y + 1, x + 1))
-                - (at(y - 1, x - 1) + 2 * at(y - 1, x) + at(y - 1, x + 1));
-            if gx.abs() + gy.abs() >= PAPER_EDGE_LEVEL {
-                set_bit(bitmap, wpr, x, y);
-            }
         }
     }
 }
