@@ -431,6 +431,11 @@ impl Detector {
         let word = |row: &[u32], k: usize| row.get(k).copied().unwrap_or(0);
         'scan: for y in 0..height {
             let row = row_words(y);
+            // Most rows of a frame have no dark pixel: a tight test of the whole row is a few
+            // instructions a word, where the scan below keeps its state in memory.
+            if row.iter().all(|&dark| dark == 0) {
+                continue;
+            }
             let above = y.checked_sub(1).map_or(&[][..], row_words);
             let below = row_words(y + 1);
             for (k, &dark) in row.iter().enumerate() {

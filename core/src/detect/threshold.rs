@@ -45,38 +45,95 @@ pub(crate) fn set_bit(bitmap: &mut [u32], wpr: usize, x: usize, y: usize) {
     }
 }
 
-/// Which of four pixels (packed little-endian in `pixels`, first pixel in the low byte) are
-/// below `threshold`, as a nibble (first pixel = bit 0).
+/// Top bit of every byte.
+const HIGH: u32 = 0x8080_8080;
+/// Low seven bits of every byte.
+const LOW7: u32 = 0x7F7F_7F7F;
+
+/// Per byte of two words of four bytes: bit 7 set where the byte of `a` >= that of `b`,
+/// every other bit clear.
 ///
 /// Four comparisons in one 32-bit word (SIMD within a register), because the Cortex-M7 has
-/// no byte-vector compare a compiler would use from stable Rust: per byte, the low seven
-/// bits are compared by a subtraction that cannot borrow from the next byte, the top bits
-/// decide where they differ, and a multiplication gathers the four flags into a nibble.
+/// no byte-vector compare a compiler would use from stable Rust (its DSP instructions need
+/// `asm!`). Per byte, `a >= b` exactly when `a + !b >= 255`, that is when the rounded-up
+/// mean of `a` and `!b` is at least 128. That mean is `(a | !b) - ((a ^ !b) >> 1)`, a
+/// subtraction that cannot borrow (the first term is never the smaller) and a shift whose
+/// bits crossing into the next byte are masked off. `a ^ !b` is written `!(a ^ b)` because
+/// the callers that select with the result need `a ^ b` anyway: with it, four instructions
+/// for four bytes (`orn`, `bic` with a shifted operand, `sub`, `and`).
+#[inline(always)]
+fn bytes_ge(a: u32, b: u32) -> u32 {
+    let differ = a ^ b;
+    (a | !b).wrapping_sub(!(differ >> 1) & LOW7) & HIGH
+}
+
+/// Which of four pixels (packed little-endian in `pixels`, first pixel in the low byte) are
+/// below `threshold`, as a nibble (first pixel = bit 0): [`bytes_ge`], and a multiplication
+/// gathers the four flags into a nibble.
 #[inline(always)]
 fn darker_than(pixels: u32, threshold: u8) -> u32 {
-    const HIGH: u32 = 0x8080_8080;
     let t = u32::from(threshold) * 0x0101_0101;
-    // Per byte, bit 7: low seven bits of the pixel >= those of the threshold.
-    let low_ge = ((pixels | HIGH).wrapping_sub(t & !HIGH)) & HIGH;
-    // Pixel >= threshold: its top bit set and the threshold's clear, or the top bits equal
-    // and the low bits decide.
-    let ge = (pixels & !t & HIGH) | (!(pixels ^ t) & low_ge);
-    let lt = (!ge & HIGH) >> 7;
+    let lt = (!bytes_ge(pixels, t) & HIGH) >> 7;
     // Bits 0, 8, 16, 24 -> 21, 22, 23, 24: the partial products land on distinct bits, so
     // nothing carries into the window.
     (lt.wrapping_mul(0x0020_4081) >> 21) & 0xF
 }
 
+/// 0xFF in every byte where the byte of `a` >= that of `b` ([`bytes_ge`]), 0 elsewhere.
+#[inline(always)]
+fn ge_mask(a: u32, b: u32) -> u32 {
+    // Each byte's flag (bit 7) moved to bit 0, times 0xFF: no byte carries into the next.
+    (bytes_ge(a, b) >> 7).wrapping_mul(0xFF)
+}
+
 /// Per-byte minimum and maximum of two words of four pixels (SIMD within a register, as
-/// [`darker_than`]): one per-byte comparison, spread to a byte mask, selects either way.
+/// [`bytes_ge`]): one per-byte comparison, spread to a byte mask, selects either way.
 #[inline(always)]
 fn byte_min_max(a: u32, b: u32) -> (u32, u32) {
-    const HIGH: u32 = 0x8080_8080;
-    let low_ge = ((a | HIGH).wrapping_sub(b & !HIGH)) & HIGH;
-    let ge = (a & !b & HIGH) | (!(a ^ b) & low_ge);
-    // 0xFF in every byte where a >= b.
-    let mask = (ge >> 7).wrapping_mul(0xFF);
-    ((b & mask) | (a & !mask), (a & mask) | (b & !mask))
+    // Where a >= b, the minimum is b = a ^ (a ^ b) and the maximum a = b ^ (a ^ b).
+    let swap = (a ^ b) & ge_mask(a, b);
+    (a ^ swap, b ^ swap)
+}
+
+/// Per-byte minimum of two words of four bytes ([`byte_min_max`]).
+#[inline(always)]
+fn byte_min(a: u32, b: u32) -> u32 {
+    a ^ ((a ^ b) & ge_mask(a, b))
+}
+
+/// Per-byte maximum of two words of four bytes ([`byte_min_max`]).
+#[inline(always)]
+fn byte_max(a: u32, b: u32) -> u32 {
+    b ^ ((a ^ b) & ge_mask(a, b))
+}
+
+/// The smallest byte of `mins` and the largest of `maxs`.
+///
+/// Both in the same two per-byte minima ([`byte_min`]): the maximum of the bytes is the
+/// complement of the minimum of their complements, so the low halves of `mins` and of
+/// `!maxs` are packed in one word, the high halves in another, and two halvings leave the
+/// minimum in byte 0 and the complemented maximum in byte 2. Fewer instructions than six
+/// byte extractions and comparisons.
+#[inline(always)]
+fn word_min_max(mins: u32, maxs: u32) -> (u8, u8) {
+    let not_maxs = !maxs;
+    let low_halves = (mins & 0xFFFF) | (not_maxs << 16);
+    let high_halves = (mins >> 16) | (not_maxs & 0xFFFF_0000);
+    let pairs = byte_min(low_halves, high_halves);
+    let single = byte_min(pairs, pairs >> 8);
+    (single as u8, !(single >> 16) as u8)
+}
+
+/// Per-byte threshold of four tiles from the minima `lo` and maxima `hi` of their windows
+/// (every byte of `hi` >= that of `lo`): the rounded-up mid-level, or 0 where the contrast
+/// is below `min_contrast` (that byte of `min_contrast` repeated in every byte).
+#[inline(always)]
+fn tile_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
+    // hi - lo cannot borrow across bytes (no byte of hi is below lo's).
+    let enough = ge_mask(hi.wrapping_sub(lo), min_contrast);
+    // ceil((lo + hi) / 2) = (lo | hi) - ((lo ^ hi) >> 1), per byte without borrows.
+    let mid = (lo | hi).wrapping_sub(((lo ^ hi) >> 1) & LOW7);
+    mid & enough
 }
 
 /// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold. `tiles` holds at
@@ -128,12 +185,8 @@ pub(crate) fn local_threshold(
             };
             let (mn01, mx01) = byte_min_max(word(a), word(b));
             let (mn23, mx23) = byte_min_max(word(c), word(d));
-            let (mn, _) = byte_min_max(mn01, mn23);
-            let (_, mx) = byte_min_max(mx01, mx23);
-            let [m0, m1, m2, m3] = mn.to_le_bytes();
-            let [x0, x1, x2, x3] = mx.to_le_bytes();
-            *lo = m0.min(m1).min(m2.min(m3));
-            *hi = x0.max(x1).max(x2.max(x3));
+            let (lo4, hi4) = (byte_min(mn01, mn23), byte_max(mx01, mx23));
+            (*lo, *hi) = word_min_max(lo4, hi4);
         }
         // A partial tile at the end of the rows (width not a multiple of the tile).
         let start = (w / TILE) * TILE;
@@ -150,19 +203,13 @@ pub(crate) fn local_threshold(
                 *hi = mx;
             }
         }
+        spread_along(mins, u8::min);
+        spread_along(maxs, u8::max);
     }
-    // Spread over the 3x3 tile neighbourhood, in place: a horizontal then a vertical pass,
-    // each carrying the previous original value in a register.
-    spread(tmin, tw, th, u8::min);
-    spread(tmax, tw, th, u8::max);
-    // Threshold per tile: flat tiles get 0, so no pixel there is dark.
-    for (lo, &hi) in tmin.iter_mut().zip(tmax.iter()) {
-        *lo = if hi.saturating_sub(*lo) < min_contrast {
-            0
-        } else {
-            (*lo as u16 + hi as u16).div_ceil(2) as u8
-        };
-    }
+    // Spread over the 3x3 tile neighbourhood, in place: the horizontal pass was done per
+    // tile row above; the vertical one also turns the window's extrema into thresholds (flat
+    // tiles get 0, so no pixel there is dark).
+    spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
     let wpr = words_per_row(w);
     for y in 0..h {
         let row = image.row(y);
@@ -181,20 +228,18 @@ pub(crate) fn local_threshold(
             .zip(thresholds.chunks_exact(32 / TILE))
             .zip(out.iter_mut())
         {
-            let flat = match *tile_thresholds {
-                [t0, t1, t2, t3, t4, t5, t6, t7] => {
-                    u32::from_le_bytes([t0, t1, t2, t3]) | u32::from_le_bytes([t4, t5, t6, t7]) == 0
-                }
-                _ => false,
-            };
-            if flat {
+            // The eight thresholds in one 64-bit value (two word loads): zero when all eight
+            // tiles are flat.
+            let eight = <[u8; 8]>::try_from(tile_thresholds).map_or(0, u64::from_le_bytes);
+            if eight == 0 {
                 *word = 0;
                 continue;
             }
             let mut bits = 0u32;
-            for (t, (quad, &th)) in pixels.chunks_exact(TILE).zip(tile_thresholds).enumerate() {
+            for (t, quad) in pixels.chunks_exact(TILE).enumerate() {
                 if let [a, b, c, d] = *quad {
-                    bits |= darker_than(u32::from_le_bytes([a, b, c, d]), th) << (TILE * t);
+                    let threshold = (eight >> (8 * t)) as u8;
+                    bits |= darker_than(u32::from_le_bytes([a, b, c, d]), threshold) << (TILE * t);
                 }
             }
             *word = bits;
@@ -212,29 +257,79 @@ pub(crate) fn local_threshold(
     }
 }
 
-/// 3x3 min (or max) filter of a `tw` x `th` grid, in place.
-fn spread(grid: &mut [u8], tw: usize, th: usize, pick: fn(u8, u8) -> u8) {
-    for row in grid.chunks_mut(tw.max(1)).take(th) {
-        let mut previous = row.first().copied().unwrap_or(0);
-        for x in 0..tw {
-            let current = row.get(x).copied().unwrap_or(0);
-            let next = row.get(x + 1).copied().unwrap_or(current);
-            if let Some(cell) = row.get_mut(x) {
-                *cell = pick(pick(previous, current), next);
+/// 3-wide min (or max) filter of one row of tiles, in place (the edges repeat): the write
+/// trails the read by one cell, so the original neighbours stay in registers. (Four tiles a
+/// word, as [`spread_down_to_thresholds`] does, measured no faster: the shifted neighbour
+/// words and the bounds of the look-ahead cost as much as the byte compares they save.)
+#[inline(always)]
+fn spread_along(row: &mut [u8], pick: impl Fn(u8, u8) -> u8) {
+    let mut cells = row.iter_mut();
+    let Some(mut slot) = cells.next() else {
+        return;
+    };
+    let (mut previous, mut current) = (*slot, *slot);
+    for cell in cells {
+        let next = *cell;
+        *slot = pick(pick(previous, current), next);
+        (previous, current, slot) = (current, next, cell);
+    }
+    *slot = pick(previous, current);
+}
+
+/// The vertical half of the 3x3 min filter of `tmin` and max filter of `tmax` (`tw` x `th`
+/// grids, already filtered along their rows; the edges repeat), then each tile's threshold
+/// ([`tile_thresholds`]) written into `tmin`.
+///
+/// Four columns at a time, as one 32-bit word per grid (SWAR, see [`byte_min_max`]), walking
+/// down the grid with the previous row's original words in registers; the columns past the
+/// last whole word one at a time.
+fn spread_down_to_thresholds(tmin: &mut [u8], tmax: &[u8], tw: usize, th: usize, min_contrast: u8) {
+    let word_at = |grid: &[u8], i: usize| {
+        grid.get(i..i + 4)
+            .and_then(|b| <[u8; 4]>::try_from(b).ok())
+            .map_or(0, u32::from_le_bytes)
+    };
+    let contrast = u32::from(min_contrast) * 0x0101_0101;
+    let whole = tw / 4 * 4;
+    for x in (0..whole).step_by(4) {
+        let (mut previous_lo, mut previous_hi) = (word_at(tmin, x), word_at(tmax, x));
+        let (mut lo, mut hi) = (previous_lo, previous_hi);
+        for y in 0..th {
+            let below = (y + 1) * tw + x;
+            let (next_lo, next_hi) = if y + 1 < th {
+                (word_at(tmin, below), word_at(tmax, below))
+            } else {
+                (lo, hi)
+            };
+            let window_lo = byte_min(byte_min(previous_lo, lo), next_lo);
+            let window_hi = byte_max(byte_max(previous_hi, hi), next_hi);
+            let threshold = tile_thresholds(window_lo, window_hi, contrast);
+            if let Some(out) = tmin.get_mut(y * tw + x..y * tw + x + 4) {
+                out.copy_from_slice(&threshold.to_le_bytes());
             }
-            previous = current;
+            (previous_lo, previous_hi, lo, hi) = (lo, hi, next_lo, next_hi);
         }
     }
-    for x in 0..tw {
-        let mut previous = grid.get(x).copied().unwrap_or(0);
+    for x in whole..tw {
+        let at = |grid: &[u8], y: usize| grid.get(y * tw + x).copied().unwrap_or(0);
+        let (mut previous_lo, mut previous_hi) = (at(tmin, 0), at(tmax, 0));
+        let (mut lo, mut hi) = (previous_lo, previous_hi);
         for y in 0..th {
-            let current = grid.get(y * tw + x).copied().unwrap_or(0);
-            let next = grid.get((y + 1) * tw + x).copied().unwrap_or(current);
-            let next = if y + 1 < th { next } else { current };
-            if let Some(cell) = grid.get_mut(y * tw + x) {
-                *cell = pick(pick(previous, current), next);
+            let (next_lo, next_hi) = if y + 1 < th {
+                (at(tmin, y + 1), at(tmax, y + 1))
+            } else {
+                (lo, hi)
+            };
+            let window_lo = previous_lo.min(lo).min(next_lo);
+            let window_hi = previous_hi.max(hi).max(next_hi);
+            if let Some(cell) = tmin.get_mut(y * tw + x) {
+                *cell = if window_hi - window_lo < min_contrast {
+                    0
+                } else {
+                    (u16::from(window_lo) + u16::from(window_hi)).div_ceil(2) as u8
+                };
             }
-            previous = current;
+            (previous_lo, previous_hi, lo, hi) = (lo, hi, next_lo, next_hi);
         }
     }
 }
@@ -242,6 +337,56 @@ fn spread(grid: &mut [u8], tw: usize, th: usize, pick: fn(u8, u8) -> u8) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every pair of bytes, in every lane, with different bytes around it.
+    #[test]
+    fn bytes_ge_agrees_with_bytes() {
+        for a in 0..=255u8 {
+            for b in 0..=255u8 {
+                for lane in 0..4 {
+                    let (x, y) = (u32::from(a) << (8 * lane), u32::from(b) << (8 * lane));
+                    let others = 0x5AFF_00A5 & !(0xFF << (8 * lane));
+                    let ge = bytes_ge(
+                        x | others,
+                        y | (others.rotate_left(8) & !(0xFF << (8 * lane))),
+                    );
+                    assert_eq!(
+                        ge >> (8 * lane + 7) & 1 == 1,
+                        a >= b,
+                        "{a} >= {b} lane {lane}"
+                    );
+                }
+                let threshold = tile_thresholds(u32::from(a.min(b)), u32::from(a.max(b)), 20);
+                let (lo, hi) = (a.min(b), a.max(b));
+                let expected = if hi - lo < 20 {
+                    0
+                } else {
+                    (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
+                };
+                assert_eq!(threshold as u8, expected, "{lo} {hi}");
+            }
+        }
+    }
+
+    #[test]
+    fn word_min_max_agrees_with_bytes() {
+        let mut seed = 99u32;
+        for _ in 0..20_000 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let mins = seed;
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let maxs = seed;
+            let expected_min = mins.to_le_bytes().into_iter().min().unwrap();
+            let expected_max = maxs.to_le_bytes().into_iter().max().unwrap();
+            assert_eq!(word_min_max(mins, maxs), (expected_min, expected_max));
+        }
+        for level in 0..=255u8 {
+            let word = u32::from_le_bytes([level, 255, level, 0]);
+            assert_eq!(word_min_max(word, word), (0, 255));
+            let word = u32::from(level) * 0x0101_0101;
+            assert_eq!(word_min_max(word, word), (level, level));
+        }
+    }
 
     #[test]
     fn byte_min_max_agrees_with_bytes() {
