@@ -442,9 +442,17 @@ impl Detector {
                 if dark == 0 {
                     continue;
                 }
+                // Every start has a light west neighbour and is not on a followed boundary:
+                // most dark words (the insides of runs, edges already followed) have none,
+                // and then the six words above and below are not read.
+                let left = word(row, k.wrapping_sub(1));
+                let light_west = dark & !((dark << 1) | (left >> 31));
+                if light_west & !tracer.visited_word(y * wpr + k) == 0 {
+                    continue;
+                }
                 let three = |r: &[u32]| [word(r, k.wrapping_sub(1)), word(r, k), word(r, k + 1)];
                 let neighbourhood = contour::Neighbourhood {
-                    left: word(row, k.wrapping_sub(1)),
+                    left,
                     dark,
                     right: word(row, k + 1),
                     above: three(above),

@@ -67,16 +67,22 @@ fn bytes_ge(a: u32, b: u32) -> u32 {
     (a | !b).wrapping_sub(!(differ >> 1) & LOW7) & HIGH
 }
 
-/// Which of four pixels (packed little-endian in `pixels`, first pixel in the low byte) are
-/// below `threshold`, as a nibble (first pixel = bit 0): [`bytes_ge`], and a multiplication
-/// gathers the four flags into a nibble.
+/// Which of eight pixels, two tiles' four each (packed little-endian in `first` and
+/// `second`, first pixel in the low byte), are below their tile's threshold, as a byte
+/// (first pixel = bit 0): [`bytes_ge`] per tile, then one multiplication gathers all eight
+/// flags.
+///
+/// The first tile's flags sit on bits 0, 8, 16, 24 and the second's on 4, 12, 20, 28; the
+/// multiplier `1 + 2^7 + 2^14 + 2^21` moves them to bits 21 to 28 in pixel order, and no two
+/// of the partial products (a flag bit plus a multiple of 7 up to 21) share a bit, so
+/// nothing carries into that window.
 #[inline(always)]
-fn darker_than(pixels: u32, threshold: u8) -> u32 {
-    let t = u32::from(threshold) * 0x0101_0101;
-    let lt = (!bytes_ge(pixels, t) & HIGH) >> 7;
-    // Bits 0, 8, 16, 24 -> 21, 22, 23, 24: the partial products land on distinct bits, so
-    // nothing carries into the window.
-    (lt.wrapping_mul(0x0020_4081) >> 21) & 0xF
+fn darker_pair(first: u32, first_threshold: u8, second: u32, second_threshold: u8) -> u32 {
+    let broadcast = |threshold: u8| u32::from(threshold) * 0x0101_0101;
+    let at_least_first = bytes_ge(first, broadcast(first_threshold)) >> 7;
+    let at_least_second = bytes_ge(second, broadcast(second_threshold)) >> 3;
+    let darker = (at_least_first | at_least_second) ^ 0x1111_1111;
+    (darker.wrapping_mul(0x0020_4081) >> 21) & 0xFF
 }
 
 /// 0xFF in every byte where the byte of `a` >= that of `b` ([`bytes_ge`]), 0 elsewhere.
@@ -236,10 +242,15 @@ pub(crate) fn local_threshold(
                 continue;
             }
             let mut bits = 0u32;
-            for (t, quad) in pixels.chunks_exact(TILE).enumerate() {
-                if let [a, b, c, d] = *quad {
-                    let threshold = (eight >> (8 * t)) as u8;
-                    bits |= darker_than(u32::from_le_bytes([a, b, c, d]), threshold) << (TILE * t);
+            for (pair, octet) in pixels.chunks_exact(2 * TILE).enumerate() {
+                if let [a0, a1, a2, a3, b0, b1, b2, b3] = *octet {
+                    let (first, second) = (
+                        u32::from_le_bytes([a0, a1, a2, a3]),
+                        u32::from_le_bytes([b0, b1, b2, b3]),
+                    );
+                    let thresholds = eight >> (16 * pair);
+                    let (t0, t1) = (thresholds as u8, (thresholds >> 8) as u8);
+                    bits |= darker_pair(first, t0, second, t1) << (2 * TILE * pair);
                 }
             }
             *word = bits;
@@ -407,7 +418,7 @@ mod tests {
     }
 
     #[test]
-    fn darker_than_agrees_with_byte_comparisons() {
+    fn darker_pair_agrees_with_byte_comparisons() {
         let levels = [0u8, 1, 2, 63, 64, 127, 128, 129, 191, 200, 254, 255];
         for &t in &levels {
             for &a in &levels {
@@ -417,8 +428,19 @@ mod tests {
                             | ((b < t) as u32) << 1
                             | ((c < t) as u32) << 2
                             | ((d < t) as u32) << 3;
-                        let got = darker_than(u32::from_le_bytes([a, b, c, d]), t);
-                        assert_eq!(got, expected, "{a} {b} {c} {d} < {t}");
+                        let pixels = u32::from_le_bytes([a, b, c, d]);
+                        let other = pixels.rotate_left(8);
+                        let expected_other = (expected << 1 | expected >> 3) & 0xF;
+                        for u in [t, 0, 255, a] {
+                            let others = (other.to_le_bytes().map(|p| (p < u) as u32), u);
+                            let ([p0, p1, p2, p3], u) = others;
+                            let expected_u = p0 | p1 << 1 | p2 << 2 | p3 << 3;
+                            let got = darker_pair(pixels, t, other, u);
+                            assert_eq!(got & 0xF, expected, "{a} {b} {c} {d} < {t}");
+                            assert_eq!(got >> 4, expected_u, "{other:#x} < {u}");
+                        }
+                        let got = darker_pair(pixels, t, other, t);
+                        assert_eq!(got >> 4, expected_other, "{a} {b} {c} {d} < {t}");
                     }
                 }
             }
