@@ -3,11 +3,10 @@
 //! ## Pipeline (one function per step, see the submodules)
 //! 1. [`threshold`]: binarise against a local (tile min/max) threshold, so shadows and
 //!    brightness gradients across the frame do not matter; pixels without local contrast are
-//!    never "dark". The paper's variant ([`Method::Paper`]) instead normalises, blurs, takes
-//!    3x3 gradients and marks strong edges.
+//!    never "dark".
 //! 2. [`contour`]: scan the binary image for the tops of dark regions and follow each
 //!    region's outer boundary (Moore neighbour tracing, iterative); holes only for
-//!    white-on-black families and the paper's pipeline.
+//!    white-on-black families.
 //! 3. [`quad`]: screen each boundary (length, compactness, sampled convexity, diameter), then
 //!    simplify the survivors with Douglas-Peucker and keep convex four-corner shapes with
 //!    sane edges and angles. A quick look at the rough corners ([`decode::precheck`]: border
@@ -19,6 +18,14 @@
 //!    margin, and look the code up in all four rotations with bounded error correction.
 //! 6. De-duplicate: the same marker found twice (two contours, two families) is kept once,
 //!    with the fewest corrected bits and then the largest decision margin.
+//!
+//! ## The paper's method
+//! [`Method::Paper`] reproduces the reference paper's tables. What it does differently
+//! (an edge map instead of step 1, every contour traced, no quick look, corners stepped back
+//! from the edge band instead of step 4, cells read as area means and matched exactly) is
+//! all in [`paper`], as one implementation of the private `Strategy` trait that
+//! [`Detector::detect`] picks once per frame; the steps above only ask the strategy, so the
+//! production path has no branches for the paper.
 //!
 //! ## Time
 //! Every step draws from one work budget per frame
