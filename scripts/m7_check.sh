@@ -138,7 +138,7 @@ while read -r region _; do
     fi
 done <"$BASELINE"
 
-# Per frame: the sum of its stages (pipeline: detection and pad fix; filter; encode).
+# Per frame: the sum of its stages (pipeline: detection, pad fix and estimator; target; encode).
 echo
 printf '%-28s %12s %8s\n' "frame (all stages)" insns insn/px
 awk -F'[: ]' '{ sum[$1] += $NF; if (!($1 in seen)) { seen[$1] = 1; order[n++] = $1 } }

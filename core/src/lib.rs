@@ -12,9 +12,11 @@
 //!
 //! The data path is one straight line:
 //! frame ([`image::GrayImage`]) -> candidates ([`detect`]) -> decoded markers
-//! ([`detect::Detection`]) -> pose ([`pose`], with the [`camera`] model and the [`pad`]
-//! layout) -> filter ([`filter`]) -> vehicle frames ([`frames`]) -> messages. The camera side
-//! of it, up to the pad fix, is one type that every caller uses: [`pipeline::FramePipeline`].
+//! ([`detect::Detection`]) -> pad fix ([`pose`], with the [`camera`] model and the [`pad`]
+//! layout) -> estimator ([`filter`], with the vehicle's attitude and the [`filter::axes`]) ->
+//! messages ([`companion`]). Everything up to the estimate is one type that every caller uses,
+//! [`pipeline::FramePipeline`]; the MAVLink side turns its output into bytes. The MAVLink
+//! parameters and what they set are [`params`].
 //!
 //! Conventions (the project's contract, see `README.md`): pixel (0, 0) is the centre of the
 //! top-left pixel, x right, y down; marker corners are the outer corners of the black border,
@@ -36,13 +38,14 @@
 
 pub mod camera;
 pub mod companion;
+mod crc;
 pub mod detect;
 pub mod family;
 pub mod filter;
-pub mod frames;
 pub mod geometry;
 pub mod image;
 pub mod pad;
+pub mod params;
 pub mod pipeline;
 pub mod pose;
 pub mod sensor;

@@ -9,16 +9,17 @@
 //!   param_store ─ LinkEvent::Status ────────────────────┘   (Channel, 4)     │   (to the FC)
 //!       ▲                                                                    │
 //!       └──────────────── SAVE (Signal<ParamSet>) ───────────────────────────┤
-//!   vision ◄───────────── VISION_SETTINGS (Signal<VisionSettings>) ──────────┘
+//!   vision ◄───────────── PIPELINE_SETTINGS (Signal<PipelineSettings>) ──────┤
+//!   vision ◄───────────── VEHICLE (Mutex<VehicleState>, newest copy) ────────┘
 //!
 //!   vision ── FRAMES_DONE ──┐
 //!                           ├──► watchdog ──► IWDG1 (petted while both counters move)
 //!   link ──── LINK_LOOPS ───┘
 //! ```
 //!
-//! - [`LINK_EVENTS`]: processed frames and faults for the MAVLink link. A channel, because
-//!   every frame matters to the tracker in order. Four events hold 133 ms of frames at 30 fps
-//!   (a [`LinkEvent`] is about 220 bytes, so under 1 KiB of DTCM); the link takes each one as
+//! - [`LINK_EVENTS`]: each frame's estimate and faults for the MAVLink link. A channel, because
+//!   every frame's target matters, in order. Four events hold 133 ms of frames at 30 fps
+//!   (a [`LinkEvent`] is a few hundred bytes, so about 1 KiB of DTCM); the link takes each one as
 //!   soon as it runs (it waits on the channel), so the queue only fills when the link is
 //!   stuck, e.g. blocked on a UART that does not drain. (Events posted at boot before the
 //!   link runs, the restore report of the parameter store and the camera probe's, wait in
@@ -26,9 +27,16 @@
 //!   and counts it ([`dropped_link_events`], in the link's summary) rather than make the
 //!   vision task wait: a late frame is worth nothing to the flight controller, a stalled
 //!   camera loop costs every frame after it.
-//! - [`VISION_SETTINGS`]: the camera-side parameters, from the link (which sees PARAM_SET) to
-//!   the vision task. A signal: only the newest settings matter, and a burst of PARAM_SETs
-//!   within one frame collapses into one update the vision task applies once.
+//! - [`PIPELINE_SETTINGS`]: the per-frame path's parameters, from the link (which sees
+//!   PARAM_SET) to the vision task. A signal: only the newest settings matter, and a burst of
+//!   PARAM_SETs within one frame collapses into one update the vision task applies once.
+//! - [`VEHICLE`]: the vehicle state (attitude and local position histories) the link decodes
+//!   from the autopilot, for the estimator in the vision task, which reads it at each frame's
+//!   exposure. A mutex around one copy, not a channel: the estimator wants the whole recent
+//!   history at once, not each sample, and the newest copy supersedes the older. The link
+//!   writes it after every received chunk ([`publish_vehicle`]), the vision task copies it out
+//!   before each frame ([`read_vehicle`]); each copy is about 1.3 KiB, a microsecond inside
+//!   the critical section, so neither ever holds the lock while it works.
 //! - [`SAVE`]: the whole parameter set to write to flash, from the link (after its debounce)
 //!   to the parameter store. A signal: each set is complete, so a newer one supersedes an
 //!   unsaved older one while a slow erase is in progress.
@@ -40,18 +48,22 @@
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use core::cell::RefCell;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
-use touchdown_core::companion::params::ParamSet;
-use touchdown_core::companion::{FrameResult, MavSeverity, VisionSettings};
 
-/// What the other tasks send the link. (A frame is ~220 bytes, a status ~12; boxing the
-/// larger variant is not an option without a heap.)
+use embassy_sync::blocking_mutex::Mutex;
+use touchdown_core::companion::MavSeverity;
+use touchdown_core::filter::{FrameEstimate, VehicleState};
+use touchdown_core::params::{ParamSet, PipelineSettings};
+
+/// What the other tasks send the link. (A frame's estimate is a few hundred bytes, a status
+/// ~12; boxing the larger variant is not an option without a heap.)
 #[allow(clippy::large_enum_variant)]
 pub enum LinkEvent {
-    /// A processed frame (exposure time and pad fix, if any).
-    Frame(FrameResult),
+    /// A processed frame: its exposure time and the estimate at it.
+    Frame(FrameEstimate),
     /// A fault or notice for the ground station (STATUSTEXT).
     Status(MavSeverity, &'static str),
 }
@@ -79,8 +91,22 @@ pub fn dropped_link_events() -> u32 {
     DROPPED_LINK_EVENTS.load(Ordering::Relaxed)
 }
 
-/// New camera-side settings from the link task for the vision task (the newest wins).
-pub static VISION_SETTINGS: Signal<CriticalSectionRawMutex, VisionSettings> = Signal::new();
+/// New per-frame path settings from the link task for the vision task (the newest wins).
+pub static PIPELINE_SETTINGS: Signal<CriticalSectionRawMutex, PipelineSettings> = Signal::new();
+
+/// The newest copy of the vehicle state, from the link task for the vision task's estimator.
+pub static VEHICLE: Mutex<CriticalSectionRawMutex, RefCell<VehicleState>> =
+    Mutex::new(RefCell::new(VehicleState::new()));
+
+/// Replaces the shared vehicle state with `vehicle` (called by the link task).
+pub fn publish_vehicle(vehicle: &VehicleState) {
+    VEHICLE.lock(|shared| shared.borrow_mut().clone_from(vehicle));
+}
+
+/// Copies the shared vehicle state into `vehicle` (called by the vision task before a frame).
+pub fn read_vehicle(vehicle: &mut VehicleState) {
+    VEHICLE.lock(|shared| vehicle.clone_from(&shared.borrow()));
+}
 
 /// The parameter set for the parameter store to save (the newest wins if saves pile up).
 pub static SAVE: Signal<CriticalSectionRawMutex, ParamSet> = Signal::new();

@@ -1,6 +1,6 @@
 //! Compile-time defaults: camera, lens, pad, MAVLink profile.
 //!
-//! What users tune in the field is a MAVLink parameter (`touchdown_core::companion::params`,
+//! What users tune in the field is a MAVLink parameter (`touchdown_core::params`,
 //! persisted in flash by [`crate::param_store`]): among them the auto-exposure limits
 //! (TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET, defaults `AutoExposureLimits::default()`), the
 //! decoder's correction cap (TD_MAX_HAMMING) and the printed size of the pad (TD_TAG_SIZE);
@@ -8,8 +8,8 @@
 //! your lens and pad, then rebuild.
 
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::VisionSettings;
 use touchdown_core::pad::{designs, PadLayout};
+use touchdown_core::params::PipelineSettings;
 use touchdown_core::sensor::any::Model;
 use touchdown_core::sensor::{Config, Exposure, GainX16};
 
@@ -95,7 +95,7 @@ pub const PAD: &PadLayout<'static> = &designs::NESTED;
 
 /// The size `settings` (TD_TAG_SIZE) scales [`PAD`] to, in whole percent of its built size
 /// (for logs and STATUSTEXT; saturates, NaN gives 0).
-pub fn pad_scale_percent(settings: &VisionSettings) -> u32 {
+pub fn pad_scale_percent(settings: &PipelineSettings) -> u32 {
     (settings.pad_scale(PAD) * 100.0 + 0.5) as u32
 }
 

@@ -2,8 +2,10 @@
 //!
 //! One task owns the [`Companion`] (touchdown-core's sans-IO MAVLink state machine) and the
 //! UART; everything else talks to it through the [`LINK_EVENTS`] channel
-//! ([`crate::channels`]): the vision task posts each processed frame ([`LinkEvent::Frame`])
-//! and faults ([`LinkEvent::Status`]), the parameter store its faults. One owner and a channel
+//! ([`crate::channels`]): the vision task posts each frame's estimate ([`LinkEvent::Frame`])
+//! and faults ([`LinkEvent::Status`]), the parameter store its faults. After each received
+//! chunk the link publishes the companion's vehicle state ([`channels::publish_vehicle`]) for
+//! the vision task's estimator. One owner and a channel
 //! keeps it simple: no lock around the companion, no task ever waits on another's critical
 //! section, and the vision task never blocks on the link (a full channel drops and counts the
 //! event rather than stall a frame).
@@ -20,9 +22,10 @@
 //! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
 //! stable for two seconds ([`SaveDebounce`]): the link signals [`SAVE`] to the
 //! parameter store task. Those of the camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure
-//! limits) take effect at once: after every input the link converts the parameters with
-//! [`VisionSettings::from_params`] and, when the result differs from what it last published,
-//! signals [`VISION_SETTINGS`] (the vision task started with the settings of the parameters
+//! limits, TD_CAM_YAW) take effect at once: after every input the link converts the parameters
+//! with [`PipelineSettings::from_params`] and, when the result differs from what it last
+//! published, signals [`PIPELINE_SETTINGS`] (the vision task started with the settings of the
+//! parameters
 //! restored at boot). A changed TD_TAG_SIZE is confirmed to the ground station with a
 //! STATUSTEXT giving the pad's scale, so a size typed for the wrong marker shows before the
 //! flight.
@@ -34,10 +37,11 @@ use embassy_futures::select::{select3, Either3};
 use embassy_stm32::usart::BufferedUart;
 use embassy_time::{Duration, Instant, Ticker};
 use embedded_io_async::{Read, Write};
-use touchdown_core::companion::persist::SaveDebounce;
-use touchdown_core::companion::{Companion, MavSeverity, ParamId, VisionSettings, MAX_FRAME_LEN};
+use touchdown_core::companion::{Companion, MavSeverity, MAX_FRAME_LEN};
+use touchdown_core::params::persist::SaveDebounce;
+use touchdown_core::params::{ParamId, PipelineSettings};
 
-use crate::channels::{self, LinkEvent, LINK_EVENTS, SAVE, VISION_SETTINGS};
+use crate::channels::{self, LinkEvent, LINK_EVENTS, PIPELINE_SETTINGS, SAVE};
 use crate::config;
 
 /// How often the link runs its periodic work without any input.
@@ -61,9 +65,9 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
     let mut uart_errors = 0u32;
     let mut next_summary = Instant::now() + SUMMARY_PERIOD;
     // What the vision task runs with: main gave it the settings of the restored parameters.
-    let mut vision_settings = VisionSettings::from_params(companion.params());
-    if vision_settings.tag_size_m.is_some() {
-        announce_pad_scale(&mut companion, &vision_settings);
+    let mut pipeline_settings = PipelineSettings::from_params(companion.params());
+    if pipeline_settings.tag_size_m.is_some() {
+        announce_pad_scale(&mut companion, &pipeline_settings);
     }
     info!(
         "link: profile {}, sysid {}, compid {}",
@@ -74,27 +78,30 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
 
     loop {
         match select3(rx.read(&mut rx_buf), LINK_EVENTS.receive(), ticker.next()).await {
-            Either3::First(Ok(n)) => companion.receive(rx_buf.get(..n).unwrap_or(&[]), now_us()),
+            Either3::First(Ok(n)) => {
+                companion.receive(rx_buf.get(..n).unwrap_or(&[]), now_us());
+                channels::publish_vehicle(companion.vehicle());
+            }
             Either3::First(Err(e)) => {
                 // Framing/noise/overrun: the parser resynchronises on the next frame start.
                 uart_errors = uart_errors.wrapping_add(1);
                 defmt::debug!("link: uart {}", e);
             }
             Either3::Second(LinkEvent::Frame(frame)) => {
-                companion.on_frame(frame, now_us());
+                companion.on_estimate(&frame, now_us());
             }
             Either3::Second(LinkEvent::Status(severity, text)) => {
                 companion.queue_status_text(severity, text);
             }
             Either3::Third(()) => {}
         }
-        let settings = VisionSettings::from_params(companion.params());
-        if settings != vision_settings {
-            if settings.tag_size_m != vision_settings.tag_size_m {
+        let settings = PipelineSettings::from_params(companion.params());
+        if settings != pipeline_settings {
+            if settings.tag_size_m != pipeline_settings.tag_size_m {
                 announce_pad_scale(&mut companion, &settings);
             }
-            VISION_SETTINGS.signal(settings);
-            vision_settings = settings;
+            PIPELINE_SETTINGS.signal(settings);
+            pipeline_settings = settings;
         }
         while let Some(n) = companion.poll_transmit(now_us(), &mut tx_buf) {
             if let Err(e) = tx.write_all(tx_buf.get(..n).unwrap_or(&[])).await {
@@ -126,7 +133,7 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
 }
 
 /// Tells the ground station what TD_TAG_SIZE does to the built pad (its scale in percent).
-fn announce_pad_scale(companion: &mut Companion, settings: &VisionSettings) {
+fn announce_pad_scale(companion: &mut Companion, settings: &PipelineSettings) {
     // Room to spare: `queue_status_text` cuts at STATUSTEXT's 50 bytes, which these texts fit
     // (50 with a four-digit percentage).
     let mut text = heapless::String::<64>::new();

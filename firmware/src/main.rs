@@ -55,7 +55,8 @@ use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use panic_probe as _;
-use touchdown_core::companion::{Companion, CompanionConfig, ParamId, VisionSettings};
+use touchdown_core::companion::{Companion, CompanionConfig};
+use touchdown_core::params::{ParamId, PipelineSettings};
 
 use crate::axisram::axisram_static;
 use crate::capture::{Capture, FrameBuffer};
@@ -115,15 +116,11 @@ async fn main(spawner: Spawner) {
     }
     info!("link: {} baud", baud);
     // The vision task starts with the restored parameters; later changes come from the link.
-    let vision_settings = VisionSettings::from_params(&params);
-    let companion = unwrap!(
-        Companion::new(CompanionConfig {
-            params,
-            ..CompanionConfig::default()
-        })
-        .ok(),
-        "the default tracker configuration is valid"
-    );
+    let pipeline_settings = PipelineSettings::from_params(&params);
+    let companion = Companion::new(CompanionConfig {
+        params,
+        ..CompanionConfig::default()
+    });
 
     // The DCMI set-up is the same for both supported sensors, so it is done before the vision
     // task has probed the SCCB bus for the one that is fitted.
@@ -149,7 +146,7 @@ async fn main(spawner: Spawner) {
         Capture::new(camera.dcmi),
         [front, back],
         workspace,
-        vision_settings
+        pipeline_settings
     )));
 }
 

@@ -1,8 +1,10 @@
-//! The vision task: camera frames in, pad fixes out to the MAVLink link.
+//! The vision task: camera frames in, pad estimates out to the MAVLink link.
 //!
 //! Per frame: capture (DMA, [`crate::capture`]) of frame n+1 runs while frame n goes through
-//! core's [`FramePipeline`] (markers, then the pad fix: the very code the host tools run) and
-//! the result is posted to the link task with the frame's exposure time. The software
+//! core's [`FramePipeline`] (markers, the pad fix, the estimator: the very code the host tools
+//! and the replay run, with the vehicle state the link task last published in
+//! [`channels::VEHICLE`]) and the estimate is posted to the link task with the frame's
+//! exposure time. The software
 //! auto-exposure ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
 //!
 //! The sensor: at start the task power-cycles it and asks the SCCB bus which supported sensor
@@ -14,12 +16,13 @@
 //! line and frame timing the driver reports ([`FrameTiming`]: exposure units, readout time
 //! for the time stamp) differ between them.
 //!
-//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_EXP_MAX_US,
-//! TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`VisionSettings`]: at boot as the task's argument
-//! (from the parameters restored from flash, before the first frame), afterwards through
-//! [`VISION_SETTINGS`], which the link task signals whenever a PARAM_SET changed them. They are
-//! taken before a frame is processed, never during it: the detector's correction cap and the
-//! pad (the built [`config::PAD`], scaled to TD_TAG_SIZE), both by [`FramePipeline::apply`],
+//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_CAM_YAW,
+//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`PipelineSettings`]: at boot as the
+//! task's argument (from the parameters restored from flash, before the first frame),
+//! afterwards through [`PIPELINE_SETTINGS`], which the link task signals whenever a PARAM_SET
+//! changed them. They are taken before a frame is processed, never during it: the detector's
+//! correction cap, the pad (the built [`config::PAD`], scaled to TD_TAG_SIZE) and the camera
+//! mount, all by [`FramePipeline::apply`],
 //! and the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
 //! current exposure is outside them). No restart, no lost frame.
 //!
@@ -61,21 +64,22 @@
 //! capture was armed late) and the failed captures by cause (overrun, short frame, timeout,
 //! synchronisation error); then re-initialisations.
 
-use defmt::{debug, info, warn};
+use defmt::{debug, info, unwrap, warn};
 use embassy_futures::join::join;
 use embassy_stm32::gpio::Output;
 use embassy_time::{Delay, Duration, Instant, Timer};
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{MavSeverity, VisionSettings};
-use touchdown_core::detect::DetectorConfig;
+use touchdown_core::companion::MavSeverity;
+use touchdown_core::filter::VehicleState;
 use touchdown_core::image::GrayImage;
-use touchdown_core::pipeline::FramePipeline;
+use touchdown_core::params::PipelineSettings;
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_core::sensor::any::{self, Camera};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, ExposureSetting};
 use touchdown_core::sensor::FrameTiming;
 
 use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, SENSOR_RESOLUTION, WIDTH};
-use crate::channels::{self, LinkEvent, VISION_SETTINGS};
+use crate::channels::{self, LinkEvent, PIPELINE_SETTINGS};
 use crate::config;
 use crate::families::SEARCHED;
 use crate::sccb::{Sccb, SccbError};
@@ -179,23 +183,24 @@ struct Summary {
 
 /// Hands `settings` to the pipeline (the caller updates the exposure loop) and logs what
 /// they do.
-fn apply_settings(pipeline: &mut FramePipeline<'static>, settings: VisionSettings) {
+fn apply_settings(pipeline: &mut FramePipeline<'static>, settings: PipelineSettings) {
     if let Err(e) = pipeline.apply(settings) {
         // Only an empty built pad cannot be scaled, and a test keeps the shipped pads
         // non-empty; the pipeline then searches the pad as built.
         warn!("vision: pad '{}' not scaled: {}", config::PAD.name(), e);
     }
     info!(
-        "vision: max hamming {}, pad '{}' at {} % of its built size, exposure {}",
+        "vision: max hamming {}, pad '{}' at {} % of its built size, camera yaw {} deg, exposure {}",
         settings.max_hamming,
         pipeline.pad().name(),
         config::pad_scale_percent(&settings),
+        settings.cam_yaw_deg,
         settings.exposure
     );
 }
 
 /// Runs the camera and the detector forever, starting with `settings` (the parameters
-/// restored at boot) and following [`VISION_SETTINGS`].
+/// restored at boot) and following [`PIPELINE_SETTINGS`].
 #[embassy_executor::task]
 pub async fn task(
     pins: SensorPins,
@@ -203,16 +208,22 @@ pub async fn task(
     mut capture: Capture,
     buffers: [&'static mut FrameBuffer; 2],
     workspace: &'static mut Workspace,
-    settings: VisionSettings,
+    settings: PipelineSettings,
 ) {
     let mut sensor = Sensor::probe(pins, sccb).await;
-    let mut pipeline = FramePipeline::new(
-        SEARCHED,
-        config::PAD,
-        *sensor.camera_model(),
-        DetectorConfig::default(),
-        settings,
+    let mut pipeline = unwrap!(
+        FramePipeline::new(
+            SEARCHED,
+            config::PAD,
+            *sensor.camera_model(),
+            PipelineConfig::default(),
+            settings,
+        )
+        .ok(),
+        "the default tracker configuration is valid"
     );
+    // The estimator's copy of the vehicle state, refreshed before each frame.
+    let mut vehicle = VehicleState::new();
     apply_settings(&mut pipeline, settings);
     let [mut front, mut back] = buffers;
     info!(
@@ -275,7 +286,7 @@ pub async fn task(
             // Capture into `back` (polled first, so the DMA is armed before anything else
             // runs) while the rest of the frame's work overlaps it: see the module docs.
             let (captured, processed) = join(capture.capture(back, timeout), async {
-                if let Some(settings) = VISION_SETTINGS.try_take() {
+                if let Some(settings) = PIPELINE_SETTINGS.try_take() {
                     apply_settings(&mut pipeline, settings);
                     if let Some(setting) =
                         exposure.set_limits(settings.exposure, timing.line_ns, timing.frame_lines)
@@ -284,7 +295,16 @@ pub async fn task(
                     }
                 }
                 let end = front_end?;
-                let processed = process(front, end, &timing, &exposure, &mut pipeline, workspace);
+                channels::read_vehicle(&mut vehicle);
+                let processed = process(
+                    front,
+                    end,
+                    &timing,
+                    &exposure,
+                    &mut pipeline,
+                    &vehicle,
+                    workspace,
+                );
                 if let Some(setting) = exposure.update(processed.mean) {
                     write_exposure(&mut sensor.camera, setting).await;
                 }
@@ -369,6 +389,7 @@ fn process(
     timing: &FrameTiming,
     exposure: &AutoExposure,
     pipeline: &mut FramePipeline<'static>,
+    vehicle: &VehicleState,
     workspace: &mut Workspace,
 ) -> Processed {
     // The frame's time: the captured image's middle row at mid-exposure.
@@ -392,13 +413,13 @@ fn process(
     };
     let mean = mean_brightness(&image, BRIGHTNESS_STEP);
     let started = Instant::now();
-    let report = pipeline.process(&image, exposure_at, &mut workspace.buffers());
+    let report = pipeline.process(&image, exposure_at, vehicle, &mut workspace.buffers());
     let detect = started.elapsed();
     if let Some(e) = report.detect_error {
         debug!("vision: detect failed: {}", e);
     }
-    let has_fix = report.result.fix.is_some();
-    channels::post_to_link(LinkEvent::Frame(report.result));
+    let has_fix = report.fix.is_some();
+    channels::post_to_link(LinkEvent::Frame(report.estimate));
     Processed {
         markers: u32::try_from(report.markers).unwrap_or(u32::MAX),
         fix: has_fix,

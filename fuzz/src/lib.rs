@@ -24,14 +24,15 @@ use touchdown_core::companion::mavlink::{
     MAVLinkV1MessageRaw, MAVLinkV2MessageRaw, MavFrame, MavHeader, MavlinkVersion, Message,
 };
 use touchdown_core::companion::{
-    Companion, CompanionConfig, CompanionStats, FrameResult, ParamId, ParamSet, Profile,
-    VisionSettings, MAX_FRAME_LEN, PARAMS, PARAM_COUNT,
+    Companion, CompanionConfig, CompanionStats, Profile, MAX_FRAME_LEN,
 };
 use touchdown_core::detect::{Detection, DetectorConfig, QvgaWorkspace, VgaWorkspace};
 use touchdown_core::family::{parse_family, tables, Family};
+use touchdown_core::filter::{EstimatorConfig, PadEstimator, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout, PadMarker};
-use touchdown_core::pipeline::FramePipeline;
+use touchdown_core::params::{ParamId, ParamSet, PipelineSettings, PARAMS, PARAM_COUNT};
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_core::pose::{marker_pose, PadFix, Pose, PoseMethod};
 use touchdown_host::config::{parse_camera, parse_pad};
 use touchdown_host::recording::{parse_frames_csv, parse_pgm};
@@ -248,17 +249,28 @@ pub fn detect(state: &mut DetectState, data: &[u8]) {
             // Boxed: the detector inside holds a contour buffer of tens of KiB.
             // The configuration's correction cap as it is (not TD_MAX_HAMMING's default), so
             // every bound a family allows is fuzzed.
-            let settings = VisionSettings {
+            let settings = PipelineSettings {
                 max_hamming: config.max_hamming,
-                ..VisionSettings::default()
+                ..PipelineSettings::default()
             };
-            let mut pipeline = Box::new(FramePipeline::new(
-                families, layout, camera, config, settings,
-            ));
+            let pipeline_config = PipelineConfig {
+                detector: config,
+                ..PipelineConfig::default()
+            };
+            let mut pipeline = Box::new(
+                FramePipeline::new(families, layout, camera, pipeline_config, settings)
+                    .expect("the default trackers are valid"),
+            );
             let exposure_us = 1_000_000;
-            let report = pipeline.process(&image, exposure_us, &mut state.workspace.buffers());
+            let report = pipeline.process(
+                &image,
+                exposure_us,
+                &VehicleState::new(),
+                &mut state.workspace.buffers(),
+            );
             assert_eq!(report.detect_error, None, "valid families and VGA buffers");
-            assert_eq!(report.result.exposure_us, exposure_us);
+            assert_eq!(report.estimate.exposure_us, exposure_us);
+            assert_eq!(report.estimate.fix_found, report.fix.is_some());
             let detector = pipeline.detector();
             let detections = detector.detections();
             assert_eq!(report.markers, detections.len());
@@ -273,7 +285,7 @@ pub fn detect(state: &mut DetectState, data: &[u8]) {
                 stats.work,
                 stats.trace_steps
             );
-            if let Some(fix) = report.result.fix {
+            if let Some(fix) = report.fix {
                 assert!(fix.pose.is_valid(), "pad fix {fix:?}");
             }
             // The detections do not depend on the pad: their marker pose once per
@@ -359,20 +371,23 @@ pub fn family_file(data: &[u8]) {
     let centre = (side as f32 - 1.0) * 0.5;
     let camera = CameraModel::pinhole(side as u32, side as u32, focal, focal, centre, centre);
     let mut workspace = Box::new(QvgaWorkspace::new());
-    let mut pipeline = Box::new(FramePipeline::new(
-        &families,
-        &pad,
-        camera,
-        DetectorConfig::default(),
-        VisionSettings::default(),
-    ));
-    let report = pipeline.process(&image, 0, &mut workspace.buffers());
+    let mut pipeline = Box::new(
+        FramePipeline::new(
+            &families,
+            &pad,
+            camera,
+            PipelineConfig::default(),
+            PipelineSettings::default(),
+        )
+        .expect("the default trackers are valid"),
+    );
+    let report = pipeline.process(&image, 0, &VehicleState::new(), &mut workspace.buffers());
     assert_eq!(
         report.detect_error, None,
         "a validated family and QVGA buffers"
     );
     check_detections(pipeline.detector().detections(), &families);
-    if let Some(fix) = report.result.fix {
+    if let Some(fix) = report.fix {
         assert!(fix.pose.is_valid(), "pad fix {fix:?}");
     }
 }
@@ -699,9 +714,11 @@ pub fn mavlink_stream(data: &[u8]) -> CompanionStats {
     if input.u8() % 2 == 1 {
         let _ = config.params.set(ParamId::VpeEnable, 1.0);
     }
-    let Ok(mut companion) = Companion::new(config) else {
-        panic!("the default configuration is valid");
-    };
+    let mut companion = Companion::new(config);
+    // The estimator stage of the pipeline, fed the script's pad fixes (there is no image here),
+    // with the vehicle state the companion decodes from the script's bytes.
+    let mut estimator =
+        PadEstimator::new(EstimatorConfig::default()).expect("the default trackers are valid");
     let mut now_us = u64::from(input.u32());
     while !input.is_empty() {
         match input.below(OPS) as u8 {
@@ -730,7 +747,8 @@ pub fn mavlink_stream(data: &[u8]) -> CompanionStats {
                 } else {
                     now_us.saturating_sub(age)
                 };
-                let _ = companion.on_frame(FrameResult { exposure_us, fix }, now_us);
+                let estimate = estimator.update(exposure_us, fix.as_ref(), companion.vehicle());
+                let _ = companion.on_estimate(&estimate, now_us);
             }
             x if x == Op::SetParam as u8 => {
                 if let Some(id) = ParamId::from_index(input.below(PARAM_COUNT)) {
@@ -750,6 +768,8 @@ pub fn mavlink_stream(data: &[u8]) -> CompanionStats {
                 let _ = companion.autopilot_alive(now_us);
             }
         }
+        // As the pipeline applies TD_CAM_YAW between frames (PARAM_SET bytes included).
+        estimator.set_mount_yaw(PipelineSettings::from_params(companion.params()).cam_yaw_deg);
         drain(&mut companion, now_us);
     }
     companion.stats()

@@ -6,9 +6,10 @@
 //! ```
 //!
 //! Benches, per frame: `pipeline` ([`FramePipeline::process`]: detection with the default
-//! families and the firmware's configuration, then the pad fix, on a one-marker pad of the
-//! marker `bench/m7` fixes on), `filter+encode` (the companion's trackers on that fix and
-//! draining its MAVLink output), then `frame`: both, as the camera board runs them. Speed
+//! families and the firmware's configuration, the pad fix on a one-marker pad of the marker
+//! `bench/m7` fixes on, and the estimator), `target+encode` (the companion's LANDING_TARGET
+//! of that estimate and draining its MAVLink output), then `frame`: both, as the camera board
+//! runs them. Speed
 //! goals are judged on the instruction counts of `scripts/m7_check.sh`; these host timings
 //! are for profiling and for the side-by-side with AprilTag 3 and OpenCV
 //! (`scripts/compare_peers.py`).
@@ -18,14 +19,12 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameResult, Profile, VisionSettings, MAX_FRAME_LEN,
-};
-use touchdown_core::detect::DetectorConfig;
+use touchdown_core::companion::{Companion, CompanionConfig, Profile, MAX_FRAME_LEN};
 use touchdown_core::family::tables;
+use touchdown_core::filter::{FrameEstimate, VehicleState};
 use touchdown_core::pad::{PadLayout, PadMarker};
-use touchdown_core::pipeline::FramePipeline;
-use touchdown_core::pose::PadFix;
+use touchdown_core::params::PipelineSettings;
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_host::image_io::GrayFrame;
 use touchdown_host::recording::parse_pgm;
 use touchdown_host::workspace::HostWorkspace;
@@ -80,64 +79,55 @@ fn one_tag(id: u16) -> PadLayout<'static> {
     .expect("a one-marker layout is valid")
 }
 
-/// A companion whose track on `fix` is confirmed, so the next frame sends a target.
-fn warmed_companion(fix: PadFix, now_us: &mut u64) -> Companion {
-    let mut companion = Companion::new(CompanionConfig::with_profile(Profile::ArduPilot))
-        .expect("default configuration");
-    let mut uart = [0u8; MAX_FRAME_LEN];
-    for _ in 0..6 {
-        *now_us += FRAME_PERIOD_US;
-        companion.on_frame(
-            FrameResult {
-                exposure_us: *now_us,
-                fix: Some(fix),
-            },
-            *now_us,
-        );
-        while companion.poll_transmit(*now_us, &mut uart).is_some() {}
-    }
-    companion
-}
-
 fn stages(c: &mut Criterion) {
     for (name, id) in FRAMES {
         let frame = load(name);
         let image = frame.view();
         let pad = one_tag(id);
-        // As the vision task sets it up: the default configuration, the default parameters.
+        // As the vision task sets it up: the default configuration, the default parameters;
+        // no attitude streamed (the estimator's camera-frame track; ArduPilot needs no more).
         let mut pipeline = FramePipeline::new(
             tables::DEFAULT,
             &pad,
             camera_for(&frame),
-            DetectorConfig::default(),
-            VisionSettings::default(),
-        );
+            PipelineConfig::default(),
+            PipelineSettings::default(),
+        )
+        .expect("the default trackers are valid");
+        let vehicle = VehicleState::new();
         let mut workspace = HostWorkspace::new();
-        let fix = pipeline
-            .process(&image, 0, &mut workspace.buffers(frame.width, frame.height))
-            .result
-            .fix
-            .expect("the frame shows its pad's marker");
+        let mut companion = Companion::new(CompanionConfig::with_profile(Profile::ArduPilot));
+        let mut uart = [0u8; MAX_FRAME_LEN];
+        // A hover over the frame's pad until the track is confirmed and a target goes out.
+        let mut now_us = 0u64;
+        let mut estimate = None;
+        for _ in 0..6 {
+            now_us += FRAME_PERIOD_US;
+            let mut buffers = workspace.buffers(frame.width, frame.height);
+            let report = pipeline.process(&image, now_us, &vehicle, &mut buffers);
+            assert!(report.fix.is_some(), "the frame shows its pad's marker");
+            companion.on_estimate(&report.estimate, now_us);
+            while companion.poll_transmit(now_us, &mut uart).is_some() {}
+            estimate = Some(report.estimate);
+        }
+        let estimate = estimate.expect("six frames ran");
+        assert!(estimate.estimate.is_some(), "the track is confirmed");
 
         c.bench_function(&format!("{name}/pipeline"), |b| {
             b.iter(|| {
+                now_us += FRAME_PERIOD_US;
                 let mut buffers = workspace.buffers(frame.width, frame.height);
-                black_box(pipeline.process(black_box(&image), 0, &mut buffers))
+                black_box(pipeline.process(black_box(&image), now_us, &vehicle, &mut buffers))
             })
         });
-        let mut now_us = 0u64;
-        let mut companion = warmed_companion(fix, &mut now_us);
-        let mut uart = [0u8; MAX_FRAME_LEN];
-        c.bench_function(&format!("{name}/filter+encode"), |b| {
+        c.bench_function(&format!("{name}/target+encode"), |b| {
             b.iter(|| {
                 now_us += FRAME_PERIOD_US;
-                companion.on_frame(
-                    FrameResult {
-                        exposure_us: now_us,
-                        fix: Some(black_box(fix)),
-                    },
-                    now_us,
-                );
+                let frame_estimate = FrameEstimate {
+                    exposure_us: now_us,
+                    ..black_box(estimate)
+                };
+                companion.on_estimate(&frame_estimate, now_us);
                 let mut bytes = 0usize;
                 while let Some(n) = companion.poll_transmit(now_us, &mut uart) {
                     bytes += n;
@@ -149,8 +139,8 @@ fn stages(c: &mut Criterion) {
             b.iter(|| {
                 now_us += FRAME_PERIOD_US;
                 let mut buffers = workspace.buffers(frame.width, frame.height);
-                let report = pipeline.process(black_box(&image), now_us, &mut buffers);
-                companion.on_frame(report.result, now_us);
+                let report = pipeline.process(black_box(&image), now_us, &vehicle, &mut buffers);
+                companion.on_estimate(&report.estimate, now_us);
                 let mut bytes = 0usize;
                 while let Some(n) = companion.poll_transmit(now_us, &mut uart) {
                     bytes += n;

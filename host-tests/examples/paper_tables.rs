@@ -7,6 +7,7 @@
 use std::time::Instant;
 
 use touchdown_host::eval::paper_geometry::{self, Config};
+use touchdown_core::pipeline::PipelineConfig;
 use touchdown_host::eval::{Method, Stage};
 
 fn main() {
@@ -30,10 +31,13 @@ fn main() {
     let methods = [
         Method::paper().named("paper's method in our code"),
         Method::ours(),
-        Method {
-            level_with_attitude: false,
-            ..Method::ours().named("ours, 6-DOF pose (tilt from the image)")
-        },
+        Method::board(
+            "ours, 6-DOF pose (tilt from the image)",
+            PipelineConfig {
+                level_fix: false,
+                ..PipelineConfig::default()
+            },
+        ),
         Method::ours()
             .without_attitude()
             .named("ours, vision only (no attitude)"),

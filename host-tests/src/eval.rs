@@ -12,26 +12,25 @@
 //! (For a single-marker pad, the pad frame is the marker frame.)
 //!
 //! ## How a method turns a frame into that position
-//! A [`Method`] is a detector configuration, a pose method and a filter:
-//! 1. detect; keep the detections that belong to the pad layout;
-//! 2. pose: [`PoseMethod::Ippe`] runs [`pad_pose_with_prediction`] (IPPE + Levenberg-Marquardt
-//!    on every layout corner, with a covariance; the filter's prediction breaks flip ties);
-//!    [`PoseMethod::PaperHomography`] runs the paper's decomposition ([`marker_pose`]) on the
-//!    largest layout marker, moved into the pad frame;
-//! 3. position: with [`Method::use_attitude`] and an attitude in the frame (the camera-to-pad
-//!    rotation the vehicle knows, from its flight controller), `c = -R_attitude t`: only the
-//!    pose's translation `t` (the pad in the camera frame) is used. Without, `c = -R_pose^T t`
-//!    (vision only). Why the attitude matters: the tilt of a single small marker is barely
-//!    observable (at 15 m a 1 m marker spans 37 px), and every degree of tilt error moves
-//!    `-R_pose^T t` sideways by 1.7 % of the range, metres at altitude, while `t` itself is
-//!    well determined (its direction from the marker's image position, its length from the
-//!    marker's image size). touchdown's firmware uses the attitude the same way
-//!    ([`touchdown_core::frames::level_measurement`]);
-//! 4. filter: [`FilterChoice::Paper`] is the paper's per-axis Kalman filter (equations 8-14,
-//!    Table 1) fed with `c`; [`FilterChoice::Tracker`] is our tracker fed with `c` and its
-//!    covariance. The pad frame is fixed to the ground, so the vehicle's position in it moves
-//!    smoothly and the tracker's constant-velocity model fits (its process noise is
-//!    isotropic, so filtering in the pad frame is the same as in level NED axes).
+//! A [`Method`] is one of two per-frame paths of core, run as they are:
+//! - **ours** ([`MethodKind::Board`]): [`FramePipeline`], the very path the camera board runs
+//!   (detection, the pad fix with its prediction and level steps as its [`PipelineConfig`]
+//!   says, the estimator), fed with the vehicle's attitude at each exposure as the
+//!   autopilot would stream it ([`Method::use_attitude`]; without it the estimator runs its
+//!   camera-frame track). Its output is scored as the autopilot receives it: the pad in body
+//!   FRD, what the ArduPilot profile's LANDING_TARGET carries, turned into the pad frame with
+//!   the autopilot's own attitude at that exposure (the frame's true camera-to-pad rotation;
+//!   without one, this frame's pose rotation), exactly what ArduPilot's precision landing
+//!   does with it. The raw position is the frame's pad fix (levelled when the level step
+//!   ran): `c = -R^T t`;
+//! - **the paper's** ([`MethodKind::Paper`]): [`PaperPipeline`], the paper's detector,
+//!   homography decomposition of the largest marker and per-axis Kalman filter (equations
+//!   8-14, Table 1), on `c = -R_attitude t` (the pose's translation turned with the attitude)
+//!   or, without an attitude, `c = -R_pose^T t`.
+//!
+//! Why the attitude matters: the tilt of a single small marker is barely observable (at 15 m
+//! a 1 m marker spans 37 px), and every degree of tilt error moves `-R_pose^T t` sideways by
+//! 1.7 % of the range, metres at altitude, while `t` itself is well determined.
 //!
 //! Both the filtered output (what the paper averages per set point) and the raw per-frame
 //! position are scored, so a table can tell the pose's share from the filter's.
@@ -56,17 +55,16 @@
 
 use std::fmt::Write as _;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use touchdown_core::camera::CameraModel;
-use touchdown_core::detect::{DetectError, Detection, Detector, DetectorConfig};
+use touchdown_core::detect::DetectError;
 use touchdown_core::family::Family;
-use touchdown_core::filter::{Measurement, PaperConfig, PaperKalman, Tracker, TrackerConfig};
+use touchdown_core::filter::axes::{Attitude, CameraMount};
+use touchdown_core::filter::{PaperConfig, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::PadLayout;
-use touchdown_core::pose::{
-    largest_layout_marker, level_pad_fix, marker_pose, marker_to_pad, pad_pose_with_prediction,
-    PoseMethod,
-};
+use touchdown_core::params::PipelineSettings;
+use touchdown_core::pipeline::{FramePipeline, PaperPipeline, PipelineConfig};
 
 use crate::workspace::HostWorkspace;
 
@@ -132,72 +130,61 @@ pub struct Frame<'a> {
     pub image: GrayImage<'a>,
 }
 
-/// Which filter smooths a method's positions.
+/// Which per-frame path of core a method runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum FilterChoice {
-    /// No filter: the estimate is the frame's own position.
-    None,
-    /// The paper's per-axis Kalman filter (equations 8-14).
+pub enum MethodKind {
+    /// The reference paper's: [`PaperPipeline`] with this filter configuration.
     Paper(PaperConfig),
-    /// Our tracker.
-    Tracker(TrackerConfig),
+    /// The camera board's: [`FramePipeline`] with this configuration.
+    Board(PipelineConfig),
 }
 
-/// A pipeline to evaluate: detector, pose, filter (see the module docs).
+/// A path to evaluate (see the module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Method {
     /// Column heading.
     pub name: String,
-    /// Detector settings.
-    pub detector: DetectorConfig,
-    /// How the pose is computed.
-    pub pose: PoseMethod,
-    /// How positions are smoothed.
-    pub filter: FilterChoice,
-    /// Use the frame's attitude, when it has one, to turn the pose's translation into the
-    /// position; otherwise (or without an attitude) use the pose's own rotation.
+    /// Which path, configured how.
+    pub kind: MethodKind,
+    /// The vehicle knows its attitude: the paper's path turns its translation with it, the
+    /// board's estimator gets it as the autopilot's attitude stream.
     pub use_attitude: bool,
-    /// With an attitude, take the pad's tilt from gravity and re-solve the translation
-    /// ([`touchdown_core::pose::level_pad_fix`]): removes the depth error a wrong tilt of a
-    /// 6-DOF pose causes (a tilted square must be nearer to look as large).
-    pub level_with_attitude: bool,
 }
 
 impl Method {
-    /// The paper's pipeline in our code: its detector ([`DetectorConfig::paper`]), its
-    /// homography decomposition, its filter with Table 1; given the vehicle attitude like
-    /// ours (the paper's camera looked straight down from a level hovering vehicle).
+    /// The paper's pipeline in our code: its detector, its homography decomposition, its
+    /// filter with Table 1; given the vehicle attitude like ours (the paper's camera looked
+    /// straight down from a level hovering vehicle).
     pub fn paper() -> Self {
         Method {
             name: "paper's method".into(),
-            detector: DetectorConfig::paper(),
-            pose: PoseMethod::PaperHomography,
-            filter: FilterChoice::Paper(PaperConfig::TABLE_1),
+            kind: MethodKind::Paper(PaperConfig::TABLE_1),
             use_attitude: true,
-            level_with_attitude: false,
         }
     }
 
-    /// touchdown's pipeline: default detector, IPPE + LM pad pose, our tracker in the
-    /// attitude-aided (level) configuration.
+    /// touchdown's: the camera board's [`FramePipeline`] as it ships
+    /// ([`PipelineConfig::default`]).
     pub fn ours() -> Self {
+        Method::board("ours", PipelineConfig::default())
+    }
+
+    /// The board's pipeline with another configuration (a variant column).
+    pub fn board(name: &str, config: PipelineConfig) -> Self {
         Method {
-            name: "ours".into(),
-            detector: DetectorConfig::default(),
-            pose: PoseMethod::Ippe,
-            filter: FilterChoice::Tracker(TrackerConfig::level()),
+            name: name.into(),
+            kind: MethodKind::Board(config),
             use_attitude: true,
-            level_with_attitude: true,
         }
     }
 
-    /// The same pipeline with a different name, for a variant column.
+    /// The same path with a different name, for a variant column.
     pub fn named(mut self, name: &str) -> Self {
         self.name = name.into();
         self
     }
 
-    /// The same pipeline without the attitude (vision only).
+    /// The same path without the attitude (vision only).
     pub fn without_attitude(mut self) -> Self {
         self.use_attitude = false;
         self
@@ -383,155 +370,131 @@ pub fn published(axis: Axis, reference_m: f64) -> Option<&'static PublishedRow> 
         .find(|r| r.axis == axis && (r.reference_cm - 100.0 * reference_m).abs() < 0.5)
 }
 
-/// The filter state of one method.
+/// `R_ned_from_pad`: the pad frame (x right, y up on the print, z up) in NED axes, taking
+/// pad +x as north. Any fixed choice does: the estimator works in NED axes and the score is
+/// turned back into the pad frame with the same matrix.
+const NED_FROM_PAD: Matrix3<f32> = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+
+/// A method's path with its state.
 #[derive(Debug)]
-enum FilterState {
-    None,
-    Paper {
-        filter: PaperKalman,
-        last_t_us: Option<u64>,
+// Both paths boxed: each holds a detector with its contour buffer (tens of KiB).
+enum Runner<'a> {
+    Paper(Box<PaperPipeline<'a>>),
+    Board {
+        pipeline: Box<FramePipeline<'a>>,
+        /// The attitude stream the autopilot would send, as the companion keeps it.
+        vehicle: Box<VehicleState>,
+        mount: CameraMount,
     },
-    // Boxed: the tracker's 6x6 covariances dwarf the other variants.
-    Tracker(Box<Tracker>),
 }
 
-/// A method with its detector and filter state.
+/// A method with its path.
 #[derive(Debug)]
-struct Pipeline {
+struct Pipeline<'a> {
     method: Method,
-    detector: Detector,
-    filter: FilterState,
+    runner: Runner<'a>,
 }
 
-impl Pipeline {
-    fn new(method: &Method) -> Result<Self, ExperimentError> {
-        let mut pipeline = Pipeline {
-            method: method.clone(),
-            detector: Detector::new(method.detector),
-            filter: FilterState::None,
-        };
-        pipeline.reset()?;
-        Ok(pipeline)
-    }
-
-    fn reset(&mut self) -> Result<(), ExperimentError> {
-        self.filter = match self.method.filter {
-            FilterChoice::None => FilterState::None,
-            FilterChoice::Paper(config) => FilterState::Paper {
-                filter: PaperKalman::new(config),
-                last_t_us: None,
-            },
-            FilterChoice::Tracker(config) => FilterState::Tracker(Box::new(
-                Tracker::new(config).map_err(|_| ExperimentError::BadTrackerConfig)?,
-            )),
-        };
-        Ok(())
-    }
-
-    /// The filter's prediction of the camera position at `t_us` (pad frame), for breaking
-    /// flip ties in the pose.
-    fn prediction(&self, t_us: u64) -> Option<Vector3<f32>> {
-        match &self.filter {
-            FilterState::Tracker(tracker) => tracker.estimate(t_us).map(|e| e.position),
-            FilterState::Paper { filter, last_t_us } => {
-                last_t_us.map(|_| Vector3::from(filter.estimate()))
+impl<'a> Pipeline<'a> {
+    fn new(
+        method: &Method,
+        camera: CameraModel,
+        families: &'a [&'a Family<'a>],
+        layout: &PadLayout<'a>,
+    ) -> Result<Self, ExperimentError> {
+        let runner = match method.kind {
+            MethodKind::Paper(filter) => {
+                Runner::Paper(Box::new(PaperPipeline::new(families, layout, camera, filter)))
             }
-            FilterState::None => None,
+            MethodKind::Board(config) => Runner::Board {
+                pipeline: Box::new(
+                    FramePipeline::new(
+                        families,
+                        layout,
+                        camera,
+                        config,
+                        PipelineSettings::default(),
+                    )
+                    .map_err(|_| ExperimentError::BadTrackerConfig)?,
+                ),
+                vehicle: Box::new(VehicleState::new()),
+                mount: config.estimator.mount,
+            },
+        };
+        Ok(Pipeline {
+            method: method.clone(),
+            runner,
+        })
+    }
+
+    fn reset(&mut self) {
+        match &mut self.runner {
+            Runner::Paper(paper) => paper.reset(),
+            Runner::Board {
+                pipeline, vehicle, ..
+            } => {
+                pipeline.reset();
+                vehicle.clear();
+            }
         }
     }
 
-    /// The position measurement of one frame (pad frame, with its covariance where the pose
-    /// gives one), or `None` when the pad was not found.
-    fn measure(
-        &self,
-        detections: &[Detection],
-        families: &[&Family<'_>],
-        layout: &PadLayout<'_>,
-        camera: &CameraModel,
+    /// Runs the path on `frame`.
+    fn process(
+        &mut self,
         frame: &Frame<'_>,
-    ) -> Option<(Vector3<f32>, Matrix3<f32>)> {
+        workspace: &mut HostWorkspace,
+    ) -> Result<MethodOutcome, ExperimentError> {
+        let mut buffers = workspace.buffers(frame.image.width(), frame.image.height());
         let attitude = frame.attitude.filter(|_| self.method.use_attitude);
-        match self.method.pose {
-            PoseMethod::Ippe => {
-                let predicted = self.prediction(frame.t_us);
-                let fix = pad_pose_with_prediction(
-                    detections,
-                    families,
-                    layout,
-                    camera,
-                    predicted.as_ref(),
-                )
-                .ok()?;
-                Some(match attitude {
-                    // `r` maps the camera frame to the (level) pad frame.
-                    Some(r) if self.method.level_with_attitude => {
-                        let level = level_pad_fix(
-                            &fix,
-                            detections,
-                            families,
-                            layout,
-                            camera,
-                            &r.transpose(),
-                        )
-                        .ok()?;
-                        (level.camera_position(), level.camera_position_covariance())
-                    }
-                    Some(r) => (
-                        -(r * fix.pose.translation),
-                        r * fix.pad_position_covariance() * r.transpose(),
-                    ),
-                    None => (fix.camera_position(), fix.camera_position_covariance()),
+        match &mut self.runner {
+            Runner::Paper(paper) => {
+                let report =
+                    paper.process(&frame.image, frame.t_us, attitude.as_ref(), &mut buffers);
+                if let Some(e) = report.detect_error {
+                    return Err(ExperimentError::Detect(e));
+                }
+                Ok(MethodOutcome {
+                    pose_found: report.raw.is_some(),
+                    raw: report.raw.map(|r| r.cast::<f64>()),
+                    estimate: report.estimate.map(|e| e.cast::<f64>()),
                 })
             }
-            PoseMethod::PaperHomography => {
-                let (detection, marker) = largest_layout_marker(detections, families, layout)?;
-                let marker_to_camera = marker_pose(
-                    &detection.corners,
-                    marker.size,
-                    camera,
-                    PoseMethod::PaperHomography,
-                )
-                .ok()?
-                .best
-                .pose;
-                let pad_to_camera = marker_to_camera.compose(&marker_to_pad(marker).inverse());
-                let position = match attitude {
-                    Some(r) => -(r * pad_to_camera.translation),
-                    None => pad_to_camera.camera_position(),
-                };
-                // The paper's pose has no covariance; its filter does not want one.
-                Some((position, Matrix3::zeros()))
-            }
-        }
-    }
-
-    /// Feeds a measurement (or its absence) to the filter; returns the filtered position.
-    fn filter(
-        &mut self,
-        t_us: u64,
-        measurement: Option<&(Vector3<f32>, Matrix3<f32>)>,
-    ) -> Option<Vector3<f32>> {
-        match &mut self.filter {
-            FilterState::None => measurement.map(|m| m.0),
-            FilterState::Paper { filter, last_t_us } => {
-                // The paper's filter has no notion of a missing measurement; without a tag the
-                // paper reports nothing ("cannot provide any results").
-                let (position, _) = measurement?;
-                let dt = last_t_us.map_or(0.0, |last| t_us.saturating_sub(last) as f32 * 1e-6);
-                *last_t_us = Some(t_us);
-                Some(Vector3::from(
-                    filter.update([position.x, position.y, position.z], dt),
-                ))
-            }
-            FilterState::Tracker(tracker) => {
-                if let Some((position, covariance)) = measurement {
-                    tracker.update(&Measurement {
-                        t_us,
-                        position: *position,
-                        covariance: *covariance,
-                    });
+            Runner::Board {
+                pipeline,
+                vehicle,
+                mount,
+            } => {
+                if let Some(r) = &attitude {
+                    // What the autopilot streams: its attitude (body FRD to NED) at the
+                    // exposure, from the camera's rotation into the pad frame and the mount.
+                    let ned_from_body = NED_FROM_PAD * r * mount.matrix().transpose();
+                    let q = UnitQuaternion::from_rotation_matrix(
+                        &Rotation3::from_matrix_unchecked(ned_from_body),
+                    );
+                    if let Ok(att) = Attitude::from_quaternion_wxyz([q.w, q.i, q.j, q.k]) {
+                        vehicle.push_attitude(frame.t_us, &att, frame.t_us);
+                    }
                 }
-                tracker.estimate(t_us).map(|e| e.position)
+                let report = pipeline.process(&frame.image, frame.t_us, vehicle, &mut buffers);
+                if let Some(e) = report.detect_error {
+                    return Err(ExperimentError::Detect(e));
+                }
+                // What the autopilot makes of the LANDING_TARGET: body FRD turned with its own
+                // attitude (the true one); without one, with this frame's pose rotation.
+                let camera_to_pad = frame
+                    .attitude
+                    .or_else(|| report.fix.map(|f| f.pose.rotation.transpose()));
+                let estimate = report
+                    .estimate
+                    .estimate
+                    .zip(camera_to_pad)
+                    .map(|(e, r)| (-(r * mount.body_to_camera(&e.body_frd))).cast::<f64>());
+                Ok(MethodOutcome {
+                    pose_found: report.fix.is_some(),
+                    raw: report.fix.map(|f| f.camera_position().cast::<f64>()),
+                    estimate,
+                })
             }
         }
     }
@@ -551,10 +514,7 @@ pub enum ExperimentError {
 /// Methods run side by side on the same frames, with per-set-point statistics.
 #[derive(Debug)]
 pub struct Experiment<'a> {
-    camera: CameraModel,
-    families: Vec<&'a Family<'a>>,
-    layout: PadLayout<'a>,
-    pipelines: Vec<Pipeline>,
+    pipelines: Vec<Pipeline<'a>>,
     workspace: HostWorkspace,
     /// The set points seen, in order of first appearance.
     set_points: Vec<SetPoint>,
@@ -566,17 +526,14 @@ impl<'a> Experiment<'a> {
     /// An experiment on frames from `camera` of the pad `layout`, searching `families`.
     pub fn new(
         camera: CameraModel,
-        families: &[&'a Family<'a>],
+        families: &'a [&'a Family<'a>],
         layout: PadLayout<'a>,
         methods: &[Method],
     ) -> Result<Self, ExperimentError> {
         Ok(Experiment {
-            camera,
-            families: families.to_vec(),
-            layout,
             pipelines: methods
                 .iter()
-                .map(Pipeline::new)
+                .map(|m| Pipeline::new(m, camera, families, &layout))
                 .collect::<Result<_, _>>()?,
             workspace: HostWorkspace::new(),
             set_points: Vec::new(),
@@ -586,7 +543,8 @@ impl<'a> Experiment<'a> {
 
     /// Resets every method's filter: the next frame starts a new, independent sequence.
     pub fn start_sequence(&mut self) -> Result<(), ExperimentError> {
-        self.pipelines.iter_mut().try_for_each(Pipeline::reset)
+        self.pipelines.iter_mut().for_each(Pipeline::reset);
+        Ok(())
     }
 
     /// Runs every method on `frame` and scores it if it carries a set point; returns what each
@@ -594,23 +552,7 @@ impl<'a> Experiment<'a> {
     pub fn process(&mut self, frame: &Frame<'_>) -> Result<Vec<MethodOutcome>, ExperimentError> {
         let mut outcomes = Vec::with_capacity(self.pipelines.len());
         for pipeline in &mut self.pipelines {
-            let detections = self
-                .workspace
-                .detect(&mut pipeline.detector, &frame.image, &self.families)
-                .map_err(ExperimentError::Detect)?;
-            let measurement = pipeline.measure(
-                &detections,
-                &self.families,
-                &self.layout,
-                &self.camera,
-                frame,
-            );
-            let estimate = pipeline.filter(frame.t_us, measurement.as_ref());
-            outcomes.push(MethodOutcome {
-                pose_found: measurement.is_some(),
-                raw: measurement.map(|m| m.0.cast::<f64>()),
-                estimate: estimate.map(|e| e.cast::<f64>()),
-            });
+            outcomes.push(pipeline.process(frame, &mut self.workspace)?);
         }
         if let Some(set_point) = frame.set_point {
             let index = match self

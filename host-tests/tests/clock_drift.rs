@@ -10,7 +10,7 @@
 //! camera exposes a frame every 33 ms, each with a pad fix, processed 25 ms later.
 //!
 //! Checked: once synchronised no frame is refused for want of vehicle state
-//! (`FrameOutcome::NoVehicleState`), except within a short window after the jump, and the
+//! (`TargetOutcome::NoVehicleState`), except within a short window after the jump, and the
 //! companion's mapping of the autopilot's time stamps to ours is within a few ms of the truth.
 //! Figures are printed (`--nocapture`).
 
@@ -24,12 +24,12 @@ use touchdown_core::companion::mavlink::dialects::common::{
     LOCAL_POSITION_NED_DATA, SYSTEM_TIME_DATA, TIMESYNC_DATA,
 };
 use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameOutcome, FrameParser, FrameResult, Profile, MAX_FRAME_LEN,
+    Companion, CompanionConfig, FrameParser, Profile, TargetOutcome, MAX_FRAME_LEN,
 };
-use touchdown_core::frames::{camera_to_ned_matrix, Attitude, CameraMount};
+use touchdown_core::filter::axes::{camera_to_ned_matrix, Attitude, CameraMount};
 use touchdown_core::pose::PadFix;
 
-use autopilot_sim::{encode, heartbeat, pad_fix, pad_ned, Rng};
+use autopilot_sim::{encode, heartbeat, pad_fix, pad_ned, FixEstimator, Rng};
 
 const STEP_US: u64 = 1_000;
 const FRAME_PERIOD_US: u64 = 33_333;
@@ -284,15 +284,15 @@ struct Figures {
 
 fn simulate(name: &str, clock: Clock, duration_us: u64, window_us: u64) -> Figures {
     let mount = CameraMount::downward();
-    let mut config = CompanionConfig::with_profile(Profile::Px4);
-    config.mount = mount;
-    let mut companion = Companion::new(config).unwrap();
+    let mut companion = Companion::new(CompanionConfig::with_profile(Profile::Px4));
+    let mut estimator = FixEstimator::new();
     let mut ap = Autopilot::new(clock);
     let mut rng = Rng(0x15_C10C);
     let (mut up, mut down) = (Link::new(), Link::new());
     let mut out = [0u8; MAX_FRAME_LEN];
     let mut next_exposure = 100_000u64;
-    let mut pending: VecDeque<(u64, FrameResult)> = VecDeque::new();
+    // (delivery time, exposure time, fix)
+    let mut pending: VecDeque<(u64, u64, PadFix)> = VecDeque::new();
     let mut fig = Figures::default();
     let mut sq = 0.0f64;
     let mut n_err = 0u32;
@@ -331,21 +331,15 @@ fn simulate(name: &str, clock: Clock, duration_us: u64, window_us: u64) -> Figur
         if now >= next_exposure {
             let te = next_exposure;
             next_exposure += FRAME_PERIOD_US;
-            pending.push_back((
-                te + PROCESS_DELAY_US,
-                FrameResult {
-                    exposure_us: te,
-                    fix: Some(fix_at(te, &mount)),
-                },
-            ));
+            pending.push_back((te + PROCESS_DELAY_US, te, fix_at(te, &mount)));
         }
-        while pending.front().is_some_and(|(t, _)| *t <= now) {
-            let (_, f) = pending.pop_front().unwrap();
-            let outcome = companion.on_frame(f, now);
+        while pending.front().is_some_and(|(t, _, _)| *t <= now) {
+            let (_, te, fix) = pending.pop_front().unwrap();
+            let outcome = estimator.deliver(&mut companion, te, Some(fix), now);
             fig.frames += 1;
             match outcome {
-                FrameOutcome::TargetQueued => fig.targets += 1,
-                FrameOutcome::NoVehicleState if now >= SETTLE_US => {
+                TargetOutcome::TargetQueued => fig.targets += 1,
+                TargetOutcome::NoVehicleState if now >= SETTLE_US => {
                     fig.nvs_times.push(now);
                     if in_window(now) {
                         fig.no_vehicle_state_in_window += 1;

@@ -4,7 +4,7 @@
 //! A vehicle flies a known path (descending, rolling, pitching, turning) over a pad at a known
 //! NED position. Every 33 ms a camera frame is "exposed"; 25 ms later its pad fix (the true
 //! camera-frame pad position plus Gaussian noise with the covariance the fix reports) reaches
-//! `Companion::on_frame`. The simulated autopilot streams what a real one does: HEARTBEAT and
+//! the board's estimator stage (`FixEstimator`) and then `Companion::on_estimate`. The simulated autopilot streams what a real one does: HEARTBEAT and
 //! SYSTEM_TIME always, TIMESYNC requests (PX4 style), ATTITUDE_QUATERNION and
 //! LOCAL_POSITION_NED only once asked with SET_MESSAGE_INTERVAL (answered with COMMAND_ACK),
 //! answers our TIMESYNC requests, all in its own clock (1000 s ahead of ours), over a link with
@@ -36,20 +36,22 @@ use touchdown_core::companion::mavlink::dialects::common::{
     PARAM_REQUEST_LIST_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, SYSTEM_TIME_DATA,
     TIMESYNC_DATA,
 };
-use touchdown_core::companion::params::name_str;
-use touchdown_core::companion::persist::{self, FlashFailed, SlotFlash, ERASED, SLOT_LEN};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, CompanionStats, FrameParser, FrameResult, ParamId, ParamSet,
-    Profile, VisionSettings, MAX_FRAME_LEN, PARAM_COUNT,
+    Companion, CompanionConfig, CompanionStats, FrameParser, Profile, TargetOutcome, MAX_FRAME_LEN,
 };
 use touchdown_core::detect::DetectorConfig;
-use touchdown_core::frames::{camera_to_ned_matrix, Attitude, CameraMount};
+use touchdown_core::filter::axes::{camera_to_ned_matrix, Attitude, CameraMount};
 use touchdown_core::pad::designs;
+use touchdown_core::params::name_str;
+use touchdown_core::params::persist::{self, FlashFailed, SlotFlash, ERASED, SLOT_LEN};
+use touchdown_core::params::{ParamId, ParamSet, PipelineSettings, PARAM_COUNT};
 use touchdown_core::pose::{PadFix, Pose};
 use touchdown_core::sensor::exposure::AutoExposureLimits;
 use touchdown_core::sensor::GainX16;
 
-use autopilot_sim::{encode, heartbeat, pad_fix, pad_ned, Rng, SIGMA_LATERAL, SIGMA_RANGE};
+use autopilot_sim::{
+    encode, heartbeat, pad_fix, pad_ned, FixEstimator, Rng, SIGMA_LATERAL, SIGMA_RANGE,
+};
 
 /// The autopilot booted this long before the companion (its clock = ours + this).
 const AP_AHEAD_US: u64 = 1_000_000_000;
@@ -397,9 +399,9 @@ fn simulate(s: &Scenario) -> Run {
     }
     // What TD_CAM_YAW means: the downward camera turned about its optical axis.
     let mount = CameraMount::downward_rotated(s.cam_yaw_deg.to_radians()).unwrap();
-    // The mount before TD_CAM_YAW: the companion applies the turn itself.
-    config.mount = CameraMount::downward();
-    let mut companion = Companion::new(config).unwrap();
+    // The estimator's mount is the downward one; TD_CAM_YAW turns it (as the pipeline does).
+    let mut companion = Companion::new(config);
+    let mut estimator = FixEstimator::new();
     let mut ap = Autopilot::new();
     ap.kind = match s.profile {
         Profile::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -419,7 +421,8 @@ fn simulate(s: &Scenario) -> Run {
     params.sort_by_key(|p| p.0);
     let mut params: VecDeque<_> = params.into();
     let mut next_exposure = 100_000u64;
-    let mut pending_frames: VecDeque<(u64, FrameResult)> = VecDeque::new();
+    // (delivery time, exposure time, fix)
+    let mut pending_frames: VecDeque<(u64, u64, Option<PadFix>)> = VecDeque::new();
     let mut out = [0u8; MAX_FRAME_LEN];
     let reboot_window = s.reboot_at.map(|r| (r, r + REBOOT_DOWN_US));
     let mut rebooted = false;
@@ -531,17 +534,11 @@ fn simulate(s: &Scenario) -> Run {
                     t_cam + Vector3::new(sl * rng.gauss(), sl * rng.gauss(), sr * rng.gauss());
                 Some(pad_fix(r_cam_ned * r_ned_pad, noisy, d))
             };
-            pending_frames.push_back((
-                te + PROCESS_DELAY_US,
-                FrameResult {
-                    exposure_us: te,
-                    fix,
-                },
-            ));
+            pending_frames.push_back((te + PROCESS_DELAY_US, te, fix));
         }
-        while pending_frames.front().is_some_and(|(t, _)| *t <= now) {
-            let (_, f) = pending_frames.pop_front().unwrap();
-            companion.on_frame(f, now);
+        while pending_frames.front().is_some_and(|(t, _, _)| *t <= now) {
+            let (_, te, fix) = pending_frames.pop_front().unwrap();
+            estimator.deliver(&mut companion, te, fix, now);
         }
         // Drain the companion.
         while let Some(n) = companion.poll_transmit(now, &mut out) {
@@ -1028,7 +1025,7 @@ fn auto_profile_follows_the_autopilot_heartbeat_not_a_gimbal() {
 /// parameter list being streamed.
 #[test]
 fn timesync_reply_goes_ahead_of_the_queue() {
-    let mut companion = Companion::new(CompanionConfig::default()).unwrap();
+    let mut companion = Companion::new(CompanionConfig::default());
     let mut ap_seq = 0u8;
     let mut gcs_seq = 0u8;
     let mut out = [0u8; MAX_FRAME_LEN];
@@ -1056,16 +1053,11 @@ fn timesync_reply_goes_ahead_of_the_queue() {
     };
     let mut now = 10_000;
     let mut queued = false;
+    let mut estimator = FixEstimator::new();
     for _ in 0..30 {
         now += FRAME_PERIOD_US;
-        let outcome = companion.on_frame(
-            FrameResult {
-                exposure_us: now - PROCESS_DELAY_US,
-                fix: Some(fix),
-            },
-            now,
-        );
-        queued = outcome == touchdown_core::companion::FrameOutcome::TargetQueued;
+        let outcome = estimator.deliver(&mut companion, now - PROCESS_DELAY_US, Some(fix), now);
+        queued = outcome == TargetOutcome::TargetQueued;
         if queued {
             break;
         }
@@ -1285,7 +1277,7 @@ fn ground_station(
 
 #[test]
 fn camera_params_are_range_checked_applied_and_persisted() {
-    let mut companion = Companion::new(CompanionConfig::default()).unwrap();
+    let mut companion = Companion::new(CompanionConfig::default());
     let mut seq = 0u8;
     let mut now = 1_000_000u64;
     // (name, value sent, value answered: the new one if accepted, else the old one)
@@ -1324,10 +1316,10 @@ fn camera_params_are_range_checked_applied_and_persisted() {
     );
 
     // What the firmware's vision task gets.
-    let settings = VisionSettings::from_params(companion.params());
+    let settings = PipelineSettings::from_params(companion.params());
     assert_eq!(
         settings,
-        VisionSettings {
+        PipelineSettings {
             max_hamming: 2,
             tag_size_m: Some(0.625),
             exposure: AutoExposureLimits {
@@ -1336,6 +1328,7 @@ fn camera_params_are_range_checked_applied_and_persisted() {
                 max_gain: GainX16(40),
                 ..AutoExposureLimits::default()
             },
+            cam_yaw_deg: 0.0,
         }
     );
     assert_eq!(
@@ -1352,7 +1345,7 @@ fn camera_params_are_range_checked_applied_and_persisted() {
         Some((0.625, 0.7))
     );
     // The defaults are the compile-time ones.
-    let defaults = VisionSettings::from_params(&ParamSet::default());
+    let defaults = PipelineSettings::from_params(&ParamSet::default());
     assert_eq!(defaults.exposure, AutoExposureLimits::default());
     assert_eq!(defaults.pad(&designs::NESTED), Ok(designs::NESTED));
 
@@ -1374,14 +1367,13 @@ fn camera_params_are_range_checked_applied_and_persisted() {
     assert_eq!((found.report.rejected, found.report.unknown), (0, 0));
     assert_eq!(boot.bad_slots, 0);
     assert_eq!(&restored, companion.params());
-    assert_eq!(VisionSettings::from_params(&restored), settings);
+    assert_eq!(PipelineSettings::from_params(&restored), settings);
 
     // After the reboot a ground station reads the new parameters back, by name and by index.
     let mut rebooted = Companion::new(CompanionConfig {
         params: restored,
         ..CompanionConfig::default()
-    })
-    .unwrap();
+    });
     let mut seq = 0u8;
     assert_eq!(
         ground_station(

@@ -10,11 +10,11 @@ use filter_sim::{compare, SimConfig};
 use nalgebra::{Matrix3, Matrix6, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use touchdown_core::filter::axes::{self, Attitude, CameraMount, RotationError};
 use touchdown_core::filter::{
     ConfigError, Measurement, PaperConfig, PaperKalman, RejectReason, TrackState, Tracker,
     TrackerConfig, UpdateOutcome,
 };
-use touchdown_core::frames::{self, Attitude, CameraMount, FrameError};
 
 const FRAME_US: u64 = 33_333;
 
@@ -728,20 +728,20 @@ fn attitude_conventions() {
     // Bad inputs.
     assert_eq!(
         Attitude::from_quaternion_wxyz([0.0; 4]).unwrap_err(),
-        FrameError::NotUnit
+        RotationError::NotUnit
     );
     assert_eq!(
         Attitude::from_quaternion_wxyz([f32::NAN, 0.0, 0.0, 0.0]).unwrap_err(),
-        FrameError::NotFinite
+        RotationError::NotFinite
     );
     assert_eq!(
         Attitude::from_euler(f32::INFINITY, 0.0, 0.0).unwrap_err(),
-        FrameError::NotFinite
+        RotationError::NotFinite
     );
     let reflection = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
     assert_eq!(
         CameraMount::from_matrix(&reflection).unwrap_err(),
-        FrameError::NotRotation
+        RotationError::NotRotation
     );
     assert_eq!(
         CameraMount::from_matrix(&Matrix3::identity())
@@ -769,7 +769,7 @@ fn level_frames() {
     // PX4's absolute LOCAL_NED.
     let vehicle = Vector3::new(10.0, -4.0, -20.0);
     assert!(close(
-        &frames::local_ned_position(&vehicle, &Vector3::new(1.0, 1.0, 20.0)),
+        &axes::local_ned_position(&vehicle, &Vector3::new(1.0, 1.0, 20.0)),
         &Vector3::new(11.0, -3.0, 0.0)
     ));
 }
@@ -783,14 +783,14 @@ fn level_measurement_rotates_position_and_covariance() {
         position: Vector3::new(0.5, -0.3, 12.0),
         covariance: Matrix3::from_diagonal(&Vector3::new(0.01, 0.02, 0.5)),
     };
-    let l = frames::level_measurement(&m, &a, &mount);
+    let l = axes::level_measurement(&m, &a, &mount);
     assert_eq!(l.t_us, 42);
     assert!(close(
         &l.position,
         &a.body_to_ned(&mount.camera_to_body(&m.position))
     ));
     assert!(close(
-        &frames::ned_to_camera(&l.position, &a, &mount),
+        &axes::ned_to_camera(&l.position, &a, &mount),
         &m.position
     ));
     let mut e0: Vec<f32> = m
@@ -811,7 +811,7 @@ fn level_measurement_rotates_position_and_covariance() {
         assert!((x - y).abs() < 1e-5);
     }
     // Level, nose north: the pad straight below is straight below, image right = east.
-    let n = frames::level_measurement(&m, &Attitude::level_north(), &mount);
+    let n = axes::level_measurement(&m, &Attitude::level_north(), &mount);
     assert!(close(&n.position, &Vector3::new(0.3, 0.5, 12.0)));
 }
 
@@ -819,15 +819,15 @@ fn level_measurement_rotates_position_and_covariance() {
 fn landing_angles_match_mavlink_and_ardupilot() {
     // Right of and below the image centre.
     let p = Vector3::new(1.0, 2.0, 10.0);
-    let a = frames::landing_angles(&p).unwrap();
+    let a = axes::landing_angles(&p).unwrap();
     assert!((a.angle_x - (0.1f32).atan()).abs() < 1e-6);
     assert!((a.angle_y - (0.2f32).atan()).abs() < 1e-6);
     // ArduPilot rebuilds the body-frame line of sight as (-tan(angle_y), tan(angle_x), 1).
     let los = Vector3::new(-a.angle_y.tan(), a.angle_x.tan(), 1.0).normalize();
     let body = CameraMount::downward().camera_to_body(&p).normalize();
     assert!(close(&los, &body));
-    assert!((frames::distance(&p) - p.norm()).abs() < 1e-6);
+    assert!((axes::distance(&p) - p.norm()).abs() < 1e-6);
     // Behind the camera or not finite: no angles.
-    assert!(frames::landing_angles(&Vector3::new(0.0, 0.0, -1.0)).is_none());
-    assert!(frames::landing_angles(&Vector3::new(f32::NAN, 0.0, 1.0)).is_none());
+    assert!(axes::landing_angles(&Vector3::new(0.0, 0.0, -1.0)).is_none());
+    assert!(axes::landing_angles(&Vector3::new(f32::NAN, 0.0, 1.0)).is_none());
 }

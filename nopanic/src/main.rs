@@ -4,13 +4,13 @@
 //! profile (see Cargo.toml), and its entry point calls the whole per-frame path on inputs the
 //! optimiser cannot see through ([`black_box`]): the vision task's [`FramePipeline`]
 //! (`process`: detection with any configuration, so both detection pipelines, any families,
-//! any pixels, then the pad fix; `apply`: the parameter hand-over), the trackers inside the
-//! companion, the companion's MAVLink parse (any received bytes) and encode (draining
+//! any pixels, then the pad fix with its prediction and level steps and the estimator, with
+//! the vehicle state the companion decoded; `apply`: the parameter hand-over), the
+//! companion's MAVLink parse (any received bytes), its LANDING_TARGET and encode (draining
 //! `poll_transmit`), the vision task's exposure loop (`AutoExposure::set_limits` included)
 //! and its frame timing (`FrameTiming`: exposure time stamp, capture timeout, settling,
 //! skipped frames). Also, off the firmware's path but public and run by the host tools:
-//! single-marker pose (IPPE + refinement), the pad pose with a prediction and the level pad
-//! fix.
+//! single-marker pose (IPPE + refinement).
 //!
 //! Not covered: `PoseMethod::PaperHomography`, the paper's homography decomposition, which
 //! only reproduces the paper's tables on the host; it uses nalgebra's SVD, whose internal
@@ -31,17 +31,16 @@
 use core::hint::black_box;
 use core::panic::PanicInfo;
 
-use nalgebra::Matrix3;
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameResult, VisionSettings, MAX_FRAME_LEN,
-};
-use touchdown_core::detect::{DetectorConfig, QvgaWorkspace};
+use touchdown_core::companion::{Companion, CompanionConfig, MAX_FRAME_LEN};
+use touchdown_core::detect::QvgaWorkspace;
 use touchdown_core::family::{tables, Family};
+use touchdown_core::filter::{FrameEstimate, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout};
-use touchdown_core::pipeline::FramePipeline;
-use touchdown_core::pose::{level_pad_fix, marker_pose, pad_pose_with_prediction, PoseMethod};
+use touchdown_core::params::PipelineSettings;
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
+use touchdown_core::pose::{marker_pose, PoseMethod};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, AutoExposureLimits};
 use touchdown_core::sensor::FrameTiming;
 
@@ -58,62 +57,51 @@ static mut RX: [u8; 256] = [0; 256];
 
 /// Everything the per-frame path keeps across frames.
 struct Pipeline<'a> {
-    /// The vision task's: detector, families, pad, camera.
+    /// The vision task's: detector, families, pad, camera, estimator.
     vision: FramePipeline<'a>,
     workspace: &'a mut QvgaWorkspace,
     companion: Companion,
     exposure: AutoExposure,
 }
 
-/// One frame: the vision pipeline (detection, pad fix), the host tools' poses, filter
-/// (inside the companion), MAVLink in and out, the settings hand-over. Every input comes
-/// through `black_box`, so no branch can be decided at compile time.
+/// One frame: the per-frame pipeline (detection, pad fix, estimator) with the vehicle state
+/// the MAVLink side decoded, the host tools' single-marker poses, MAVLink in and out, the
+/// settings hand-over. Every input comes through `black_box`, so no branch can be decided at
+/// compile time.
 #[inline(never)]
-fn per_frame(
-    pipeline: &mut Pipeline<'_>,
-    pixels: &[u8],
-    // The pipeline's families (it does not lend them), for the host tools' poses.
-    families: &[&Family<'_>],
-    rx: &[u8],
-    now_us: u64,
-) {
+fn per_frame(pipeline: &mut Pipeline<'_>, pixels: &[u8], rx: &[u8], now_us: u64) {
     let exposure_us = black_box(now_us.wrapping_sub(25_000));
-    let result = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
+    pipeline.companion.receive(rx, now_us);
+    let estimate = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
         Ok(image) => {
             pipeline
                 .vision
-                .process(&image, exposure_us, &mut pipeline.workspace.buffers())
-                .result
+                .process(
+                    &image,
+                    exposure_us,
+                    pipeline.companion.vehicle(),
+                    &mut pipeline.workspace.buffers(),
+                )
+                .estimate
         }
-        Err(_) => FrameResult {
+        Err(_) => FrameEstimate {
             exposure_us,
-            fix: None,
+            fix_found: false,
+            estimate: None,
         },
     };
-    // Not on the firmware's path (the pipeline runs `pad_pose` alone), but public core
-    // functions the host tools call on the same detections: covered here.
+    // Not on the firmware's path, but a public core function the host tools call on the same
+    // detections (the single-marker pose): covered here.
     let vision = &pipeline.vision;
-    let (detections, layout, camera) = (
-        vision.detector().detections(),
-        vision.pad(),
-        vision.camera(),
-    );
+    let (detections, camera) = (vision.detector().detections(), vision.camera());
     for d in detections {
         let size = black_box(0.16);
         let _ = black_box(marker_pose(&d.corners, size, camera, PoseMethod::Ippe));
     }
-    let predicted = black_box(None);
-    if let Ok(fix) = pad_pose_with_prediction(detections, families, layout, camera, predicted) {
-        let camera_from_level: Matrix3<f32> = black_box(Matrix3::identity());
-        let _ = black_box(level_pad_fix(
-            &fix,
-            detections,
-            families,
-            layout,
-            camera,
-            &camera_from_level,
-        ));
-    }
+    // The vehicle state as the firmware's vision task reads it (a copy of the link's).
+    let mut vehicle = black_box(VehicleState::new());
+    vehicle.clone_from(pipeline.companion.vehicle());
+    let _ = black_box(vehicle.attitude_at(black_box(exposure_us)));
     #[cfg(feature = "canary")]
     {
         // A deliberate bug: indexes one past the frame. The canary build must not link.
@@ -121,8 +109,7 @@ fn per_frame(
         black_box(pixels[past_end]);
     }
     let companion = &mut pipeline.companion;
-    companion.receive(rx, now_us);
-    let _ = black_box(companion.on_frame(result, now_us));
+    let _ = black_box(companion.on_estimate(&estimate, now_us));
     let mut tx = [0u8; MAX_FRAME_LEN];
     while let Some(n) = companion.poll_transmit(now_us, &mut tx) {
         black_box(tx.get(..n));
@@ -134,7 +121,7 @@ fn per_frame(
         let mean = mean_brightness(&image, black_box(8));
         let _ = black_box(pipeline.exposure.update(mean));
     }
-    let settings = VisionSettings::from_params(pipeline.companion.params());
+    let settings = PipelineSettings::from_params(pipeline.companion.params());
     let _ = black_box(pipeline.vision.apply(settings));
     let (line_ns, frame_lines) = (black_box(120_000), black_box(278));
     pipeline
@@ -167,11 +154,7 @@ pub extern "C" fn _start() -> ! {
             &*core::ptr::addr_of!(RX),
         )
     };
-    let Ok(companion) = Companion::new(black_box(CompanionConfig::default())) else {
-        loop {
-            core::hint::spin_loop();
-        }
-    };
+    let companion = Companion::new(black_box(CompanionConfig::default()));
     let exposure = AutoExposure::new(
         black_box(AutoExposureLimits::default()),
         black_box(120_000),
@@ -187,14 +170,19 @@ pub extern "C" fn _start() -> ! {
         159.5,
         119.5,
     ));
+    let Ok(vision) = FramePipeline::new(
+        families,
+        layout,
+        camera,
+        black_box(PipelineConfig::default()),
+        black_box(PipelineSettings::default()),
+    ) else {
+        loop {
+            core::hint::spin_loop();
+        }
+    };
     let mut pipeline = Pipeline {
-        vision: FramePipeline::new(
-            families,
-            layout,
-            camera,
-            black_box(DetectorConfig::default()),
-            black_box(VisionSettings::default()),
-        ),
+        vision,
         workspace,
         companion,
         exposure,
@@ -205,7 +193,7 @@ pub extern "C" fn _start() -> ! {
         let pixels: &[u8] = black_box(&frame[..]);
         let rx_len = black_box(0usize).min(rx.len());
         let rx_bytes = rx.get(..rx_len).unwrap_or(&[]);
-        per_frame(&mut pipeline, pixels, families, black_box(rx_bytes), now_us);
+        per_frame(&mut pipeline, pixels, black_box(rx_bytes), now_us);
     }
 }
 

@@ -12,16 +12,17 @@
 //! - `pipeline`: [`FramePipeline::process`], called as `firmware/src/vision.rs` does: the
 //!   default families, a static [`QvgaWorkspace`] / [`VgaWorkspace`], the pipeline in static
 //!   storage, the default configuration with the default parameters applied (TD_MAX_HAMMING,
-//!   the pad as built). That is detection, then the pad fix
-//!   ([`pad_pose`](touchdown_core::pose::pad_pose): IPPE + Levenberg-Marquardt) with the
-//!   simulator's camera, on the frame's pad ([`Frame::pad`]).
-//! - `filter`: [`Companion::on_frame`] with the frame's result, as the link task calls it:
-//!   the trackers' predict and update, the ArduPilot profile's target.
+//!   the pad as built). That is detection, the pad fix
+//!   ([`pad_pose_with_prediction`](touchdown_core::pose::pad_pose_with_prediction): IPPE +
+//!   Levenberg-Marquardt) with the simulator's camera, on the frame's pad ([`Frame::pad`]),
+//!   and the estimator's predict and update (no attitude streamed: its camera-frame track).
+//! - `target`: [`Companion::on_estimate`] with the frame's estimate, as the link task calls
+//!   it: the ArduPilot profile's LANDING_TARGET.
 //! - `encode`: draining [`Companion::poll_transmit`] into a UART buffer (MAVLink 2 framing,
 //!   CRC), as the link task does after each frame.
 //!
-//! Frames without a detection run `filter` and `encode` too (the empty fix is what the
-//! firmware posts then).
+//! Frames without a detection run `target` and `encode` too (the estimate without a fix is
+//! what the firmware posts then).
 //!
 //! Frames ([`FRAMES`]): the typical ones are rendered by the simulator
 //! (`cargo run --release -p touchdown-host --example m7_frames` writes `frames/*.pgm`); the
@@ -44,14 +45,14 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_semihosting as _;
 use touchdown_core::camera::CameraModel;
-use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameResult, Profile, VisionSettings, MAX_FRAME_LEN,
-};
-use touchdown_core::detect::{DetectStats, DetectorConfig, QvgaWorkspace, VgaWorkspace};
+use touchdown_core::companion::{Companion, CompanionConfig, Profile, MAX_FRAME_LEN};
+use touchdown_core::detect::{DetectStats, QvgaWorkspace, VgaWorkspace};
 use touchdown_core::family::tables;
+use touchdown_core::filter::VehicleState;
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout, PadMarker};
-use touchdown_core::pipeline::{FramePipeline, FrameReport};
+use touchdown_core::params::PipelineSettings;
+use touchdown_core::pipeline::{FramePipeline, FrameReport, PipelineConfig};
 
 use frames::{FrameBuffer, Source};
 
@@ -293,57 +294,60 @@ struct Bench {
 /// detections differ from what it contains.
 fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
     let Bench {
-        pipeline,
+        pipeline: pipeline_slot,
         qvga,
         vga,
         companion,
         now_us,
     } = bench;
     // Set up outside the regions, as the vision task does before its first frame.
-    let pipeline = pipeline.write(FramePipeline::new(
+    let Ok(pipeline) = FramePipeline::new(
         tables::DEFAULT,
         frame.pad,
         camera_for(frame.width, frame.height),
-        DetectorConfig::default(),
-        VisionSettings::default(),
-    ));
-    // The tracker confirms a track over a few frames; the benchmark frames are unrelated
-    // scenes, so each is first shown to the companion a few times outside the regions (as a
-    // hover would), and the counted frame is the one that sends its LANDING_TARGET. Its time
-    // is the exposure time the pipeline stamps.
-    let t = *now_us + (WARM_UP_FRAMES as u64 + 1) * FRAME_PERIOD_US;
+        PipelineConfig::default(),
+        PipelineSettings::default(),
+    ) else {
+        hprintln!("  bad pipeline configuration");
+        return false;
+    };
+    let pipeline = pipeline_slot.write(pipeline);
+    // No autopilot streams its attitude here: the estimator runs its camera-frame track, and
+    // the ArduPilot profile needs nothing more.
+    let vehicle = VehicleState::new();
     let vga_frame = (frame.width, frame.height) == VGA;
-    // Stage 1: detection and the pad fix, as firmware/src/vision.rs runs them.
-    let FrameReport {
-        result,
-        markers,
-        detect_error,
-    } = region(frame.name, "pipeline", || {
+    // The whole per-frame path, as firmware/src/vision.rs runs it.
+    let mut process = |pipeline: &mut FramePipeline<'static>, t: u64| {
         if vga_frame {
-            pipeline.process(image, t, &mut vga.buffers())
+            pipeline.process(image, t, &vehicle, &mut vga.buffers())
         } else {
-            pipeline.process(image, t, &mut qvga.buffers())
+            pipeline.process(image, t, &vehicle, &mut qvga.buffers())
         }
-    });
-    let ok = report(frame, detect_error.map_or(Ok(markers), Err), pipeline);
-    let fix = result.fix;
-    // Stages 2 and 3: the link task's filter and MAVLink output for this frame.
+    };
+    // The tracker confirms a track over a few frames; the benchmark frames are unrelated
+    // scenes, so each is first run a few times outside the regions (as a hover would), and
+    // the counted frame is the one that sends its LANDING_TARGET.
     for _ in 0..WARM_UP_FRAMES {
         *now_us += FRAME_PERIOD_US;
-        companion.on_frame(
-            FrameResult {
-                exposure_us: *now_us,
-                fix,
-            },
-            *now_us,
-        );
+        let warm_up = process(pipeline, *now_us);
+        companion.on_estimate(&warm_up.estimate, *now_us);
         while companion
             .poll_transmit(*now_us, &mut [0u8; MAX_FRAME_LEN])
             .is_some()
         {}
     }
-    *now_us = t;
-    let outcome = region(frame.name, "filter", || companion.on_frame(result, t));
+    *now_us += FRAME_PERIOD_US;
+    let t = *now_us;
+    // Stage 1: detection, the pad fix and the estimator (the vision task's work).
+    let FrameReport {
+        estimate,
+        fix,
+        markers,
+        detect_error,
+    } = region(frame.name, "pipeline", || process(pipeline, t));
+    let ok = report(frame, detect_error.map_or(Ok(markers), Err), pipeline);
+    // Stages 2 and 3: the link task's LANDING_TARGET and its MAVLink bytes for this frame.
+    let outcome = region(frame.name, "target", || companion.on_estimate(&estimate, t));
     let mut uart = [0u8; MAX_FRAME_LEN];
     let (messages, bytes) = region(frame.name, "encode", || {
         let (mut messages, mut bytes) = (0u32, 0usize);
@@ -354,7 +358,7 @@ fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
         (messages, bytes)
     });
     hprintln!(
-        "  fix {} filter {:?} sent {} messages, {} bytes",
+        "  fix {} target {:?} sent {} messages, {} bytes",
         fix.is_some(),
         outcome,
         messages,
@@ -441,15 +445,7 @@ fn main() -> ! {
                 pipeline: &mut *addr_of_mut!(PIPELINE),
                 qvga: &mut *addr_of_mut!(QVGA_WORKSPACE),
                 vga: &mut *addr_of_mut!(VGA_WORKSPACE),
-                companion: match Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)) {
-                    Ok(companion) => companion,
-                    Err(_) => {
-                        hprintln!("m7bench: bad companion configuration");
-                        debug::exit(debug::EXIT_FAILURE);
-                        #[allow(clippy::empty_loop)]
-                        loop {}
-                    }
-                },
+                companion: Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)),
                 now_us: 0,
             },
             &mut *addr_of_mut!(FRAME),

@@ -2,15 +2,19 @@
 //!
 //! - **ArduPilot** (`AC_PrecLand`, companion backend): with `position_valid = 1` it reads
 //!   `x, y, z` in `MAV_FRAME_BODY_FRD` and divides them by `distance` (which must be > 0) to get
-//!   the line of sight; without it, it falls back to `angle_x`/`angle_y`. It time-stamps the
-//!   message on receipt and drops the target after 1 s without messages; so the pad relative
-//!   to the vehicle, body axes, every frame, and nothing once the pad is gone. Its own vehicle
-//!   state does the rest, so no vehicle state is needed here. It reads `x, y, z` in no
-//!   other frame.
+//!   the line of sight; without it, it falls back to `angle_x`/`angle_y`. It keeps
+//!   `time_usec` (jitter-corrected) as the measurement's time, to tell new measurements from
+//!   repeats and expire them after 1 s; the lag between exposure and use is its PLND_LAG. Its
+//!   estimator keeps a target for up to 2 s without measurements. So: the pad relative to the
+//!   vehicle, body axes, every frame, and nothing once the pad is gone. Its own vehicle state
+//!   does the rest, so no vehicle state is needed here. Up to 4.6 it reads `x, y, z` in no
+//!   other frame (4.7 also takes `MAV_FRAME_LOCAL_FRD`).
 //! - **PX4** (`mavlink_receiver` to `landing_target_pose`): only `MAV_FRAME_LOCAL_NED` with
 //!   `position_valid = 1`, read as the pad's **absolute** position in the local frame: the
 //!   vehicle's LOCAL_POSITION_NED at the exposure plus the pad offset in NED axes. It converts
-//!   `time_usec` with its own TIMESYNC estimate of *our* clock (`sync_stamp`), which is why
+//!   `time_usec` with its own TIMESYNC estimate of *our* clock once it has converged
+//!   (`sync_stamp`; before that, and on links where it runs no TIMESYNC, it uses the arrival
+//!   time), which is why
 //!   [`super::TimeBase::ByProfile`] sends our boot time to PX4 (and we answer PX4's TIMESYNC
 //!   requests so its estimate converges). It refuses any other frame ("coordinate frame 12
 //!   unsupported"), which is why the profile must match the autopilot: TD_PROFILE's default,
@@ -25,15 +29,16 @@
 //!   `angle_x = atan2(y, z)`, `angle_y = atan2(-x, z)` make that vector equal `x, y, z /
 //!   distance` whatever the camera mount (TD_CAM_YAW included);
 //! - `distance`, the norm of that vector;
-//! - `q`, the pad's orientation in the frame of `x, y, z` ([`pad_orientation`]): the rotation
+//! - `q`, the pad's orientation in the frame of `x, y, z`
+//!   ([`crate::filter::axes::pad_orientation`]): the rotation
 //!   from the pad frame (x right, y up, z up out of the pad, docs/interfaces.md) to body FRD
 //!   (ArduPilot) or to NED (PX4), `[w, x, y, z]`, from the frame's pad fix and the attitude at
 //!   its exposure, for heading-aligned landings;
 //! - `type = LANDING_TARGET_TYPE_VISION_FIDUCIAL`.
 
-use crate::frames::{distance, Attitude, CameraMount};
+use crate::filter::axes::{distance, local_ned_position, Attitude};
 use mavlink::dialects::common::MavAutopilot;
-use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 /// The flight stack LANDING_TARGET is formatted for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -140,7 +145,7 @@ pub struct TargetFields {
     /// `distance` from the camera, metres (> 0).
     pub distance: f32,
     /// `q`: the pad's orientation in the frame of `position`, `[w, x, y, z]`
-    /// ([`pad_orientation`]).
+    /// ([`crate::filter::axes::pad_orientation`]).
     pub q: [f32; 4],
 }
 
@@ -156,40 +161,6 @@ pub fn body_angles(body: &Vector3<f32>) -> Option<(f32, f32)> {
         return None;
     }
     Some((libm::atan2f(body.y, body.z), libm::atan2f(-body.x, body.z)))
-}
-
-fn unit(q: [f32; 4]) -> UnitQuaternion<f32> {
-    let [w, x, y, z] = q;
-    UnitQuaternion::new_normalize(Quaternion::new(w, x, y, z))
-}
-
-/// The pad's orientation for `q`: the rotation from the pad frame to body FRD (`attitude`
-/// `None`) or to NED (`Some`: the attitude at the exposure, body FRD to NED), `[w, x, y, z]`,
-/// from the fix's rotation (pad frame to camera frame) and the mount (camera to body).
-/// `None` when the rotation is not finite or not a rotation (far from orthonormal).
-pub fn pad_orientation(
-    pad_to_camera: &Matrix3<f32>,
-    mount: &CameraMount,
-    attitude: Option<&Attitude>,
-) -> Option<[f32; 4]> {
-    if !pad_to_camera.iter().all(|v| v.is_finite()) {
-        return None;
-    }
-    let err = pad_to_camera.transpose() * pad_to_camera - Matrix3::identity();
-    if !err.iter().all(|v| v.abs() <= 1.0e-2) || !(pad_to_camera.determinant() > 0.0) {
-        return None;
-    }
-    let cam_pad =
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*pad_to_camera));
-    // Shepperd's method on a nearly orthonormal matrix: renormalise.
-    let cam_pad = UnitQuaternion::new_normalize(cam_pad.into_inner());
-    let body_pad = unit(mount.quaternion_wxyz()) * cam_pad;
-    let q = match attitude {
-        Some(att) => unit(att.quaternion_wxyz()) * body_pad,
-        None => body_pad,
-    };
-    let wxyz = [q.w, q.i, q.j, q.k];
-    wxyz.iter().all(|v| v.is_finite()).then_some(wxyz)
 }
 
 /// ArduPilot: the pad relative to the vehicle in body FRD, the pad's orientation `q` (pad to
@@ -221,7 +192,7 @@ pub fn px4_fields(
 ) -> Option<TargetFields> {
     let (angle_x, angle_y) = body_angles(&attitude.ned_to_body(rel_ned))?;
     let d = distance(rel_ned);
-    let abs = crate::frames::local_ned_position(vehicle_ned, rel_ned);
+    let abs = local_ned_position(vehicle_ned, rel_ned);
     if !finite(&abs) || !(d > 0.0) || !d.is_finite() {
         return None;
     }
@@ -285,30 +256,5 @@ mod tests {
             ProfileSetting::Px4.resolve(Some(Profile::ArduPilot)),
             Some(Profile::Px4)
         );
-    }
-
-    #[test]
-    fn orientation_of_a_yawed_pad() {
-        // Camera straight down, image top to the nose; pad x along camera x, pad y along
-        // camera -y, pad z toward the camera (-z): the pad "upright" in the image.
-        let mount = CameraMount::downward();
-        let upright = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
-        let yaw = 0.4f32;
-        let turned = upright * Rotation3::from_axis_angle(&Vector3::z_axis(), yaw).into_inner();
-        let q0 = unit(pad_orientation(&upright, &mount, None).unwrap());
-        let q1 = unit(pad_orientation(&turned, &mount, None).unwrap());
-        // Pad y (the top of the print) in body FRD: forward, then turned.
-        let y0 = q0 * Vector3::y();
-        assert!((y0 - Vector3::x()).amax() < 1e-5, "{y0}");
-        let a = q0.angle_to(&q1);
-        assert!((a - yaw).abs() < 1e-4, "{a}");
-        let att = Attitude::from_euler(0.0, 0.0, 1.0).unwrap();
-        let qn = unit(pad_orientation(&upright, &mount, Some(&att)).unwrap());
-        let yn = qn * Vector3::y();
-        assert!((libm::atan2f(yn.y, yn.x) - 1.0).abs() < 1e-5);
-        let mut bad = upright;
-        bad[(0, 0)] = f32::NAN;
-        assert!(pad_orientation(&bad, &mount, None).is_none());
-        assert!(pad_orientation(&(upright * 2.0), &mount, None).is_none());
     }
 }

@@ -11,8 +11,8 @@
 //! at all: PX4 SITL runs 1-2 % slow, lock-step SITL and HITL follow the simulator, and sim
 //! speed factors scale it on purpose. At 2 % the offset moves by 20 ms every second; an
 //! offset-only filter lags it by tens of milliseconds, long enough for the vehicle state to
-//! be mapped beyond [`super::vehicle::MAX_EXTRAPOLATION_US`] (issue 15: a third of PX4 SITL's
-//! frames found no vehicle state). So the model is a line,
+//! be mapped beyond [`crate::filter::vehicle::MAX_EXTRAPOLATION_US`] (measured: a third of PX4
+//! SITL's frames found no vehicle state). So the model is a line,
 //!
 //! `autopilot = ours + offset + drift * (ours - reference)`,
 //!
@@ -47,7 +47,7 @@
 //! real change (the autopilot rebooted or changed its clock source): the window is replaced
 //! by them and [`TimeSync::jumps`] counts it. Any sample that passes the gate clears the
 //! candidates, so scattered outliers never add up to a reset. A reboot seen elsewhere (vehicle
-//! time going backwards, see [`super::vehicle`]) resets the estimate at once with
+//! time going backwards, see [`crate::filter::vehicle`]) resets the estimate at once with
 //! [`TimeSync::reset`]; the rate is kept as the prior of the next fit (same crystal, same
 //! simulator), with a weak weight that two samples outvote.
 //!

@@ -1,4 +1,5 @@
-//! Filters that smooth the pad position over time.
+//! The estimator stage: filters that smooth the pad position over time, the vehicle state
+//! they read it with, and the coordinate axes they work in.
 //!
 //! A single pose is noisy (its depth error grows with the square of the distance), it is
 //! sometimes wrong (a mis-decoded or mirrored pose), and frames get dropped. The flight
@@ -13,17 +14,27 @@
 //!   Mahalanobis gating, recovery from a real jump, a track lifecycle and no stale output.
 //!
 //! Both consume a [`Measurement`]: a position in metres with its 3x3 covariance and the
-//! exposure time stamp. Which frame the position is expressed in is the caller's choice and
+//! exposure time stamp. Which axes the position is expressed in is the caller's choice and
 //! matters (see [`tracker`]): with the vehicle's attitude, rotate the camera-frame pose into
-//! the level NED-axes frame with [`crate::frames::level_measurement`] first.
+//! level NED axes with [`axes::level_measurement`] first.
+//!
+//! What flies is [`estimator::PadEstimator`]: two trackers (level NED axes with the attitude
+//! at each frame's exposure from [`vehicle::VehicleState`], and the camera frame as the
+//! fallback), run by [`crate::pipeline::FramePipeline`] after each pad fix. [`axes`] holds the
+//! attitude, the camera mount and the rotations between camera, body FRD and NED.
 
+pub mod axes;
+pub mod estimator;
 pub mod paper;
 pub mod tracker;
+pub mod vehicle;
 
+pub use estimator::{EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate, PadEstimator};
 pub use paper::{PaperConfig, PaperKalman};
 pub use tracker::{
     ConfigError, Estimate, RejectReason, TrackState, Tracker, TrackerConfig, UpdateOutcome,
 };
+pub use vehicle::{PositionSample, VehicleState};
 
 use nalgebra::{Matrix3, Vector3};
 

@@ -19,11 +19,11 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, FrameOutcome, Profile, TimeSource, VisionSettings, MAX_FRAME_LEN,
+    Companion, CompanionConfig, Profile, TargetOutcome, TimeSource, MAX_FRAME_LEN,
 };
-use touchdown_core::detect::DetectorConfig;
 use touchdown_core::family::Family;
-use touchdown_core::pipeline::FramePipeline;
+use touchdown_core::params::PipelineSettings;
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 
 use super::{CliError, Outcome};
 use crate::families::{self, SelectedFamily};
@@ -223,18 +223,19 @@ pub fn run(
         ProfileArg::Ardupilot => CompanionConfig::with_profile(Profile::ArduPilot),
         ProfileArg::Px4 => CompanionConfig::with_profile(Profile::Px4),
     };
-    let mut companion =
-        Companion::new(config).map_err(|e| CliError(format!("companion configuration: {e:?}")))?;
+    let mut companion = Companion::new(config);
     // The camera board's per-frame path, with the parameters applied between frames exactly
-    // as its vision task applies them (TD_TAG_SIZE, TD_MAX_HAMMING over MAVLink included).
-    let mut vision_settings = VisionSettings::from_params(companion.params());
+    // as its vision task applies them (TD_TAG_SIZE, TD_MAX_HAMMING, TD_CAM_YAW over MAVLink
+    // included), and the estimator reading the vehicle state the companion decodes.
+    let mut pipeline_settings = PipelineSettings::from_params(companion.params());
     let mut pipeline = FramePipeline::new(
         &family_refs,
         &layout,
         reader.camera,
-        DetectorConfig::default(),
-        vision_settings,
-    );
+        PipelineConfig::default(),
+        pipeline_settings,
+    )
+    .map_err(|e| CliError(format!("pipeline configuration: {e:?}")))?;
     let mut workspace = HostWorkspace::new();
 
     let start = Instant::now();
@@ -257,15 +258,15 @@ pub fn run(
                 Err(e) => return Err(CliError(format!("{endpoint_name}: {e}"))),
             }
         }
-        let settings = VisionSettings::from_params(companion.params());
-        if settings != vision_settings {
+        let settings = PipelineSettings::from_params(companion.params());
+        if settings != pipeline_settings {
             if let Err(e) = pipeline.apply(settings) {
                 let _ = writeln!(
                     err,
                     "warning: pad not scaled ({e:?}): searching it as built"
                 );
             }
-            vision_settings = settings;
+            pipeline_settings = settings;
         }
         if let Some(entry) = reader.entries.get(next) {
             let exposure_us = lead_us + (entry.t_us - t0);
@@ -274,12 +275,13 @@ pub fn run(
                 let frame = reader.frame(next - 1).map_err(CliError::new)?;
                 let view = frame.image.view();
                 let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
-                let report = pipeline.process(&view, exposure_us, &mut buffers);
+                let report =
+                    pipeline.process(&view, exposure_us, companion.vehicle(), &mut buffers);
                 if let Some(e) = report.detect_error {
                     let _ = writeln!(err, "warning: frame {}: {e:?}", frame.index);
                 }
-                let outcome = companion.on_frame(report.result, now_us());
-                if outcome == FrameOutcome::TargetQueued {
+                let outcome = companion.on_estimate(&report.estimate, now_us());
+                if outcome == TargetOutcome::TargetQueued {
                     targets += 1;
                 }
             }

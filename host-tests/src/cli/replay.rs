@@ -39,6 +39,7 @@ use clap::Args;
 use nalgebra::{Matrix3, Vector3};
 use touchdown_core::camera::CameraModel;
 use touchdown_core::family::Family;
+use touchdown_core::pipeline::PipelineConfig;
 
 use super::{CliError, Outcome};
 use crate::config::PadConfig;
@@ -62,9 +63,9 @@ const FRAMES_AHEAD: usize = 2;
 
 /// `touchdown replay --help`.
 pub const LONG_HELP: &str = "\
-Replay a recording, or a simulated scenario, through the pipeline the camera board runs
-(detector, pad pose, Kalman filter), for the paper's method (in our code) and ours side by
-side; print the paper's kind of tables and write figures of the estimates against the truth.
+Replay a recording, or a simulated scenario, through the per-frame path the camera board
+runs (core's FramePipeline: detector, pad fix, estimator), beside the paper's method (in our
+code); print the paper's kind of tables and write figures of the estimates against the truth.
 
 Input, one of:
   RECORDING          a recording directory (camera.toml, pad.toml, frames/NNNNNN.pgm,
@@ -77,8 +78,13 @@ Input, one of:
 Methods:
   paper's method     the paper's detector, its homography pose of the largest pad marker,
                      and its per-axis Kalman filter with Table 1's values (lag included)
-  ours               touchdown's detector, IPPE + Levenberg-Marquardt pose of the whole pad
-                     with a covariance, levelled with the attitude, and the 3-D tracker
+  ours               the board's pipeline as it ships: touchdown's detector, IPPE +
+                     Levenberg-Marquardt fix of the whole pad (flip choice by prediction,
+                     tilt from the attitude), the estimator; scored as the autopilot receives
+                     it: the LANDING_TARGET's body FRD vector turned with the autopilot's
+                     attitude
+  --pose-steps       adds the board's pipeline without the level fix, without the flip
+                     choice, and without both
 Both are given the camera's attitude from the truth (what the flight controller knows);
 a recording without truth runs vision only and prints no errors.
 
@@ -133,6 +139,11 @@ pub struct ReplayArgs {
     /// Write no figures
     #[arg(long)]
     pub no_plots: bool,
+
+    /// Also run the board's pipeline without each optional pad-fix step (the level fix, the
+    /// flip choice by prediction): the measurement behind what ships
+    #[arg(long)]
+    pub pose_steps: bool,
 
     /// Rendering threads for --scenario [default: all cores]
     #[arg(
@@ -377,14 +388,22 @@ pub fn run(
     let selected = families::resolve_all(&names).map_err(CliError::new)?;
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
-    let methods: Vec<Method> = if input.has_truth {
-        vec![Method::paper().named("paper's method"), Method::ours()]
-    } else {
-        vec![
-            Method::paper().without_attitude().named("paper's method"),
-            Method::ours().without_attitude(),
-        ]
-    };
+    let mut methods: Vec<Method> = vec![Method::paper().named("paper's method"), Method::ours()];
+    if args.pose_steps {
+        let steps = |flip_by_prediction, level_fix| PipelineConfig {
+            flip_by_prediction,
+            level_fix,
+            ..PipelineConfig::default()
+        };
+        methods.extend([
+            Method::board("no level fix", steps(true, false)),
+            Method::board("no flip choice", steps(false, true)),
+            Method::board("neither step", steps(false, false)),
+        ]);
+    }
+    if !input.has_truth {
+        methods = methods.into_iter().map(Method::without_attitude).collect();
+    }
     let mut experiment = Experiment::new(input.camera, &family_refs, layout, &methods)
         .map_err(|e| CliError(format!("cannot set up the methods: {e:?}")))?;
     let set_points: BTreeMap<String, SetPoint> = input

@@ -13,6 +13,9 @@ use touchdown_core::companion::mavlink::dialects::common::{
     MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::{Companion, TargetOutcome};
+use touchdown_core::filter::{EstimatorConfig, PadEstimator};
+use touchdown_core::params::PipelineSettings;
 use touchdown_core::pose::{PadFix, Pose};
 
 /// Lateral noise of a fix, as a fraction of the distance.
@@ -98,5 +101,33 @@ pub fn pad_fix(rotation: Matrix3<f32>, translation: Vector3<f32>, distance: f32)
         markers_used: 1,
         reprojection_rms_px: 0.3,
         alternative_rms_px: f32::INFINITY,
+    }
+}
+
+/// The board's estimator stage fed pad fixes instead of images: what
+/// `FramePipeline::process` runs after its pad fix, with TD_CAM_YAW applied between frames as
+/// `FramePipeline::apply` does, and the companion's vehicle state read when the frame is
+/// delivered (as the vision task reads the link's copy before each frame).
+pub struct FixEstimator(PadEstimator);
+
+impl FixEstimator {
+    pub fn new() -> Self {
+        FixEstimator(PadEstimator::new(EstimatorConfig::default()).unwrap())
+    }
+
+    /// One frame exposed at `exposure_us`, processed and handed to `companion` at `now_us`.
+    pub fn deliver(
+        &mut self,
+        companion: &mut Companion,
+        exposure_us: u64,
+        fix: Option<PadFix>,
+        now_us: u64,
+    ) -> TargetOutcome {
+        self.0
+            .set_mount_yaw(PipelineSettings::from_params(companion.params()).cam_yaw_deg);
+        let estimate = self
+            .0
+            .update(exposure_us, fix.as_ref(), companion.vehicle());
+        companion.on_estimate(&estimate, now_us)
     }
 }

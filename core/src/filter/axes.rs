@@ -1,4 +1,4 @@
-//! Vehicle attitude, the camera mount, and the frames MAVLink wants the pad in.
+//! Vehicle attitude, the camera mount, and the axes MAVLink wants the pad in.
 //!
 //! The pose gives the pad in the **camera frame** (x right, y down, z forward along the
 //! optical axis). The flight controllers want it elsewhere:
@@ -42,7 +42,7 @@ use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 /// A bad attitude or mount input.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum FrameError {
+pub enum RotationError {
     /// A component is NaN or infinite.
     NotFinite,
     /// The quaternion's norm is far from 1 (not a rotation, or a zero "not supported" value).
@@ -56,15 +56,15 @@ const UNIT_TOLERANCE: f32 = 0.1;
 /// How far from orthonormal a mount matrix may be (per element of `R^T R - I`).
 const ROTATION_TOLERANCE: f32 = 1.0e-3;
 
-fn unit_from_wxyz(q: [f32; 4]) -> Result<UnitQuaternion<f32>, FrameError> {
+fn unit_from_wxyz(q: [f32; 4]) -> Result<UnitQuaternion<f32>, RotationError> {
     if !q.iter().all(|v| v.is_finite()) {
-        return Err(FrameError::NotFinite);
+        return Err(RotationError::NotFinite);
     }
     let [w, x, y, z] = q;
     let quat = Quaternion::new(w, x, y, z);
     let norm = quat.norm();
     if !((norm - 1.0).abs() <= UNIT_TOLERANCE) {
-        return Err(FrameError::NotUnit);
+        return Err(RotationError::NotUnit);
     }
     Ok(UnitQuaternion::from_quaternion(quat))
 }
@@ -96,7 +96,7 @@ impl Attitude {
     /// From MAVLink ATTITUDE_QUATERNION's `[q1, q2, q3, q4]` = `[w, x, y, z]` (body FRD to
     /// NED). Normalised; refused when not finite or its norm is not within 10 % of 1 (an
     /// all-zero "not available" quaternion, for instance).
-    pub fn from_quaternion_wxyz(q: [f32; 4]) -> Result<Self, FrameError> {
+    pub fn from_quaternion_wxyz(q: [f32; 4]) -> Result<Self, RotationError> {
         Ok(Attitude {
             q: unit_from_wxyz(q)?,
         })
@@ -104,9 +104,9 @@ impl Attitude {
 
     /// From MAVLink ATTITUDE's roll, pitch and yaw, radians (Tait-Bryan Z-Y-X:
     /// `Rz(yaw) Ry(pitch) Rx(roll)`).
-    pub fn from_euler(roll: f32, pitch: f32, yaw: f32) -> Result<Self, FrameError> {
+    pub fn from_euler(roll: f32, pitch: f32, yaw: f32) -> Result<Self, RotationError> {
         if !(roll.is_finite() && pitch.is_finite() && yaw.is_finite()) {
-            return Err(FrameError::NotFinite);
+            return Err(RotationError::NotFinite);
         }
         Ok(Attitude {
             q: UnitQuaternion::from_euler_angles(roll, pitch, yaw),
@@ -190,9 +190,9 @@ impl CameraMount {
 
     /// Looking straight down, image top toward the nose, then turned by `yaw` radians about the
     /// optical axis (positive: the image top turns toward the right wing).
-    pub fn downward_rotated(yaw: f32) -> Result<Self, FrameError> {
+    pub fn downward_rotated(yaw: f32) -> Result<Self, RotationError> {
         if !yaw.is_finite() {
-            return Err(FrameError::NotFinite);
+            return Err(RotationError::NotFinite);
         }
         let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
         Ok(CameraMount {
@@ -201,7 +201,7 @@ impl CameraMount {
     }
 
     /// From a quaternion `[w, x, y, z]`, camera to body FRD.
-    pub fn from_quaternion_wxyz(q: [f32; 4]) -> Result<Self, FrameError> {
+    pub fn from_quaternion_wxyz(q: [f32; 4]) -> Result<Self, RotationError> {
         Ok(CameraMount {
             q: unit_from_wxyz(q)?,
         })
@@ -209,15 +209,15 @@ impl CameraMount {
 
     /// From a rotation matrix, camera to body FRD (its columns are the camera axes in the body
     /// frame). Refused unless orthonormal with determinant +1 (to 1e-3).
-    pub fn from_matrix(m: &Matrix3<f32>) -> Result<Self, FrameError> {
+    pub fn from_matrix(m: &Matrix3<f32>) -> Result<Self, RotationError> {
         if !m.iter().all(|v| v.is_finite()) {
-            return Err(FrameError::NotFinite);
+            return Err(RotationError::NotFinite);
         }
         let err = m.transpose() * m - Matrix3::identity();
         if !err.iter().all(|v| v.abs() <= ROTATION_TOLERANCE)
             || !((m.determinant() - 1.0).abs() <= ROTATION_TOLERANCE * 3.0)
         {
-            return Err(FrameError::NotRotation);
+            return Err(RotationError::NotRotation);
         }
         Ok(CameraMount {
             q: UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*m)),
@@ -243,6 +243,48 @@ impl CameraMount {
     pub fn body_to_camera(&self, v: &Vector3<f32>) -> Vector3<f32> {
         self.q.inverse_transform_vector(v)
     }
+
+    /// This mount with the camera turned by `yaw_deg` degrees about its own optical axis
+    /// (TD_CAM_YAW: a board mounted rotated in its plane); unchanged when `yaw_deg` is not
+    /// finite.
+    pub fn turned_about_optical_axis(&self, yaw_deg: f32) -> CameraMount {
+        if !yaw_deg.is_finite() {
+            return *self;
+        }
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw_deg.to_radians());
+        CameraMount {
+            q: UnitQuaternion::new_normalize((self.q * turn).into_inner()),
+        }
+    }
+}
+
+/// The pad's orientation: the rotation from the pad frame to body FRD (`attitude` `None`) or
+/// to NED (`Some`: the attitude at the exposure, body FRD to NED), `[w, x, y, z]`, from a fix's
+/// rotation (pad frame to camera frame) and the mount (camera to body). `None` when the
+/// rotation is not finite or not a rotation (far from orthonormal).
+pub fn pad_orientation(
+    pad_to_camera: &Matrix3<f32>,
+    mount: &CameraMount,
+    attitude: Option<&Attitude>,
+) -> Option<[f32; 4]> {
+    if !pad_to_camera.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let err = pad_to_camera.transpose() * pad_to_camera - Matrix3::identity();
+    if !err.iter().all(|v| v.abs() <= 1.0e-2) || !(pad_to_camera.determinant() > 0.0) {
+        return None;
+    }
+    let cam_pad =
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*pad_to_camera));
+    // Shepperd's method on a nearly orthonormal matrix: renormalise.
+    let cam_pad = UnitQuaternion::new_normalize(cam_pad.into_inner());
+    let body_pad = mount.q * cam_pad;
+    let q = match attitude {
+        Some(att) => att.q * body_pad,
+        None => body_pad,
+    };
+    let wxyz = [q.w, q.i, q.j, q.k];
+    wxyz.iter().all(|v| v.is_finite()).then_some(wxyz)
 }
 
 /// The rotation matrix from the camera frame to NED axes: `R_ned_body * R_body_camera`.
@@ -302,4 +344,39 @@ pub fn landing_angles(p: &Vector3<f32>) -> Option<LandingAngles> {
 /// LANDING_TARGET's `distance`: the distance from the camera to the target, metres.
 pub fn distance(p: &Vector3<f32>) -> f32 {
     p.norm()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit(q: [f32; 4]) -> UnitQuaternion<f32> {
+        let [w, x, y, z] = q;
+        UnitQuaternion::new_normalize(Quaternion::new(w, x, y, z))
+    }
+
+    #[test]
+    fn orientation_of_a_yawed_pad() {
+        // Camera straight down, image top to the nose; pad x along camera x, pad y along
+        // camera -y, pad z toward the camera (-z): the pad "upright" in the image.
+        let mount = CameraMount::downward();
+        let upright = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+        let yaw = 0.4f32;
+        let turned = upright * Rotation3::from_axis_angle(&Vector3::z_axis(), yaw).into_inner();
+        let q0 = unit(pad_orientation(&upright, &mount, None).unwrap());
+        let q1 = unit(pad_orientation(&turned, &mount, None).unwrap());
+        // Pad y (the top of the print) in body FRD: forward, then turned.
+        let y0 = q0 * Vector3::y();
+        assert!((y0 - Vector3::x()).amax() < 1e-5, "{y0}");
+        let a = q0.angle_to(&q1);
+        assert!((a - yaw).abs() < 1e-4, "{a}");
+        let att = Attitude::from_euler(0.0, 0.0, 1.0).unwrap();
+        let qn = unit(pad_orientation(&upright, &mount, Some(&att)).unwrap());
+        let yn = qn * Vector3::y();
+        assert!((libm::atan2f(yn.y, yn.x) - 1.0).abs() < 1e-5);
+        let mut bad = upright;
+        bad[(0, 0)] = f32::NAN;
+        assert!(pad_orientation(&bad, &mount, None).is_none());
+        assert!(pad_orientation(&(upright * 2.0), &mount, None).is_none());
+    }
 }

@@ -19,7 +19,7 @@ use std::vec::Vec;
 
 use embassy_futures::block_on;
 
-use super::super::params::{ParamId, ParamSet};
+use super::super::{ParamId, ParamSet};
 use super::*;
 
 /// How the step the power is cut at is left.
@@ -278,7 +278,7 @@ trait Design {
     fn save(s: &mut Self::State, m: &mut Model, p: &ParamSet) -> bool;
 }
 
-/// Today's design (before issue 12): one sector (the model's second), append-only, erased when
+/// The first design (replaced by the two-sector log): one sector (the model's second), append-only, erased when
 /// full, then slot 0 written.
 struct SingleSector;
 

@@ -11,7 +11,7 @@
 //! [`MAX_EXTRAPOLATION_US`]) the newest is used (the position advanced by its velocity).
 //!
 //! Time stamps: a sample's `time_boot_ms` is in the autopilot's clock; with a known clock
-//! offset ([`super::timesync`]) it is converted to ours, else the receive time is used (late by
+//! offset ([`crate::companion::timesync`]) it is converted to ours, else the receive time is used (late by
 //! the transport delay, a few ms on a fast UART). When the offset changes (first known, or
 //! reset) the histories are cleared, since old and new stamps are not comparable.
 //!
@@ -20,7 +20,7 @@
 //! restarted (or its clock was reset): [`VehicleState::observe_time`] reports it and the
 //! companion drops everything it knew of the vehicle.
 
-use crate::frames::Attitude;
+use super::axes::Attitude;
 use nalgebra::{UnitQuaternion, Vector3};
 
 /// Attitude samples kept (0.64 s at 50 Hz).
@@ -51,7 +51,7 @@ struct Ring<T: Copy, const N: usize> {
 }
 
 impl<T: Copy, const N: usize> Ring<T, N> {
-    fn new() -> Self {
+    const fn new() -> Self {
         Ring {
             items: [None; N],
             head: 0,
@@ -125,6 +125,8 @@ pub struct VehicleState {
     last_time: Option<(u64, u64)>,
     /// Our time of the newest sample received.
     last_rx_us: Option<u64>,
+    /// Autopilot reboots seen ([`VehicleState::on_reboot`]).
+    reboots: u32,
 }
 
 impl Default for VehicleState {
@@ -134,13 +136,14 @@ impl Default for VehicleState {
 }
 
 impl VehicleState {
-    /// Nothing known.
-    pub fn new() -> Self {
+    /// Nothing known (`const`, so the firmware can keep one in a static).
+    pub const fn new() -> Self {
         VehicleState {
             attitude: Ring::new(),
             position: Ring::new(),
             last_time: None,
             last_rx_us: None,
+            reboots: 0,
         }
     }
 
@@ -156,6 +159,18 @@ impl VehicleState {
     pub fn clear_samples(&mut self) {
         self.attitude.clear();
         self.position.clear();
+    }
+
+    /// The autopilot rebooted: forgets the samples and counts the reboot, so that whoever
+    /// filters positions in the autopilot's frames ([`super::estimator`]) restarts too.
+    pub fn on_reboot(&mut self) {
+        self.clear_samples();
+        self.reboots = self.reboots.wrapping_add(1);
+    }
+
+    /// Autopilot reboots seen since start (wrapping): compare two readings for "changed".
+    pub fn reboots(&self) -> u32 {
+        self.reboots
     }
 
     /// Checks an autopilot time stamp (µs, its clock) received at `now_us`; returns true when

@@ -2,7 +2,7 @@
 //!
 //! Users tune the board from Mission Planner or QGroundControl through the MAVLink parameter
 //! protocol (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE); the
-//! [`super::Companion`] speaks the protocol, this module holds the values.
+//! [`crate::companion::Companion`] speaks the protocol, this module holds the values.
 //!
 //! Every parameter is sent as `MAV_PARAM_TYPE_REAL32`, integers included. The protocol has two
 //! incompatible encodings for integer parameters (ArduPilot's C cast, PX4's bytewise copy) and
@@ -14,16 +14,21 @@
 //! and is answered with the **old** value, which is how a ground station learns that the write
 //! failed.
 //!
-//! The parameters of the camera side (TD_TAG_SIZE, TD_MAX_HAMMING, the auto-exposure limits
-//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are turned into the settings the vision code
-//! uses by [`super::vision::VisionSettings::from_params`].
+//! The parameters of the per-frame path (TD_TAG_SIZE, TD_MAX_HAMMING, TD_CAM_YAW, the
+//! auto-exposure limits TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are turned into the settings
+//! the pipeline applies by [`settings::PipelineSettings::from_params`].
 //!
 //! Persistence is the firmware's job: [`ParamSet::export`] writes the values as bytes
 //! (magic, version, `name + value` records, CRC) and [`ParamSet::import`] reads them back.
 //! Records are matched by name, so a firmware with a changed table still reads what it knows;
 //! each imported value is range-checked again and a bad one keeps its default.
 
-use super::link::crc_accumulate;
+use crate::crc::crc16_x25;
+
+pub mod persist;
+mod settings;
+
+pub use settings::{largest_marker_size, scale_pad, PipelineSettings};
 
 /// Longest parameter name (MAVLink's `param_id`, not NUL-terminated when exactly 16).
 pub const PARAM_NAME_LEN: usize = 16;
@@ -393,7 +398,7 @@ impl ParamSet {
             }
             val.copy_from_slice(&value.to_le_bytes());
         }
-        let crc = crc_accumulate(0xFFFF, records);
+        let crc = crc16_x25(0xFFFF, records);
         let mut h = [0u8; HEADER_LEN];
         h[..4].copy_from_slice(&MAGIC);
         h[4] = FORMAT_VERSION;
@@ -421,7 +426,7 @@ impl ParamSet {
         let records = blob
             .get(HEADER_LEN..HEADER_LEN + count * RECORD_LEN)
             .ok_or(ImportError::Truncated)?;
-        if crc_accumulate(0xFFFF, records) != crc {
+        if crc16_x25(0xFFFF, records) != crc {
             return Err(ImportError::BadCrc);
         }
         let mut report = ImportReport::default();
@@ -525,7 +530,7 @@ mod tests {
         let end = HEADER_LEN + records * RECORD_LEN;
         blob[end..].fill(0);
         blob[5] = records as u8;
-        let crc = crc_accumulate(0xFFFF, &blob[HEADER_LEN..end]);
+        let crc = crc16_x25(0xFFFF, &blob[HEADER_LEN..end]);
         blob[6..8].copy_from_slice(&crc.to_le_bytes());
         blob
     }

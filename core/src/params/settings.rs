@@ -1,17 +1,19 @@
-//! The camera side's parameters, turned into the settings the vision code applies.
+//! The per-frame path's parameters, turned into the settings [`crate::pipeline`] applies.
 //!
-//! Four groups of MAVLink parameters tune what happens before a pose reaches the companion:
-//! TD_MAX_HAMMING (the decoder's correction cap), TD_TAG_SIZE (the printed size of the pad)
-//! and TD_EXP_MAX_US / TD_GAIN_MAX / TD_EXP_TARGET (the software auto-exposure's limits, see
-//! [`crate::sensor::exposure`]). The [`super::Companion`] owns the [`ParamSet`], but the
-//! detector, the pad layout and the exposure loop live with the camera (a separate task in the
-//! firmware). [`VisionSettings::from_params`] is the one place that converts: the firmware's
-//! link task calls it whenever the parameters change and hands the result to the vision task,
-//! which applies it between frames; the host tests call the same function.
+//! Four groups of MAVLink parameters tune what happens between a frame and its estimate:
+//! TD_MAX_HAMMING (the decoder's correction cap), TD_TAG_SIZE (the printed size of the pad),
+//! TD_CAM_YAW (the camera's turn about its optical axis, for the estimator's mount) and
+//! TD_EXP_MAX_US / TD_GAIN_MAX / TD_EXP_TARGET (the software auto-exposure's limits, see
+//! [`crate::sensor::exposure`]). The MAVLink side ([`crate::companion::Companion`]) owns the
+//! [`ParamSet`], but the detector, the pad layout, the estimator and the exposure loop live
+//! with the camera (a separate task in the firmware). [`PipelineSettings::from_params`] is the
+//! one place that converts: the firmware's link task calls it whenever the parameters change
+//! and hands the result to the vision task, which applies it between frames
+//! ([`crate::pipeline::FramePipeline::apply`]); the host's `touchdown companion` does the same
+//! after every received chunk.
 //!
 //! Why here and not in `detect`, `pad` or `sensor`: those modules know nothing of MAVLink
-//! parameter names and should not; the dependency points from the companion (which owns the
-//! table) to them.
+//! parameter names and should not; the dependency points from the parameter table to them.
 //!
 //! # TD_TAG_SIZE
 //!
@@ -23,32 +25,34 @@
 //! simply that marker's edge. 0 (the default) keeps the pad as built, so a build whose pad
 //! matches the print needs no parameter.
 
-use super::params::{ParamId, ParamSet};
+use super::{ParamId, ParamSet};
 use crate::detect::DetectorConfig;
 use crate::pad::{PadError, PadLayout, PadMarker, MAX_PAD_MARKERS};
 use crate::sensor::exposure::AutoExposureLimits;
 use crate::sensor::GainX16;
 
-/// What the vision code takes from the parameters.
+/// What the per-frame path takes from the parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct VisionSettings {
+pub struct PipelineSettings {
     /// Upper bound on corrected bits per marker (each family's own bound applies too).
     pub max_hamming: u8,
     /// Edge of the pad's largest marker as printed, metres; `None`: the pad as built.
     pub tag_size_m: Option<f32>,
     /// The auto-exposure's limits and target.
     pub exposure: AutoExposureLimits,
+    /// The camera's turn about its optical axis from the built mount, degrees (TD_CAM_YAW).
+    pub cam_yaw_deg: f32,
 }
 
-impl Default for VisionSettings {
+impl Default for PipelineSettings {
     /// The settings of the default parameters.
     fn default() -> Self {
-        VisionSettings::from_params(&ParamSet::default())
+        PipelineSettings::from_params(&ParamSet::default())
     }
 }
 
-impl VisionSettings {
+impl PipelineSettings {
     /// The settings `params` ask for. Every value was range-checked when it was set, so this
     /// only converts units; the exposure loop's deadband is not a parameter and keeps
     /// [`AutoExposureLimits::default`]'s.
@@ -57,7 +61,7 @@ impl VisionSettings {
         let tag_size = params.get(ParamId::TagSize);
         // The gain parameter is in times, the sensor's unit is sixteenths.
         let gain_x16 = libm::roundf(params.get(ParamId::GainMax) * 16.0);
-        VisionSettings {
+        PipelineSettings {
             max_hamming: u8::try_from(params.get_int(ParamId::MaxHamming)).unwrap_or(0),
             tag_size_m: (tag_size > 0.0).then_some(tag_size),
             exposure: AutoExposureLimits {
@@ -68,6 +72,7 @@ impl VisionSettings {
                 // `as` saturates; the parameter's range keeps it within 16..=512 anyway.
                 max_gain: GainX16((gain_x16 as u16).max(GainX16::ONE.0)),
             },
+            cam_yaw_deg: params.get(ParamId::CamYaw),
         }
     }
 
@@ -130,8 +135,8 @@ mod tests {
 
     #[test]
     fn default_parameters_give_the_compile_time_defaults() {
-        let s = VisionSettings::default();
-        assert_eq!(s, VisionSettings::from_params(&ParamSet::default()));
+        let s = PipelineSettings::default();
+        assert_eq!(s, PipelineSettings::from_params(&ParamSet::default()));
         assert_eq!(s.exposure, AutoExposureLimits::default());
         assert_eq!(s.tag_size_m, None);
         assert_eq!(s.max_hamming, 1);
@@ -155,9 +160,9 @@ mod tests {
     fn each_parameter_changes_its_setting() {
         let mut p = ParamSet::default();
         p.set(ParamId::MaxHamming, 3.0).unwrap();
-        assert_eq!(VisionSettings::from_params(&p).max_hamming, 3);
+        assert_eq!(PipelineSettings::from_params(&p).max_hamming, 3);
         assert_eq!(
-            VisionSettings::from_params(&p)
+            PipelineSettings::from_params(&p)
                 .detector_config(DetectorConfig::default())
                 .max_hamming,
             3
@@ -166,7 +171,7 @@ mod tests {
         p.set(ParamId::GainMax, 2.5).unwrap();
         p.set(ParamId::ExpTarget, 150.0).unwrap();
         p.set(ParamId::TagSize, 0.625).unwrap();
-        let s = VisionSettings::from_params(&p);
+        let s = PipelineSettings::from_params(&p);
         assert_eq!(
             s.exposure,
             AutoExposureLimits {
@@ -177,14 +182,18 @@ mod tests {
             }
         );
         assert_eq!(s.tag_size_m, Some(0.625));
-        // Parameters that are not the camera's change nothing here.
+        p.set(ParamId::CamYaw, 90.0).unwrap();
+        let s = PipelineSettings::from_params(&p);
+        assert_eq!(s.cam_yaw_deg, 90.0);
+        // Parameters of the MAVLink side change nothing here.
         let mut q = p;
         q.set(ParamId::RateHz, 5.0).unwrap();
-        q.set(ParamId::CamYaw, 90.0).unwrap();
-        assert_eq!(VisionSettings::from_params(&q), s);
+        q.set(ParamId::Profile, 1.0).unwrap();
+        q.set(ParamId::VpeEnable, 1.0).unwrap();
+        assert_eq!(PipelineSettings::from_params(&q), s);
         // Back to 0: the pad as built again.
         p.set(ParamId::TagSize, 0.0).unwrap();
-        assert_eq!(VisionSettings::from_params(&p).tag_size_m, None);
+        assert_eq!(PipelineSettings::from_params(&p).tag_size_m, None);
     }
 
     #[test]
@@ -201,7 +210,7 @@ mod tests {
                 let def = id.def();
                 p.set(id, if pick_max { def.max } else { def.min }).unwrap();
             }
-            let s = VisionSettings::from_params(&p);
+            let s = PipelineSettings::from_params(&p);
             let e = s.exposure;
             if pick_max {
                 assert_eq!(s.max_hamming, 3);
@@ -235,7 +244,7 @@ mod tests {
         let mut p = ParamSet::default();
         // The nested pad printed at half size: its 1.25 m marker is 0.625 m.
         p.set(ParamId::TagSize, 0.625).unwrap();
-        let s = VisionSettings::from_params(&p);
+        let s = PipelineSettings::from_params(&p);
         let built = &designs::NESTED;
         assert_eq!(s.pad_scale(built), 0.5);
         let scaled = s.pad(built).unwrap();
@@ -253,7 +262,7 @@ mod tests {
     fn a_single_marker_pad_takes_the_tag_size() {
         let mut p = ParamSet::default();
         p.set(ParamId::TagSize, 0.2).unwrap();
-        let s = VisionSettings::from_params(&p);
+        let s = PipelineSettings::from_params(&p);
         let scaled = s.pad(&designs::PAPER_SINGLE).unwrap();
         let m = scaled.markers()[0];
         assert_eq!((m.family, m.id, m.size), ("aruco_6x6_250", 0, 0.2));

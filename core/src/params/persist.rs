@@ -55,8 +55,8 @@
 use core::future::Future;
 
 #[cfg(test)]
-use super::params::ImportError;
-use super::params::{ImportReport, ParamSet, EXPORT_LEN};
+use super::ImportError;
+use super::{ImportReport, ParamSet, EXPORT_LEN};
 
 /// Flash programming unit of the STM32H7 (256 bits).
 pub const FLASH_WORD: usize = 32;
@@ -807,7 +807,7 @@ mod power_loss_tests;
 /// `persist_tests.rs`.
 #[cfg(test)]
 mod tests {
-    use super::super::params::ParamId;
+    use super::super::ParamId;
     use super::*;
 
     const SLOTS: usize = 6;
@@ -842,7 +842,7 @@ mod tests {
     /// The slot size the module documentation's save count is worked out from.
     #[test]
     fn slot_size_of_the_current_table() {
-        assert_eq!(EXPORT_LEN, 8 + super::super::params::PARAM_COUNT * 20);
+        assert_eq!(EXPORT_LEN, 8 + super::super::PARAM_COUNT * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
         // Format 2: a header word and the sequence number more; 409 slots per sector after

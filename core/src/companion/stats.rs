@@ -1,0 +1,85 @@
+//! What the companion counts, for logs and reports, and what became of each frame's target.
+
+use super::framing::ParserStats;
+use super::timesync::TimeSource;
+
+/// What [`super::Companion::on_estimate`] did with a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TargetOutcome {
+    /// A LANDING_TARGET is queued.
+    TargetQueued,
+    /// No pad in this frame: nothing sent.
+    NoFix,
+    /// The tracker has no confirmed, fresh estimate (starting, or the fix was rejected).
+    NoEstimate,
+    /// PX4 profile: no attitude or local position at the exposure time.
+    NoVehicleState,
+    /// TD_PROFILE auto and no autopilot identified yet (no HEARTBEAT from it, or one whose
+    /// `autopilot` is neither ArduPilot nor PX4): a target in the wrong frame would be
+    /// refused, so none is sent.
+    NoProfile,
+    /// Within TD_RATE_HZ's interval of the previous target.
+    RateLimited,
+    /// The estimate gave no valid target (not finite, behind the camera).
+    Invalid,
+}
+
+/// Counters (saturating) and link state, for logs and reports.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CompanionStats {
+    /// The receive parser's counters.
+    pub link: ParserStats,
+    /// Valid frames whose payload did not decode (bad enum value...).
+    pub decode_errors: u32,
+    /// Frames handed to [`super::Companion::poll_transmit`]'s caller.
+    pub tx_frames: u32,
+    /// Bytes handed out.
+    pub tx_bytes: u64,
+    /// LANDING_TARGETs sent.
+    pub landing_targets: u32,
+    /// VISION_POSITION_ESTIMATEs sent.
+    pub vision_estimates: u32,
+    /// PARAM_VALUEs sent.
+    pub param_values: u32,
+    /// Queue items (STATUSTEXTs included) dropped because their queue was full.
+    pub queue_overflows: u32,
+    /// STATUSTEXTs sent.
+    pub status_texts: u32,
+    /// Targets dropped because they were not transmitted in time.
+    pub targets_expired: u32,
+    /// Unsent targets replaced by a newer one.
+    pub targets_replaced: u32,
+    /// Frames processed.
+    pub frames: u32,
+    /// Frames with a pad fix.
+    pub frames_with_fix: u32,
+    /// Frames with a fix but no fresh estimate.
+    pub no_estimate: u32,
+    /// Frames with a fix but no vehicle state (PX4).
+    pub no_vehicle_state: u32,
+    /// Frames with a fix but no profile yet (TD_PROFILE auto, autopilot not identified).
+    pub no_profile: u32,
+    /// Autopilot reboots detected.
+    pub autopilot_reboots: u32,
+    /// Accepted PARAM_SETs.
+    pub param_sets_accepted: u32,
+    /// Rejected PARAM_SETs (answered with the old value).
+    pub param_sets_rejected: u32,
+    /// SET_MESSAGE_INTERVAL commands sent.
+    pub interval_requests: u32,
+    /// COMMAND_ACKs for them with MAV_RESULT_ACCEPTED.
+    pub interval_acks_accepted: u32,
+    /// COMMAND_ACKs for them with another result.
+    pub interval_acks_other: u32,
+    /// TIMESYNC samples used / answers refused / confirmed offset jumps.
+    pub timesync_samples: u32,
+    /// TIMESYNC answers refused (not ours, or a round trip too long).
+    pub timesync_rejected: u32,
+    /// Where the clock offset comes from.
+    pub time_source: Option<TimeSource>,
+    /// Autopilot minus companion clock, µs.
+    pub clock_offset_us: Option<i64>,
+    /// The autopilot's (system, component) id, once heard.
+    pub autopilot: Option<(u8, u8)>,
+}

@@ -1,0 +1,161 @@
+//! From the estimator's output to the LANDING_TARGET (and VISION_POSITION_ESTIMATE) queued for
+//! the autopilot, in the format of the profile in force.
+//!
+//! - ArduPilot: body FRD, from [`PadEstimate::body_frd`] (the level estimate rotated with the
+//!   attitude at exposure, or the camera-frame estimate through the mount). ArduPilot needs
+//!   none of our vehicle state, so targets keep flowing when its messages stop.
+//! - PX4: LOCAL_NED, the vehicle's position at the exposure plus the level estimate; nothing
+//!   without both the attitude and LOCAL_POSITION_NED at the exposure.
+//!
+//! Then TD_RATE_HZ's pacing (by exposure time), the time base of `time_usec`, and the newest
+//! target replacing an unsent older one.
+
+use super::profile::{self, Profile, TargetFrame};
+use super::{PendingTarget, PendingVpe, State, TargetOutcome, TimeBase, UNKNOWN_Q};
+use crate::filter::axes::Attitude;
+use crate::filter::{Estimate, FrameEstimate};
+use crate::params::ParamId;
+use mavlink::dialects::common::{
+    LandingTargetType, MavBool, MavFrame, LANDING_TARGET_DATA, VISION_POSITION_ESTIMATE_DATA,
+};
+use nalgebra::UnitQuaternion;
+
+impl State {
+    pub(super) fn on_estimate(&mut self, frame: &FrameEstimate, now_us: u64) -> TargetOutcome {
+        self.stats.frames = self.stats.frames.saturating_add(1);
+        if !frame.fix_found {
+            return TargetOutcome::NoFix;
+        }
+        self.stats.frames_with_fix = self.stats.frames_with_fix.saturating_add(1);
+        let t = frame.exposure_us;
+        let Some(profile) = self.profile() else {
+            self.stats.no_profile = self.stats.no_profile.saturating_add(1);
+            return TargetOutcome::NoProfile;
+        };
+        let fields = match profile {
+            Profile::ArduPilot => {
+                let Some(e) = &frame.estimate else {
+                    self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
+                    return TargetOutcome::NoEstimate;
+                };
+                // Body FRD needs no attitude: the camera is fixed to the body.
+                profile::ardupilot_fields(&e.body_frd, e.orientation_body.unwrap_or(UNKNOWN_Q))
+            }
+            Profile::Px4 => {
+                let level = frame.estimate.as_ref().and_then(|e| Some((e, e.level?)));
+                let position = frame
+                    .estimate
+                    .as_ref()
+                    .and_then(|e| e.vehicle_position)
+                    .or_else(|| self.vehicle.position_at(t));
+                let attitude = level
+                    .map(|(_, l)| l.attitude)
+                    .or_else(|| self.vehicle.attitude_at(t));
+                let (Some(_), Some(pos)) = (attitude, position) else {
+                    self.stats.no_vehicle_state = self.stats.no_vehicle_state.saturating_add(1);
+                    return TargetOutcome::NoVehicleState;
+                };
+                let Some((e, l)) = level else {
+                    self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
+                    return TargetOutcome::NoEstimate;
+                };
+                profile::px4_fields(
+                    &pos.position,
+                    &l.estimate.position,
+                    &l.attitude,
+                    e.orientation_ned.unwrap_or(UNKNOWN_Q),
+                )
+            }
+        };
+        let Some(fields) = fields else {
+            return TargetOutcome::Invalid;
+        };
+        let rate = self.params.get(ParamId::RateHz).max(1.0);
+        let min_interval_us = (0.9e6 / rate) as u64;
+        if self
+            .last_target_exposure_us
+            .is_some_and(|last| t > last && t - last < min_interval_us)
+        {
+            return TargetOutcome::RateLimited;
+        }
+        self.last_target_exposure_us = Some(t);
+        let time_usec = match self.time_base() {
+            TimeBase::Companion | TimeBase::ByProfile => t,
+            TimeBase::Autopilot => self.timesync.to_autopilot(t).unwrap_or(t),
+        };
+        let data = LANDING_TARGET_DATA {
+            time_usec,
+            angle_x: fields.angle_x,
+            angle_y: fields.angle_y,
+            distance: fields.distance,
+            size_x: 0.0,
+            size_y: 0.0,
+            target_num: 0,
+            frame: match fields.frame {
+                TargetFrame::BodyFrd => MavFrame::MAV_FRAME_BODY_FRD,
+                TargetFrame::LocalNed => MavFrame::MAV_FRAME_LOCAL_NED,
+            },
+            x: fields.position.x,
+            y: fields.position.y,
+            z: fields.position.z,
+            q: fields.q,
+            mavtype: LandingTargetType::LANDING_TARGET_TYPE_VISION_FIDUCIAL,
+            position_valid: MavBool::MAV_BOOL_TRUE,
+        };
+        if self.target.is_some() {
+            self.stats.targets_replaced = self.stats.targets_replaced.saturating_add(1);
+        }
+        self.target = Some(PendingTarget {
+            created_us: now_us,
+            data,
+        });
+        if self.params.get_int(ParamId::VpeEnable) == 1 {
+            if let Some(l) = frame.estimate.as_ref().and_then(|e| e.level) {
+                self.vpe = Some(PendingVpe {
+                    created_us: now_us,
+                    data: vision_estimate(time_usec, &l.estimate, &l.attitude),
+                });
+            }
+        }
+        TargetOutcome::TargetQueued
+    }
+}
+
+/// VISION_POSITION_ESTIMATE: the vehicle in a pad-centred NED frame (origin at the pad, NED
+/// axes), i.e. minus the pad's level position, with the vehicle's attitude; covariance upper
+/// triangle (x, y, z, roll, pitch, yaw), row-major: the estimate's position covariance, the
+/// attitude entries set to (0.05 rad)², since the attitude is the autopilot's own.
+fn vision_estimate(time_usec: u64, e: &Estimate, att: &Attitude) -> VISION_POSITION_ESTIMATE_DATA {
+    let [w, x, y, z] = att.quaternion_wxyz();
+    let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z));
+    let (roll, pitch, yaw) = q.euler_angles();
+    let mut full = nalgebra::Matrix6::<f32>::zeros();
+    full.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&e.position_covariance);
+    for k in 3..6 {
+        if let Some(v) = full.get_mut((k, k)) {
+            *v = 0.05 * 0.05;
+        }
+    }
+    let mut covariance = [0.0f32; 21];
+    let mut slots = covariance.iter_mut();
+    for r in 0..6 {
+        for c in r..6 {
+            if let (Some(slot), Some(v)) = (slots.next(), full.get((r, c))) {
+                *slot = *v;
+            }
+        }
+    }
+    let p = -e.position;
+    VISION_POSITION_ESTIMATE_DATA {
+        usec: time_usec,
+        x: p.x,
+        y: p.y,
+        z: p.z,
+        roll,
+        pitch,
+        yaw,
+        covariance,
+        reset_counter: 0,
+    }
+}

@@ -1,0 +1,127 @@
+//! Unit tests of the companion's own behaviour (the end-to-end tests with a simulated
+//! autopilot are in host-tests/tests/companion.rs).
+
+use super::*;
+use crate::filter::{FrameEstimate, PadEstimate};
+use mavlink::dialects::common::{
+    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
+};
+use nalgebra::Vector3;
+
+#[test]
+fn landing_target_has_extension_fields() {
+    assert_eq!(
+        <LANDING_TARGET_DATA as MessageData>::ENCODED_LEN,
+        LANDING_TARGET_FULL_LEN
+    );
+}
+
+#[test]
+fn heartbeat_first_and_at_one_hertz() {
+    let mut c = Companion::new(CompanionConfig::default());
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut heartbeats = 0;
+    for ms in 0..3000u64 {
+        while let Some(n) = c.poll_transmit(ms * 1000, &mut out) {
+            // MAVLink 2, message id 0.
+            assert_eq!(out[0], 0xFD);
+            assert_eq!(&out[7..10], &[0, 0, 0]);
+            assert!(n > 12);
+            heartbeats += 1;
+        }
+    }
+    assert_eq!(heartbeats, 3);
+}
+
+#[test]
+fn status_text_is_sent_once_and_cut_to_the_field() {
+    let mut c = Companion::new(CompanionConfig::default());
+    let mut out = [0u8; MAX_FRAME_LEN];
+    // Drain the first heartbeat.
+    while c.poll_transmit(0, &mut out).is_some() {}
+    let long = "camera: no frame for 2 s, re-initialising the OV7725 sensor now";
+    assert!(long.len() > STATUS_TEXT_LEN);
+    assert!(c.queue_status_text(MavSeverity::MAV_SEVERITY_ERROR, long));
+    let mut texts = 0;
+    let mut parser = FrameParser::new();
+    while let Some(n) = c.poll_transmit(1000, &mut out) {
+        parser.push(&out[..n], |frame| {
+            if let Ok(MavMessage::STATUSTEXT(s)) = frame.decode() {
+                assert_eq!(s.severity, MavSeverity::MAV_SEVERITY_ERROR);
+                assert_eq!(s.text.to_str().unwrap(), &long[..STATUS_TEXT_LEN]);
+                texts += 1;
+            }
+        });
+    }
+    assert_eq!(texts, 1);
+    assert_eq!(c.stats().status_texts, 1);
+    // A full queue refuses and counts.
+    for _ in 0..STATUS_QUEUE_CAPACITY {
+        assert!(c.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, "x"));
+    }
+    assert!(!c.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, "x"));
+    assert_eq!(c.stats().queue_overflows, 1);
+    // Multi-byte characters are never split.
+    let mut c = Companion::new(CompanionConfig::default());
+    let accents = "é".repeat(30); // 60 bytes
+    assert!(c.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, &accents));
+    assert_eq!(c.state.status.front().unwrap().text[48..], [0xC3, 0xA9]);
+}
+
+fn heartbeat_from(c: &mut Companion, sys: u8, comp: u8, autopilot: MavAutopilot) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let data = HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    };
+    let n = framing::write_v2_frame(&mut out, 0, sys, comp, &data).unwrap();
+    c.receive(&out[..n], 0);
+}
+
+#[test]
+fn auto_profile_latches_on_the_autopilot_only() {
+    let mut c = Companion::new(CompanionConfig::default());
+    assert_eq!(c.profile(), None);
+    let frame = FrameEstimate {
+        exposure_us: 0,
+        fix_found: true,
+        estimate: Some(PadEstimate {
+            body_frd: Vector3::new(0.0, 0.0, 5.0),
+            level: None,
+            vehicle_position: None,
+            orientation_body: None,
+            orientation_ned: None,
+        }),
+    };
+    assert_eq!(c.on_estimate(&frame, 1000), TargetOutcome::NoProfile);
+    assert_eq!(c.stats().no_profile, 1);
+    // A gimbal (component 154), another system's autopilot: ignored.
+    heartbeat_from(&mut c, 1, 154, MavAutopilot::MAV_AUTOPILOT_GENERIC);
+    heartbeat_from(&mut c, 2, 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+    assert_eq!((c.profile(), c.stats().autopilot), (None, None));
+    heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+    assert_eq!(c.profile(), Some(Profile::Px4));
+    assert_eq!(c.stats().autopilot, Some((1, 1)));
+    heartbeat_from(&mut c, 1, 154, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+    assert_eq!(c.profile(), Some(Profile::Px4));
+    // Announced once; again when the autopilot changes.
+    heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_PX4);
+    assert_eq!(c.state.status.len(), 1);
+    heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+    assert_eq!(c.profile(), Some(Profile::ArduPilot));
+    assert_eq!(c.state.status.len(), 2);
+    // A forced profile wins.
+    c.set_param(ParamId::Profile, 1.0).unwrap();
+    assert_eq!(c.profile(), Some(Profile::Px4));
+}
+
+#[test]
+fn footprint_is_small() {
+    // The firmware keeps one in static RAM: stay well under 8 KiB.
+    let size = core::mem::size_of::<Companion>();
+    assert!(size < 8192, "{size} bytes");
+}

@@ -1,0 +1,202 @@
+//! What the companion sends and when: the periodic messages (HEARTBEAT, TIMESYNC requests,
+//! stream requests while a stream is missing, a paced parameter list), and the order of the
+//! transmit queue: TIMESYNC answers first, then the newest LANDING_TARGET (dropped when older
+//! than [`super::CompanionConfig::max_target_latency_us`]), VISION_POSITION_ESTIMATE,
+//! STATUSTEXT, and the rest in order.
+//!
+//! Frames are serialised here, one per call, into the caller's buffer.
+
+use super::framing;
+use super::profile::Profile;
+use super::{Pending, State, MAX_FRAME_LEN, MSG_ATTITUDE_QUATERNION, TX_QUEUE_CAPACITY};
+use crate::params::{ParamId, PARAM_COUNT};
+use mavlink::dialects::common::{
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavState, MavType,
+    COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA, STATUSTEXT_DATA,
+    TIMESYNC_DATA,
+};
+
+impl State {
+    /// Queues what is due at `now_us`.
+    fn tick(&mut self, now_us: u64) {
+        // A schedule saturated at u64::MAX is never due: otherwise a clock at the end of its
+        // range would queue a frame on every poll, forever, at one instant (found by the
+        // mavlink_stream fuzz target; fuzz/regressions/mavlink_stream/).
+        if now_us >= self.next_heartbeat_us && self.next_heartbeat_us < u64::MAX {
+            self.enqueue(Pending::Heartbeat);
+            self.next_heartbeat_us = now_us.saturating_add(self.config.heartbeat_period_us);
+        }
+        let alive = self.autopilot_alive(now_us);
+        if let (Some(target), true) = (self.autopilot, alive) {
+            if now_us >= self.next_timesync_us && self.next_timesync_us < u64::MAX {
+                let ts1 = self.timesync.request(now_us);
+                self.enqueue(Pending::TimesyncRequest { ts1, target });
+                self.next_timesync_us = now_us.saturating_add(self.config.timesync_period_us);
+            }
+            let wants_position = self.profile() == Some(Profile::Px4);
+            let (timeout, period) = (
+                self.config.stream_timeout_us,
+                self.config.interval_request_period_us,
+            );
+            let mut requests: [Option<Pending>; 2] = [None, None];
+            for (s, req) in self.streams.iter_mut().zip(requests.iter_mut()) {
+                let wanted = s.message_id == MSG_ATTITUDE_QUATERNION || wants_position;
+                let flowing = s
+                    .last_rx_us
+                    .is_some_and(|t| now_us.saturating_sub(t) <= timeout);
+                if wanted && !flowing && now_us >= s.next_request_us && s.next_request_us < u64::MAX
+                {
+                    s.next_request_us = now_us.saturating_add(period);
+                    let interval_us = if s.message_id == MSG_ATTITUDE_QUATERNION {
+                        self.config.attitude_interval_us
+                    } else {
+                        self.config.position_interval_us
+                    };
+                    *req = Some(Pending::SetInterval {
+                        message_id: s.message_id,
+                        interval_us,
+                        target,
+                    });
+                }
+            }
+            for p in requests.into_iter().flatten() {
+                self.stats.interval_requests = self.stats.interval_requests.saturating_add(1);
+                self.enqueue(p);
+            }
+        }
+        if let Some(i) = self.param_cursor {
+            // Leave room in the queue for everything else.
+            if now_us >= self.next_param_us && self.queue.len() < TX_QUEUE_CAPACITY / 2 {
+                match ParamId::from_index(i) {
+                    Some(id) => {
+                        self.enqueue(Pending::ParamValue(id));
+                        self.param_cursor = Some(i + 1);
+                        self.next_param_us =
+                            now_us.saturating_add(self.config.param_stream_interval_us);
+                    }
+                    None => self.param_cursor = None,
+                }
+            }
+        }
+    }
+
+    pub(super) fn poll_transmit(&mut self, now_us: u64, out: &mut [u8]) -> Option<usize> {
+        if out.len() < MAX_FRAME_LEN {
+            return None;
+        }
+        self.tick(now_us);
+        // TIMESYNC answers first: their round trip is what the autopilot measures.
+        if let Some(p) = self.timesync_reply.take() {
+            let msg = self.message(p);
+            return self.emit(&msg, out);
+        }
+        let latency = self.config.max_target_latency_us;
+        while let Some(p) = self.target.take() {
+            if now_us.saturating_sub(p.created_us) > latency {
+                self.stats.targets_expired = self.stats.targets_expired.saturating_add(1);
+                continue;
+            }
+            self.stats.landing_targets = self.stats.landing_targets.saturating_add(1);
+            return self.emit(&MavMessage::LANDING_TARGET(p.data), out);
+        }
+        if let Some(p) = self.vpe.take() {
+            if now_us.saturating_sub(p.created_us) <= latency {
+                self.stats.vision_estimates = self.stats.vision_estimates.saturating_add(1);
+                return self.emit(&MavMessage::VISION_POSITION_ESTIMATE(p.data), out);
+            }
+        }
+        if let Some(s) = self.status.pop_front() {
+            self.stats.status_texts = self.stats.status_texts.saturating_add(1);
+            let msg = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                severity: s.severity,
+                text: s.text.into(),
+                ..STATUSTEXT_DATA::DEFAULT
+            });
+            return self.emit(&msg, out);
+        }
+        let p = self.queue.pop_front()?;
+        let msg = self.message(p);
+        if let Pending::ParamValue(_) = p {
+            self.stats.param_values = self.stats.param_values.saturating_add(1);
+        }
+        self.emit(&msg, out)
+    }
+
+    fn message(&self, p: Pending) -> MavMessage {
+        match p {
+            Pending::Heartbeat => MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_ONBOARD_CONTROLLER,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            }),
+            Pending::TimesyncRequest { ts1, target } => MavMessage::TIMESYNC(TIMESYNC_DATA {
+                tc1: 0,
+                ts1,
+                target_system: target.0,
+                target_component: target.1,
+            }),
+            Pending::TimesyncResponse { tc1, ts1, target } => MavMessage::TIMESYNC(TIMESYNC_DATA {
+                tc1,
+                ts1,
+                target_system: target.0,
+                target_component: target.1,
+            }),
+            Pending::SetInterval {
+                message_id,
+                interval_us,
+                target,
+            } => MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                param1: message_id as f32,
+                param2: interval_us as f32,
+                command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                target_system: target.0,
+                target_component: target.1,
+                ..COMMAND_LONG_DATA::DEFAULT
+            }),
+            Pending::CommandAck { command, target } => MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+                command,
+                result: MavResult::MAV_RESULT_UNSUPPORTED,
+                target_system: target.0,
+                target_component: target.1,
+                ..COMMAND_ACK_DATA::DEFAULT
+            }),
+            Pending::ParamValue(id) => MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+                param_value: self.params.get(id),
+                param_count: PARAM_COUNT as u16,
+                param_index: id.index() as u16,
+                param_id: id.def().name.into(),
+                param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+            }),
+        }
+    }
+
+    fn emit(&mut self, msg: &MavMessage, out: &mut [u8]) -> Option<usize> {
+        let (seq, sys, comp) = (self.sequence, self.sysid(), self.compid());
+        // Serialise through the concrete payload type. `serialize_message(&MavMessage)` would
+        // link the serialiser of every message of the common dialect (~110 KB of flash in the
+        // firmware) although the companion only ever sends these. Framed by
+        // `framing::write_v2_frame` (same bytes as `MAVLinkV2MessageRaw`, without its panic
+        // paths; see nopanic/).
+        let written = match msg {
+            MavMessage::HEARTBEAT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::TIMESYNC(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::COMMAND_LONG(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::COMMAND_ACK(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::PARAM_VALUE(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::LANDING_TARGET(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::VISION_POSITION_ESTIMATE(d) => {
+                framing::write_v2_frame(out, seq, sys, comp, d)
+            }
+            MavMessage::STATUSTEXT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            _ => return None,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        let len = written?;
+        self.stats.tx_frames = self.stats.tx_frames.saturating_add(1);
+        self.stats.tx_bytes = self.stats.tx_bytes.saturating_add(len as u64);
+        Some(len)
+    }
+}

@@ -1,0 +1,314 @@
+//! The estimator: from one frame's pad fix and the vehicle's state to the pad's place
+//! relative to the vehicle, filtered, at the frame's exposure time.
+//!
+//! This is the stage between the camera and the MAVLink messages. It owns two trackers
+//! ([`super::tracker`]) that see every fix:
+//!
+//! - the **level** tracker filters the pad relative to the vehicle in NED axes, each fix
+//!   rotated with the attitude *at the frame's exposure* ([`super::vehicle`] keeps a short
+//!   history and interpolates). This is the good one: the pad is static in that frame, so the
+//!   constant-velocity model holds while the vehicle tilts.
+//! - the **camera-frame** tracker filters the raw camera-frame positions; its larger process
+//!   noise absorbs the vehicle's tilting. It is the fallback when there is no attitude (the
+//!   autopilot silent, or not streaming it).
+//!
+//! What it gives ([`PadEstimate`]) is independent of the autopilot: the pad in body FRD (from
+//! the level estimate and the attitude at exposure, else from the camera-frame estimate
+//! through the mount), the level estimate with that attitude, the vehicle's local position at
+//! the exposure where known, and the pad's orientation. Which of those a LANDING_TARGET carries
+//! is the MAVLink side's choice ([`crate::companion::profile`]).
+//!
+//! Why the vehicle state is an argument and not owned here: it arrives with the autopilot's
+//! messages, which the MAVLink side decodes (and, on the board, in another task than the
+//! camera's). The state carries a reboot counter ([`VehicleState::reboots`]); when it moves,
+//! the level tracker restarts, since NED positions from before an autopilot reboot are in a
+//! frame that no longer exists.
+//!
+//! The camera mount (TD_CAM_YAW) is set between frames ([`PadEstimator::set_mount_yaw`]); a
+//! changed mount restarts both trackers, because measurements before and after it are in
+//! different frames.
+
+use super::axes::{level_measurement, pad_orientation, Attitude, CameraMount};
+use super::tracker::{ConfigError, Estimate, Tracker, TrackerConfig};
+use super::vehicle::{PositionSample, VehicleState};
+use super::Measurement;
+use crate::pose::PadFix;
+use nalgebra::Vector3;
+
+/// Everything about the estimator that is fixed at start-up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimatorConfig {
+    /// The camera mount before TD_CAM_YAW's turn about the optical axis.
+    pub mount: CameraMount,
+    /// The level (NED axes) tracker.
+    pub level_tracker: TrackerConfig,
+    /// The camera-frame tracker (no attitude).
+    pub camera_tracker: TrackerConfig,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        EstimatorConfig {
+            mount: CameraMount::downward(),
+            level_tracker: TrackerConfig::level(),
+            camera_tracker: TrackerConfig::camera_frame(),
+        }
+    }
+}
+
+/// The level estimate with the attitude it was read with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LevelEstimate {
+    /// The pad relative to the vehicle, NED axes, metres (and its velocity, covariances).
+    pub estimate: Estimate,
+    /// The vehicle's attitude at the exposure (body FRD to NED).
+    pub attitude: Attitude,
+}
+
+/// The filtered pad at one frame's exposure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PadEstimate {
+    /// The pad relative to the vehicle in body FRD, metres: from the level estimate where there
+    /// is one, else from the camera-frame estimate through the mount.
+    pub body_frd: Vector3<f32>,
+    /// The level estimate, when the attitude at the exposure is known and the level track is
+    /// confirmed and fresh.
+    pub level: Option<LevelEstimate>,
+    /// The vehicle's local position at the exposure, when the autopilot streams it.
+    pub vehicle_position: Option<PositionSample>,
+    /// The pad's orientation from this frame's fix (the trackers filter positions only), pad
+    /// frame to body FRD, `[w, x, y, z]`; `None` when the fix's rotation is unusable.
+    pub orientation_body: Option<[f32; 4]>,
+    /// The same, pad frame to NED (needs the attitude at the exposure).
+    pub orientation_ned: Option<[f32; 4]>,
+}
+
+/// What the estimator made of one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameEstimate {
+    /// The frame's exposure time, our clock, µs.
+    pub exposure_us: u64,
+    /// The frame had a pad fix.
+    pub fix_found: bool,
+    /// The estimate at the exposure: `None` without a fix, or while no tracker has a confirmed
+    /// estimate whose last measurement is fresh (see [`TrackerConfig::max_coast_us`]).
+    pub estimate: Option<PadEstimate>,
+}
+
+/// The two trackers and the mount (see the module docs).
+#[derive(Debug, Clone)]
+pub struct PadEstimator {
+    config: EstimatorConfig,
+    mount: CameraMount,
+    /// TD_CAM_YAW in force, degrees.
+    mount_yaw_deg: f32,
+    level: Tracker,
+    camera: Tracker,
+    /// [`VehicleState::reboots`] when the level tracker last ran.
+    vehicle_reboots: u32,
+}
+
+impl PadEstimator {
+    /// An estimator with no track. Fails when a tracker configuration is invalid.
+    pub fn new(config: EstimatorConfig) -> Result<Self, ConfigError> {
+        Ok(PadEstimator {
+            config,
+            mount: config.mount,
+            mount_yaw_deg: 0.0,
+            level: Tracker::new(config.level_tracker)?,
+            camera: Tracker::new(config.camera_tracker)?,
+            vehicle_reboots: 0,
+        })
+    }
+
+    /// Turns the configured mount by `yaw_deg` about the optical axis (TD_CAM_YAW). A change
+    /// restarts both trackers.
+    pub fn set_mount_yaw(&mut self, yaw_deg: f32) {
+        // Compared as the parameter, not as the turned quaternion, whose last bits a turn by
+        // zero may change.
+        if yaw_deg != self.mount_yaw_deg {
+            self.mount_yaw_deg = yaw_deg;
+            self.mount = self.config.mount.turned_about_optical_axis(yaw_deg);
+            self.reset();
+        }
+    }
+
+    /// The mount in force (the configured one turned by TD_CAM_YAW).
+    pub fn mount(&self) -> &CameraMount {
+        &self.mount
+    }
+
+    /// Forgets both tracks (a new, independent flight).
+    pub fn reset(&mut self) {
+        self.level.reset();
+        self.camera.reset();
+    }
+
+    /// The pad in the camera frame predicted at `t_us` from the tracks (before this frame's
+    /// fix), for choosing between a fix's two mirror solutions; `None` without a track.
+    pub fn predicted_in_camera(&self, t_us: u64, vehicle: &VehicleState) -> Option<Vector3<f32>> {
+        let level = vehicle.attitude_at(t_us).and_then(|att| {
+            let e = self.level.estimate(t_us)?;
+            Some(self.mount.body_to_camera(&att.ned_to_body(&e.position)))
+        });
+        level.or_else(|| self.camera.estimate(t_us).map(|e| e.position))
+    }
+
+    /// Feeds one frame: `fix` (if the pad was found) exposed at `exposure_us`, read with the
+    /// vehicle state known when the frame was processed.
+    pub fn update(
+        &mut self,
+        exposure_us: u64,
+        fix: Option<&PadFix>,
+        vehicle: &VehicleState,
+    ) -> FrameEstimate {
+        if vehicle.reboots() != self.vehicle_reboots {
+            self.vehicle_reboots = vehicle.reboots();
+            self.level.reset();
+        }
+        let t = exposure_us;
+        self.level.predict_to(t);
+        self.camera.predict_to(t);
+        let Some(fix) = fix else {
+            return FrameEstimate {
+                exposure_us,
+                fix_found: false,
+                estimate: None,
+            };
+        };
+        let m = Measurement {
+            t_us: t,
+            position: fix.pose.translation,
+            covariance: fix.pad_position_covariance(),
+        };
+        self.camera.update(&m);
+        let attitude = vehicle.attitude_at(t);
+        if let Some(att) = &attitude {
+            self.level.update(&level_measurement(&m, att, &self.mount));
+        }
+        let level = attitude.and_then(|attitude| {
+            self.level
+                .estimate(t)
+                .map(|estimate| LevelEstimate { estimate, attitude })
+        });
+        let body_frd = match &level {
+            Some(l) => Some(l.attitude.ned_to_body(&l.estimate.position)),
+            None => self
+                .camera
+                .estimate(t)
+                .map(|e| self.mount.camera_to_body(&e.position)),
+        };
+        let estimate = body_frd.map(|body_frd| PadEstimate {
+            body_frd,
+            level,
+            vehicle_position: vehicle.position_at(t),
+            orientation_body: pad_orientation(&fix.pose.rotation, &self.mount, None),
+            orientation_ned: attitude
+                .as_ref()
+                .and_then(|att| pad_orientation(&fix.pose.rotation, &self.mount, Some(att))),
+        });
+        FrameEstimate {
+            exposure_us,
+            fix_found: true,
+            estimate,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pose::Pose;
+    use nalgebra::{Matrix3, Matrix6};
+
+    const PERIOD_US: u64 = 33_333;
+
+    /// A pad 5 m below a level camera, slightly forward and right, as a confident fix.
+    fn fix() -> PadFix {
+        PadFix {
+            pose: Pose {
+                rotation: Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0),
+                translation: Vector3::new(0.3, -0.2, 5.0),
+            },
+            covariance: Matrix6::identity() * 1e-6,
+            markers_used: 1,
+            reprojection_rms_px: 0.2,
+            alternative_rms_px: f32::INFINITY,
+        }
+    }
+
+    /// Feeds `frames` fixes from `t0`; returns the last frame's estimate and its time.
+    fn feed(
+        e: &mut PadEstimator,
+        vehicle: &mut VehicleState,
+        level: bool,
+        t0: u64,
+        frames: u64,
+    ) -> (FrameEstimate, u64) {
+        let mut last = None;
+        let mut t = t0;
+        for k in 0..frames {
+            t = t0 + k * PERIOD_US;
+            if level {
+                vehicle.push_attitude(t, &Attitude::level_north(), t);
+            }
+            last = Some(e.update(t, Some(&fix()), vehicle));
+        }
+        (last.unwrap(), t)
+    }
+
+    #[test]
+    fn without_attitude_the_camera_track_gives_body_frd_and_no_level() {
+        let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut vehicle = VehicleState::new();
+        let first = e.update(0, Some(&fix()), &vehicle);
+        assert!(
+            first.fix_found && first.estimate.is_none(),
+            "not yet confirmed"
+        );
+        let (last, _) = feed(&mut e, &mut vehicle, false, PERIOD_US, 5);
+        let est = last.estimate.expect("confirmed");
+        assert!(est.level.is_none());
+        // Downward mount: camera x (right) is body y, camera y (down the image) is body -x.
+        let want = Vector3::new(0.2, 0.3, 5.0);
+        assert!((est.body_frd - want).amax() < 1e-3, "{}", est.body_frd);
+        assert!(est.orientation_body.is_some() && est.orientation_ned.is_none());
+        // A frame without a fix: nothing, but the exposure time is kept.
+        let none = e.update(10 * PERIOD_US, None, &vehicle);
+        assert_eq!((none.exposure_us, none.fix_found), (10 * PERIOD_US, false));
+        assert!(none.estimate.is_none());
+    }
+
+    #[test]
+    fn with_attitude_the_level_track_is_used() {
+        let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut vehicle = VehicleState::new();
+        let (last, _) = feed(&mut e, &mut vehicle, true, 0, 6);
+        let est = last.estimate.expect("confirmed");
+        let level = est.level.expect("attitude known");
+        // Level, nose north: body FRD is NED.
+        assert!((level.estimate.position - est.body_frd).amax() < 1e-4);
+        assert!((est.body_frd - Vector3::new(0.2, 0.3, 5.0)).amax() < 1e-3);
+        assert!(est.orientation_ned.is_some());
+    }
+
+    #[test]
+    fn an_autopilot_reboot_restarts_the_level_track_and_a_mount_change_both() {
+        let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut vehicle = VehicleState::new();
+        let (_, t) = feed(&mut e, &mut vehicle, true, 0, 6);
+        vehicle.on_reboot();
+        let (after, t) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 1);
+        let est = after.estimate.expect("the camera track carries on");
+        assert!(est.level.is_none(), "the level track restarted");
+        let (again, t) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 6);
+        assert!(again.estimate.and_then(|e| e.level).is_some());
+        // The same yaw changes nothing; another one restarts both tracks.
+        e.set_mount_yaw(0.0);
+        let (same, t) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 1);
+        assert!(same.estimate.is_some());
+        e.set_mount_yaw(90.0);
+        let (turned, _) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 1);
+        assert!(turned.fix_found && turned.estimate.is_none());
+    }
+}

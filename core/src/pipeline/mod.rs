@@ -1,0 +1,365 @@
+//! The per-frame path, in one place: frame -> candidates -> decoded markers -> pad fix ->
+//! estimate, with the parameters that tune it applied between frames.
+//!
+//! The firmware's vision task, the host's `touchdown companion` and `touchdown replay`, the
+//! benchmarks and the no-panic and fuzz harnesses all run exactly this: what a bench or a
+//! replay measures through [`FramePipeline`] is what the camera board does with the same
+//! frame and the same vehicle state. Before it existed each caller wired the detector, the pad
+//! scaling, the pose and the filters by hand, and the copies drifted: the host kept the pad
+//! it was started with while the firmware followed TD_TAG_SIZE, and the replay scored a pose
+//! and filter chain the board did not run.
+//!
+//! What it owns: the [`Detector`] (with its configuration), the families searched, the pad as
+//! built and as currently scaled, the camera model, the [`PadEstimator`] and the
+//! [`PipelineSettings`] in force. What it is handed per frame: the image, its exposure time,
+//! what the vehicle has told us ([`VehicleState`], which the MAVLink side keeps) and the
+//! detector's frame-sized work memory ([`Buffers`], which the firmware keeps in DMA-reachable
+//! RAM and the host sizes to the image). What it returns ([`FrameReport`]): the
+//! [`FrameEstimate`] the MAVLink side turns into a LANDING_TARGET
+//! ([`crate::companion::Companion::on_estimate`]), plus the fix and the counts a log or a
+//! report wants.
+//!
+//! # The pad fix
+//!
+//! [`pad_pose_with_prediction`] fits every corner of every pad marker in view. Two optional
+//! steps follow the measurement on the replay ([`PipelineConfig`]):
+//!
+//! - **flip by prediction**: a single small marker seen nearly head-on has two mirror poses
+//!   that reproject almost equally well; the one nearer the estimator's prediction wins.
+//! - **level fix** ([`level_pad_fix`]): with the attitude at the exposure, the pad's tilt is
+//!   taken from gravity instead of the image (where it is barely observable on a small
+//!   marker), which removes the range bias the tilt-range coupling gives at altitude.
+//!
+//! # Settings
+//!
+//! [`FramePipeline::apply`] changes the detector's correction cap, the pad's scale and the
+//! estimator's mount; it is meant to be called between frames (the firmware takes the settings
+//! from the link task's signal before processing the next frame; the host after each received
+//! MAVLink chunk). The exposure loop is not here: it drives a sensor, which the host does not
+//! have.
+//!
+//! The reference paper's method is [`PaperPipeline`], beside this one and apart from it, so
+//! that its tables can be reproduced on the same frames.
+
+mod paper;
+
+pub use paper::{PaperPipeline, PaperReport};
+
+use crate::camera::CameraModel;
+use crate::detect::{Buffers, DetectError, Detection, Detector, DetectorConfig};
+use crate::family::Family;
+use crate::filter::axes::camera_to_ned_matrix;
+use crate::filter::{ConfigError, EstimatorConfig, FrameEstimate, PadEstimator, VehicleState};
+use crate::image::GrayImage;
+use crate::pad::{PadError, PadLayout};
+use crate::params::PipelineSettings;
+use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix};
+use nalgebra::{Matrix3, Vector3};
+
+/// Everything about the pipeline that is fixed at start-up (the tunable part is
+/// [`PipelineSettings`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PipelineConfig {
+    /// The detector before the settings' correction cap (e.g. [`DetectorConfig::default`], the
+    /// camera's work budget).
+    pub detector: DetectorConfig,
+    /// The estimator's mount and trackers.
+    pub estimator: EstimatorConfig,
+    /// Choose between a fix's two mirror solutions by the estimator's prediction.
+    pub flip_by_prediction: bool,
+    /// Re-solve the fix with the tilt from the attitude at the exposure, when known.
+    pub level_fix: bool,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        PipelineConfig {
+            detector: DetectorConfig::default(),
+            estimator: EstimatorConfig::default(),
+            flip_by_prediction: true,
+            level_fix: true,
+        }
+    }
+}
+
+/// What one frame gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameReport {
+    /// What the MAVLink side takes: the exposure time and the estimate at it.
+    pub estimate: FrameEstimate,
+    /// This frame's pad fix (levelled when the level fix ran), if the pad was found.
+    pub fix: Option<PadFix>,
+    /// Markers decoded in the frame (of any id, on the pad or not).
+    pub markers: usize,
+    /// Why detection stopped, when it did (the frame then has no fix).
+    pub detect_error: Option<DetectError>,
+}
+
+/// `R_ned_from_level`: the level frame of [`level_pad_fix`] (x north, y west, z up) in NED.
+const NED_FROM_LEVEL: Matrix3<f32> = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+
+/// The detector, the pad, the camera and the estimator, applied to one frame after another.
+#[derive(Debug)]
+pub struct FramePipeline<'a> {
+    detector: Detector,
+    config: PipelineConfig,
+    families: &'a [&'a Family<'a>],
+    built_pad: PadLayout<'a>,
+    pad: PadLayout<'a>,
+    camera: CameraModel,
+    settings: PipelineSettings,
+    estimator: PadEstimator,
+    /// The rotation of the last fix (pad to camera), to turn the estimator's prediction of the
+    /// pad's position into one of the camera's position in the pad frame.
+    last_rotation: Option<Matrix3<f32>>,
+}
+
+impl<'a> FramePipeline<'a> {
+    /// A pipeline searching `families` for `built_pad` through `camera`, configured as
+    /// `config` and then `settings` applied. When the pad cannot be scaled as `settings` ask
+    /// (only an empty pad cannot), it is searched as built. Fails when a tracker configuration
+    /// is invalid.
+    pub fn new(
+        families: &'a [&'a Family<'a>],
+        built_pad: &PadLayout<'a>,
+        camera: CameraModel,
+        config: PipelineConfig,
+        settings: PipelineSettings,
+    ) -> Result<Self, ConfigError> {
+        let mut pipeline = FramePipeline {
+            detector: Detector::new(config.detector),
+            config,
+            families,
+            built_pad: *built_pad,
+            pad: *built_pad,
+            camera,
+            settings,
+            estimator: PadEstimator::new(config.estimator)?,
+            last_rotation: None,
+        };
+        // The error is kept in the pad (as built); `apply` reports it to callers that ask.
+        let _ = pipeline.apply(settings);
+        Ok(pipeline)
+    }
+
+    /// Takes new settings (call between frames): the detector's correction cap, the pad
+    /// scaled to TD_TAG_SIZE and the mount turned by TD_CAM_YAW (a changed mount restarts the
+    /// estimator). If the pad cannot be scaled, the pad as built is searched and the error
+    /// returned; the other settings apply either way.
+    pub fn apply(&mut self, settings: PipelineSettings) -> Result<(), PadError> {
+        self.settings = settings;
+        self.detector
+            .set_config(settings.detector_config(self.config.detector));
+        self.estimator.set_mount_yaw(settings.cam_yaw_deg);
+        match settings.pad(&self.built_pad) {
+            Ok(pad) => {
+                self.pad = pad;
+                Ok(())
+            }
+            Err(e) => {
+                self.pad = self.built_pad;
+                Err(e)
+            }
+        }
+    }
+
+    /// Forgets the tracks: the next frame starts a new, independent sequence.
+    pub fn reset(&mut self) {
+        self.estimator.reset();
+        self.last_rotation = None;
+    }
+
+    /// Finds the pad in `image`, exposed at `exposure_us` (our clock, µs), and estimates it
+    /// with `vehicle`'s state at that time, using `buffers` as the detector's work memory.
+    pub fn process(
+        &mut self,
+        image: &GrayImage<'_>,
+        exposure_us: u64,
+        vehicle: &VehicleState,
+        buffers: &mut Buffers<'_>,
+    ) -> FrameReport {
+        let predicted = self.predicted_camera_position(exposure_us, vehicle);
+        let (markers, fix, detect_error) = match self.detector.detect(image, self.families, buffers)
+        {
+            Ok(detections) => {
+                let fix = PadFixer {
+                    families: self.families,
+                    pad: &self.pad,
+                    camera: &self.camera,
+                    level_fix: self.config.level_fix,
+                }
+                .fix(
+                    detections,
+                    predicted.as_ref(),
+                    exposure_us,
+                    vehicle,
+                    &self.estimator,
+                );
+                (detections.len(), fix, None)
+            }
+            Err(e) => (0, None, Some(e)),
+        };
+        if let Some(f) = &fix {
+            self.last_rotation = Some(f.pose.rotation);
+        }
+        FrameReport {
+            estimate: self.estimator.update(exposure_us, fix.as_ref(), vehicle),
+            fix,
+            markers,
+            detect_error,
+        }
+    }
+
+    /// The camera's position in the pad frame that the estimator predicts at `t_us`, for the
+    /// flip choice: its predicted pad position (camera frame) turned with the last fix's
+    /// rotation. `None` when the step is off or there is no track.
+    fn predicted_camera_position(&self, t_us: u64, vehicle: &VehicleState) -> Option<Vector3<f32>> {
+        if !self.config.flip_by_prediction {
+            return None;
+        }
+        let rotation = self.last_rotation?;
+        let pad_in_camera = self.estimator.predicted_in_camera(t_us, vehicle)?;
+        Some(-(rotation.transpose() * pad_in_camera))
+    }
+
+    /// The settings in force.
+    pub fn settings(&self) -> &PipelineSettings {
+        &self.settings
+    }
+
+    /// The start-up configuration.
+    pub fn config(&self) -> &PipelineConfig {
+        &self.config
+    }
+
+    /// The pad searched for (scaled to TD_TAG_SIZE).
+    pub fn pad(&self) -> &PadLayout<'a> {
+        &self.pad
+    }
+
+    /// The pad as built (what TD_TAG_SIZE scales).
+    pub fn built_pad(&self) -> &PadLayout<'a> {
+        &self.built_pad
+    }
+
+    /// The camera model.
+    pub fn camera(&self) -> &CameraModel {
+        &self.camera
+    }
+
+    /// The detector (its statistics of the last frame, its configuration).
+    pub fn detector(&self) -> &Detector {
+        &self.detector
+    }
+
+    /// The estimator (its mount in force).
+    pub fn estimator(&self) -> &PadEstimator {
+        &self.estimator
+    }
+}
+
+/// The pad-fix step's inputs, borrowed from the pipeline while the detector's output is.
+struct PadFixer<'p, 'a> {
+    families: &'a [&'a Family<'a>],
+    pad: &'p PadLayout<'a>,
+    camera: &'p CameraModel,
+    level_fix: bool,
+}
+
+impl PadFixer<'_, '_> {
+    /// The pad fix of `detections` (see the module docs); the level fix falls back to the
+    /// image's own when it cannot be solved.
+    fn fix(
+        &self,
+        detections: &[Detection],
+        predicted: Option<&Vector3<f32>>,
+        exposure_us: u64,
+        vehicle: &VehicleState,
+        estimator: &PadEstimator,
+    ) -> Option<PadFix> {
+        let fix =
+            pad_pose_with_prediction(detections, self.families, self.pad, self.camera, predicted)
+                .ok()?;
+        if !self.level_fix {
+            return Some(fix);
+        }
+        let Some(attitude) = vehicle.attitude_at(exposure_us) else {
+            return Some(fix);
+        };
+        let camera_from_level =
+            camera_to_ned_matrix(&attitude, estimator.mount()).transpose() * NED_FROM_LEVEL;
+        Some(
+            level_pad_fix(
+                &fix,
+                detections,
+                self.families,
+                self.pad,
+                self.camera,
+                &camera_from_level,
+            )
+            .unwrap_or(fix),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::family::tables;
+    use crate::pad::designs;
+    use crate::params::{ParamId, ParamSet};
+
+    /// The firmware's set-up: the default families, the nested pad, a QVGA pinhole camera.
+    fn nested_pipeline() -> FramePipeline<'static> {
+        FramePipeline::new(
+            tables::DEFAULT,
+            &designs::NESTED,
+            CameraModel::pinhole(320, 240, 233.5, 233.5, 159.5, 119.5),
+            PipelineConfig::default(),
+            PipelineSettings::default(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn settings_scale_the_pad_and_cap_the_correction() {
+        let mut pipeline = nested_pipeline();
+        assert_eq!(*pipeline.pad(), designs::NESTED);
+        assert_eq!(pipeline.detector().config().max_hamming, 1);
+
+        let mut params = ParamSet::default();
+        params.set(ParamId::TagSize, 0.625).unwrap();
+        params.set(ParamId::MaxHamming, 0.0).unwrap();
+        assert_eq!(
+            pipeline.apply(PipelineSettings::from_params(&params)),
+            Ok(())
+        );
+        // The nested pad's largest marker is 1.25 m: everything at half size.
+        let (built, scaled) = (&designs::NESTED.markers()[1], &pipeline.pad().markers()[1]);
+        assert_eq!(scaled.size, built.size * 0.5);
+        assert_eq!(scaled.x, built.x * 0.5);
+        assert_eq!(pipeline.detector().config().max_hamming, 0);
+        // Back to the pad as built.
+        assert_eq!(pipeline.apply(PipelineSettings::default()), Ok(()));
+        assert_eq!(*pipeline.pad(), designs::NESTED);
+        assert_eq!(*pipeline.built_pad(), designs::NESTED);
+    }
+
+    #[test]
+    fn a_blank_frame_has_no_fix_and_keeps_its_time() {
+        let mut pipeline = nested_pipeline();
+        let pixels = [200u8; 320 * 240];
+        let image = GrayImage::new(&pixels, 320, 240).unwrap();
+        let mut workspace = crate::detect::QvgaWorkspace::new();
+        let report = pipeline.process(
+            &image,
+            123_456,
+            &VehicleState::new(),
+            &mut workspace.buffers(),
+        );
+        assert_eq!(report.estimate.exposure_us, 123_456);
+        assert_eq!((report.fix, report.estimate.estimate), (None, None));
+        assert!(!report.estimate.fix_found);
+        assert_eq!((report.markers, report.detect_error), (0, None));
+    }
+}
