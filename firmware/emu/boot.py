@@ -102,7 +102,7 @@ def run_boot(machine, board, args):
 
 def report_stack(machine):
     """Prints the stack high-water mark; returns the problems (a stack that used all of its
-    room)."""
+    room, or more than memory.x reserves for it)."""
     used = machine.stack_high_water()
     room = machine.stack_start - machine.stack_end
     reserve = machine.elf.symbols.get("__stack_reserve")
@@ -111,4 +111,8 @@ def report_stack(machine):
              if reserve else ")"))
     if used >= room:
         return ["the stack used all of its room (or the paint was overwritten)"]
+    # The reserve is what memory.x promises the stack (a link-time check keeps that much DTCM
+    # free); a run that needs more would overflow once `.bss` grows into the slack.
+    if reserve and used > reserve:
+        return [f"stack high-water {used} bytes is over memory.x's __stack_reserve {reserve}"]
     return []

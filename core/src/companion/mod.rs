@@ -347,7 +347,7 @@ impl Companion {
     /// The next frame to send, serialised into `out` (at least [`MAX_FRAME_LEN`] bytes):
     /// its length, or `None` when there is nothing to send (or `out` is too small). Also runs
     /// the periodic work (heartbeat, TIMESYNC, stream requests, parameter list pacing), so call
-    /// it regularly, e.g. every few milliseconds and after every `on_frame`/`receive`.
+    /// it regularly, e.g. every few milliseconds and after every `on_estimate`/`receive`.
     pub fn poll_transmit(&mut self, now_us: u64, out: &mut [u8]) -> Option<usize> {
         self.state.poll_transmit(now_us, out)
     }

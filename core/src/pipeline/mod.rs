@@ -126,6 +126,25 @@ impl<'a> FramePipeline<'a> {
         config: PipelineConfig,
         settings: PipelineSettings,
     ) -> Result<Self, ConfigError> {
+        let estimator = PadEstimator::new(config.estimator)?;
+        Ok(Self::with_estimator(
+            families, built_pad, camera, config, estimator, settings,
+        ))
+    }
+
+    /// [`FramePipeline::new`] with the estimator built (and its configuration checked) by the
+    /// caller; `config.estimator` is not read. Infallible, so the pipeline (tens of KiB: the
+    /// detector's contour buffer) can be built straight into its final place: the firmware's
+    /// vision task does: built through `new`'s `Result` (and an `Option`), the stack's
+    /// high-water mark was 53,464 bytes against 32,256 this way (scripts/emu_boot.sh).
+    pub fn with_estimator(
+        families: &'a [&'a Family<'a>],
+        built_pad: &PadLayout<'a>,
+        camera: CameraModel,
+        config: PipelineConfig,
+        estimator: PadEstimator,
+        settings: PipelineSettings,
+    ) -> Self {
         let mut pipeline = FramePipeline {
             detector: Detector::new(config.detector),
             config,
@@ -134,12 +153,12 @@ impl<'a> FramePipeline<'a> {
             pad: *built_pad,
             camera,
             settings,
-            estimator: PadEstimator::new(config.estimator)?,
+            estimator,
             last_rotation: None,
         };
         // The error is kept in the pad (as built); `apply` reports it to callers that ask.
         let _ = pipeline.apply(settings);
-        Ok(pipeline)
+        pipeline
     }
 
     /// Takes new settings (call between frames): the detector's correction cap, the pad
