@@ -2,8 +2,16 @@
 //!
 //! Everything of the touchdown landing aid that does not touch hardware: finding fiducial
 //! markers in a grey frame, the marker families, pose, the landing pad, filters, the MAVLink
-//! companion logic, and the camera sensors' register sequences (as data and `async` SCCB
-//! transactions against embedded-hal-async traits: the firmware supplies the bus).
+//! companion logic, the parameters, and the sensor-independent side of the camera (its units
+//! and frame timing, and the software auto-exposure loop: [`sensor`]).
+//!
+//! The camera sensor drivers are not here: they are the `touchdown-sensors` crate
+//! (`sensors/`). A driver is I/O against a bus (register writes over SCCB through
+//! embedded-hal-async traits); this crate is algorithms on plain values, testable on the host
+//! and depending on no hardware trait. The drivers depend on core for the types they share
+//! with it ([`sensor::GainX16`], [`sensor::FrameTiming`]), core depends on nothing of theirs,
+//! and the firmware wires the two: the bus into the driver, the frames and the timing into
+//! core.
 //!
 //! The crate is `no_std`, allocates nothing and contains no `unsafe`. All working memory is
 //! either owned by a struct with capacities fixed by named constants, or lent by the caller,

@@ -4,7 +4,7 @@
 //! # Data path
 //!
 //! The sensor sends YUV 4:2:2 with Y first (`Y U Y V ...`, one byte per pixel clock). Both
-//! drivers set up this format and the same sync polarities (`touchdown_core::sensor::any`), so
+//! drivers set up this format and the same sync polarities (`touchdown_sensors::any`), so
 //! this module is the same for either and is configured before it is known which one answers
 //! on the SCCB bus. The DCMI's byte select keeps every other byte starting with the first
 //! (RM0433 §34.5.1 DCMI_CR, BSM = 01, OEBS = 0), so the DMA writes 8-bit grey straight into
@@ -94,7 +94,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::signal::Signal;
 use embassy_time::{Duration, Instant, Timer};
-use touchdown_core::sensor::Resolution;
+use touchdown_sensors::Resolution;
 
 /// What the sensor is asked to send (the DCMI keeps all of it, or with `camera-vga` the
 /// middle [`HEIGHT`] rows).

@@ -10,8 +10,9 @@
 use touchdown_core::camera::CameraModel;
 use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::params::PipelineSettings;
-use touchdown_core::sensor::any::Model;
-use touchdown_core::sensor::{Config, Exposure, GainX16};
+use touchdown_core::sensor::GainX16;
+use touchdown_sensors::any::Model;
+use touchdown_sensors::{Config, Exposure};
 
 use crate::capture::{HEIGHT, SENSOR_RESOLUTION, WIDTH};
 
@@ -44,7 +45,7 @@ pub const CAMERA: CameraModel = centred_pinhole(467.0);
 /// Nominal pinhole model of the OV2640 with the same 2.8 mm lens.
 ///
 /// The focal length in pixels is the lens focal length over the pitch of one *output* pixel
-/// on the array, which the driver's readout sets (`touchdown_core::sensor::ov2640`):
+/// on the array, which the driver's readout sets (`touchdown_sensors::ov2640`):
 ///
 /// - the array's 1600x1200 active pixels are 2.2 µm (3.52 mm x 2.64 mm);
 /// - the SVGA mode reads all of it subsampled by two each way: 800x600 at 4.4 µm;

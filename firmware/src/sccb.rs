@@ -7,8 +7,8 @@
 //! through a small buffer in AXI SRAM, with D-cache maintenance around the DMA (clean before
 //! a write, invalidate after a read).
 //!
-//! SCCB has no repeated start, and no sensor driver here asks for one (the OV7725's, the
-//! OV2640's, and the probe that tries both addresses, `touchdown_core::sensor::any`): each
+//! SCCB has no repeated start, and no sensor driver asks for one (the OV7725's, the
+//! OV2640's, and the probe that tries both addresses, `touchdown_sensors::any`): each
 //! sends one operation per transaction, a register read being a one-byte write of the address
 //! and then a separate one-byte read; the OV2640's bank select is an ordinary two-byte write.
 //! The probe's access to the address of the sensor that is not fitted ends in a NACK

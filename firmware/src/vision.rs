@@ -74,9 +74,9 @@ use touchdown_core::filter::VehicleState;
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
-use touchdown_core::sensor::any::{self, Camera};
 use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, ExposureSetting};
 use touchdown_core::sensor::FrameTiming;
+use touchdown_sensors::any::{self, Camera};
 
 use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, SENSOR_RESOLUTION, WIDTH};
 use crate::channels::{self, LinkEvent, PIPELINE_SETTINGS};

@@ -18,7 +18,7 @@
 //! - **Exposure and gain**: the sensor's own AEC/AGC with a gain ceiling (COM9), or manual
 //!   exposure (AEC/AECH, in line periods) and gain (GAIN). The sensor's AEC has no exposure
 //!   ceiling below the frame period; for a hard exposure limit (motion blur in bright sun) run
-//!   [`super::exposure::AutoExposure`] and feed its manual settings here.
+//!   [`touchdown_core::sensor::exposure::AutoExposure`] and feed its manual settings here.
 //!
 //! The bus is SCCB, which is I2C-compatible for writes but does not support a repeated
 //! start: a register read is a write of the register address, a STOP, then a separate read
@@ -32,10 +32,10 @@
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 
-use super::{gain_ceiling_log2, FrameTiming, GainX16, Resolution};
-// The set-up and its errors are the sensor-independent ones (`super::Config`), so the firmware
+use crate::{gain_ceiling_log2, FrameTiming, GainX16, Resolution};
+// The set-up and its errors are the sensor-independent ones (`crate::Config`), so the firmware
 // drives either sensor through one type; re-exported so `ov7725::Config` still names them.
-pub use super::{Config, ConfigError, Exposure};
+pub use crate::{Config, ConfigError, Exposure};
 
 /// 7-bit SCCB address (0x42 to write, 0x43 to read in 8-bit notation).
 pub const I2C_ADDRESS: u8 = 0x21;

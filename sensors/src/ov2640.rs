@@ -50,11 +50,12 @@
 //! - **Sync signals**: VSYNC is inverted (COM10 bit 1) so it is high between frames like the
 //!   OV7725's; HREF (high during a line's data) and PCLK (data changes on the falling edge)
 //!   stay as reset. One camera interface set-up then serves both sensors (see
-//!   [`super::any`]).
+//!   [`crate::any`]).
 //! - **Exposure and gain**: the sensor's own AEC/AGC with a gain ceiling (COM8, COM9), or
 //!   manual exposure (16 bits of line periods split over REG45, AEC and REG04) and gain
-//!   (GAIN). With a hard exposure limit, run [`super::exposure::AutoExposure`] and feed its
-//!   manual settings here. The banding filter stays off in both.
+//!   (GAIN). With a hard exposure limit, run
+//!   [`touchdown_core::sensor::exposure::AutoExposure`] and feed its manual settings here.
+//!   The banding filter stays off in both.
 //!
 //! The whole set-up is data: the tables and the values derived here are lists of
 //! [`Setting`]s that one loop writes ([`Ov2640::init`]), so the firmware carries one copy of
@@ -78,8 +79,8 @@
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 
-use super::ov7725::{gain_from_register, gain_register};
-use super::{gain_ceiling_log2, Config, ConfigError, Exposure, FrameTiming, GainX16, Resolution};
+use crate::ov7725::{gain_from_register, gain_register};
+use crate::{gain_ceiling_log2, Config, ConfigError, Exposure, FrameTiming, GainX16, Resolution};
 
 /// 7-bit SCCB address (0x60 to write, 0x61 to read in 8-bit notation).
 pub const I2C_ADDRESS: u8 = 0x30;
@@ -1234,7 +1235,7 @@ mod tests {
 
     use super::reg::{dsp, sensor, BANK_SEL};
     use super::*;
-    use crate::sensor::mock::{Access, Device, MockBus, MockDelay, Nack};
+    use crate::mock::{Access, Device, MockBus, MockDelay, Nack};
     use embassy_futures::block_on;
     use embedded_hal_async::i2c::{ErrorType, I2c, Operation};
 

@@ -14,9 +14,9 @@
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::{ErrorType, I2c};
 
-use super::ov2640::{self, Ov2640};
-use super::ov7725::{self, Ov7725};
-use super::{Config, ConfigError, Exposure, FrameTiming, GainX16};
+use crate::ov2640::{self, Ov2640};
+use crate::ov7725::{self, Ov7725};
+use crate::{Config, ConfigError, Exposure, FrameTiming, GainX16};
 
 /// The supported sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -247,8 +247,8 @@ mod tests {
     use std::vec;
 
     use super::*;
-    use crate::sensor::mock::{Access, Device, MockBus, MockDelay, Nack};
-    use crate::sensor::Resolution;
+    use crate::mock::{Access, Device, MockBus, MockDelay, Nack};
+    use crate::Resolution;
     use embassy_futures::block_on;
 
     fn ov7725() -> Device {
@@ -392,8 +392,8 @@ mod tests {
             ]
         );
         // Below 2x and above 32x are limited to the sensors' range (COM9[6:4] = 0 and 4).
-        assert_eq!(super::super::gain_ceiling_log2(GainX16::ONE), 1);
-        assert_eq!(super::super::gain_ceiling_log2(GainX16(u16::MAX)), 5);
+        assert_eq!(crate::gain_ceiling_log2(GainX16::ONE), 1);
+        assert_eq!(crate::gain_ceiling_log2(GainX16(u16::MAX)), 5);
     }
 
     #[test]
