@@ -34,8 +34,10 @@ use touchdown_core::pad::{designs, PadLayout, PadMarker};
 use touchdown_core::params::{ParamId, ParamSet, PipelineSettings, PARAMS, PARAM_COUNT};
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_core::pose::{marker_pose, PadFix, Pose, PoseMethod};
-use touchdown_host::config::{parse_camera, parse_pad};
-use touchdown_host::recording::{parse_frames_csv, parse_pgm};
+use touchdown_host::formats::camera::parse_camera;
+use touchdown_host::formats::pad::parse_pad;
+use touchdown_host::formats::pgm::parse_pgm;
+use touchdown_host::formats::recording::parse_frames_csv;
 
 /// Reads structured values from fuzz input; past the end every value is zero.
 #[derive(Debug)]

@@ -25,8 +25,8 @@ use touchdown_core::filter::{FrameEstimate, VehicleState};
 use touchdown_core::pad::{PadLayout, PadMarker};
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
+use touchdown_host::formats::pgm::parse_pgm;
 use touchdown_host::image_io::GrayFrame;
-use touchdown_host::recording::parse_pgm;
 use touchdown_host::workspace::HostWorkspace;
 
 /// The benchmark frames (committed with the M7 benchmark), each with the tag36h11 id its pad

@@ -23,7 +23,8 @@ use std::path::PathBuf;
 
 use touchdown_core::detect::{buffer_sizes, Buffers, Detector, DetectorConfig};
 use touchdown_core::family::{tables, Family};
-use touchdown_host::image_io::{save_pgm, GrayFrame};
+use touchdown_host::formats::pgm::save_pgm;
+use touchdown_host::image_io::GrayFrame;
 use touchdown_host::render::{render_markers, Background, FrameOptions, MarkerPattern, Placement};
 
 /// One benchmark frame: name, size, markers (family, id, placement), seed.

@@ -6,8 +6,8 @@
 
 use std::time::Instant;
 
-use touchdown_host::eval::paper_geometry::{self, Config};
 use touchdown_core::pipeline::PipelineConfig;
+use touchdown_host::eval::paper_geometry::{self, Config};
 use touchdown_host::eval::{Method, Stage};
 
 fn main() {

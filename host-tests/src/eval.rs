@@ -403,9 +403,9 @@ impl<'a> Pipeline<'a> {
         layout: &PadLayout<'a>,
     ) -> Result<Self, ExperimentError> {
         let runner = match method.kind {
-            MethodKind::Paper(filter) => {
-                Runner::Paper(Box::new(PaperPipeline::new(families, layout, camera, filter)))
-            }
+            MethodKind::Paper(filter) => Runner::Paper(Box::new(PaperPipeline::new(
+                families, layout, camera, filter,
+            ))),
             MethodKind::Board(config) => Runner::Board {
                 pipeline: Box::new(
                     FramePipeline::new(

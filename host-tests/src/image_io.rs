@@ -1,4 +1,5 @@
-//! Reading and writing grey frames (PNG, PGM, JPEG; colour is converted to grey).
+//! Reading and writing grey frames (PNG, PGM, JPEG; colour is converted to grey). The strict
+//! PGM of recordings, reader and writer, is [`crate::formats::pgm`].
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -142,13 +143,6 @@ pub fn jpeg_is_complete(bytes: &[u8]) -> bool {
         }
     }
     false
-}
-
-/// Writes a frame as binary PGM (P5).
-pub fn save_pgm(path: &Path, frame: &GrayFrame) -> std::io::Result<()> {
-    let mut out = format!("P5\n{} {}\n255\n", frame.width, frame.height).into_bytes();
-    out.extend_from_slice(&frame.pixels);
-    std::fs::write(path, out)
 }
 
 /// Writes a frame as PNG.

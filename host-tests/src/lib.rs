@@ -5,12 +5,11 @@
 //! (files, allocation, formatting) and calls the core exactly as the firmware does.
 
 pub mod cli;
-pub mod config;
 pub mod eval;
 pub mod families;
+pub mod formats;
 pub mod image_io;
 pub mod plot;
-pub mod recording;
 pub mod render;
 pub mod shared_data;
 pub mod sim;

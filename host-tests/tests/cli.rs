@@ -6,7 +6,8 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 use touchdown_core::family::{tables, Family};
-use touchdown_host::image_io::{save_pgm, save_png, GrayFrame};
+use touchdown_host::formats::pgm::save_pgm;
+use touchdown_host::image_io::{save_png, GrayFrame};
 
 fn touchdown(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_touchdown"))

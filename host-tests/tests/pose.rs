@@ -35,7 +35,7 @@ use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::pose::{
     marker_corners, marker_pose, pad_pose, pad_pose_with_prediction, Pose, PoseMethod,
 };
-use touchdown_host::config;
+use touchdown_host::formats::pad::load_pad;
 use touchdown_host::image_io::load_gray;
 use touchdown_host::workspace::HostWorkspace;
 
@@ -558,7 +558,7 @@ fn shipped_pad_files_equal_the_core_designs() {
     let pads = Path::new(env!("CARGO_MANIFEST_DIR")).join("../pads");
     for design in designs::ALL {
         let path = pads.join(format!("{}.toml", design.name()));
-        let file = config::load_pad(&path).unwrap_or_else(|e| panic!("{e}"));
+        let file = load_pad(&path).unwrap_or_else(|e| panic!("{e}"));
         let layout = file.layout().expect("layout");
         assert_eq!(
             &layout,
@@ -570,7 +570,7 @@ fn shipped_pad_files_equal_the_core_designs() {
     // Every shipped file is one of the designs.
     for entry in std::fs::read_dir(&pads).expect("pads/") {
         let path = entry.expect("entry").path();
-        let file = config::load_pad(&path).unwrap_or_else(|e| panic!("{e}"));
+        let file = load_pad(&path).unwrap_or_else(|e| panic!("{e}"));
         assert!(
             designs::ALL.iter().any(|d| d.name() == file.name),
             "{}",

@@ -400,7 +400,7 @@ fn simulate_writes_a_readable_recording() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let recording = touchdown_host::recording::Recording::read(&dir).unwrap();
+    let recording = touchdown_host::formats::recording::Recording::read(&dir).unwrap();
     assert_eq!(recording.frames.len(), 2);
     assert_eq!(recording.frames[0].label.as_deref(), Some("hover=20"));
     let truth = recording.frames[1].truth.unwrap();
@@ -531,7 +531,7 @@ fn pad_writes_svg_and_the_same_layout() {
     let svg = std::fs::read_to_string(dir.join("pad.svg")).unwrap();
     assert!(svg.contains("mm\" height=\"") && svg.contains("viewBox"));
     assert!(svg.contains("100 mm"));
-    let config = touchdown_host::config::load_pad(&dir.join("pad.toml")).unwrap();
+    let config = touchdown_host::formats::pad::load_pad(&dir.join("pad.toml")).unwrap();
     assert_eq!(
         config.layout().unwrap(),
         touchdown_core::pad::designs::NESTED

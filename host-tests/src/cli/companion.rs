@@ -27,7 +27,7 @@ use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 
 use super::{CliError, Outcome};
 use crate::families::{self, SelectedFamily};
-use crate::recording::RecordingReader;
+use crate::formats::recording::RecordingReader;
 use crate::workspace::HostWorkspace;
 
 /// Arguments of `touchdown companion`.

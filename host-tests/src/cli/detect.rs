@@ -321,7 +321,7 @@ fn check_pose_options(args: &DetectArgs) -> Result<Option<(CameraModel, f32)>, C
             "--tag-size needs --camera CAMERA.toml for poses",
         )),
         (Some(path), Some(size)) => {
-            let model = crate::config::load_camera(path).map_err(CliError::new)?;
+            let model = crate::formats::camera::load_camera(path).map_err(CliError::new)?;
             Ok(Some((model, size as f32)))
         }
     }

@@ -17,8 +17,8 @@ use clap::builder::PossibleValuesParser;
 use clap::{ArgGroup, Args};
 
 use super::{CliError, Outcome};
-use crate::config;
-use crate::sim::pad::{design_names, pad_toml, PrintedPad, Rect};
+use crate::formats::pad::{load_pad, pad_toml};
+use crate::sim::pad::{design_names, PrintedPad, Rect};
 
 /// `touchdown pad --help`.
 pub const LONG_HELP: &str = "\
@@ -123,7 +123,7 @@ pub fn run(args: &PadArgs, out: &mut dyn Write, _err: &mut dyn Write) -> Result<
             PrintedPad::design(name).ok_or_else(|| CliError(format!("unknown design `{name}`")))?
         }
         (None, Some(path)) => {
-            let config = config::load_pad(path).map_err(CliError::new)?;
+            let config = load_pad(path).map_err(CliError::new)?;
             PrintedPad::from_config(&config)
                 .map_err(|e| CliError(format!("{}: {e}", path.display())))?
         }
@@ -595,7 +595,7 @@ fn grid_bounds(m: &crate::sim::pad::PrintedMarker) -> Rect {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{MarkerConfig, PadConfig};
+    use crate::formats::pad::{MarkerConfig, PadConfig};
 
     #[test]
     fn svg_is_true_size_with_every_marker() {

@@ -42,12 +42,12 @@ use touchdown_core::family::Family;
 use touchdown_core::pipeline::PipelineConfig;
 
 use super::{CliError, Outcome};
-use crate::config::PadConfig;
 use crate::eval::{published, Axis, Experiment, ExperimentError, Frame, Method, Report, SetPoint};
 use crate::families::{self, SelectedFamily};
+use crate::formats::pad::PadConfig;
+use crate::formats::recording::{CameraTruth, RecordingReader};
 use crate::image_io::GrayFrame;
 use crate::plot;
-use crate::recording::{CameraTruth, RecordingReader};
 use crate::sim::scenario::{Scenario, SCENARIOS};
 use crate::sim::{math, Simulator};
 use crate::trace::{MethodSummary, Trace, TraceFrame};

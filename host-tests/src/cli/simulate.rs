@@ -12,7 +12,7 @@ use clap::builder::{PossibleValue, PossibleValuesParser};
 use clap::Args;
 
 use super::{CliError, Outcome};
-use crate::recording::RecordingWriter;
+use crate::formats::recording::RecordingWriter;
 use crate::sim::scenario::{Scenario, SCENARIOS};
 use crate::sim::Simulator;
 
@@ -190,13 +190,13 @@ fn simulation_toml(s: &Scenario) -> String {
         "# How this recording was simulated (touchdown simulate); informational.\n\
          scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\
          supersampling = {}\nground = {}\ndistortion = {:?}\n",
-        crate::sim::pad::toml_string(&s.name),
-        crate::sim::pad::toml_string(&s.description),
+        crate::formats::toml_string(&s.name),
+        crate::formats::toml_string(&s.description),
         s.seed,
         s.frames.len(),
         s.exposure_time_s,
         s.supersampling,
-        crate::sim::pad::toml_string(&format!("{:?}", s.ground)),
+        crate::formats::toml_string(&format!("{:?}", s.ground)),
         lens
     )
 }

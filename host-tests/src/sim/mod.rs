@@ -15,7 +15,7 @@
 //!   `shadow`, `occlusion`).
 //!
 //! [`Simulator`] renders a scenario frame by frame; `touchdown simulate` writes the frames as
-//! a recording ([`crate::recording`]). Everything is a pure function of the scenario and its
+//! a recording ([`crate::formats::recording`]). Everything is a pure function of the scenario and its
 //! seed: the same seed gives the same bytes, whatever the thread count.
 //!
 //! Timing: a frame's time is the middle of its exposure, and its truth is the camera pose at
@@ -44,7 +44,7 @@ pub const MAX_SUBFRAMES: usize = 24;
 /// Image motion per sub-frame, pixels.
 pub const SUBFRAME_STEP_PX: f64 = 0.5;
 
-pub use crate::recording::CameraTruth;
+pub use crate::formats::recording::CameraTruth;
 
 /// The truth (`frames.csv` columns) of a camera pose: quaternion with `w >= 0`.
 pub fn truth_of_pose(pose: &CameraPose) -> CameraTruth {

@@ -17,7 +17,7 @@ use std::fmt;
 use touchdown_core::family::tables;
 use touchdown_core::pad::PadLayout;
 
-use crate::config::{MarkerConfig, PadConfig};
+use crate::formats::pad::{config_of_layout, PadConfig};
 use crate::render::MarkerPattern;
 
 /// White paper beyond the grid of a marker whose family has no quiet ring of its own (ArUco,
@@ -290,70 +290,10 @@ pub fn design_names() -> Vec<&'static str> {
         .collect()
 }
 
-/// An `f32` as the `f64` of its shortest decimal form (`0.4f32` becomes `0.4`, not
-/// `0.4000000059604645`), so files written from `f32` layouts read naturally.
-pub fn f32_decimal(v: f32) -> f64 {
-    format!("{v:?}").parse().unwrap_or(f64::from(v))
-}
-
-/// A core layout as `pad.toml` contents.
-pub fn config_of_layout(layout: &PadLayout<'_>) -> PadConfig {
-    PadConfig {
-        name: layout.name().to_string(),
-        markers: layout
-            .markers()
-            .iter()
-            .map(|m| MarkerConfig {
-                family: m.family.to_string(),
-                id: m.id,
-                size: f32_decimal(m.size),
-                x: f32_decimal(m.x),
-                y: f32_decimal(m.y),
-                yaw_deg: f32_decimal(m.yaw_deg),
-            })
-            .collect(),
-    }
-}
-
-/// `pad.toml` text for a layout (the contract's format). Numbers are written in their
-/// shortest exact form, so reading the file back gives the same `f64`s.
-pub fn pad_toml(config: &PadConfig) -> String {
-    let mut out = format!("name = {}\n", toml_string(&config.name));
-    for m in &config.markers {
-        out.push_str(&format!(
-            "\n[[marker]]\nfamily = {}\nid = {}\nsize = {:?}\nx = {:?}\ny = {:?}\nyaw_deg = {:?}\n",
-            toml_string(&m.family),
-            m.id,
-            m.size,
-            m.x,
-            m.y,
-            m.yaw_deg
-        ));
-    }
-    out
-}
-
-/// A TOML basic string.
-pub(crate) fn toml_string(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for ch in s.chars() {
-        match ch {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            '\n' => out.push_str("\\n"),
-            '\t' => out.push_str("\\t"),
-            c if c.is_control() => out.push_str(&format!("\\u{:04X}", c as u32)),
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::formats::pad::MarkerConfig;
 
     #[test]
     fn nested_sheet_and_corners() {
@@ -431,13 +371,5 @@ mod tests {
         };
         assert!(PrintedPad::from_config(&two(0.0)).is_ok());
         assert!(PrintedPad::from_config(&two(45.0)).is_err());
-    }
-
-    #[test]
-    fn pad_toml_round_trips() {
-        let config = config_of_layout(&touchdown_core::pad::designs::NESTED);
-        assert_eq!(config.markers[1].size, 0.4);
-        let text = pad_toml(&config);
-        assert_eq!(crate::config::parse_pad(&text).unwrap(), config);
     }
 }

@@ -1,6 +1,7 @@
-//! Recordings (the contract's format): a directory with `camera.toml`, `pad.toml`,
-//! `frames/NNNNNN.pgm` (8-bit P5) and `frames.csv`, written by the simulator and, later, by
-//! the camera board; read back by `replay` and the tests.
+//! Recordings, the contract's format (`docs/interfaces.md`): a directory with `camera.toml`
+//! ([`super::camera`]), `pad.toml` ([`super::pad`]), `frames/NNNNNN.pgm` ([`super::pgm`])
+//! and `frames.csv`, written by the simulator and, later, by the camera board; read back by
+//! `replay` and the tests. [`RecordingWriter`] and [`RecordingReader`] are the two sides.
 //!
 //! `frames.csv` has the header `index,t_us` or `index,t_us,cam_x,cam_y,cam_z,cam_qw,cam_qx,
 //! cam_qy,cam_qz` (the camera's true position in the pad frame, metres, and its camera-to-pad
@@ -30,7 +31,10 @@ use std::path::{Path, PathBuf};
 
 use touchdown_core::camera::CameraModel;
 
-use crate::config::{self, ConfigError, PadConfig};
+use super::camera::{camera_toml, load_camera};
+use super::pad::{load_pad, pad_toml, PadConfig};
+use super::pgm::{parse_pgm, save_pgm};
+use super::ConfigError;
 use crate::image_io::GrayFrame;
 
 /// The truth columns of `frames.csv`, in order.
@@ -150,38 +154,6 @@ impl Recording {
     }
 }
 
-/// `camera.toml` text (the contract's format) for a camera model, exact.
-pub fn camera_toml(camera: &CameraModel) -> String {
-    let mut out = format!(
-        "# camera intrinsics, pixels ((0, 0) = centre of the top-left pixel)\n\
-         width = {}\nheight = {}\nfx = {}\nfy = {}\ncx = {}\ncy = {}\n",
-        camera.width,
-        camera.height,
-        exact_f32(camera.fx),
-        exact_f32(camera.fy),
-        exact_f32(camera.cx),
-        exact_f32(camera.cy)
-    );
-    if camera.has_distortion() {
-        let d: Vec<String> = camera.distortion.iter().map(|&k| exact_f32(k)).collect();
-        out.push_str(&format!(
-            "distortion = [{}]   # k1, k2, p1, p2, k3 (OpenCV order)\n",
-            d.join(", ")
-        ));
-    }
-    out
-}
-
-/// The shortest decimal that reads back (through `f64`, as the config reader does) to `v`.
-fn exact_f32(v: f32) -> String {
-    let short = format!("{v:?}");
-    if short.parse::<f64>().map(|x| x as f32) == Ok(v) {
-        short
-    } else {
-        format!("{:?}", f64::from(v))
-    }
-}
-
 /// Writes a recording frame by frame (the simulator never holds more than one frame).
 #[derive(Debug)]
 pub struct RecordingWriter {
@@ -227,7 +199,7 @@ impl RecordingWriter {
             std::fs::write(&path, text).map_err(|e| io_error(&path, "write", e))
         };
         write("camera.toml", camera_toml(camera))?;
-        write("pad.toml", crate::sim::pad::pad_toml(pad))?;
+        write("pad.toml", pad_toml(pad))?;
         let csv_path = dir.join("frames.csv");
         let file = File::create(&csv_path).map_err(|e| io_error(&csv_path, "create", e))?;
         let mut csv = BufWriter::new(file);
@@ -292,7 +264,7 @@ impl RecordingWriter {
                 "truth given for a recording created without truth columns",
             ));
         }
-        crate::image_io::save_pgm(&path, image).map_err(|e| io_error(&path, "write", e))?;
+        save_pgm(&path, image).map_err(|e| io_error(&path, "write", e))?;
         let mut row = format!("{index},{t_us}");
         if self.has_truth {
             match truth {
@@ -393,8 +365,8 @@ impl RecordingReader {
                 "not a recording directory (no such directory)",
             ));
         }
-        let camera = config::load_camera(&dir.join("camera.toml"))?;
-        let pad = config::load_pad(&dir.join("pad.toml"))?;
+        let camera = load_camera(&dir.join("camera.toml"))?;
+        let pad = load_pad(&dir.join("pad.toml"))?;
         let csv_path = dir.join("frames.csv");
         let text =
             std::fs::read_to_string(&csv_path).map_err(|e| io_error(&csv_path, "read", e))?;
@@ -630,8 +602,8 @@ fn parse_setpoints_csv(text: &str, labels: &mut [Option<String>]) -> Result<(), 
     Ok(())
 }
 
-/// Reads an 8-bit binary PGM (P5) strictly: one image, maxval 255, exactly
-/// `width x height` pixel bytes, and the size `expected` when given.
+/// Reads an 8-bit binary PGM (P5) strictly ([`parse_pgm`]), with the size `expected` when
+/// given; the error names the file.
 pub fn read_pgm(
     path: &Path,
     expected: Option<(usize, usize)>,
@@ -640,109 +612,9 @@ pub fn read_pgm(
     parse_pgm(&bytes, expected).map_err(|reason| error(path, None, reason))
 }
 
-/// [`read_pgm`] on bytes; the error is the reason alone.
-pub fn parse_pgm(bytes: &[u8], expected: Option<(usize, usize)>) -> Result<GrayFrame, String> {
-    if bytes.get(..2) != Some(b"P5") {
-        return Err("not a binary PGM file (it must start with `P5`)".into());
-    }
-    let mut pos = 2;
-    let mut numbers = [0usize; 3];
-    for (k, name) in ["width", "height", "maxval"].iter().enumerate() {
-        // Whitespace and `#` comments separate the header fields.
-        loop {
-            match bytes.get(pos) {
-                Some(b) if b.is_ascii_whitespace() => pos += 1,
-                Some(b'#') => {
-                    while bytes.get(pos).is_some_and(|&b| b != b'\n') {
-                        pos += 1;
-                    }
-                }
-                _ => break,
-            }
-        }
-        let start = pos;
-        while bytes.get(pos).is_some_and(u8::is_ascii_digit) {
-            pos += 1;
-        }
-        if start == pos {
-            return Err(match bytes.get(pos) {
-                None => format!("truncated header: no {name}"),
-                Some(_) => format!("bad header: {name} is not a number"),
-            });
-        }
-        let text = std::str::from_utf8(bytes.get(start..pos).unwrap_or(&[])).unwrap_or("");
-        numbers[k] = text
-            .parse()
-            .map_err(|_| format!("bad header: {name} `{text}` is too large"))?;
-    }
-    let [width, height, maxval] = numbers;
-    if maxval != 255 {
-        return Err(format!(
-            "maxval {maxval}: only 8-bit frames (maxval 255) are supported"
-        ));
-    }
-    if width == 0
-        || height == 0
-        || width > touchdown_core::image::MAX_DIMENSION
-        || height > touchdown_core::image::MAX_DIMENSION
-    {
-        return Err(format!("unsupported size {width}x{height}"));
-    }
-    match bytes.get(pos) {
-        Some(b) if b.is_ascii_whitespace() => pos += 1,
-        Some(_) => return Err("bad header: no whitespace after maxval".into()),
-        None => return Err("truncated: no pixel data".into()),
-    }
-    let needed = width * height;
-    let data = bytes.get(pos..).unwrap_or(&[]);
-    if data.len() < needed {
-        return Err(format!(
-            "truncated: a {width}x{height} frame needs {needed} pixel bytes, the file has {}",
-            data.len()
-        ));
-    }
-    if data.len() > needed {
-        return Err(format!(
-            "{} unexpected bytes after the {width}x{height} frame",
-            data.len() - needed
-        ));
-    }
-    if let Some((w, h)) = expected {
-        if (w, h) != (width, height) {
-            return Err(format!(
-                "frame is {width}x{height} but camera.toml says {w}x{h}"
-            ));
-        }
-    }
-    Ok(GrayFrame {
-        width,
-        height,
-        pixels: data.to_vec(),
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn pgm_header_with_comment() {
-        let mut bytes = b"P5\n# hello\n2 1\n255\n".to_vec();
-        bytes.extend_from_slice(&[7, 9]);
-        let f = parse_pgm(&bytes, Some((2, 1))).unwrap();
-        assert_eq!(f.pixels, vec![7, 9]);
-        assert!(parse_pgm(&bytes[..bytes.len() - 1], None)
-            .unwrap_err()
-            .starts_with("truncated"));
-        assert!(parse_pgm(b"P5\n2 1\n65535\n\0\0\0\0", None)
-            .unwrap_err()
-            .contains("maxval"));
-        assert!(parse_pgm(&bytes, Some((3, 1)))
-            .unwrap_err()
-            .contains("camera.toml"));
-        assert!(parse_pgm(b"P2\n", None).is_err());
-        assert!(parse_pgm(b"P5\n2", None).unwrap_err().contains("truncated"));
-    }
 
     #[test]
     fn csv_errors_name_the_line() {
@@ -770,20 +642,5 @@ mod tests {
         assert!(e.1.contains("unit quaternion"), "{e:?}");
         let e = parse_frames_csv(&format!("{truth}0,5,1,2,3,1,0,0\n")).unwrap_err();
         assert!(e.1.contains("columns"), "{e:?}");
-    }
-
-    #[test]
-    fn camera_toml_is_exact() {
-        let camera = CameraModel {
-            distortion: [-0.12, 0.03, 0.0005, -0.0003, 0.0],
-            ..CameraModel::pinhole(640, 480, 554.256_3, 554.256_3, 319.5, 239.5)
-        };
-        let back = config::parse_camera(&camera_toml(&camera)).unwrap();
-        assert_eq!(back, camera);
-        let pinhole = CameraModel::pinhole(64, 48, 1.0e-1, 0.1, 31.5, 23.5);
-        assert_eq!(
-            config::parse_camera(&camera_toml(&pinhole)).unwrap(),
-            pinhole
-        );
     }
 }
