@@ -70,7 +70,7 @@ use embassy_stm32::gpio::Output;
 use embassy_time::{Delay, Duration, Instant, Timer};
 use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::MavSeverity;
-use touchdown_core::filter::VehicleState;
+use touchdown_core::filter::{EstimatorConfig, PadEstimator, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
@@ -211,16 +211,18 @@ pub async fn task(
     settings: PipelineSettings,
 ) {
     let mut sensor = Sensor::probe(pins, sccb).await;
-    let mut pipeline = unwrap!(
-        FramePipeline::new(
-            SEARCHED,
-            config::PAD,
-            *sensor.camera_model(),
-            PipelineConfig::default(),
-            settings,
-        )
-        .ok(),
+    let estimator = unwrap!(
+        PadEstimator::new(EstimatorConfig::default()).ok(),
         "the default tracker configuration is valid"
+    );
+    // Built in place (see `FramePipeline::with_estimator` for why not `new`).
+    let mut pipeline = FramePipeline::with_estimator(
+        SEARCHED,
+        config::PAD,
+        *sensor.camera_model(),
+        PipelineConfig::default(),
+        estimator,
+        settings,
     );
     // The estimator's copy of the vehicle state, refreshed before each frame.
     let mut vehicle = VehicleState::new();
