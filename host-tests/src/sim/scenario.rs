@@ -15,6 +15,9 @@
 //! the nose. `paper` keeps it ideal (the paper used Gazebo's distortion-free camera); the
 //! others add a mild barrel distortion, defocus and vignetting of a board camera.
 //!
+//! `paper` flies the set points of [`crate::eval::paper_geometry`] (its tables are the one
+//! definition of the experiment), Z rows first, then X, then Y, all at heading 0.
+//!
 //! Frames carry set-point labels where the scenario has set points (`z=5`, `x=1.2`,
 //! `hover=3`); the paper's tables group frames by them.
 
@@ -25,6 +28,9 @@ use super::sensor::{Exposure, Optics, Sensor};
 use super::texture::GroundKind;
 use super::trajectory::{Profile, Segment, Trajectory, Wobble};
 use super::world::{Lighting, Occluder, ShadowEdge};
+use crate::eval::paper_geometry::{
+    EXTRA_ALTITUDES_M, OFFSET_ROWS_ALTITUDE_M, TABLE_ALTITUDES_M, TABLE_OFFSETS_M,
+};
 
 /// Mild barrel distortion of a small M12 board lens at 60 degrees.
 pub const BOARD_LENS_DISTORTION: [f32; 5] = [-0.12, 0.03, 0.0005, -0.0003, 0.0];
@@ -206,14 +212,15 @@ impl Scenario {
         let scenario = match name {
             "paper" => {
                 let mut points: Vec<(String, Vec3)> = Vec::new();
-                for z in [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 40.0, 50.0] {
+                for &z in TABLE_ALTITUDES_M.iter().chain(&EXTRA_ALTITUDES_M) {
                     points.push((label("z", z), [0.0, 0.0, z]));
                 }
-                for x in [1.2, 2.4, 3.6, 4.8, 6.0] {
-                    points.push((label("x", x), [x, 0.0, 15.0]));
+                let h = OFFSET_ROWS_ALTITUDE_M;
+                for x in TABLE_OFFSETS_M {
+                    points.push((label("x", x), [x, 0.0, h]));
                 }
-                for y in [1.2, 2.4, 3.6, 4.8, 6.0] {
-                    points.push((label("y", y), [0.0, y, 15.0]));
+                for y in TABLE_OFFSETS_M {
+                    points.push((label("y", y), [0.0, y, h]));
                 }
                 let (segments, frames) = set_points(&points, 16, 30.0, 1.0);
                 let trajectory = Trajectory {
