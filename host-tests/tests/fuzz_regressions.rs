@@ -92,12 +92,41 @@ fn detect_seed_holds_a_marker() {
     assert_eq!(pixels.len(), width * height);
     let image = touchdown_core::image::GrayImage::new(pixels, width, height).unwrap();
     let mut workspace = Box::new(touchdown_core::detect::QvgaWorkspace::new());
-    let mut detector =
-        touchdown_core::detect::Detector::new(touchdown_core::detect::DetectorConfig::default());
+    // Through the per-frame path the board runs, on a one-marker pad of that tag.
     let families = touchdown_core::family::tables::DEFAULT;
-    let found = detector
-        .detect(&image, families, &mut workspace.buffers())
-        .unwrap();
+    let marker = touchdown_core::pad::PadMarker {
+        family: "tag36h11",
+        id: 0,
+        size: 0.16,
+        x: 0.0,
+        y: 0.0,
+        yaw_deg: 0.0,
+    };
+    let pad = touchdown_core::pad::PadLayout::new("seed", &[marker]).unwrap();
+    let (w, h) = (width as f32, height as f32);
+    let camera = touchdown_core::camera::CameraModel::pinhole(
+        width as u32,
+        height as u32,
+        w,
+        w,
+        0.5 * (w - 1.0),
+        0.5 * (h - 1.0),
+    );
+    let mut pipeline = Box::new(
+        touchdown_core::pipeline::FramePipeline::new(
+            families,
+            &pad,
+            camera,
+            touchdown_core::pipeline::PipelineConfig::default(),
+            touchdown_core::params::PipelineSettings::default(),
+        )
+        .unwrap(),
+    );
+    let vehicle = touchdown_core::filter::VehicleState::new();
+    let report = pipeline.process(&image, 0, &vehicle, &mut workspace.buffers());
+    assert_eq!(report.detect_error, None);
+    assert!(report.fix.is_some(), "the pad's one marker gives a fix");
+    let found = pipeline.detector().detections();
     assert_eq!(found.len(), 1, "{found:?}");
     assert_eq!((found[0].family, found[0].id), (0, 0));
 }

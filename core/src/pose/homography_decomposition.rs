@@ -7,7 +7,7 @@
 //! with noise they differ), `r3 = r1 x r2`, and the resulting matrix is projected onto the
 //! nearest rotation (SVD). It ignores which of the two planar solutions is right and does
 //! not minimise any image error, which is why touchdown uses [`ippe`](super::ippe) and
-//! [`refine`](super::refine) instead.
+//! [`levenberg_marquardt`](super::levenberg_marquardt) instead.
 //!
 //! The corners are taken in undistorted normalised coordinates, i.e. `K^-1 H` directly: for a
 //! distortion-free camera, the paper's setup, that is exactly its equation.

@@ -11,7 +11,7 @@
 //!   face-on (the "flip" ambiguity). Infinitesimal Plane-based Pose Estimation (Collins and
 //!   Bartoli 2014, [`ippe`]) gives both in closed form from the corner homography; each is
 //!   polished by Levenberg-Marquardt on the pixel reprojection error with the lens
-//!   distortion included ([`refine`]), and the one with the lower error is reported first.
+//!   distortion included ([`levenberg_marquardt`]), and the one with the lower error is reported first.
 //!   The other is kept so a caller with a prediction (the filter) can choose
 //!   ([`MarkerPose::choose_by_predicted_camera_position`]).
 //! - [`PoseMethod::PaperHomography`]: the paper's equations 5-7, `H = K [r1 r2 t]` decomposed
@@ -27,8 +27,8 @@
 pub mod homography_decomposition;
 pub mod ippe;
 pub mod level;
+pub mod levenberg_marquardt;
 pub mod pad_pose;
-pub mod refine;
 
 pub use level::level_pad_fix;
 pub use pad_pose::{
@@ -272,7 +272,7 @@ pub fn marker_pose(
             let starts = ippe::square_poses(&normalized, size)?;
             let mut refined: [Option<PoseCandidate>; 2] = [None, None];
             for (slot, start) in refined.iter_mut().zip(starts.iter()) {
-                *slot = refine::refine(camera, &model, corners, start)
+                *slot = levenberg_marquardt::refine(camera, &model, corners, start)
                     .ok()
                     .map(|r| PoseCandidate {
                         pose: r.pose,

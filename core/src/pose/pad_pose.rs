@@ -11,7 +11,7 @@
 //!    layout marker seen twice is used once). Their corners become pad-frame model points.
 //! 2. Start from the marker with the largest image: both IPPE solutions of it, refined on its
 //!    own corners and moved into the pad frame.
-//! 3. Refine each start on all corners (Levenberg-Marquardt, [`refine`](super::refine)); keep
+//! 3. Refine each start on all corners (Levenberg-Marquardt, [`levenberg_marquardt`](super::levenberg_marquardt)); keep
 //!    the lower reprojection error, or, when the two are within [`AMBIGUOUS_RMS_RATIO`] and a
 //!    prediction is given, the one whose camera position is nearer the prediction.
 //! 4. Covariance `(J^T J)^-1 sigma^2`, sigma from the residuals with a floor of
@@ -25,7 +25,7 @@
 //! - [`PadFix::covariance`] is over (rotation increment in the camera frame, applied on the
 //!   left of `R`; translation `t`), radians and metres.
 
-use super::{ippe, marker_corners, normalized_corners, refine, Pose, PoseError};
+use super::{ippe, levenberg_marquardt, marker_corners, normalized_corners, Pose, PoseError};
 use crate::camera::CameraModel;
 use crate::detect::Detection;
 use crate::family::Family;
@@ -198,12 +198,13 @@ pub fn pad_pose_with_prediction(
     let starts = ippe::square_poses(&normalized, anchor_marker.size)?;
     let anchor_model = marker_corners(anchor_marker.size);
     let pad_to_marker = marker_to_pad(anchor_marker).inverse();
-    let mut fits: [Option<refine::Refined>; 2] = [None, None];
+    let mut fits: [Option<levenberg_marquardt::Refined>; 2] = [None, None];
     for (fit, start) in fits.iter_mut().zip(starts.iter()) {
-        let single = refine::refine(camera, &anchor_model, &anchor_corners, start)
+        let single = levenberg_marquardt::refine(camera, &anchor_model, &anchor_corners, start)
             .map(|r| r.pose)
             .unwrap_or(*start);
-        *fit = refine::refine(camera, model, image, &single.compose(&pad_to_marker)).ok();
+        *fit =
+            levenberg_marquardt::refine(camera, model, image, &single.compose(&pad_to_marker)).ok();
     }
     let (best, other) = match fits {
         [Some(a), Some(b)] => {
