@@ -34,7 +34,8 @@
 //!   from the autopilot, for the estimator in the vision task, which reads it at each frame's
 //!   exposure. A mutex around one copy, not a channel: the estimator wants the whole recent
 //!   history at once, not each sample, and the newest copy supersedes the older. The link
-//!   writes it after every received chunk ([`publish_vehicle`]), the vision task copies it out
+//!   writes it after each received chunk that changed it ([`publish_vehicle`]), the vision
+//!   task copies it out
 //!   before each frame ([`read_vehicle`]); each copy is about 1.3 KiB, a microsecond inside
 //!   the critical section, so neither ever holds the lock while it works.
 //! - [`SAVE`]: the whole parameter set to write to flash, from the link (after its debounce)

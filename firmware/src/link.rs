@@ -4,8 +4,8 @@
 //! UART; everything else talks to it through the [`LINK_EVENTS`] channel
 //! ([`crate::channels`]): the vision task posts each frame's estimate ([`LinkEvent::Frame`])
 //! and faults ([`LinkEvent::Status`]), the parameter store its faults. After each received
-//! chunk the link publishes the companion's vehicle state ([`channels::publish_vehicle`]) for
-//! the vision task's estimator. One owner and a channel
+//! chunk that changed it, the link publishes the companion's vehicle state
+//! ([`channels::publish_vehicle`]) for the vision task's estimator. One owner and a channel
 //! keeps it simple: no lock around the companion, no task ever waits on another's critical
 //! section, and the vision task never blocks on the link (a full channel drops and counts the
 //! event rather than stall a frame).
@@ -63,6 +63,9 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
     let mut ticker = Ticker::every(TICK);
     let mut debounce = SaveDebounce::new(*companion.params());
     let mut uart_errors = 0u32;
+    // The vehicle state's revision last copied for the vision task (the shared copy starts as
+    // a new state, revision 0, as the companion's does).
+    let mut published_vehicle = companion.vehicle().revision();
     let mut next_summary = Instant::now() + SUMMARY_PERIOD;
     // What the vision task runs with: main gave it the settings of the restored parameters.
     let mut pipeline_settings = PipelineSettings::from_params(companion.params());
@@ -80,7 +83,11 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
         match select3(rx.read(&mut rx_buf), LINK_EVENTS.receive(), ticker.next()).await {
             Either3::First(Ok(n)) => {
                 companion.receive(rx_buf.get(..n).unwrap_or(&[]), now_us());
-                channels::publish_vehicle(companion.vehicle());
+                // Copied for the vision task only when a sample came in (or was dropped).
+                if companion.vehicle().revision() != published_vehicle {
+                    published_vehicle = companion.vehicle().revision();
+                    channels::publish_vehicle(companion.vehicle());
+                }
             }
             Either3::First(Err(e)) => {
                 // Framing/noise/overrun: the parser resynchronises on the next frame start.

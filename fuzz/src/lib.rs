@@ -749,7 +749,7 @@ pub fn mavlink_stream(data: &[u8]) -> CompanionStats {
                 } else {
                     now_us.saturating_sub(age)
                 };
-                let estimate = estimator.update(exposure_us, fix.as_ref(), companion.vehicle());
+                let estimate = estimator.update(fix.as_ref(), &companion.vehicle().at(exposure_us));
                 let _ = companion.on_estimate(&estimate, now_us);
             }
             x if x == Op::SetParam as u8 => {

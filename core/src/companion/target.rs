@@ -42,29 +42,27 @@ impl State {
                 profile::ardupilot_fields(&e.body_frd, e.orientation_body.unwrap_or(UNKNOWN_Q))
             }
             Profile::Px4 => {
-                let level = frame.estimate.as_ref().and_then(|e| Some((e, e.level?)));
-                let position = frame
-                    .estimate
-                    .as_ref()
-                    .and_then(|e| e.vehicle_position)
-                    .or_else(|| self.vehicle.position_at(t));
-                let attitude = level
-                    .map(|(_, l)| l.attitude)
-                    .or_else(|| self.vehicle.attitude_at(t));
-                let (Some(_), Some(pos)) = (attitude, position) else {
-                    self.stats.no_vehicle_state = self.stats.no_vehicle_state.saturating_add(1);
-                    return TargetOutcome::NoVehicleState;
-                };
-                let Some((e, l)) = level else {
-                    self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
-                    return TargetOutcome::NoEstimate;
-                };
-                profile::px4_fields(
-                    &pos.position,
-                    &l.estimate.position,
-                    &l.attitude,
-                    e.orientation_ned.unwrap_or(UNKNOWN_Q),
-                )
+                let estimate = frame.estimate.as_ref();
+                match estimate.and_then(|e| Some((e, e.level?, e.vehicle_position?))) {
+                    Some((e, l, pos)) => profile::px4_fields(
+                        &pos.position,
+                        &l.estimate.position,
+                        &l.attitude,
+                        e.orientation_ned.unwrap_or(UNKNOWN_Q),
+                    ),
+                    None => {
+                        // Which of the two is missing: the vehicle state at the exposure, or
+                        // (with it) a confirmed, fresh level estimate.
+                        let at = self.vehicle.at(t);
+                        if at.attitude.is_none() || at.position.is_none() {
+                            self.stats.no_vehicle_state =
+                                self.stats.no_vehicle_state.saturating_add(1);
+                            return TargetOutcome::NoVehicleState;
+                        }
+                        self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
+                        return TargetOutcome::NoEstimate;
+                    }
+                }
             }
         };
         let Some(fields) = fields else {

@@ -20,9 +20,10 @@
 //!
 //! Why the vehicle state is an argument and not owned here: it arrives with the autopilot's
 //! messages, which the MAVLink side decodes (and, on the board, in another task than the
-//! camera's). The state carries a reboot counter ([`VehicleState::reboots`]); when it moves,
-//! the level tracker restarts, since NED positions from before an autopilot reboot are in a
-//! frame that no longer exists.
+//! camera's). It is read once per frame, at the exposure ([`VehicleAtExposure`], from
+//! [`super::VehicleState::at`]), with the state's reboot counter; when that moves, the level
+//! tracker restarts, since NED positions from before an autopilot reboot are in a frame that
+//! no longer exists.
 //!
 //! The camera mount (TD_CAM_YAW) is set between frames ([`PadEstimator::set_mount_yaw`]); a
 //! changed mount restarts both trackers, because measurements before and after it are in
@@ -30,7 +31,7 @@
 
 use super::axes::{level_measurement, pad_orientation, Attitude, CameraMount};
 use super::tracker::{ConfigError, Estimate, Tracker, TrackerConfig};
-use super::vehicle::{PositionSample, VehicleState};
+use super::vehicle::{PositionSample, VehicleAtExposure};
 use super::Measurement;
 use crate::pose::PadFix;
 use nalgebra::Vector3;
@@ -104,7 +105,7 @@ pub struct PadEstimator {
     mount_yaw_deg: f32,
     level: Tracker,
     camera: Tracker,
-    /// [`VehicleState::reboots`] when the level tracker last ran.
+    /// [`super::VehicleState::reboots`] when the level tracker last ran.
     vehicle_reboots: u32,
 }
 
@@ -144,34 +145,30 @@ impl PadEstimator {
         self.camera.reset();
     }
 
-    /// The pad in the camera frame predicted at `t_us` from the tracks (before this frame's
-    /// fix), for choosing between a fix's two mirror solutions; `None` without a track.
-    pub fn predicted_in_camera(&self, t_us: u64, vehicle: &VehicleState) -> Option<Vector3<f32>> {
-        let level = vehicle.attitude_at(t_us).and_then(|att| {
+    /// The pad in the camera frame predicted at the exposure from the tracks (before this
+    /// frame's fix), for choosing between a fix's two mirror solutions; `None` without a track.
+    pub fn predicted_in_camera(&self, vehicle: &VehicleAtExposure) -> Option<Vector3<f32>> {
+        let t_us = vehicle.t_us;
+        let level = vehicle.attitude.as_ref().and_then(|att| {
             let e = self.level.estimate(t_us)?;
             Some(self.mount.body_to_camera(&att.ned_to_body(&e.position)))
         });
         level.or_else(|| self.camera.estimate(t_us).map(|e| e.position))
     }
 
-    /// Feeds one frame: `fix` (if the pad was found) exposed at `exposure_us`, read with the
-    /// vehicle state known when the frame was processed.
-    pub fn update(
-        &mut self,
-        exposure_us: u64,
-        fix: Option<&PadFix>,
-        vehicle: &VehicleState,
-    ) -> FrameEstimate {
-        if vehicle.reboots() != self.vehicle_reboots {
-            self.vehicle_reboots = vehicle.reboots();
+    /// Feeds one frame: `fix` (if the pad was found), exposed at `vehicle.t_us`, with the
+    /// vehicle state read at that time when the frame was processed.
+    pub fn update(&mut self, fix: Option<&PadFix>, vehicle: &VehicleAtExposure) -> FrameEstimate {
+        if vehicle.reboots != self.vehicle_reboots {
+            self.vehicle_reboots = vehicle.reboots;
             self.level.reset();
         }
-        let t = exposure_us;
+        let t = vehicle.t_us;
         self.level.predict_to(t);
         self.camera.predict_to(t);
         let Some(fix) = fix else {
             return FrameEstimate {
-                exposure_us,
+                exposure_us: t,
                 fix_found: false,
                 estimate: None,
             };
@@ -182,7 +179,7 @@ impl PadEstimator {
             covariance: fix.pad_position_covariance(),
         };
         self.camera.update(&m);
-        let attitude = vehicle.attitude_at(t);
+        let attitude = vehicle.attitude;
         if let Some(att) = &attitude {
             self.level.update(&level_measurement(&m, att, &self.mount));
         }
@@ -201,14 +198,14 @@ impl PadEstimator {
         let estimate = body_frd.map(|body_frd| PadEstimate {
             body_frd,
             level,
-            vehicle_position: vehicle.position_at(t),
+            vehicle_position: vehicle.position,
             orientation_body: pad_orientation(&fix.pose.rotation, &self.mount, None),
             orientation_ned: attitude
                 .as_ref()
                 .and_then(|att| pad_orientation(&fix.pose.rotation, &self.mount, Some(att))),
         });
         FrameEstimate {
-            exposure_us,
+            exposure_us: t,
             fix_found: true,
             estimate,
         }
@@ -218,6 +215,7 @@ impl PadEstimator {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::VehicleState;
     use crate::pose::Pose;
     use nalgebra::{Matrix3, Matrix6};
 
@@ -252,7 +250,7 @@ mod tests {
             if level {
                 vehicle.push_attitude(t, &Attitude::level_north(), t);
             }
-            last = Some(e.update(t, Some(&fix()), vehicle));
+            last = Some(e.update(Some(&fix()), &vehicle.at(t)));
         }
         (last.unwrap(), t)
     }
@@ -261,7 +259,7 @@ mod tests {
     fn without_attitude_the_camera_track_gives_body_frd_and_no_level() {
         let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
         let mut vehicle = VehicleState::new();
-        let first = e.update(0, Some(&fix()), &vehicle);
+        let first = e.update(Some(&fix()), &vehicle.at(0));
         assert!(
             first.fix_found && first.estimate.is_none(),
             "not yet confirmed"
@@ -274,7 +272,7 @@ mod tests {
         assert!((est.body_frd - want).amax() < 1e-3, "{}", est.body_frd);
         assert!(est.orientation_body.is_some() && est.orientation_ned.is_none());
         // A frame without a fix: nothing, but the exposure time is kept.
-        let none = e.update(10 * PERIOD_US, None, &vehicle);
+        let none = e.update(None, &vehicle.at(10 * PERIOD_US));
         assert_eq!((none.exposure_us, none.fix_found), (10 * PERIOD_US, false));
         assert!(none.estimate.is_none());
     }

@@ -34,7 +34,7 @@ pub use paper::{PaperConfig, PaperKalman};
 pub use tracker::{
     ConfigError, Estimate, RejectReason, TrackState, Tracker, TrackerConfig, UpdateOutcome,
 };
-pub use vehicle::{PositionSample, VehicleState};
+pub use vehicle::{PositionSample, VehicleAtExposure, VehicleState};
 
 use nalgebra::{Matrix3, Vector3};
 

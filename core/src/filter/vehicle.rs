@@ -116,6 +116,20 @@ fn fraction(t0: u64, t1: u64, t: u64) -> f32 {
     (t.saturating_sub(t0) as f32 / (t1 - t0) as f32).clamp(0.0, 1.0)
 }
 
+/// The vehicle state read at one exposure time: what the per-frame path needs of it, read
+/// once per frame ([`VehicleState::at`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleAtExposure {
+    /// The exposure time, our clock, µs.
+    pub t_us: u64,
+    /// The attitude then, if the history covers it.
+    pub attitude: Option<Attitude>,
+    /// The local position then, if the history covers it.
+    pub position: Option<PositionSample>,
+    /// [`VehicleState::reboots`] at the time of reading.
+    pub reboots: u32,
+}
+
 /// The vehicle state histories.
 #[derive(Debug, Clone)]
 pub struct VehicleState {
@@ -127,6 +141,8 @@ pub struct VehicleState {
     last_rx_us: Option<u64>,
     /// Autopilot reboots seen ([`VehicleState::on_reboot`]).
     reboots: u32,
+    /// Changes of what the readers see (samples added or cleared, reboots), wrapping.
+    revision: u32,
 }
 
 impl Default for VehicleState {
@@ -144,11 +160,30 @@ impl VehicleState {
             last_time: None,
             last_rx_us: None,
             reboots: 0,
+            revision: 0,
         }
+    }
+
+    /// What the per-frame path reads at `t_us` (our clock): the attitude, the position and the
+    /// reboot count, in one pass.
+    pub fn at(&self, t_us: u64) -> VehicleAtExposure {
+        VehicleAtExposure {
+            t_us,
+            attitude: self.attitude_at(t_us),
+            position: self.position_at(t_us),
+            reboots: self.reboots,
+        }
+    }
+
+    /// Changes since start (wrapping): a copy with the same revision reads the same, so the
+    /// firmware's link task copies the state for the vision task only when it moved.
+    pub fn revision(&self) -> u32 {
+        self.revision
     }
 
     /// Forgets everything (reboot, clock offset change).
     pub fn clear(&mut self) {
+        self.revision = self.revision.wrapping_add(1);
         self.attitude.clear();
         self.position.clear();
         self.last_time = None;
@@ -157,6 +192,7 @@ impl VehicleState {
 
     /// Forgets the samples but keeps the reboot detector's reference.
     pub fn clear_samples(&mut self) {
+        self.revision = self.revision.wrapping_add(1);
         self.attitude.clear();
         self.position.clear();
     }
@@ -191,12 +227,14 @@ impl VehicleState {
         let q = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, x, y, z));
         self.attitude.push(t_us, q);
         self.last_rx_us = Some(now_us);
+        self.revision = self.revision.wrapping_add(1);
     }
 
     /// Adds a position sample at `t_us` (our clock), received at `now_us`.
     pub fn push_position(&mut self, t_us: u64, sample: PositionSample, now_us: u64) {
         self.position.push(t_us, sample);
         self.last_rx_us = Some(now_us);
+        self.revision = self.revision.wrapping_add(1);
     }
 
     /// Our time of the newest sample received.
@@ -263,5 +301,30 @@ mod tests {
         assert!(!v.observe_time(100_000_000, 0));
         assert!(!v.observe_time(101_000_000, 1_000_000));
         assert!(v.observe_time(500_000, 2_000_000));
+    }
+
+    #[test]
+    fn a_reading_at_exposure_is_the_histories_there_and_changes_move_the_revision() {
+        let mut v = VehicleState::new();
+        let r0 = v.revision();
+        v.push_attitude(1_000, &Attitude::level_north(), 1_000);
+        let sample = PositionSample {
+            position: Vector3::new(1.0, 2.0, -3.0),
+            velocity: Vector3::new(0.5, 0.0, 0.0),
+        };
+        v.push_position(1_000, sample, 1_000);
+        let r1 = v.revision();
+        assert_ne!(r0, r1);
+        let at = v.at(11_000);
+        assert_eq!(at.t_us, 11_000);
+        assert_eq!(at.attitude, v.attitude_at(11_000));
+        assert_eq!(at.position, v.position_at(11_000));
+        assert_eq!(at.reboots, 0);
+        // Reading changes nothing; a reboot does, and is counted.
+        assert_eq!(v.revision(), r1);
+        v.on_reboot();
+        assert_ne!(v.revision(), r1);
+        assert_eq!(v.at(11_000).reboots, 1);
+        assert_eq!(v.at(11_000).attitude, None);
     }
 }

@@ -46,10 +46,12 @@ mod paper;
 pub use paper::{PaperPipeline, PaperReport};
 
 use crate::camera::CameraModel;
-use crate::detect::{Buffers, DetectError, Detection, Detector, DetectorConfig};
+use crate::detect::{Buffers, DetectError, Detector, DetectorConfig};
 use crate::family::Family;
 use crate::filter::axes::camera_to_ned_matrix;
-use crate::filter::{ConfigError, EstimatorConfig, FrameEstimate, PadEstimator, VehicleState};
+use crate::filter::{
+    ConfigError, EstimatorConfig, FrameEstimate, PadEstimator, VehicleAtExposure, VehicleState,
+};
 use crate::image::GrayImage;
 use crate::pad::{PadError, PadLayout};
 use crate::params::PipelineSettings;
@@ -197,23 +199,29 @@ impl<'a> FramePipeline<'a> {
         vehicle: &VehicleState,
         buffers: &mut Buffers<'_>,
     ) -> FrameReport {
-        let predicted = self.predicted_camera_position(exposure_us, vehicle);
+        // The vehicle state is read once, at the exposure, for every step that needs it.
+        let at_exposure = vehicle.at(exposure_us);
+        let predicted = self.predicted_camera_position(&at_exposure);
+        let camera_from_level = at_exposure
+            .attitude
+            .as_ref()
+            .filter(|_| self.config.level_fix)
+            .map(|att| {
+                camera_to_ned_matrix(att, self.estimator.mount()).transpose() * NED_FROM_LEVEL
+            });
         let (markers, fix, detect_error) = match self.detector.detect(image, self.families, buffers)
         {
             Ok(detections) => {
-                let fix = PadFixer {
-                    families: self.families,
-                    pad: &self.pad,
-                    camera: &self.camera,
-                    level_fix: self.config.level_fix,
-                }
-                .fix(
-                    detections,
-                    predicted.as_ref(),
-                    exposure_us,
-                    vehicle,
-                    &self.estimator,
-                );
+                let (families, pad, camera) = (self.families, &self.pad, &self.camera);
+                // The level fix falls back to the image's own fix when it cannot be solved.
+                let fix =
+                    pad_pose_with_prediction(detections, families, pad, camera, predicted.as_ref())
+                        .ok()
+                        .map(|fix| match &camera_from_level {
+                            Some(c) => level_pad_fix(&fix, detections, families, pad, camera, c)
+                                .unwrap_or(fix),
+                            None => fix,
+                        });
                 (detections.len(), fix, None)
             }
             Err(e) => (0, None, Some(e)),
@@ -222,22 +230,22 @@ impl<'a> FramePipeline<'a> {
             self.last_rotation = Some(f.pose.rotation);
         }
         FrameReport {
-            estimate: self.estimator.update(exposure_us, fix.as_ref(), vehicle),
+            estimate: self.estimator.update(fix.as_ref(), &at_exposure),
             fix,
             markers,
             detect_error,
         }
     }
 
-    /// The camera's position in the pad frame that the estimator predicts at `t_us`, for the
-    /// flip choice: its predicted pad position (camera frame) turned with the last fix's
+    /// The camera's position in the pad frame that the estimator predicts at the exposure, for
+    /// the flip choice: its predicted pad position (camera frame) turned with the last fix's
     /// rotation. `None` when the step is off or there is no track.
-    fn predicted_camera_position(&self, t_us: u64, vehicle: &VehicleState) -> Option<Vector3<f32>> {
+    fn predicted_camera_position(&self, vehicle: &VehicleAtExposure) -> Option<Vector3<f32>> {
         if !self.config.flip_by_prediction {
             return None;
         }
         let rotation = self.last_rotation?;
-        let pad_in_camera = self.estimator.predicted_in_camera(t_us, vehicle)?;
+        let pad_in_camera = self.estimator.predicted_in_camera(vehicle)?;
         Some(-(rotation.transpose() * pad_in_camera))
     }
 
@@ -274,50 +282,6 @@ impl<'a> FramePipeline<'a> {
     /// The estimator (its mount in force).
     pub fn estimator(&self) -> &PadEstimator {
         &self.estimator
-    }
-}
-
-/// The pad-fix step's inputs, borrowed from the pipeline while the detector's output is.
-struct PadFixer<'p, 'a> {
-    families: &'a [&'a Family<'a>],
-    pad: &'p PadLayout<'a>,
-    camera: &'p CameraModel,
-    level_fix: bool,
-}
-
-impl PadFixer<'_, '_> {
-    /// The pad fix of `detections` (see the module docs); the level fix falls back to the
-    /// image's own when it cannot be solved.
-    fn fix(
-        &self,
-        detections: &[Detection],
-        predicted: Option<&Vector3<f32>>,
-        exposure_us: u64,
-        vehicle: &VehicleState,
-        estimator: &PadEstimator,
-    ) -> Option<PadFix> {
-        let fix =
-            pad_pose_with_prediction(detections, self.families, self.pad, self.camera, predicted)
-                .ok()?;
-        if !self.level_fix {
-            return Some(fix);
-        }
-        let Some(attitude) = vehicle.attitude_at(exposure_us) else {
-            return Some(fix);
-        };
-        let camera_from_level =
-            camera_to_ned_matrix(&attitude, estimator.mount()).transpose() * NED_FROM_LEVEL;
-        Some(
-            level_pad_fix(
-                &fix,
-                detections,
-                self.families,
-                self.pad,
-                self.camera,
-                &camera_from_level,
-            )
-            .unwrap_or(fix),
-        )
     }
 }
 

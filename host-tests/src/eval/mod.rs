@@ -59,7 +59,7 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use touchdown_core::camera::CameraModel;
 use touchdown_core::detect::DetectError;
 use touchdown_core::family::Family;
-use touchdown_core::filter::axes::{Attitude, CameraMount};
+use touchdown_core::filter::axes::Attitude;
 use touchdown_core::filter::{PaperConfig, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::PadLayout;
@@ -384,7 +384,6 @@ enum Runner<'a> {
         pipeline: Box<FramePipeline<'a>>,
         /// The attitude stream the autopilot would send, as the companion keeps it.
         vehicle: Box<VehicleState>,
-        mount: CameraMount,
     },
 }
 
@@ -418,7 +417,6 @@ impl<'a> Pipeline<'a> {
                     .map_err(|_| ExperimentError::BadTrackerConfig)?,
                 ),
                 vehicle: Box::new(VehicleState::new()),
-                mount: config.estimator.mount,
             },
         };
         Ok(Pipeline {
@@ -430,9 +428,7 @@ impl<'a> Pipeline<'a> {
     fn reset(&mut self) {
         match &mut self.runner {
             Runner::Paper(paper) => paper.reset(),
-            Runner::Board {
-                pipeline, vehicle, ..
-            } => {
+            Runner::Board { pipeline, vehicle } => {
                 pipeline.reset();
                 vehicle.clear();
             }
@@ -460,11 +456,9 @@ impl<'a> Pipeline<'a> {
                     estimate: report.estimate.map(|e| e.cast::<f64>()),
                 })
             }
-            Runner::Board {
-                pipeline,
-                vehicle,
-                mount,
-            } => {
+            Runner::Board { pipeline, vehicle } => {
+                // The mount in force, the one the estimator turns body FRD with.
+                let mount = *pipeline.estimator().mount();
                 if let Some(r) = &attitude {
                     // What the autopilot streams: its attitude (body FRD to NED) at the
                     // exposure, from the camera's rotation into the pad frame and the mount.

@@ -127,7 +127,7 @@ impl FixEstimator {
             .set_mount_yaw(PipelineSettings::from_params(companion.params()).cam_yaw_deg);
         let estimate = self
             .0
-            .update(exposure_us, fix.as_ref(), companion.vehicle());
+            .update(fix.as_ref(), &companion.vehicle().at(exposure_us));
         companion.on_estimate(&estimate, now_us)
     }
 }
