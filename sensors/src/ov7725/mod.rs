@@ -29,13 +29,26 @@
 //! window geometry and frame sizes (784x510 pixel periods per VGA frame, 576x278 per QVGA
 //! frame). Nothing was copied; the values are derived below.
 
+//!
+//! The driver is split by concern: [`reg`] is the register map, `clock` plans the pixel clock
+//! and frame length for a frame rate ([`plan_clock`]), `gain` is the GAIN register's encoding
+//! (shared with the OV2640, which uses the same one), and this module holds the driver that
+//! writes them in order. The register field values below are shared by the driver and the
+//! clock plan, so they live here, next to the set-up sequence that documents them.
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 
-use crate::{gain_ceiling_log2, FrameTiming, GainX16, Resolution};
+use crate::{gain_ceiling_log2, GainX16, Resolution};
 // The set-up and its errors are the sensor-independent ones (`crate::Config`), so the firmware
 // drives either sensor through one type; re-exported so `ov7725::Config` still names them.
 pub use crate::{Config, ConfigError, Exposure};
+
+mod clock;
+mod gain;
+pub mod reg;
+
+pub use clock::{plan_clock, ClockPlan, Pll, Prescaler};
+pub use gain::{gain_from_register, gain_register};
 
 /// 7-bit SCCB address (0x42 to write, 0x43 to read in 8-bit notation).
 pub const I2C_ADDRESS: u8 = 0x21;
@@ -52,65 +65,6 @@ pub const XCLK_RANGE_HZ: core::ops::RangeInclusive<u32> = 10_000_000..=48_000_00
 pub const MAX_PCLK_HZ: u32 = 24_000_000;
 /// A frame rate within this many parts per million of the request counts as exact.
 pub const FPS_TOLERANCE_PPM: u64 = 5_000;
-
-/// Register addresses (the subset this driver touches), with what each one does.
-pub mod reg {
-    /// AGC gain. Bits [7:4] each double the gain (set from bit 4 upwards), bits [3:0] add
-    /// sixteenths: gain = 2^(set high bits) x (1 + [3:0]/16). Written by the AGC when on.
-    pub const GAIN: u8 = 0x00;
-    /// Exposure, bits [15:8] (AEC[15:8]), in line periods. Written by the AEC when on.
-    pub const AECH: u8 = 0x08;
-    /// Product id MSB, read-only (0x77).
-    pub const PID: u8 = 0x0A;
-    /// Product id LSB, read-only (0x21 for the OV7725).
-    pub const VER: u8 = 0x0B;
-    /// COM3: bit 7 vertical flip, bit 6 horizontal mirror, bit 4 YUV byte order (1: Y
-    /// first), bit 0 colour bar test pattern.
-    pub const COM3: u8 = 0x0C;
-    /// COM4: bits [7:6] PLL (00 bypass, 01 x4, 10 x6, 11 x8), bits [5:4] AEC evaluation
-    /// window (00 full frame), bit 0 reserved (reset value 1, kept).
-    pub const COM4: u8 = 0x0D;
-    /// Exposure, bits [7:0] (AEC[7:0]), in line periods.
-    pub const AEC: u8 = 0x10;
-    /// CLKRC: bit 7 reserved (reset value 1, kept), bit 6 use the input clock directly (no
-    /// prescaler), bits [5:0] prescaler n: internal clock = input / ((n + 1) x 2).
-    pub const CLKRC: u8 = 0x11;
-    /// COM7: bit 7 register reset (self-clearing), bit 6 resolution (1 QVGA, 0 VGA), bits
-    /// [1:0] output format (00 YUV, 01 processed Bayer, 10 RGB, 11 raw Bayer).
-    pub const COM7: u8 = 0x12;
-    /// COM8: bit 7 fast AEC/AGC, bit 6 unlimited AEC step, bit 5 banding filter, bit 4 AEC
-    /// below the banding value, bit 3 exposures shorter than one line, bit 2 AGC, bit 1
-    /// AWB, bit 0 AEC. Reset value 0xCF.
-    pub const COM8: u8 = 0x13;
-    /// COM9: bits [6:4] AGC gain ceiling (000 2x ... 100 32x); other bits kept as read.
-    pub const COM9: u8 = 0x14;
-    /// Horizontal window start, bits [9:2] (pixels).
-    pub const HSTART: u8 = 0x17;
-    /// Horizontal window size, bits [9:2] (pixels).
-    pub const HSIZE: u8 = 0x18;
-    /// Vertical window start, bits [8:1] (lines).
-    pub const VSTART: u8 = 0x19;
-    /// Vertical window size, bits [8:1] (lines).
-    pub const VSIZE: u8 = 0x1A;
-    /// Output width, bits [9:2] (pixels).
-    pub const HOUTSIZE: u8 = 0x29;
-    /// EXHCH: bits [7:4] dummy pixels [11:8], bit 2 output height LSB, bits [1:0] output
-    /// width LSBs.
-    pub const EXHCH: u8 = 0x2A;
-    /// Dummy pixels per line, bits [7:0] (lengthen the line; unused, written 0).
-    pub const EXHCL: u8 = 0x2B;
-    /// Output height, bits [8:1] (lines).
-    pub const VOUTSIZE: u8 = 0x2C;
-    /// HREF: LSBs of the window: bit 6 VSTART[0], bits [5:4] HSTART[1:0], bit 2 VSIZE[0],
-    /// bits [1:0] HSIZE[1:0].
-    pub const HREF: u8 = 0x32;
-    /// Dummy lines per frame, bits [7:0] (lengthen the frame: lower frame rate).
-    pub const DM_LNL: u8 = 0x33;
-    /// Dummy lines per frame, bits [15:8].
-    pub const DM_LNH: u8 = 0x34;
-    /// DSP_CTRL4: bits [1:0] DSP output (00 YUV/RGB, 10 RAW8, 11 RAW10).
-    pub const DSP_CTRL4: u8 = 0x67;
-}
 
 /// COM7 bit 7: reset every register to its default.
 const COM7_RESET: u8 = 0x80;
@@ -161,99 +115,6 @@ pub enum Error<E> {
     Config(ConfigError),
 }
 
-/// The sensor's PLL setting (COM4[7:6]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Pll {
-    /// PLL bypassed (x1).
-    Bypass,
-    /// x4.
-    X4,
-    /// x6.
-    X6,
-    /// x8.
-    X8,
-}
-
-impl Pll {
-    const ALL: [Pll; 4] = [Pll::Bypass, Pll::X4, Pll::X6, Pll::X8];
-
-    /// The multiplier.
-    pub const fn multiplier(self) -> u32 {
-        match self {
-            Pll::Bypass => 1,
-            Pll::X4 => 4,
-            Pll::X6 => 6,
-            Pll::X8 => 8,
-        }
-    }
-
-    /// COM4[7:6].
-    const fn com4_bits(self) -> u8 {
-        match self {
-            Pll::Bypass => 0x00,
-            Pll::X4 => 0x40,
-            Pll::X6 => 0x80,
-            Pll::X8 => 0xC0,
-        }
-    }
-}
-
-/// The clock prescaler (CLKRC).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Prescaler {
-    /// CLKRC bit 6: no division.
-    Direct,
-    /// CLKRC[5:0] = n: divide by (n + 1) x 2.
-    Divide(u8),
-}
-
-impl Prescaler {
-    /// The division factor.
-    pub const fn divisor(self) -> u32 {
-        match self {
-            Prescaler::Direct => 1,
-            Prescaler::Divide(n) => (n as u32 + 1) * 2,
-        }
-    }
-
-    /// The CLKRC register value (reserved bit 7 kept at its reset value 1).
-    const fn clkrc(self) -> u8 {
-        match self {
-            Prescaler::Direct => CLKRC_RESERVED | CLKRC_DIRECT,
-            Prescaler::Divide(n) => CLKRC_RESERVED | (n & 0x3F),
-        }
-    }
-}
-
-/// Pixel clock and frame length for a frame rate ([`plan_clock`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct ClockPlan {
-    /// PLL multiplier.
-    pub pll: Pll,
-    /// Prescaler.
-    pub prescaler: Prescaler,
-    /// Dummy lines added to the frame (DM_LNL/DM_LNH).
-    pub dummy_lines: u16,
-    /// Resulting pixel clock, Hz.
-    pub pclk_hz: u32,
-    /// Resulting line and frame timing.
-    pub timing: FrameTiming,
-}
-
-/// Pixel clocks per line and lines per frame (blanking included, no dummy lines), and active
-/// lines, of each mode. In YUV each pixel takes two pixel clocks (one byte each).
-const fn geometry(resolution: Resolution) -> (u32, u32, u32) {
-    match resolution {
-        // 784 pixel periods per line, 510 lines per frame.
-        Resolution::Vga => (784 * 2, 510, 480),
-        // 576 pixel periods per line, 278 lines per frame.
-        Resolution::Qvga => (576 * 2, 278, 240),
-    }
-}
-
 /// Window registers of each mode: (HSTART, HSIZE, VSTART, VSIZE, HREF). The window's LSBs
 /// (HREF) are all zero for both modes: VGA starts at pixel 140, line 14; QVGA at 252, 6.
 const fn window(resolution: Resolution) -> [u8; 5] {
@@ -273,94 +134,6 @@ const fn window(resolution: Resolution) -> [u8; 5] {
             0,
         ],
     }
-}
-
-/// Chooses PLL, prescaler and dummy lines for `fps` frames per second from an input clock of
-/// `xclk_hz`.
-///
-/// Among settings within [`FPS_TOLERANCE_PPM`] of the request, the one with the fewest dummy
-/// lines wins (the sensor's natural timing, as every reference configuration uses), then the
-/// lower pixel clock. If none is within tolerance, the closest rate wins.
-pub fn plan_clock(
-    xclk_hz: u32,
-    resolution: Resolution,
-    fps: u32,
-) -> Result<ClockPlan, ConfigError> {
-    if !XCLK_RANGE_HZ.contains(&xclk_hz) {
-        return Err(ConfigError::XclkOutOfRange);
-    }
-    if fps == 0 {
-        return Err(ConfigError::FrameRateUnreachable);
-    }
-    let (line_pclks, base_lines, active_lines) = geometry(resolution);
-    let fps = u64::from(fps);
-    // (out of tolerance, dummy lines or error, pixel clock) -> plan; smallest key wins.
-    let mut best: Option<((bool, u64, u64), ClockPlan)> = None;
-    let prescalers =
-        core::iter::once(Prescaler::Direct).chain((0..=CLKRC_MAX_N).map(Prescaler::Divide));
-    for pll in Pll::ALL {
-        for prescaler in prescalers.clone() {
-            let pclk =
-                u64::from(xclk_hz) * u64::from(pll.multiplier()) / u64::from(prescaler.divisor());
-            if pclk == 0 || pclk > u64::from(MAX_PCLK_HZ) {
-                continue;
-            }
-            let line = u64::from(line_pclks);
-            let lines = (pclk / fps + line / 2) / line;
-            let Some(dummy) = lines.checked_sub(u64::from(base_lines)) else {
-                continue;
-            };
-            let Ok(dummy_lines) = u16::try_from(dummy) else {
-                continue;
-            };
-            // Achieved rate in milli-fps against the request.
-            let achieved = pclk * 1000 / (lines * line);
-            let error_ppm = achieved.abs_diff(fps * 1000) * 1_000_000 / (fps * 1000);
-            let out = error_ppm > FPS_TOLERANCE_PPM;
-            let key = (out, if out { error_ppm } else { dummy }, pclk);
-            if best.as_ref().is_some_and(|(k, _)| *k <= key) {
-                continue;
-            }
-            let pclk_hz = u32::try_from(pclk).unwrap_or(u32::MAX);
-            let line_ns = u32::try_from(line * 1_000_000_000 / pclk).unwrap_or(u32::MAX);
-            best = Some((
-                key,
-                ClockPlan {
-                    pll,
-                    prescaler,
-                    dummy_lines,
-                    pclk_hz,
-                    timing: FrameTiming {
-                        pclk_hz,
-                        line_ns,
-                        frame_lines: u32::try_from(lines).unwrap_or(u32::MAX),
-                        active_lines,
-                    },
-                },
-            ));
-        }
-    }
-    best.map(|(_, plan)| plan)
-        .ok_or(ConfigError::FrameRateUnreachable)
-}
-
-/// Encodes a gain for the GAIN register (clamped to 1x ... 31x, the register's range).
-pub fn gain_register(gain: GainX16) -> u8 {
-    let g = gain.0.clamp(16, 16 * 32);
-    // Number of doublings: g in [16 << k, 32 << k).
-    let mut k = 0u16;
-    while k < 4 && g >= (32u16 << k) {
-        k += 1;
-    }
-    let fine = ((g >> k).saturating_sub(16)).min(15) as u8;
-    let doublings = ((1u16 << k) - 1) as u8;
-    (doublings << 4) | fine
-}
-
-/// Decodes the GAIN register.
-pub fn gain_from_register(value: u8) -> GainX16 {
-    let doublings = (value >> 4).count_ones();
-    GainX16((16 + u16::from(value & 0x0F)) << doublings)
 }
 
 /// The OV7725 on an SCCB (I2C) bus.
@@ -742,53 +515,6 @@ mod tests {
         let r = block_on(sensor.init(&mut MockDelay::default(), &zero));
         assert_eq!(r, Err(Error::Config(ConfigError::ZeroExposure)));
         assert!(sensor.release().log.is_empty());
-    }
-
-    #[test]
-    fn clock_plans() {
-        // VGA 30 fps needs the full 24 MHz: input clock used directly.
-        let p = plan_clock(24_000_000, Resolution::Vga, 30).unwrap();
-        assert_eq!(
-            (p.pll, p.prescaler, p.dummy_lines),
-            (Pll::Bypass, Prescaler::Direct, 0)
-        );
-        // QVGA 60 fps: 19.2 MHz = 24 x 8 / 10.
-        let p = plan_clock(24_000_000, Resolution::Qvga, 60).unwrap();
-        assert_eq!(p.pclk_hz, 19_200_000);
-        assert_eq!(p.dummy_lines, 0);
-        assert!((p.timing.fps() - 60.0).abs() < 0.1, "{}", p.timing.fps());
-        // QVGA 25 fps: 8 MHz = 24 x 4 / 12.
-        let p = plan_clock(24_000_000, Resolution::Qvga, 25).unwrap();
-        assert!((p.timing.fps() - 25.0).abs() < 0.1, "{}", p.timing.fps());
-        // VGA 60 fps would need 48 MHz: beyond the pixel clock limit.
-        assert_eq!(
-            plan_clock(24_000_000, Resolution::Vga, 60),
-            Err(ConfigError::FrameRateUnreachable)
-        );
-        assert_eq!(
-            plan_clock(24_000_000, Resolution::Vga, 0),
-            Err(ConfigError::FrameRateUnreachable)
-        );
-        // A 12 MHz clock (OpenMV-style) still reaches QVGA 30 fps.
-        let p = plan_clock(12_000_000, Resolution::Qvga, 30).unwrap();
-        assert!((p.timing.fps() - 30.0).abs() < 0.2, "{}", p.timing.fps());
-    }
-
-    #[test]
-    fn gain_encoding() {
-        assert_eq!(gain_register(GainX16::ONE), 0x00);
-        assert_eq!(gain_register(GainX16(32)), 0x10);
-        assert_eq!(gain_register(GainX16(40)), 0x14);
-        assert_eq!(gain_register(GainX16(128)), 0x70);
-        assert_eq!(gain_register(GainX16(0)), 0x00); // below 1x: clamped
-        assert_eq!(gain_register(GainX16(u16::MAX)), 0xFF); // 31x, the largest
-        for g in 16..=496u16 {
-            let r = gain_register(GainX16(g));
-            let back = gain_from_register(r).0;
-            // Rounded down by less than one step of the fine field at that doubling.
-            let step = 1u16 << (r >> 4).count_ones();
-            assert!(back <= g && g - back < step, "{g} {back}");
-        }
     }
 
     #[test]
