@@ -11,7 +11,7 @@
 //! - Filter: the tracker's covariance stays symmetric positive definite through random
 //!   sequences of updates with extreme measurement covariances (eigenvalues over 18 decades,
 //!   rank-deficient, slightly indefinite), predictions, drops and resets. This complements
-//!   host-tests/tests/filter.rs's seeded random test (variances 1e-8..1e2 m²) with the
+//!   tests/filter_covariance.rs's seeded random test (variances 1e-8..1e2 m²) with the
 //!   extreme covariances and shrinking to a minimal failing sequence.
 //!
 //! Case counts are set so the file runs in a few seconds in a debug `cargo test`.

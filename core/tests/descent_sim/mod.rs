@@ -1,6 +1,7 @@
 //! A simulated precision-landing descent for the filters: the truth, the noisy pose
 //! measurements a real detector would give, and the figures it is judged by (RMS per axis,
-//! lag). Shared by `tests/filter.rs` and `examples/descent.rs` (included with `#[path]`).
+//! lag). `tests/filter_descent.rs` holds the filters to it (and prints the comparison);
+//! `tests/filter_covariance.rs` draws its Gaussian noise from it ([`gauss`]).
 //!
 //! Geometry. The pad is at the origin of the local NED frame. The vehicle flies a straight
 //! approach: 1 m/s down from 30 m to 1 m above the pad while drifting 0.5 m/s horizontally
@@ -23,6 +24,7 @@
 //! Frames are dropped at random (`drop_probability`) and in one burst (`burst`), and a few
 //! measurements are gross outliers (`outlier_probability`, 3-8 m off, a wrong pose that still
 //! reports its normal covariance).
+// Each test binary that declares this module uses part of it.
 #![allow(dead_code)]
 
 use nalgebra::{Matrix3, Vector3};

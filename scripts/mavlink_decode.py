@@ -1,6 +1,8 @@
-"""Decodes a file of MAVLink frames with pymavlink, strictly, for tests/companion.rs.
+"""Decodes a file of MAVLink frames with pymavlink, strictly: the reference decoder of the
+companion tests (core/tests/companion_*.rs, through core/tests/autopilot_sim/decoded.rs) and
+of the host tool's `touchdown companion --serial` test over a pty (companion_serial.rs).
 
-Usage: python3 companion_decode.py FRAMES.bin
+Usage: python3 scripts/mavlink_decode.py FRAMES.bin
 
 Prints one JSON object per message (the message's fields plus `_type`, `_seq`, `_src`,
 `_mlen` = payload length on the wire, `_version`), then a summary line

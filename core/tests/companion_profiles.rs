@@ -1,0 +1,260 @@
+//! The companion (core/src/companion) against a simulated autopilot of each stack, with every
+//! emitted byte checked by pymavlink (`autopilot_sim`): ArduPilot (BODY_FRD targets in its
+//! clock, the parameter protocol, VISION_POSITION_ESTIMATE, TIMESYNC answers, stream
+//! requests), PX4 (LOCAL_NED targets in our clock, TIMESYNC answered in the millisecond), and
+//! TD_PROFILE auto following the autopilot's HEARTBEAT and not a gimbal's. Figures are
+//! printed; run with `--nocapture` to see them.
+
+mod autopilot_sim;
+
+use serde_json::Value;
+use touchdown_core::companion::Profile;
+use touchdown_core::params::PARAM_COUNT;
+
+use autopilot_sim::{
+    accuracy, decode_with_pymavlink, f, heartbeats_ok, landing_targets, pad_ned, report, simulate,
+    ParamAction, Run, Scenario, Target, VehiclePath, AP_AHEAD_US,
+};
+
+/// Flies `s` and checks what pymavlink decoded of it: our HEARTBEATs, every LANDING_TARGET's
+/// invariants, more than `min_targets` of them, all within the allowed error (their RMS
+/// error is printed). `None` without pymavlink.
+fn fly_and_check_targets(
+    s: &Scenario,
+    min_targets: usize,
+) -> Option<(Run, Vec<Value>, Vec<Target>)> {
+    let run = simulate(s);
+    let msgs = decode_with_pymavlink(s.name, &run.tx)?;
+    report(s.name, &run, &msgs);
+    heartbeats_ok(&run, &msgs, s.duration_us);
+    let targets = landing_targets(&run, &msgs, s.profile);
+    assert!(targets.len() > min_targets, "{} targets", targets.len());
+    let (rms, worst) = accuracy(&run, &targets, s.profile);
+    let frame = match s.profile {
+        Profile::ArduPilot => "BODY_FRD",
+        Profile::Px4 => "LOCAL_NED",
+    };
+    println!(
+        "[{}] {} LANDING_TARGET ({frame}): RMS error x {:.3} y {:.3} z {:.3} m; worst {:.2} of the allowed 4 sigma",
+        s.name,
+        targets.len(),
+        rms.x,
+        rms.y,
+        rms.z,
+        worst
+    );
+    assert!(worst <= 1.0);
+    Some((run, msgs, targets))
+}
+
+#[test]
+fn ardupilot_profile_pymavlink() {
+    let mut s = Scenario::new("ardupilot", Profile::ArduPilot);
+    s.vpe = true;
+    s.params = vec![
+        (2_000_000, ParamAction::RequestList),
+        (3_000_000, ParamAction::ReadName("TD_RATE_HZ")),
+        (3_100_000, ParamAction::ReadIndex(2)),
+        (4_000_000, ParamAction::Set("TD_RATE_HZ", 1.0e9)),
+        (4_100_000, ParamAction::Set("TD_TAG_SIZE", f32::NAN)),
+        (4_200_000, ParamAction::Set("TD_MAX_HAMMING", 1.5)),
+        (4_300_000, ParamAction::Set("TD_TAG_SIZE", 0.5)),
+        (4_400_000, ParamAction::Set("TD_NO_SUCH", 1.0)),
+    ];
+    // 30 Hz for 8 s, less the first frames (track confirmation).
+    let Some((run, msgs, targets)) = fly_and_check_targets(&s, 220) else {
+        return;
+    };
+    // time_usec: the autopilot's clock once TIMESYNC has an answer (after ~0.5 s).
+    let synced: Vec<_> = targets.iter().filter(|t| t.tx_us > 1_500_000).collect();
+    assert!(!synced.is_empty());
+    for t in &synced {
+        assert!(
+            (t.clock_us - AP_AHEAD_US as i64).abs() <= 1_000,
+            "time_usec not in the autopilot clock: {t:?}"
+        );
+    }
+    let worst_clock = synced
+        .iter()
+        .map(|t| (t.clock_us - AP_AHEAD_US as i64).abs())
+        .max()
+        .unwrap();
+    println!(
+        "[{}] time_usec vs autopilot clock: worst {worst_clock} us",
+        s.name
+    );
+    // Parameters.
+    let pv: Vec<(u64, &Value)> = run
+        .tx
+        .iter()
+        .zip(&msgs)
+        .filter(|(_, m)| m["_type"] == "PARAM_VALUE")
+        .map(|((t, _), m)| (*t, m))
+        .collect();
+    let listed: Vec<_> = pv
+        .iter()
+        .filter(|(t, _)| (2_000_000..3_000_000).contains(t))
+        .collect();
+    assert_eq!(listed.len(), PARAM_COUNT, "the full list");
+    for (k, (_, m)) in listed.iter().enumerate() {
+        assert_eq!(m["param_index"], k);
+        assert_eq!(m["param_count"], PARAM_COUNT);
+        assert_eq!(m["param_type"], 9, "MAV_PARAM_TYPE_REAL32");
+    }
+    let span = listed.last().unwrap().0 - listed.first().unwrap().0;
+    assert!(
+        span >= (PARAM_COUNT as u64 - 1) * 19_000,
+        "paced: {span} us"
+    );
+    let by_time = |lo: u64| -> Vec<&Value> {
+        pv.iter()
+            .filter(|(t, _)| (lo..lo + 50_000).contains(t))
+            .map(|(_, m)| *m)
+            .collect()
+    };
+    assert_eq!(by_time(3_000_000)[0]["param_id"], "TD_RATE_HZ");
+    assert_eq!(by_time(3_100_000)[0]["param_id"], "TD_TAG_SIZE");
+    // Absurd values: answered with the old value.
+    let r = by_time(4_000_000);
+    assert_eq!(
+        (r[0]["param_id"].clone(), f(r[0], "param_value")),
+        ("TD_RATE_HZ".into(), 30.0)
+    );
+    let r = by_time(4_100_000);
+    assert_eq!(f(r[0], "param_value"), 0.0, "{}", r[0]);
+    let r = by_time(4_200_000);
+    assert_eq!(f(r[0], "param_value"), 1.0);
+    let r = by_time(4_300_000);
+    assert!(
+        (f(r[0], "param_value") - 0.5).abs() < 1e-6,
+        "accepted: {}",
+        r[0]
+    );
+    assert!(by_time(4_400_000).is_empty(), "unknown names get no answer");
+    assert_eq!(run.stats.param_sets_rejected, 3);
+    assert_eq!(run.stats.param_sets_accepted, 1);
+    // VISION_POSITION_ESTIMATE: the vehicle in the pad-centred NED frame, with covariance.
+    let vpe: Vec<&Value> = msgs
+        .iter()
+        .filter(|m| m["_type"] == "VISION_POSITION_ESTIMATE")
+        .collect();
+    assert!(vpe.len() > 200);
+    let last = vpe.last().unwrap();
+    let t_end = *run.truth.keys().last().unwrap() as f32 * 1e-6;
+    let truth = VehiclePath::APPROACH.position(t_end) - pad_ned();
+    assert!((f(last, "x") as f32 - truth.x).abs() < 0.3, "{last}");
+    assert!((f(last, "z") as f32 - truth.z).abs() < 0.5, "{last}");
+    assert_eq!(last["covariance"].as_array().unwrap().len(), 21);
+    assert!(last["covariance"][0].as_f64().unwrap() > 0.0, "{last}");
+    // TIMESYNC answers to the autopilot's requests, SET_MESSAGE_INTERVAL requests.
+    let answers = msgs
+        .iter()
+        .filter(|m| m["_type"] == "TIMESYNC" && m["tc1"].as_i64() != Some(0))
+        .count();
+    assert!(answers >= 7, "{answers} TIMESYNC answers");
+    let requests = msgs
+        .iter()
+        .filter(|m| m["_type"] == "COMMAND_LONG" && m["command"] == 511)
+        .count();
+    assert!(requests >= 1);
+    assert!(run.stats.interval_acks_accepted >= 1);
+}
+
+#[test]
+fn px4_profile_pymavlink() {
+    let s = Scenario::new("px4", Profile::Px4);
+    let Some((run, msgs, targets)) = fly_and_check_targets(&s, 200) else {
+        return;
+    };
+    // PX4 converts time_usec itself (its TIMESYNC with us): our exposure time, exactly.
+    for t in &targets {
+        assert_eq!(t.clock_us, 0, "{t:?}");
+    }
+    // Both streams requested.
+    let requested: Vec<f64> = msgs
+        .iter()
+        .filter(|m| m["_type"] == "COMMAND_LONG" && m["command"] == 511)
+        .map(|m| f(m, "param1"))
+        .collect();
+    assert!(
+        requested.contains(&31.0) && requested.contains(&32.0),
+        "{requested:?}"
+    );
+    // Every answer to PX4's TIMESYNC requests goes out in the millisecond its request
+    // arrived (tc1 is our time at receipt, in ns), whatever else was waiting.
+    let answers: Vec<(u64, i64)> = run
+        .tx
+        .iter()
+        .zip(&msgs)
+        .filter(|(_, m)| m["_type"] == "TIMESYNC" && m["tc1"].as_i64() != Some(0))
+        .map(|((t, _), m)| (*t, m["tc1"].as_i64().unwrap()))
+        .collect();
+    assert!(answers.len() >= 7, "{answers:?}");
+    for (tx_us, tc1) in answers {
+        assert_eq!(tx_us as i64, tc1 / 1000, "answered late");
+    }
+}
+
+/// The STATUSTEXTs sent, in order.
+fn status_texts(msgs: &[Value]) -> Vec<String> {
+    msgs.iter()
+        .filter(|m| m["_type"] == "STATUSTEXT")
+        .map(|m| {
+            m["text"]
+                .as_str()
+                .unwrap()
+                .trim_end_matches('\0')
+                .to_string()
+        })
+        .collect()
+}
+
+#[test]
+fn auto_profile_follows_the_autopilot_heartbeat_not_a_gimbal() {
+    for profile in [Profile::ArduPilot, Profile::Px4] {
+        let (name, announcement) = match profile {
+            Profile::ArduPilot => (
+                "auto-ardupilot",
+                "touchdown: profile auto: ArduPilot (BODY_FRD)",
+            ),
+            Profile::Px4 => ("auto-px4", "touchdown: profile auto: PX4 (LOCAL_NED)"),
+        };
+        let mut s = Scenario::new(name, profile);
+        s.auto = true;
+        // A gimbal heartbeats from the start (before the autopilot is heard, and just before
+        // each of its heartbeats); the autopilot's first heartbeat comes at 1 s.
+        s.gimbal = true;
+        s.autopilot_from_us = 1_000_000;
+        // A pad turned by 30 degrees under a camera turned by 90 (TD_CAM_YAW).
+        s.pad_yaw = 30f32.to_radians();
+        s.cam_yaw_deg = 90.0;
+        let run = simulate(&s);
+        let Some(msgs) = decode_with_pymavlink(s.name, &run.tx) else {
+            return;
+        };
+        report(s.name, &run, &msgs);
+        // The frame each stack takes (checked per target by `landing_targets`), and the pad's
+        // orientation and the angles (checked per target by `accuracy`).
+        let targets = landing_targets(&run, &msgs, profile);
+        assert!(targets.len() > 180, "{} targets", targets.len());
+        let (_, worst) = accuracy(&run, &targets, profile);
+        assert!(worst <= 1.0);
+        // Nothing until the autopilot said what it is (its heartbeat arrives at 1.003 s).
+        let first = targets.first().unwrap().tx_us;
+        assert!(
+            first >= 1_003_000,
+            "target at {first} us before the autopilot"
+        );
+        assert!(run.stats.no_profile >= 20, "{}", run.stats.no_profile);
+        // The autopilot is 1/1, the gimbal never took over, the choice announced once.
+        assert_eq!(run.stats.autopilot, Some((1, 1)));
+        assert_eq!(status_texts(&msgs), vec![announcement.to_string()]);
+        println!(
+            "[{name}] first target at {:.3} s; {} frames with a fix before the autopilot was \
+             identified; announced: {announcement}",
+            first as f64 * 1e-6,
+            run.stats.no_profile
+        );
+        heartbeats_ok(&run, &msgs, s.duration_us);
+    }
+}
