@@ -1,0 +1,184 @@
+//! The slot format: what one save writes (format 2: header word, sequence number, export blob,
+//! padding, trailer with CRC-32), how a slot is recognised and checked, and the format-1 slot
+//! (a bare export blob) that older firmware wrote.
+//!
+//! Separate from the store and the scan because it is the on-flash layout alone: bytes in,
+//! bytes out, no decision about where a slot goes.
+
+use super::FLASH_WORD;
+use crate::params::{ImportReport, ParamSet, EXPORT_LEN};
+
+/// Slot format version written by [`Store`] (1 was the bare export blob, see
+/// [`LEGACY_SLOT_LEN`]).
+pub const SLOT_VERSION: u8 = 2;
+/// First bytes of a version-2 slot.
+const SLOT_MAGIC: [u8; 4] = *b"TDSL";
+/// Header: a whole word, identical in every slot of this length: magic (4), version (1),
+/// length in flash words (1), zeros; then the sequence number (4, LE). The export blob starts
+/// right after, mid-word, so it can never pass for a format-1 slot.
+const SLOT_HEADER_LEN: usize = FLASH_WORD + 4;
+/// Trailer, at the end of the slot's last word: magic (4), CRC-32 (4, LE) of all bytes before
+/// the CRC.
+const SLOT_TRAILER_LEN: usize = 8;
+const TRAILER_MAGIC: [u8; 4] = *b"TDOK";
+/// Bytes of one slot this firmware writes: header, export blob and trailer, rounded up to
+/// whole flash words.
+pub const SLOT_LEN: usize =
+    (SLOT_HEADER_LEN + EXPORT_LEN + SLOT_TRAILER_LEN).div_ceil(FLASH_WORD) * FLASH_WORD;
+/// Longest slot read back (a later firmware with a larger table writes longer slots; the
+/// length is in the header, so the scan can step over them).
+pub const MAX_SLOT_LEN: usize = 32 * FLASH_WORD;
+pub(super) const SLOT_LEN_U32: u32 = SLOT_LEN as u32;
+pub(super) const WORD_U32: u32 = FLASH_WORD as u32;
+const _: () = assert!(SLOT_LEN <= MAX_SLOT_LEN && MAX_SLOT_LEN / FLASH_WORD <= u8::MAX as usize);
+
+/// Bytes per slot of the format-1 log: the 13-parameter export blob (268 bytes) rounded up to
+/// flash words, what every firmware before slot format 2 wrote.
+pub const LEGACY_SLOT_LEN: usize = 288;
+/// First bytes of an export blob ([`ParamSet::export`]'s magic and format version), i.e. of a
+/// format-1 slot.
+pub(super) const LEGACY_MAGIC: [u8; 5] = [b'T', b'D', b'P', b'R', 1];
+
+/// The slot length in words if `word` starts a format-2 slot.
+pub(super) fn slot_header(word: &[u8; FLASH_WORD]) -> Option<u32> {
+    let (magic, rest) = word.split_first_chunk::<4>()?;
+    let (&[version, words], _) = rest.split_first_chunk::<2>()?;
+    let min_words = (SLOT_HEADER_LEN + SLOT_TRAILER_LEN).div_ceil(FLASH_WORD);
+    let ok = *magic == SLOT_MAGIC
+        && version == SLOT_VERSION
+        && usize::from(words) >= min_words
+        && usize::from(words) * FLASH_WORD <= MAX_SLOT_LEN
+        && word.iter().skip(6).all(|&b| b == 0);
+    ok.then_some(u32::from(words))
+}
+
+/// Checks a whole format-2 slot (trailer magic, CRC, blob) and imports it on top of `base`.
+pub(super) fn check_v2(slot: &[u8], base: &ParamSet) -> Option<(u32, ParamSet, ImportReport)> {
+    let (body, crc) = slot.split_last_chunk::<4>()?;
+    if crc32(body) != u32::from_le_bytes(*crc) {
+        return None;
+    }
+    let (inner, magic) = body.split_last_chunk::<4>()?;
+    if *magic != TRAILER_MAGIC {
+        return None;
+    }
+    let (_, after_header_word) = inner.split_first_chunk::<FLASH_WORD>()?;
+    let (seq, _) = after_header_word.split_first_chunk::<4>()?;
+    let blob = inner.get(SLOT_HEADER_LEN..)?;
+    let mut p = *base;
+    let report = p.import(blob).ok()?;
+    Some((u32::from_le_bytes(*seq), p, report))
+}
+
+/// Writes a format-2 slot for `params` with sequence number `seq`.
+pub(super) fn encode_v2(params: &ParamSet, seq: u32, out: &mut [u8; SLOT_LEN]) {
+    out.fill(0);
+    let mut header = [0u8; SLOT_HEADER_LEN];
+    header[..4].copy_from_slice(&SLOT_MAGIC);
+    header[4] = SLOT_VERSION;
+    header[5] = (SLOT_LEN / FLASH_WORD) as u8;
+    header[FLASH_WORD..].copy_from_slice(&seq.to_le_bytes());
+    let (head, rest) = out.split_at_mut(SLOT_HEADER_LEN);
+    head.copy_from_slice(&header);
+    let (blob_and_pad, trailer) = rest.split_at_mut(SLOT_LEN - SLOT_HEADER_LEN - SLOT_TRAILER_LEN);
+    params.export(blob_and_pad);
+    let (magic, _) = trailer.split_at_mut(4);
+    magic.copy_from_slice(&TRAILER_MAGIC);
+    let (body, crc) = out.split_at_mut(SLOT_LEN - 4);
+    let c = crc32(body);
+    crc.copy_from_slice(&c.to_le_bytes());
+}
+
+/// CRC-32 (IEEE 802.3: reflected polynomial 0xEDB88320, initial and final XOR 0xFFFFFFFF),
+/// half a byte per table look-up: fast enough to check both sectors at boot in a few ms, with a
+/// 64-byte table.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        for nibble in [b & 0x0F, b >> 4] {
+            let i = ((crc ^ u32::from(nibble)) & 0x0F) as usize;
+            crc = CRC32_NIBBLES.get(i).copied().unwrap_or(0) ^ (crc >> 4);
+        }
+    }
+    !crc
+}
+
+// Evaluated at compile time: an index out of bounds would fail the build, not panic.
+#[allow(clippy::indexing_slicing)]
+const CRC32_NIBBLES: [u32; 16] = {
+    let mut t = [0u32; 16];
+    let mut i = 0;
+    while i < 16 {
+        let mut c = i as u32;
+        let mut k = 0;
+        while k < 4 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+            k += 1;
+        }
+        t[i] = c;
+        i += 1;
+    }
+    t
+};
+
+#[cfg(test)]
+mod tests {
+    use super::super::fixtures::values;
+    use super::*;
+
+    const _: () =
+        assert!(LEGACY_SLOT_LEN.is_multiple_of(FLASH_WORD) && LEGACY_SLOT_LEN >= EXPORT_LEN);
+
+    /// The slot size the module documentation's save count is worked out from.
+    #[test]
+    fn slot_size_of_the_current_table() {
+        assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
+        assert_eq!(LEGACY_SLOT_LEN, 288);
+        assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
+        // Format 2: a header word and the sequence number more; 409 slots per sector after
+        // the first boot's free word.
+        assert_eq!(SLOT_LEN, 320);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 409);
+    }
+
+    #[test]
+    fn slot_layout() {
+        assert_eq!(SLOT_LEN, 320);
+        let mut slot = [0u8; SLOT_LEN];
+        encode_v2(&values(3), 0x0102_0304, &mut slot);
+        let mut other = [0u8; SLOT_LEN];
+        encode_v2(&values(4), 7, &mut other);
+        // The first word is the same in every slot (see the module documentation).
+        assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
+        assert_eq!(&slot[..6], b"TDSL\x02\x0a");
+        assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
+        assert_eq!(slot[32..36], [4, 3, 2, 1]);
+        // The export blob starts mid-word, so it can never pass for a format-1 slot.
+        assert_eq!(&slot[36..40], b"TDPR");
+        // The trailer fills the end of the last word, written last.
+        assert_eq!(&slot[SLOT_LEN - 8..SLOT_LEN - 4], b"TDOK");
+        assert_eq!(
+            u32::from_le_bytes(slot[SLOT_LEN - 4..].try_into().unwrap()),
+            crc32(&slot[..SLOT_LEN - 4])
+        );
+        assert_eq!(
+            check_v2(&slot, &ParamSet::default()).map(|(seq, p, _)| (seq, p)),
+            Some((0x0102_0304, values(3)))
+        );
+        for i in 0..SLOT_LEN {
+            let mut bad = slot;
+            bad[i] ^= 0x10;
+            assert!(check_v2(&bad, &ParamSet::default()).is_none(), "byte {i}");
+        }
+    }
+
+    #[test]
+    fn crc32_reference_vector() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32(b""), 0);
+    }
+}
