@@ -77,9 +77,20 @@
 //! is ignored ([`RejectReason::OutOfOrder`]); further back, the clock itself was reset (a
 //! reboot, a new time sync) and the tracker restarts from that measurement
 //! ([`UpdateOutcome::Reset`]). [`Tracker::predict_to`] with an older time is a no-op.
+//!
+//! The Kalman filter itself (state, prediction, gated correction, covariance repair) is in
+//! `kf`, and the 3x3 symmetric eigen-decomposition that conditions measurement covariances in
+//! `eigen`: this module is the tracker's public surface and its track management (gating,
+//! candidates, confirmation, loss).
+
+mod eigen;
+mod kf;
+
+use eigen::symmetric_eigen3;
+use kf::{block3, symmetrised3, Kf};
 
 use super::Measurement;
-use nalgebra::{Matrix3, Matrix3x6, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6, Vector3};
 
 /// Chi-square quantile, 3 degrees of freedom, 99.9 %.
 pub const CHI2_3DOF_999: f32 = 16.27;
@@ -101,8 +112,6 @@ const REPAIR_FLOOR: f32 = 1.0e-9;
 pub const MAX_MEASUREMENT_ANISOTROPY: f32 = 1.0e5;
 /// Smallest allowed `min_measurement_sigma`, metres (f32 conditioning, see above).
 pub const MIN_MEASUREMENT_SIGMA_FLOOR: f32 = 1.0e-3;
-/// Iteration bound of the 3x3 symmetric eigen-decomposition (converges in a handful).
-const EIGEN_MAX_ITERATIONS: usize = 64;
 
 /// Tuning of [`Tracker`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -268,216 +277,6 @@ pub struct Estimate {
     pub velocity_covariance: Matrix3<f32>,
     /// Time since the last accepted measurement, µs (0: the estimate is at a measurement).
     pub since_update_us: u64,
-}
-
-/// The Kalman state at one time.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Kf {
-    x: Vector6<f32>,
-    p: Matrix6<f32>,
-    t_us: u64,
-}
-
-/// `[I 0]`: the position part of the state.
-fn h() -> Matrix3x6<f32> {
-    Matrix3x6::identity()
-}
-
-fn symmetrised6(p: &Matrix6<f32>) -> Matrix6<f32> {
-    (p + p.transpose()) * 0.5
-}
-
-fn symmetrised3(p: &Matrix3<f32>) -> Matrix3<f32> {
-    (p + p.transpose()) * 0.5
-}
-
-/// The 3x3 diagonal block of `p` starting at row and column `at` (0 or 3). Built element by
-/// element: `fixed_view(..).into_owned()` goes through nalgebra's iterator constructor, whose
-/// "iterator too short" panic the optimiser keeps (see nopanic/).
-fn block3(p: &Matrix6<f32>, at: usize) -> Matrix3<f32> {
-    Matrix3::from_fn(|r, c| p.get((at + r, at + c)).copied().unwrap_or(0.0))
-}
-
-/// Eigen-decomposition of a symmetric 3x3 matrix.
-struct Eigen3 {
-    eigenvalues: Vector3<f32>,
-    /// Unit eigenvectors, as columns, in the order of the eigenvalues.
-    eigenvectors: Matrix3<f32>,
-}
-
-/// Cyclic Jacobi eigen-decomposition of a symmetric 3x3 matrix: `None` when it is not finite.
-///
-/// Used instead of `nalgebra::SymmetricEigen`, whose bounds-checked indexing inside its QR
-/// iterations leaves panic paths in the firmware (the no-panic link check, nopanic/, needs
-/// none); for a 3x3 covariance this is as accurate (both to f32 rounding) and as fast. Each
-/// rotation zeroes one off-diagonal pair; the off-diagonal mass falls quadratically, so a
-/// handful of sweeps reach rounding level and [`EIGEN_MAX_ITERATIONS`] is never the limit for
-/// finite input.
-fn symmetric_eigen3(a: &Matrix3<f32>) -> Option<Eigen3> {
-    if !a.iter().all(|v| v.is_finite()) {
-        return None;
-    }
-    let mut a = *a;
-    let mut v = Matrix3::<f32>::identity();
-    for _ in 0..EIGEN_MAX_ITERATIONS {
-        let off = a.m12 * a.m12 + a.m13 * a.m13 + a.m23 * a.m23;
-        let diag = a.m11 * a.m11 + a.m22 * a.m22 + a.m33 * a.m33;
-        if !(off > f32::EPSILON * f32::EPSILON * diag) {
-            break; // also ends on an all-zero matrix
-        }
-        jacobi_rotate(&mut a, &mut v, 0, 1);
-        jacobi_rotate(&mut a, &mut v, 0, 2);
-        jacobi_rotate(&mut a, &mut v, 1, 2);
-    }
-    let eigenvalues = Vector3::new(a.m11, a.m22, a.m33);
-    if !(eigenvalues.iter().chain(v.iter()).all(|x| x.is_finite())) {
-        return None;
-    }
-    Some(Eigen3 {
-        eigenvalues,
-        eigenvectors: v,
-    })
-}
-
-/// One Jacobi rotation in the (p, q) plane (p < q < 3): `a <- Jᵀ a J` with `a[p][q]` zeroed,
-/// `v <- v J` accumulating the eigenvectors.
-#[inline(always)]
-fn jacobi_rotate(a: &mut Matrix3<f32>, v: &mut Matrix3<f32>, p: usize, q: usize) {
-    let (Some(&apq), Some(&app), Some(&aqq)) = (a.get((p, q)), a.get((p, p)), a.get((q, q))) else {
-        return;
-    };
-    if apq == 0.0 {
-        return;
-    }
-    // tan of the rotation angle, the smaller root of t² + 2θt - 1 = 0 (stable form).
-    let theta = (aqq - app) / (2.0 * apq);
-    let t = if theta.abs() > 1.0e18 {
-        0.5 / theta // θ² would overflow; t ≈ 1/(2θ)
-    } else {
-        let root = libm::sqrtf(theta * theta + 1.0);
-        if theta >= 0.0 {
-            1.0 / (theta + root)
-        } else {
-            -1.0 / (-theta + root)
-        }
-    };
-    let c = 1.0 / libm::sqrtf(t * t + 1.0);
-    let s = t * c;
-    let mut j = Matrix3::<f32>::identity();
-    for (index, value) in [((p, p), c), ((q, q), c), ((p, q), s), ((q, p), -s)] {
-        if let Some(slot) = j.get_mut(index) {
-            *slot = value;
-        }
-    }
-    *a = j.transpose() * *a * j;
-    for index in [(p, q), (q, p)] {
-        if let Some(slot) = a.get_mut(index) {
-            *slot = 0.0;
-        }
-    }
-    *v *= j;
-}
-
-/// Seconds between two time stamps (`t1 >= t0`, else 0).
-fn seconds(t0: u64, t1: u64) -> f32 {
-    t1.saturating_sub(t0) as f32 * 1.0e-6
-}
-
-impl Kf {
-    fn new(m: &Measurement, r: &Matrix3<f32>, velocity_sigma: f32) -> Self {
-        let mut x = Vector6::zeros();
-        x.fixed_rows_mut::<3>(0).copy_from(&m.position);
-        let mut p = Matrix6::zeros();
-        p.fixed_view_mut::<3, 3>(0, 0).copy_from(r);
-        p.fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(&(Matrix3::identity() * (velocity_sigma * velocity_sigma)));
-        Kf { x, p, t_us: m.t_us }
-    }
-
-    /// The state predicted to `t_us` (itself when `t_us` is not later).
-    fn predicted(&self, t_us: u64, q: f32) -> Kf {
-        if t_us <= self.t_us {
-            return *self;
-        }
-        let dt = seconds(self.t_us, t_us);
-        let mut f = Matrix6::identity();
-        f.fixed_view_mut::<3, 3>(0, 3)
-            .copy_from(&(Matrix3::identity() * dt));
-        let i3 = Matrix3::<f32>::identity();
-        let mut qm = Matrix6::zeros();
-        qm.fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&(i3 * (q * dt * dt * dt / 3.0)));
-        qm.fixed_view_mut::<3, 3>(0, 3)
-            .copy_from(&(i3 * (q * dt * dt / 2.0)));
-        qm.fixed_view_mut::<3, 3>(3, 0)
-            .copy_from(&(i3 * (q * dt * dt / 2.0)));
-        qm.fixed_view_mut::<3, 3>(3, 3).copy_from(&(i3 * (q * dt)));
-        Kf {
-            x: f * self.x,
-            p: symmetrised6(&(f * self.p * f.transpose() + qm)),
-            t_us,
-        }
-    }
-
-    fn position(&self) -> Vector3<f32> {
-        h() * self.x
-    }
-
-    /// Innovation `y`, its covariance's Cholesky factor and `y^T S^-1 y`.
-    fn innovation(
-        &self,
-        z: &Vector3<f32>,
-        r: &Matrix3<f32>,
-    ) -> Option<(Vector3<f32>, nalgebra::Cholesky<f32, nalgebra::U3>, f32)> {
-        let y = z - self.position();
-        let hm = h();
-        let s = symmetrised3(&(hm * self.p * hm.transpose() + r));
-        let chol = s.cholesky()?;
-        let d2 = y.dot(&chol.solve(&y));
-        if d2.is_finite() {
-            Some((y, chol, d2))
-        } else {
-            None
-        }
-    }
-
-    /// The Kalman update (Joseph form). Returns whether the covariance had to be repaired.
-    fn correct(
-        &mut self,
-        y: &Vector3<f32>,
-        chol: &nalgebra::Cholesky<f32, nalgebra::U3>,
-        r: &Matrix3<f32>,
-    ) -> bool {
-        let hm = h();
-        // K = P H^T S^-1, and since S is symmetric K^T = S^-1 (P H^T)^T = S^-1 H P.
-        let kt: Matrix3x6<f32> = chol.solve(&(hm * self.p));
-        let k = kt.transpose();
-        self.x += k * y;
-        let i_kh = Matrix6::identity() - k * hm;
-        let p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
-        self.p = symmetrised6(&p);
-        self.repair()
-    }
-
-    /// Keeps `P` positive definite should rounding ever break it: drops the correlations and
-    /// floors the variances. Returns whether that was needed.
-    fn repair(&mut self) -> bool {
-        if self.p.iter().all(|v| v.is_finite()) && self.p.cholesky().is_some() {
-            return false;
-        }
-        let d = self.p.diagonal().map(|v| {
-            if v.is_finite() && v > REPAIR_FLOOR {
-                v
-            } else {
-                REPAIR_FLOOR
-            }
-        });
-        self.p = Matrix6::from_diagonal(&d);
-        if !self.x.iter().all(|v| v.is_finite()) {
-            self.x = Vector6::zeros();
-        }
-        true
-    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -744,51 +543,5 @@ impl Tracker {
             self.candidate = Some(next);
             false
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The Jacobi decomposition agrees with nalgebra's: same eigenvalues, and it rebuilds
-    /// the matrix (covariances of every shape: isotropic, flat, needle, rotated, singular).
-    #[test]
-    fn jacobi_eigen_matches_nalgebra() {
-        let rotation = nalgebra::Rotation3::from_euler_angles(0.3, -1.1, 2.0);
-        let cases = [
-            Matrix3::identity() * 0.01,
-            Matrix3::from_diagonal(&Vector3::new(1.0e-4, 2.0e-4, 5.0)),
-            Matrix3::from_diagonal(&Vector3::new(3.0, 1.0e-6, 1.0e-6)),
-            rotation.matrix()
-                * Matrix3::from_diagonal(&Vector3::new(0.5, 2.0e-3, 1.0e-5))
-                * rotation.matrix().transpose(),
-            rotation.matrix()
-                * Matrix3::from_diagonal(&Vector3::new(0.0, 1.0, 1.0))
-                * rotation.matrix().transpose(),
-            Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, -0.25, 0.5, -0.25, 2.0),
-            Matrix3::zeros(),
-        ];
-        for m in cases {
-            let m = symmetrised3(&m);
-            let ours = symmetric_eigen3(&m).unwrap();
-            let theirs = nalgebra::SymmetricEigen::try_new(m, f32::EPSILON, 64).unwrap();
-            let mut a: [f32; 3] = ours.eigenvalues.into();
-            let mut b: [f32; 3] = theirs.eigenvalues.into();
-            a.sort_by(f32::total_cmp);
-            b.sort_by(f32::total_cmp);
-            let scale = m.norm().max(1e-12);
-            for (x, y) in a.iter().zip(&b) {
-                assert!((x - y).abs() <= 1e-5 * scale, "{m}: {a:?} vs {b:?}");
-            }
-            let v = ours.eigenvectors;
-            let rebuilt = v * Matrix3::from_diagonal(&ours.eigenvalues) * v.transpose();
-            assert!(
-                (rebuilt - m).norm() <= 1e-5 * scale,
-                "{m} rebuilt as {rebuilt}"
-            );
-            assert!((v.transpose() * v - Matrix3::identity()).norm() < 1e-5);
-        }
-        assert!(symmetric_eigen3(&Matrix3::from_element(f32::NAN)).is_none());
     }
 }
