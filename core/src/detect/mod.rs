@@ -47,17 +47,27 @@
 //! | `Detector` (contour of [`MAX_CONTOUR_POINTS`], detections, candidates) | fixed | ~20 KiB | ~20 KiB |
 //! | total | | ~49 KiB (budget 64 KiB) | ~135 KiB (budget 160 KiB) |
 
+//!
+//! ## Layout
+//! This module is the detector's public surface (configuration, buffers, results, the entry
+//! [`Detector::detect`] that runs the scan). The per-candidate steps 3 to 6 are in `candidates`,
+//! the two methods' choices behind the private `Strategy` trait in `strategy` (touchdown's)
+//! and [`paper`] (the paper's).
+mod candidates;
 mod contour;
 mod decode;
 mod paper;
 mod quad;
 mod refine;
+mod strategy;
 mod threshold;
 
 use crate::family::Family;
-use crate::geometry::cyclic;
 use crate::geometry::Point;
 use crate::image::GrayImage;
+
+use candidates::Candidates;
+use strategy::{Look, Robust, Strategy};
 
 /// Most markers reported per frame.
 pub const MAX_DETECTIONS: usize = 64;
@@ -504,264 +514,6 @@ impl Detector {
     }
 }
 
-/// What the two methods ([`Method`]) do differently, as the steps they share ask it: the
-/// binary image, which boundaries are followed, which quads are candidates for which family,
-/// the quick look, the corners the cells are read through, the cell reading and the look-up's
-/// error bound. [`Detector::detect`] picks one per frame ([`Robust`], [`paper::Paper`]), so
-/// the shared steps have no branches on the method and the paper's choices stay in
-/// [`paper`].
-trait Strategy {
-    /// Step 1: the bitmap whose boundaries are traced. `tiles` is the frame's scratch memory
-    /// ([`Buffers::tiles`]).
-    fn binarise(
-        &self,
-        image: &GrayImage<'_>,
-        config: &DetectorConfig,
-        bitmap: &mut [u32],
-        tiles: &mut [u8],
-    );
-    /// Which boundaries of the bitmap start a trace when searching for `families`.
-    fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule;
-    /// Whether `quad` can be a marker of `family`.
-    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool;
-    /// The quick look at a candidate's rough corners before it is refined and read, charging
-    /// its work to `tracer`.
-    fn quick_look(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        quad: &quad::Quad,
-        tracer: &mut contour::Tracer<'_>,
-    ) -> Look;
-    /// The corners the cells are read through, adding the image reads to `samples`.
-    fn corners(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        quad: &quad::Quad,
-        samples: &mut u32,
-    ) -> [Point; 4];
-    /// Reads the cells of `family`'s layout through `corners`, adding the image reads to
-    /// `samples`.
-    fn read(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        family: &Family<'_>,
-        corners: &[Point; 4],
-        samples: &mut u32,
-    ) -> Option<decode::GridRead>;
-    /// Most bits the code look-up may correct.
-    fn max_hamming(&self, config: &DetectorConfig) -> u8;
-}
-
-/// What the quick look ([`Strategy::quick_look`]) made of a candidate.
-enum Look {
-    /// Refine and read it.
-    Candidate,
-    /// Not a marker.
-    Rejected,
-    /// The work budget ran out.
-    OutOfBudget,
-}
-
-/// touchdown's method ([`Method::Robust`]).
-struct Robust;
-
-impl Strategy for Robust {
-    fn binarise(
-        &self,
-        image: &GrayImage<'_>,
-        config: &DetectorConfig,
-        bitmap: &mut [u32],
-        tiles: &mut [u8],
-    ) {
-        threshold::local_threshold(image, config.min_contrast, bitmap, tiles);
-    }
-
-    /// Hole boundaries are only candidates for white-on-black families; for the others
-    /// following them is wasted time (see `contour`).
-    fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule {
-        if families.iter().any(|f| f.reversed()) {
-            contour::StartRule::AllBoundaries
-        } else {
-            contour::StartRule::OuterOnly
-        }
-    }
-
-    /// The binarisation knows polarity: a hole is a light region, which only the reversed
-    /// families are detected by.
-    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool {
-        family.reversed() == quad.hole
-    }
-
-    /// [`decode::precheck`], for dark-on-light families with a quiet margin (a hole is a
-    /// white-on-black one's).
-    fn quick_look(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        quad: &quad::Quad,
-        tracer: &mut contour::Tracer<'_>,
-    ) -> Look {
-        if quad.hole || !candidates.quiet_margins {
-            return Look::Candidate;
-        }
-        if !tracer.charge(WORK_PRECHECK) {
-            return Look::OutOfBudget;
-        }
-        let rough = refine::half_pixel_adjusted(quad);
-        let flat_rejects = !candidates.uniform_decodes;
-        let cells = candidates.max_quad_cells;
-        let min_contrast = candidates.config.min_contrast;
-        match decode::precheck(candidates.image, cells, &rough, min_contrast, flat_rejects) {
-            decode::Precheck::Candidate => Look::Candidate,
-            decode::Precheck::Flat | decode::Precheck::NoBorder => Look::Rejected,
-        }
-    }
-
-    fn corners(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        quad: &quad::Quad,
-        samples: &mut u32,
-    ) -> [Point; 4] {
-        if !candidates.config.refine_edges {
-            return refine::half_pixel_adjusted(quad);
-        }
-        let c = &quad.corners;
-        let shortest = (0..4)
-            .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
-            .fold(f32::MAX, f32::min);
-        let radius = (0.5 * shortest / candidates.max_quad_cells as f32).clamp(0.75, 4.0);
-        refine::refine_corners(candidates.image, quad, radius, samples)
-    }
-
-    fn read(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        family: &Family<'_>,
-        corners: &[Point; 4],
-        samples: &mut u32,
-    ) -> Option<decode::GridRead> {
-        let (image, config) = (candidates.image, candidates.config);
-        decode::read_robust(image, family, corners, config, samples)
-    }
-
-    fn max_hamming(&self, config: &DetectorConfig) -> u8 {
-        config.max_hamming
-    }
-}
-
-/// What every candidate of a frame is checked against.
-struct Candidates<'f, 'i, 'a> {
-    /// The method's choices.
-    strategy: &'f dyn Strategy,
-    image: &'f GrayImage<'i>,
-    families: &'f [&'f Family<'a>],
-    config: &'f DetectorConfig,
-    /// Cells across the largest detected square among the families: bounds how far an edge
-    /// may be moved without reaching the next edge inside the marker.
-    max_quad_cells: usize,
-    /// Some family decodes an all-black or all-white grid, so a candidate with a flat
-    /// interior may still be one of its markers ([`decode::uniform_grid_decodes`]).
-    uniform_decodes: bool,
-    /// Every family has a quiet (white) ring right outside its border: then a marker's
-    /// outline is a clean quad (the screening's convexity test holds) and
-    /// [`decode::precheck`] can take that ring as the white reference. tagStandard41h12 has
-    /// data cells there instead.
-    quiet_margins: bool,
-}
-
-impl Candidates<'_, '_, '_> {
-    /// Quad fit, refinement and decoding of one closed boundary, charging the work to
-    /// `tracer`'s budget. Returns false when the scan must stop: the work budget or the
-    /// candidate budget ran out.
-    fn process(
-        &self,
-        boundary: &[contour::Pixel],
-        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
-        stats: &mut DetectStats,
-        tracer: &mut contour::Tracer<'_>,
-    ) -> bool {
-        let config = self.config;
-        let Some(screened) = quad::screen(boundary, config.min_edge_px, self.quiet_margins) else {
-            return true;
-        };
-        if !tracer.charge(WORK_FIT + boundary.len() as u32) {
-            return false;
-        }
-        let Some(quad) = quad::fit(boundary, &screened, config.min_edge_px) else {
-            return true;
-        };
-        let strategy = self.strategy;
-        if !self.families.iter().any(|f| strategy.wanted(f, &quad)) {
-            return true;
-        }
-        stats.quads += 1;
-        match strategy.quick_look(self, &quad, tracer) {
-            Look::Candidate => {}
-            Look::Rejected => return true,
-            Look::OutOfBudget => return false,
-        }
-        // The candidate's work is counted as it is done (image samples) and charged after;
-        // it starts only while some budget is left, so a frame overruns its budget by at most
-        // one candidate.
-        if stats.refined >= u32::from(config.max_candidates) || tracer.remaining() == 0 {
-            return false;
-        }
-        stats.refined += 1;
-        let mut samples = 0u32;
-        let corners = strategy.corners(self, &quad, &mut samples);
-        if !quad::check_shape(&corners, 0.8 * config.min_edge_px) {
-            return tracer.charge(candidate_work(samples));
-        }
-        let mut bordered = false;
-        // The last layout read and its result: consecutive families with the same layout
-        // (the default tag36h11 + aruco_6x6_250 pair) sample and threshold the cells once.
-        let mut last: Option<(&Family<'_>, Option<decode::GridRead>)> = None;
-        for (index, family) in self.families.iter().enumerate() {
-            if !strategy.wanted(family, &quad) {
-                continue;
-            }
-            let grid = match last {
-                Some((seen, grid)) if seen.same_layout(family) => grid,
-                _ => {
-                    let grid = strategy.read(self, family, &corners, &mut samples);
-                    last = Some((family, grid));
-                    grid
-                }
-            };
-            let Some(grid) = grid else {
-                continue;
-            };
-            bordered = true;
-            let max_hamming = strategy.max_hamming(config);
-            let Some(read) = decode::lookup(family, &grid, max_hamming) else {
-                continue;
-            };
-            stats.decoded += 1;
-            let detection = Detection {
-                family: index as u8,
-                id: read.decoded.id,
-                hamming: read.decoded.hamming,
-                corners: read.corners,
-                center: read.center,
-                decision_margin: read.margin,
-                contrast: read.contrast,
-            };
-            if !insert_unique(detections, detection) {
-                stats.truncated = true;
-            }
-        }
-        if bordered {
-            stats.bordered += 1;
-        }
-        tracer.charge(candidate_work(samples))
-    }
-}
-
-/// Work units of a refined and read candidate that took `samples` weighted image reads.
-fn candidate_work(samples: u32) -> u32 {
-    WORK_CANDIDATE.saturating_add(samples.saturating_mul(WORK_PER_SAMPLE_X2) / 2)
-}
-
 /// Work units of a frame of `pixels` at `per_pixel` units each, at least [`MIN_WORK_BUDGET`]
 /// (0 for a negative, zero or not-a-number setting), saturating.
 fn work_budget(per_pixel: f32, pixels: usize) -> u32 {
@@ -773,39 +525,6 @@ fn work_budget(per_pixel: f32, pixels: usize) -> u32 {
     } else {
         0
     }
-}
-
-/// Mean edge length of a detection, pixels.
-fn edge_length(d: &Detection) -> f32 {
-    let c = &d.corners;
-    (0..4)
-        .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
-        .sum::<f32>()
-        * 0.25
-}
-
-/// Adds a detection unless the same physical marker is already there; of two, the one with
-/// fewer corrected bits, then the larger decision margin, is kept. Two detections are the
-/// same marker when their centres nearly coincide and their sizes agree (a small marker
-/// printed inside a large one is a different marker). Returns false when full.
-fn insert_unique(
-    detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
-    new: Detection,
-) -> bool {
-    let size = edge_length(&new);
-    for existing in detections.iter_mut() {
-        let other = edge_length(existing);
-        let ratio = size.max(other) / size.min(other).max(1e-3);
-        if new.center.distance(existing.center) < 0.25 * size.min(other) && ratio < 1.5 {
-            let better =
-                (new.hamming, -new.decision_margin) < (existing.hamming, -existing.decision_margin);
-            if better {
-                *existing = new;
-            }
-            return true;
-        }
-    }
-    detections.push(new).is_ok()
 }
 
 #[cfg(test)]

@@ -1,0 +1,159 @@
+//! Steps 3 to 6 for one closed boundary: quad fit, quick look, refinement, decoding and
+//! de-duplication, charged to the frame's work budget.
+//!
+//! Separate from the scan in the parent module, which only finds the boundaries and hands
+//! each one to [`Candidates::process`]; the method's choices come from the [`Strategy`].
+
+use super::{
+    contour, decode, quad, DetectStats, Detection, DetectorConfig, Look, Strategy, MAX_DETECTIONS,
+    WORK_CANDIDATE, WORK_FIT, WORK_PER_SAMPLE_X2,
+};
+use crate::family::Family;
+use crate::geometry::cyclic;
+use crate::image::GrayImage;
+
+/// What every candidate of a frame is checked against.
+pub(super) struct Candidates<'f, 'i, 'a> {
+    /// The method's choices.
+    pub(super) strategy: &'f dyn Strategy,
+    pub(super) image: &'f GrayImage<'i>,
+    pub(super) families: &'f [&'f Family<'a>],
+    pub(super) config: &'f DetectorConfig,
+    /// Cells across the largest detected square among the families: bounds how far an edge
+    /// may be moved without reaching the next edge inside the marker.
+    pub(super) max_quad_cells: usize,
+    /// Some family decodes an all-black or all-white grid, so a candidate with a flat
+    /// interior may still be one of its markers ([`decode::uniform_grid_decodes`]).
+    pub(super) uniform_decodes: bool,
+    /// Every family has a quiet (white) ring right outside its border: then a marker's
+    /// outline is a clean quad (the screening's convexity test holds) and
+    /// [`decode::precheck`] can take that ring as the white reference. tagStandard41h12 has
+    /// data cells there instead.
+    pub(super) quiet_margins: bool,
+}
+
+impl Candidates<'_, '_, '_> {
+    /// Quad fit, refinement and decoding of one closed boundary, charging the work to
+    /// `tracer`'s budget. Returns false when the scan must stop: the work budget or the
+    /// candidate budget ran out.
+    pub(super) fn process(
+        &self,
+        boundary: &[contour::Pixel],
+        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+        stats: &mut DetectStats,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> bool {
+        let config = self.config;
+        let Some(screened) = quad::screen(boundary, config.min_edge_px, self.quiet_margins) else {
+            return true;
+        };
+        if !tracer.charge(WORK_FIT + boundary.len() as u32) {
+            return false;
+        }
+        let Some(quad) = quad::fit(boundary, &screened, config.min_edge_px) else {
+            return true;
+        };
+        let strategy = self.strategy;
+        if !self.families.iter().any(|f| strategy.wanted(f, &quad)) {
+            return true;
+        }
+        stats.quads += 1;
+        match strategy.quick_look(self, &quad, tracer) {
+            Look::Candidate => {}
+            Look::Rejected => return true,
+            Look::OutOfBudget => return false,
+        }
+        // The candidate's work is counted as it is done (image samples) and charged after;
+        // it starts only while some budget is left, so a frame overruns its budget by at most
+        // one candidate.
+        if stats.refined >= u32::from(config.max_candidates) || tracer.remaining() == 0 {
+            return false;
+        }
+        stats.refined += 1;
+        let mut samples = 0u32;
+        let corners = strategy.corners(self, &quad, &mut samples);
+        if !quad::check_shape(&corners, 0.8 * config.min_edge_px) {
+            return tracer.charge(candidate_work(samples));
+        }
+        let mut bordered = false;
+        // The last layout read and its result: consecutive families with the same layout
+        // (the default tag36h11 + aruco_6x6_250 pair) sample and threshold the cells once.
+        let mut last: Option<(&Family<'_>, Option<decode::GridRead>)> = None;
+        for (index, family) in self.families.iter().enumerate() {
+            if !strategy.wanted(family, &quad) {
+                continue;
+            }
+            let grid = match last {
+                Some((seen, grid)) if seen.same_layout(family) => grid,
+                _ => {
+                    let grid = strategy.read(self, family, &corners, &mut samples);
+                    last = Some((family, grid));
+                    grid
+                }
+            };
+            let Some(grid) = grid else {
+                continue;
+            };
+            bordered = true;
+            let max_hamming = strategy.max_hamming(config);
+            let Some(read) = decode::lookup(family, &grid, max_hamming) else {
+                continue;
+            };
+            stats.decoded += 1;
+            let detection = Detection {
+                family: index as u8,
+                id: read.decoded.id,
+                hamming: read.decoded.hamming,
+                corners: read.corners,
+                center: read.center,
+                decision_margin: read.margin,
+                contrast: read.contrast,
+            };
+            if !insert_unique(detections, detection) {
+                stats.truncated = true;
+            }
+        }
+        if bordered {
+            stats.bordered += 1;
+        }
+        tracer.charge(candidate_work(samples))
+    }
+}
+
+/// Work units of a refined and read candidate that took `samples` weighted image reads.
+fn candidate_work(samples: u32) -> u32 {
+    WORK_CANDIDATE.saturating_add(samples.saturating_mul(WORK_PER_SAMPLE_X2) / 2)
+}
+
+/// Mean edge length of a detection, pixels.
+fn edge_length(d: &Detection) -> f32 {
+    let c = &d.corners;
+    (0..4)
+        .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
+        .sum::<f32>()
+        * 0.25
+}
+
+/// Adds a detection unless the same physical marker is already there; of two, the one with
+/// fewer corrected bits, then the larger decision margin, is kept. Two detections are the
+/// same marker when their centres nearly coincide and their sizes agree (a small marker
+/// printed inside a large one is a different marker). Returns false when full.
+fn insert_unique(
+    detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+    new: Detection,
+) -> bool {
+    let size = edge_length(&new);
+    for existing in detections.iter_mut() {
+        let other = edge_length(existing);
+        let ratio = size.max(other) / size.min(other).max(1e-3);
+        if new.center.distance(existing.center) < 0.25 * size.min(other) && ratio < 1.5 {
+            let better =
+                (new.hamming, -new.decision_margin) < (existing.hamming, -existing.decision_margin);
+            if better {
+                *existing = new;
+            }
+            return true;
+        }
+    }
+    detections.push(new).is_ok()
+}

@@ -1,0 +1,155 @@
+//! What the two detection methods do differently, as the [`Strategy`] the shared steps ask,
+//! and touchdown's own method ([`Robust`]); the paper's is in [`super::paper`].
+//!
+//! Separate from the entry in the parent module so the shared steps read without the
+//! methods' choices, and the choices of each method sit together.
+
+use super::{contour, decode, quad, refine, threshold, Candidates, DetectorConfig, WORK_PRECHECK};
+use crate::family::Family;
+use crate::geometry::{cyclic, Point};
+use crate::image::GrayImage;
+
+/// What the two methods ([`Method`]) do differently, as the steps they share ask it: the
+/// binary image, which boundaries are followed, which quads are candidates for which family,
+/// the quick look, the corners the cells are read through, the cell reading and the look-up's
+/// error bound. [`Detector::detect`] picks one per frame ([`Robust`], [`paper::Paper`]), so
+/// the shared steps have no branches on the method and the paper's choices stay in
+/// [`paper`].
+pub(super) trait Strategy {
+    /// Step 1: the bitmap whose boundaries are traced. `tiles` is the frame's scratch memory
+    /// ([`Buffers::tiles`]).
+    fn binarise(
+        &self,
+        image: &GrayImage<'_>,
+        config: &DetectorConfig,
+        bitmap: &mut [u32],
+        tiles: &mut [u8],
+    );
+    /// Which boundaries of the bitmap start a trace when searching for `families`.
+    fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule;
+    /// Whether `quad` can be a marker of `family`.
+    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool;
+    /// The quick look at a candidate's rough corners before it is refined and read, charging
+    /// its work to `tracer`.
+    fn quick_look(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> Look;
+    /// The corners the cells are read through, adding the image reads to `samples`.
+    fn corners(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        samples: &mut u32,
+    ) -> [Point; 4];
+    /// Reads the cells of `family`'s layout through `corners`, adding the image reads to
+    /// `samples`.
+    fn read(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        family: &Family<'_>,
+        corners: &[Point; 4],
+        samples: &mut u32,
+    ) -> Option<decode::GridRead>;
+    /// Most bits the code look-up may correct.
+    fn max_hamming(&self, config: &DetectorConfig) -> u8;
+}
+
+/// What the quick look ([`Strategy::quick_look`]) made of a candidate.
+pub(super) enum Look {
+    /// Refine and read it.
+    Candidate,
+    /// Not a marker.
+    Rejected,
+    /// The work budget ran out.
+    OutOfBudget,
+}
+
+/// touchdown's method ([`Method::Robust`]).
+pub(super) struct Robust;
+
+impl Strategy for Robust {
+    fn binarise(
+        &self,
+        image: &GrayImage<'_>,
+        config: &DetectorConfig,
+        bitmap: &mut [u32],
+        tiles: &mut [u8],
+    ) {
+        threshold::local_threshold(image, config.min_contrast, bitmap, tiles);
+    }
+
+    /// Hole boundaries are only candidates for white-on-black families; for the others
+    /// following them is wasted time (see `contour`).
+    fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule {
+        if families.iter().any(|f| f.reversed()) {
+            contour::StartRule::AllBoundaries
+        } else {
+            contour::StartRule::OuterOnly
+        }
+    }
+
+    /// The binarisation knows polarity: a hole is a light region, which only the reversed
+    /// families are detected by.
+    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool {
+        family.reversed() == quad.hole
+    }
+
+    /// [`decode::precheck`], for dark-on-light families with a quiet margin (a hole is a
+    /// white-on-black one's).
+    fn quick_look(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> Look {
+        if quad.hole || !candidates.quiet_margins {
+            return Look::Candidate;
+        }
+        if !tracer.charge(WORK_PRECHECK) {
+            return Look::OutOfBudget;
+        }
+        let rough = refine::half_pixel_adjusted(quad);
+        let flat_rejects = !candidates.uniform_decodes;
+        let cells = candidates.max_quad_cells;
+        let min_contrast = candidates.config.min_contrast;
+        match decode::precheck(candidates.image, cells, &rough, min_contrast, flat_rejects) {
+            decode::Precheck::Candidate => Look::Candidate,
+            decode::Precheck::Flat | decode::Precheck::NoBorder => Look::Rejected,
+        }
+    }
+
+    fn corners(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        quad: &quad::Quad,
+        samples: &mut u32,
+    ) -> [Point; 4] {
+        if !candidates.config.refine_edges {
+            return refine::half_pixel_adjusted(quad);
+        }
+        let c = &quad.corners;
+        let shortest = (0..4)
+            .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
+            .fold(f32::MAX, f32::min);
+        let radius = (0.5 * shortest / candidates.max_quad_cells as f32).clamp(0.75, 4.0);
+        refine::refine_corners(candidates.image, quad, radius, samples)
+    }
+
+    fn read(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        family: &Family<'_>,
+        corners: &[Point; 4],
+        samples: &mut u32,
+    ) -> Option<decode::GridRead> {
+        let (image, config) = (candidates.image, candidates.config);
+        decode::read_robust(image, family, corners, config, samples)
+    }
+
+    fn max_hamming(&self, config: &DetectorConfig) -> u8 {
+        config.max_hamming
+    }
+}
