@@ -2,12 +2,13 @@
 //! 1-2 % slow against wall time; lock-step SITL, HITL and sim speed factors do the same) and
 //! jumps once (a clock-source change), end to end through the MAVLink bytes.
 //!
-//! The simulated autopilot (`autopilot_sim`: system 1, component 1, PX4 heartbeat) keeps its own clock,
-//! `A(t) = A0 + rate * t` (+ a jump after `jump_at`), where `t` is the true time (= our clock).
-//! It streams ATTITUDE_QUATERNION (50 Hz) and LOCAL_POSITION_NED (30 Hz) once asked, stamped
-//! in its clock, SYSTEM_TIME and its own TIMESYNC requests at 1 Hz, and answers ours. Each
-//! direction of the link has a random 0.5-4 ms delay (round trips of 1-8 ms), in order. The
-//! camera exposes a frame every 33 ms, each with a pad fix, processed 25 ms later.
+//! The simulated autopilot (`autopilot_sim`: system 1, component 1, PX4 heartbeat) keeps its
+//! own clock, `A(t) = A0 + rate * t` (+ a jump after `jump_at`), where `t` is the true time
+//! (= our clock). It streams ATTITUDE_QUATERNION (50 Hz) and LOCAL_POSITION_NED (30 Hz) once
+//! asked, stamped in its clock, SYSTEM_TIME and its own TIMESYNC requests at 1 Hz, and answers
+//! ours. Each direction of the link has a random 0.5-4 ms delay (round trips of 1-8 ms), in
+//! order. The camera exposes a frame every 33 ms, each with the exact pad fix, processed 25 ms
+//! later.
 //!
 //! Checked: once synchronised no frame is refused for want of vehicle state
 //! (`TargetOutcome::NoVehicleState`), except within a short window after the jump, and the

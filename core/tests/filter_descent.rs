@@ -1,7 +1,10 @@
 //! The filters on a simulated descent (`descent_sim`: 1 m/s down from 30 m to 1 m, 0.5 m/s
 //! drift, 30 Hz, range-dependent pose noise, dropped frames, outliers) against their accuracy
 //! targets: ours beats the raw pose without lag, the paper's filter trails; and the printed
-//! comparison of the three (an ignored test, see [`descent_comparison_report`]).
+//! comparison of the three, an ignored report:
+//! `cargo test -p touchdown-core --test filter_descent -- --ignored --nocapture`
+//! (`TOUCHDOWN_DESCENT_WOBBLE_DEG`, `TOUCHDOWN_DESCENT_SEED`: see
+//! [`descent_comparison_report`]).
 
 mod descent_sim;
 
@@ -68,7 +71,7 @@ fn descent_with_attitude_wobble() {
 /// hence ignored by default. Run it with
 ///
 /// ```text
-/// cargo test -p touchdown-core --test filter_descent -- --ignored --nocapture descent_comparison_report
+/// cargo test -p touchdown-core --test filter_descent -- --ignored --nocapture
 /// ```
 ///
 /// and choose the descent with `TOUCHDOWN_DESCENT_WOBBLE_DEG` (roll/pitch wobble, degrees,

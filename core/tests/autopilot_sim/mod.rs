@@ -54,6 +54,7 @@ pub const PROCESS_DELAY_US: u64 = 25_000;
 pub const SIGMA_LATERAL: f32 = 0.002;
 /// Range noise of a fix, as a fraction of the distance.
 pub const SIGMA_RANGE: f32 = 0.006;
+
 /// splitmix64 + Box-Muller: deterministic, no dependency.
 pub struct Rng(pub u64);
 

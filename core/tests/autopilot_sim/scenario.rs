@@ -2,7 +2,7 @@
 //! descending, rolling, pitching, turning) over a pad at a known NED position. Every 33 ms a
 //! camera frame is "exposed"; 25 ms later its pad fix (the true camera-frame pad position plus
 //! Gaussian noise with the covariance the fix reports) reaches the board's estimator stage
-//! ([`FixEstimator`]) and then `Companion::on_estimate`. The simulated autopilot
+//! ([`super::FixEstimator`]) and then `Companion::on_estimate`. The simulated autopilot
 //! ([`Autopilot`]) runs in its own clock, 1000 s ahead of ours, over a link with 2-3 ms
 //! latency. Faults: garbage, truncated frames and flipped bits on the autopilot's stream; a
 //! reboot (clock restarts, streams forgotten); 10 s of silence; the pad lost. A ground station
