@@ -1,7 +1,7 @@
-//! cargo-fuzz target `config_toml`: see [`touchdown_fuzz::config_toml`] for the input layout and what is
-//! checked (the harness is shared with host-tests/tests/fuzz_regressions.rs).
+//! cargo-fuzz target `config_toml`: see [`touchdown_fuzz_harness::config_toml`] for the input layout and what is
+//! checked (the harness is shared with fuzz/harness/tests/regressions.rs).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| touchdown_fuzz::config_toml(data));
+fuzz_target!(|data: &[u8]| touchdown_fuzz_harness::config_toml(data));

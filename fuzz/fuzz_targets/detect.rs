@@ -1,11 +1,11 @@
-//! cargo-fuzz target `detect`: see [`touchdown_fuzz::detect`] for the input layout and what is
-//! checked (the harness is shared with host-tests/tests/fuzz_regressions.rs).
+//! cargo-fuzz target `detect`: see [`touchdown_fuzz_harness::detect`] for the input layout and what is
+//! checked (the harness is shared with fuzz/harness/tests/regressions.rs).
 #![no_main]
 
 use std::cell::RefCell;
 
 use libfuzzer_sys::fuzz_target;
-use touchdown_fuzz::DetectState;
+use touchdown_fuzz_harness::DetectState;
 
 thread_local! {
     /// Work memory and detectors, allocated once per process.
@@ -13,5 +13,5 @@ thread_local! {
 }
 
 fuzz_target!(
-    |data: &[u8]| STATE.with(|state| touchdown_fuzz::detect(&mut state.borrow_mut(), data))
+    |data: &[u8]| STATE.with(|state| touchdown_fuzz_harness::detect(&mut state.borrow_mut(), data))
 );

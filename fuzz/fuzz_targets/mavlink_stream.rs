@@ -1,9 +1,9 @@
-//! cargo-fuzz target `mavlink_stream`: see [`touchdown_fuzz::mavlink_stream`] for the input layout and what is
-//! checked (the harness is shared with host-tests/tests/fuzz_regressions.rs).
+//! cargo-fuzz target `mavlink_stream`: see [`touchdown_fuzz_harness::mavlink_stream`] for the input layout and what is
+//! checked (the harness is shared with fuzz/harness/tests/regressions.rs).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    touchdown_fuzz::mavlink_stream(data);
+    touchdown_fuzz_harness::mavlink_stream(data);
 });

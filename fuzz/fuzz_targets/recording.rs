@@ -1,7 +1,7 @@
-//! cargo-fuzz target `recording`: see [`touchdown_fuzz::recording`] for the input layout and what is
-//! checked (the harness is shared with host-tests/tests/fuzz_regressions.rs).
+//! cargo-fuzz target `recording`: see [`touchdown_fuzz_harness::recording`] for the input layout and what is
+//! checked (the harness is shared with fuzz/harness/tests/regressions.rs).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 
-fuzz_target!(|data: &[u8]| touchdown_fuzz::recording(data));
+fuzz_target!(|data: &[u8]| touchdown_fuzz_harness::recording(data));

@@ -6,9 +6,8 @@
 
 pub mod cli;
 pub mod eval;
-pub mod families;
-pub mod formats;
-pub mod image_io;
+pub use touchdown_formats as formats;
+pub use touchdown_formats::{families, image_io};
 pub mod plot;
 pub mod render;
 pub mod shared_data;

@@ -13,7 +13,7 @@ use std::path::Path;
 use serde::Deserialize;
 use touchdown_core::pad::{PadError, PadLayout, PadMarker};
 
-use super::{line_of_key, read, toml_error, toml_string, ConfigError, ParseError};
+use crate::toml_file::{line_of_key, read, toml_error, toml_string, ConfigError, ParseError};
 
 /// One `[[marker]]` of `pad.toml` as written.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

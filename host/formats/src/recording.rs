@@ -1,5 +1,5 @@
 //! Recordings, the contract's format (`docs/interfaces.md`): a directory with `camera.toml`
-//! ([`super::camera`]), `pad.toml` ([`super::pad`]), `frames/NNNNNN.pgm` ([`super::pgm`])
+//! ([`crate::camera`]), `pad.toml` ([`crate::pad`]), `frames/NNNNNN.pgm` ([`crate::pgm`])
 //! and `frames.csv`, written by the simulator and, later, by the camera board; read back by
 //! `replay` and the tests. [`RecordingWriter`] and [`RecordingReader`] are the two sides.
 //!
@@ -31,11 +31,11 @@ use std::path::{Path, PathBuf};
 
 use touchdown_core::camera::CameraModel;
 
-use super::camera::{camera_toml, load_camera};
-use super::pad::{load_pad, pad_toml, PadConfig};
-use super::pgm::{parse_pgm, save_pgm};
-use super::ConfigError;
+use crate::camera::{camera_toml, load_camera};
 use crate::image_io::GrayFrame;
+use crate::pad::{load_pad, pad_toml, PadConfig};
+use crate::pgm::{parse_pgm, save_pgm};
+use crate::ConfigError;
 
 /// The truth columns of `frames.csv`, in order.
 pub const TRUTH_COLUMNS: [&str; 7] = [

@@ -1,26 +1,10 @@
-//! The files the host reads and writes, one submodule per format, each with its reader and
-//! its writer side by side so the two cannot drift apart.
-//!
-//! The formats themselves are the contract's (`docs/interfaces.md`); these modules implement
-//! them and say only what the contract leaves to the implementation:
-//!
-//! - [`camera`]: `camera.toml`, the camera's intrinsics;
-//! - [`pad`]: `pad.toml`, the landing pad's layout;
-//! - [`recording`]: a recording directory (`frames.csv`, `setpoints.csv`, the frames);
-//! - [`pgm`]: the 8-bit binary PGM frames of a recording.
-//!
-//! The TOML files share their error types ([`ConfigError`], [`ParseError`]) and the helpers
-//! that turn a toml/serde error into one line naming the key and the line: every error names
-//! the file, and the key and line when known, in one line:
+//! What the TOML files (`camera.toml`, `pad.toml`) share: their error types ([`ConfigError`],
+//! [`ParseError`]) and the helpers that turn a toml/serde error into one line naming the key
+//! and the line, so every error names the file, and the key and line when known, in one line:
 //! `pads/nested.toml: line 12: marker[2].size: must be positive`.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
-
-pub mod camera;
-pub mod pad;
-pub mod pgm;
-pub mod recording;
 
 /// A configuration file that cannot be used.
 #[derive(Debug, Clone, PartialEq)]
@@ -148,8 +132,9 @@ pub(crate) fn line_of_key(text: &str, table: Option<(&str, usize)>, key: &str) -
     None
 }
 
-/// A TOML basic string.
-pub(crate) fn toml_string(s: &str) -> String {
+/// A TOML basic string (quoted and escaped), for the writers here and for other TOML the host
+/// writes (`touchdown simulate`'s `simulation.toml`).
+pub fn toml_string(s: &str) -> String {
     let mut out = String::with_capacity(s.len() + 2);
     out.push('"');
     for ch in s.chars() {

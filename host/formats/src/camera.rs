@@ -12,7 +12,7 @@ use std::path::Path;
 use serde::Deserialize;
 use touchdown_core::camera::{CameraError, CameraModel};
 
-use super::{line_of_key, read, toml_error, ConfigError, ParseError};
+use crate::toml_file::{line_of_key, read, toml_error, ConfigError, ParseError};
 
 /// `CAMERA.toml` as written.
 #[derive(Debug, Clone, Deserialize)]

@@ -1,5 +1,5 @@
 //! Reading and writing grey frames (PNG, PGM, JPEG; colour is converted to grey). The strict
-//! PGM of recordings, reader and writer, is [`crate::formats::pgm`].
+//! PGM of recordings, reader and writer, is [`crate::pgm`].
 
 use std::fmt;
 use std::path::{Path, PathBuf};

@@ -1,19 +1,15 @@
 //! Replays the fuzz seed corpora (`fuzz/corpus/<target>/`) and every input a fuzzer found
 //! (`fuzz/regressions/<target>/`) through the fuzz harnesses, without libFuzzer.
 //!
-//! The harnesses are `fuzz/src/lib.rs`, included here as a module, so a crash found by
-//! `cargo fuzz` and saved under `fuzz/regressions/` fails `cargo test` until it is fixed, and
-//! the checks the fuzzers make (valid ids, finite corners, valid MAVLink out, budgets) run in
+//! The harnesses are this crate's library (`touchdown-fuzz-harness`), the one the cargo-fuzz
+//! targets call, so a crash found by `cargo fuzz` and saved under `fuzz/regressions/` fails
+//! `cargo test` until it is fixed, and the checks the fuzzers make (valid ids, finite corners, valid MAVLink out, budgets) run in
 //! CI on the seeds. The seeds are also checked for reaching what they are meant to reach (the
 //! marker seed decodes, the MAVLink capture makes the companion send targets).
 //!
 //! The MAVLink seeds are scripts for the `mavlink_stream` harness built from a simulated
 //! autopilot's byte stream; `write_mavlink_seeds` (ignored) regenerates them:
-//! `cargo test -p touchdown-host --test fuzz_regressions -- --ignored write_mavlink_seeds`.
-
-#[path = "../../fuzz/src/lib.rs"]
-#[allow(dead_code)]
-mod harness;
+//! `cargo test -p touchdown-fuzz-harness --test regressions -- --ignored write_mavlink_seeds`.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +19,7 @@ use touchdown_core::companion::mavlink::dialects::common::{
     PARAM_SET_DATA, SYSTEM_TIME_DATA, TIMESYNC_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_fuzz_harness as harness;
 
 const TARGETS: [&str; 5] = [
     "detect",
@@ -32,8 +29,9 @@ const TARGETS: [&str; 5] = [
     "mavlink_stream",
 ];
 
+/// `fuzz/`, this crate's parent directory.
 fn fuzz_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 /// Files of `fuzz/<kind>/<target>/`, sorted (none if the directory does not exist).
