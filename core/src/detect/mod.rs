@@ -52,7 +52,7 @@
 //! This module is the detector's public surface (configuration, buffers, results, the entry
 //! [`Detector::detect`] that runs the scan). The per-candidate steps 3 to 6 are in `candidates`,
 //! the two methods' choices behind the private `Strategy` trait in `strategy` (touchdown's)
-//! and [`paper`] (the paper's).
+//! and `paper` (the paper's).
 mod candidates;
 mod contour;
 mod decode;

@@ -9,15 +9,15 @@ use crate::family::Family;
 use crate::geometry::{cyclic, Point};
 use crate::image::GrayImage;
 
-/// What the two methods ([`Method`]) do differently, as the steps they share ask it: the
+/// What the two methods ([`Method`](super::Method)) do differently, as the steps they share ask it: the
 /// binary image, which boundaries are followed, which quads are candidates for which family,
 /// the quick look, the corners the cells are read through, the cell reading and the look-up's
-/// error bound. [`Detector::detect`] picks one per frame ([`Robust`], [`paper::Paper`]), so
+/// error bound. [`Detector::detect`](super::Detector::detect) picks one per frame ([`Robust`], [`paper::Paper`](super::paper::Paper)), so
 /// the shared steps have no branches on the method and the paper's choices stay in
-/// [`paper`].
+/// [`paper`](super::paper).
 pub(super) trait Strategy {
     /// Step 1: the bitmap whose boundaries are traced. `tiles` is the frame's scratch memory
-    /// ([`Buffers::tiles`]).
+    /// ([`Buffers::tiles`](super::Buffers::tiles)).
     fn binarise(
         &self,
         image: &GrayImage<'_>,
@@ -67,7 +67,7 @@ pub(super) enum Look {
     OutOfBudget,
 }
 
-/// touchdown's method ([`Method::Robust`]).
+/// touchdown's method ([`Method::Robust`](super::Method::Robust)).
 pub(super) struct Robust;
 
 impl Strategy for Robust {

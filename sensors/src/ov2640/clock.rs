@@ -44,7 +44,7 @@ impl ClockPlan {
 /// both. The PCLK divider gives the output port enough bandwidth with margin: per sensor
 /// line (1190 sensor clocks) VGA emits on average 0.8 output lines of 1280 bytes, QVGA 0.4
 /// lines of 640 bytes. With the DSP clock at twice the sensor clock (see
-/// [`reg::dsp::R_DVP_SP`]), dividing by 2 (VGA) gives PCLK = sensor clock (the port 86% busy),
+/// [`reg::dsp::R_DVP_SP`](super::reg::dsp::R_DVP_SP)), dividing by 2 (VGA) gives PCLK = sensor clock (the port 86% busy),
 /// by 4 (QVGA) half of it (43% busy).
 pub(super) const fn scaling(resolution: Resolution) -> (u8, u8) {
     match resolution {

@@ -1,4 +1,4 @@
-//! Register addresses: the documented ones this driver or its [`table`]s write, with
+//! Register addresses: the documented ones this driver or its [`table`](super::table)s write, with
 //! what each one does. (The tables write further registers by number: those whose meaning
 //! is not published.)
 //!

@@ -13,10 +13,10 @@
 //!   the AEC statistics bits cleared); here the derived value is the only one written.
 //!   COM3 (banding auto-detection, written by Linux and OpenMV) keeps its reset value: the
 //!   banding filter stays off.
-//!   The one overlap is the DSP's RESET: [`table::DSP_COMMON`] holds the JPEG and output blocks in
+//!   The one overlap is the DSP's RESET: [`table::DSP_COMMON`](DSP_COMMON) holds the JPEG and output blocks in
 //!   reset as the references do, and the derived sequence releases them last.
 //! - The reference set-up is for the UXGA mode; the SVGA mode's analog timing replaces its
-//!   UXGA values ([`table::SVGA_TIMING`]), written after the mode select as esp32-camera, the one
+//!   UXGA values ([`table::SVGA_TIMING`](SVGA_TIMING)), written after the mode select as esp32-camera, the one
 //!   reference that runs the SVGA mode, does.
 //! - Registers named `0x..` without a constant are undocumented: their meaning is unknown
 //!   and the value is the vendor's.

@@ -1,5 +1,5 @@
-//! Parameter persistence: a power-loss-safe log of [`ParamSet::export`] blobs in two flash
-//! sectors.
+//! Parameter persistence: a power-loss-safe log of
+//! [`ParamSet::export`](crate::params::ParamSet::export) blobs in two flash sectors.
 //!
 //! The STM32H743 erases flash only in 128 KiB sectors (a second or more, and ~10k cycles per
 //! sector) and programs it in 32-byte flash words, each once per erase. So a save appends one

@@ -8,7 +8,7 @@
 use super::FLASH_WORD;
 use crate::params::{ImportReport, ParamSet, EXPORT_LEN};
 
-/// Slot format version written by [`Store`] (1 was the bare export blob, see
+/// Slot format version written by [`Store`](super::Store) (1 was the bare export blob, see
 /// [`LEGACY_SLOT_LEN`]).
 pub const SLOT_VERSION: u8 = 2;
 /// First bytes of a version-2 slot.
