@@ -19,7 +19,7 @@ tag36h11, with no expected ids).
 Detectors, each in its own subprocess (so one library's threads, allocator or SIMD dispatch
 cannot affect another's timing):
 - touchdown: `touchdown detect --json --family F`, built with
-  `cargo build --release -p touchdown-host` (or `--touchdown PATH`); its `time_ms`;
+  `cargo build --release -p touchdown-cli` (or `--touchdown PATH`); its `time_ms`;
 - AprilTag 3 (pupil_apriltags): the right family, quad_decimate 1 and 2, refine_edges on,
   nthreads 1;
 - OpenCV ArUco (cv2.aruco.ArucoDetector) with the matching DICT_APRILTAG_* / DICT_* dictionary
@@ -425,8 +425,8 @@ def main():
 
 
 def build_touchdown():
-    print("building touchdown (cargo build --release -p touchdown-host)...", file=sys.stderr, flush=True)
-    subprocess.run(["cargo", "build", "--release", "-p", "touchdown-host"], cwd=REPO, check=True)
+    print("building touchdown (cargo build --release -p touchdown-cli)...", file=sys.stderr, flush=True)
+    subprocess.run(["cargo", "build", "--release", "-p", "touchdown-cli"], cwd=REPO, check=True)
     metadata = subprocess.run(["cargo", "metadata", "--format-version", "1", "--no-deps"], cwd=REPO,
                               check=True, capture_output=True, text=True)
     target = json.loads(metadata.stdout)["target_directory"]

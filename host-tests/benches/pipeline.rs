@@ -2,7 +2,7 @@
 //! instruction counts (`bench/m7/frames`, rendered by the simulator):
 //!
 //! ```text
-//! cargo bench -p touchdown-host --bench pipeline [-- FILTER]
+//! cargo bench -p touchdown-host-tests --bench pipeline [-- FILTER]
 //! ```
 //!
 //! Benches, per frame: `pipeline` ([`FramePipeline::process`]: detection with the default
@@ -25,9 +25,9 @@ use touchdown_core::filter::{FrameEstimate, VehicleState};
 use touchdown_core::pad::{PadLayout, PadMarker};
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
-use touchdown_host::formats::pgm::parse_pgm;
-use touchdown_host::image_io::GrayFrame;
-use touchdown_host::workspace::HostWorkspace;
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::image_io::GrayFrame;
+use touchdown_formats::pgm::parse_pgm;
 
 /// The benchmark frames (committed with the M7 benchmark), each with the tag36h11 id its pad
 /// is made of: the marker `bench/m7` fixes on, so both measure the same pose.

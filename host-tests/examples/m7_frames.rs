@@ -2,7 +2,7 @@
 //! `bench/m7/frames/*.pgm`, and checks that the host detector finds every marker in them.
 //!
 //! ```text
-//! cargo run --release -p touchdown-host --example m7_frames [-- OUT_DIR]
+//! cargo run --release -p touchdown-host-tests --example m7_frames [-- OUT_DIR]
 //! ```
 //!
 //! The frames are deterministic (fixed placements and seeds), so re-running this rewrites
@@ -23,9 +23,9 @@ use std::path::PathBuf;
 
 use touchdown_core::detect::{buffer_sizes, Buffers, Detector, DetectorConfig};
 use touchdown_core::family::{tables, Family};
-use touchdown_host::formats::pgm::save_pgm;
-use touchdown_host::image_io::GrayFrame;
-use touchdown_host::render::{render_markers, Background, FrameOptions, MarkerPattern, Placement};
+use touchdown_formats::image_io::GrayFrame;
+use touchdown_formats::pgm::save_pgm;
+use touchdown_sim::render::{render_markers, Background, FrameOptions, MarkerPattern, Placement};
 
 /// One benchmark frame: name, size, markers (family, id, placement), seed.
 struct FrameSpec {

@@ -1,14 +1,14 @@
 //! The paper's Tables 2-4 reproduced in simulation: the published values, the paper's
-//! method in our code, and ours (see `touchdown_host::eval` for what is compared and how,
+//! method in our code, and ours (see `touchdown_eval` for what is compared and how,
 //! and `eval::paper_geometry` for the simulated set-up).
 //!
-//!     cargo run --release -p touchdown-host --example paper_tables [-- --frames N] [-- --seed S]
+//!     cargo run --release -p touchdown-host-tests --example paper_tables [-- --frames N] [-- --seed S]
 
 use std::time::Instant;
 
 use touchdown_core::pipeline::PipelineConfig;
-use touchdown_host::eval::paper_geometry::{self, Config};
-use touchdown_host::eval::{Method, Stage};
+use touchdown_eval::paper_geometry::{self, Config};
+use touchdown_eval::{Method, Stage};
 
 fn main() {
     let mut config = Config {

@@ -2,7 +2,7 @@
 //! paper's method, on rendered frames under a fixed mix of conditions.
 //!
 //! ```text
-//! cargo run --release -p touchdown-host --example recall_report -- \
+//! cargo run --release -p touchdown-host-tests --example recall_report -- \
 //!     [--trials N] [--sizes 8,10,12,...] [--write DIR]
 //! ```
 //!
@@ -25,12 +25,12 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use touchdown_core::detect::{Detector, DetectorConfig};
 use touchdown_core::family::{tables, Family};
-use touchdown_host::image_io::save_png;
-use touchdown_host::render::{
-    render_markers, score_frame, Background, Expected, FrameOptions, MarkerPattern, MarkerTruth,
-    Placement,
+use touchdown_eval::scoring::{score_frame, Expected};
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::image_io::save_png;
+use touchdown_sim::render::{
+    render_markers, Background, FrameOptions, MarkerPattern, MarkerTruth, Placement,
 };
-use touchdown_host::workspace::HostWorkspace;
 
 const FAMILIES: [&str; 6] = [
     "tag36h11",

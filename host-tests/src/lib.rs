@@ -1,16 +1,32 @@
-//! Host-side support for touchdown: image files, owned work memory, marker families from
-//! files, the command-line tool's pieces, and the test renderer.
+//! touchdown's integration tests of the host libraries (`touchdown-formats`, `touchdown-sim`,
+//! `touchdown-eval`) with the core on recorded, rendered and simulated frames and on real
+//! photos; the criterion benchmarks (`benches/`) and the examples (`examples/`). The tests of
+//! the `touchdown` binary live with it (`host/cli/tests/`), the core's own with the core.
 //!
-//! Everything algorithmic lives in `touchdown-core`; this crate only does what needs `std`
-//! (files, allocation, formatting) and calls the core exactly as the firmware does.
+//! This library is only the tests' support: where the shared evaluation data lives (real
+//! photos, pose ground truth, family files). It is here, not in a library the tool ships,
+//! because only these tests read that data. It is never copied into the repository: tests
+//! read it from `$TOUCHDOWN_DATA`, else from `shared/data` beside the repository (where CI
+//! has it). In a clone without it, the tests that need it print that they skip.
 
-pub mod cli;
-pub mod eval;
-pub use touchdown_formats as formats;
-pub use touchdown_formats::{families, image_io};
-pub mod plot;
-pub mod render;
-pub mod shared_data;
-pub mod sim;
-pub mod trace;
-pub mod workspace;
+use std::path::{Path, PathBuf};
+
+/// The shared data directory, whether or not it exists.
+pub fn shared_data_dir() -> PathBuf {
+    match std::env::var_os("TOUCHDOWN_DATA") {
+        Some(dir) => PathBuf::from(dir),
+        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
+    }
+}
+
+/// The shared data directory, or `None` after printing `skipping: shared data not found at
+/// ...` when it is absent.
+pub fn shared_data_or_skip() -> Option<PathBuf> {
+    let dir = shared_data_dir();
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!("skipping: shared data not found at {}", dir.display());
+        None
+    }
+}

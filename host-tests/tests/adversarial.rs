@@ -26,9 +26,9 @@ use touchdown_core::detect::{
     MIN_WORK_BUDGET,
 };
 use touchdown_core::family::{tables, Family};
-use touchdown_host::image_io::GrayFrame;
-use touchdown_host::render::{render_marker, FrameOptions, Placement};
-use touchdown_host::workspace::HostWorkspace;
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::image_io::GrayFrame;
+use touchdown_sim::render::{render_marker, FrameOptions, Placement};
 
 const SIZES: [(usize, usize); 2] = [(320, 240), (640, 480)];
 

@@ -18,9 +18,9 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use touchdown_core::detect::{Detection, Detector, DetectorConfig, MAX_FAMILIES};
 use touchdown_core::family::{tables, CellRole, Family};
-use touchdown_host::image_io::{load_gray, GrayFrame};
-use touchdown_host::render::{render_cells, render_marker, Background, FrameOptions, Placement};
-use touchdown_host::workspace::HostWorkspace;
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::image_io::{load_gray, GrayFrame};
+use touchdown_sim::render::{render_cells, render_marker, Background, FrameOptions, Placement};
 
 /// The shipped families; fails loudly if the generated tables are missing.
 fn families() -> &'static [&'static Family<'static>] {
@@ -121,7 +121,7 @@ fn gaussian_noise() {
         };
         (
             format!("noise mean {mean} sigma {sigma}"),
-            touchdown_host::render::Scene::new(options).render().frame,
+            touchdown_sim::render::Scene::new(options).render().frame,
         )
     });
     assert_nothing_in("gaussian noise", frames);
@@ -327,7 +327,7 @@ fn markers_of_other_families_are_not_reported() {
 
 /// `TOUCHDOWN_DATA`, else `shared/data` beside the repository.
 fn data_dir() -> PathBuf {
-    touchdown_host::shared_data::shared_data_dir()
+    touchdown_host_tests::shared_data_dir()
 }
 
 /// Corner quads of an AprilTag test `.txt`: `id, (x0 y0), (x1 y1), (x2 y2), (x3 y3)`.

@@ -4,9 +4,9 @@
 //!
 //! The set-up (a 1.0 m `aruco_6x6_250` marker, 640x480 camera with a 60° field of view
 //! looking down from a hovering vehicle, noise and blur) is
-//! `touchdown_host::eval::paper_geometry`; what is compared (the camera centre in the marker
+//! `touchdown_eval::paper_geometry`; what is compared (the camera centre in the marker
 //! frame, error = truth - estimate, filtered estimates averaged per set point) is
-//! `touchdown_host::eval`. The paper's method in our code runs alongside and is reported, not
+//! `touchdown_eval`. The paper's method in our code runs alongside and is reported, not
 //! judged: beyond ~20 m its detector loses the marker, which is the paper's own finding
 //! beyond 25 m.
 //!
@@ -16,8 +16,8 @@
 
 use std::time::Instant;
 
-use touchdown_host::eval::paper_geometry::{self, Config};
-use touchdown_host::eval::{Method, Stage, PAPER_TABLES};
+use touchdown_eval::paper_geometry::{self, Config};
+use touchdown_eval::{Method, Stage, PAPER_TABLES};
 
 /// Our mean |error| must be at most this fraction of the paper's |published error|.
 const FRACTION_OF_PAPER_ERROR: f64 = 0.25;

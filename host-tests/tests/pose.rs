@@ -35,12 +35,12 @@ use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::pose::{
     marker_corners, marker_pose, pad_pose, pad_pose_with_prediction, Pose, PoseMethod,
 };
-use touchdown_host::formats::pad::load_pad;
-use touchdown_host::image_io::load_gray;
-use touchdown_host::workspace::HostWorkspace;
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::image_io::load_gray;
+use touchdown_formats::pad::load_pad;
 
 fn data_dir() -> PathBuf {
-    touchdown_host::shared_data::shared_data_dir()
+    touchdown_host_tests::shared_data_dir()
 }
 
 fn visp_dir() -> Option<PathBuf> {

@@ -48,8 +48,8 @@ use std::time::Instant;
 
 use touchdown_core::detect::{Detection, Detector, DetectorConfig};
 use touchdown_core::family::{tables, Family};
-use touchdown_host::image_io::{load_gray, GrayFrame};
-use touchdown_host::workspace::HostWorkspace;
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::image_io::{load_gray, GrayFrame};
 
 /// Repeats per image for the timing figure (the median is reported).
 const TIMING_REPEATS: usize = 5;
@@ -58,7 +58,7 @@ type Corners = [[f64; 2]; 4];
 
 /// The shared data directory, or `None` (after printing why) when it is absent.
 fn data_dir() -> Option<PathBuf> {
-    touchdown_host::shared_data::shared_data_or_skip()
+    touchdown_host_tests::shared_data_or_skip()
 }
 
 /// A reference marker: id and corners in our order and pixel convention.

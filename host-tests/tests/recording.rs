@@ -4,11 +4,11 @@
 use std::path::{Path, PathBuf};
 
 use touchdown_core::camera::CameraModel;
-use touchdown_host::formats::pad::{config_of_layout, PadConfig};
-use touchdown_host::formats::recording::{
+use touchdown_formats::image_io::GrayFrame;
+use touchdown_formats::pad::{config_of_layout, PadConfig};
+use touchdown_formats::recording::{
     frame_path, CameraTruth, RecordedFrame, Recording, RecordingError, RecordingReader,
 };
-use touchdown_host::image_io::GrayFrame;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("touchdown-rec-{}-{name}", std::process::id()));

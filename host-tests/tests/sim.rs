@@ -1,31 +1,25 @@
 //! The landing simulator: determinism, geometry against independent projections, the lens
-//! model, motion blur, the landing scenario's coverage, and the `simulate` / `pad` commands.
+//! model, motion blur and the landing scenario's coverage (the `simulate` / `pad` commands
+//! are tested with the binary, in `host/cli/tests/simulate_and_pad.rs`).
 //!
 //! Frames are kept small (or few) so the suite stays fast in the dev profile. The ignored
 //! `gallery` test writes a PNG per effect for looking at:
-//! `TOUCHDOWN_SIM_GALLERY=/tmp/gallery cargo test -p touchdown-host --test sim -- --ignored`.
+//! `TOUCHDOWN_SIM_GALLERY=/tmp/gallery cargo test -p touchdown-host-tests --test sim -- --ignored`.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 use touchdown_core::camera::CameraModel;
 use touchdown_core::geometry::Point;
-use touchdown_host::image_io::save_png;
-use touchdown_host::render::MarkerPattern;
-use touchdown_host::sim::camera::{RayMap, SimCamera};
-use touchdown_host::sim::pad::PrintedPad;
-use touchdown_host::sim::scenario::{FramePlan, Scenario, BOARD_LENS_DISTORTION};
-use touchdown_host::sim::sensor::{Optics, Sensor};
-use touchdown_host::sim::texture::GroundKind;
-use touchdown_host::sim::trajectory::{Profile, Segment, Trajectory, Wobble};
-use touchdown_host::sim::world::{INK_ALBEDO, PAPER_ALBEDO};
-use touchdown_host::sim::Simulator;
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("touchdown-sim-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
+use touchdown_formats::image_io::save_png;
+use touchdown_sim::camera::{RayMap, SimCamera};
+use touchdown_sim::pad::PrintedPad;
+use touchdown_sim::render::MarkerPattern;
+use touchdown_sim::scenario::{FramePlan, Scenario, BOARD_LENS_DISTORTION};
+use touchdown_sim::sensor::{Optics, Sensor};
+use touchdown_sim::texture::GroundKind;
+use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
+use touchdown_sim::world::{INK_ALBEDO, PAPER_ALBEDO};
+use touchdown_sim::Simulator;
 
 /// A vehicle holding still at `position` with constant roll, pitch and yaw (degrees).
 fn still(position: [f64; 3], rpy_deg: (f64, f64, f64)) -> Trajectory {
@@ -138,7 +132,7 @@ fn rendered_marker_matches_projected_corners() {
     let trajectory = still([0.31, -0.22, 4.7], (9.0, -6.0, 23.0));
     let simulator = Simulator::new(clean(camera, pad, trajectory)).with_threads(2);
     let frame = simulator.render(0).unwrap();
-    let pose = touchdown_host::sim::pose_of_truth(&frame.truth);
+    let pose = touchdown_sim::pose_of_truth(&frame.truth);
     // Corners through the core's f32 camera model: an independent path from the renderer's.
     let model = camera.model;
     let corners: Vec<(f64, f64)> = simulator.world.pad.markers[0]
@@ -372,183 +366,6 @@ fn landing_keeps_a_usable_marker_in_view() {
         failures.len(),
         failures
     );
-}
-
-fn touchdown() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_touchdown"))
-}
-
-#[test]
-fn simulate_writes_a_readable_recording() {
-    let dir = scratch("simulate");
-    let out = touchdown()
-        .args([
-            "simulate",
-            "--scenario",
-            "sun",
-            "--frames",
-            "2",
-            "--seed",
-            "3",
-            "--out",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let recording = touchdown_host::formats::recording::Recording::read(&dir).unwrap();
-    assert_eq!(recording.frames.len(), 2);
-    assert_eq!(recording.frames[0].label.as_deref(), Some("hover=20"));
-    let truth = recording.frames[1].truth.unwrap();
-    assert!((truth.position[2] - 20.0).abs() < 0.2);
-    // Rendering again from the same seed gives the same bytes.
-    let mut scenario = Scenario::named("sun", 3).unwrap();
-    scenario.truncate(2);
-    let again = Simulator::new(scenario).render(1).unwrap();
-    assert_eq!(again.image, recording.frames[1].image);
-    // A non-empty directory is refused with one line and status 2.
-    let out = touchdown()
-        .args(["simulate", "--scenario", "sun", "--frames", "1", "--out"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
-    assert!(stderr.contains("not empty"), "{stderr}");
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-#[test]
-fn bad_options_are_one_line_and_status_2() {
-    for args in [
-        vec!["simulate", "--scenario", "moon"],
-        vec!["simulate", "--scenario", "paper", "--frames", "0"],
-        vec!["pad", "--design", "nested"],
-        vec!["pad", "--layout", "/nonexistent/pad.toml", "--out", "/tmp"],
-    ] {
-        let out = touchdown().args(&args).output().unwrap();
-        assert_eq!(out.status.code(), Some(2), "{args:?}");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(stderr.starts_with("error:"), "{args:?}: {stderr}");
-        assert_eq!(stderr.lines().count(), 1, "{args:?}: {stderr}");
-    }
-}
-
-#[test]
-fn pad_refuses_overlapping_markers() {
-    let dir = scratch("pad-overlap");
-    std::fs::create_dir_all(&dir).unwrap();
-    let layout = dir.join("overlap.toml");
-    std::fs::write(
-        &layout,
-        "name = \"overlap\"\n\
-         [[marker]]\nfamily = \"tag36h11\"\nid = 0\nsize = 1.0\nx = 0.0\ny = 0.0\n\
-         [[marker]]\nfamily = \"tag36h11\"\nid = 1\nsize = 0.2\nx = 0.1\ny = 0.1\n",
-    )
-    .unwrap();
-    let out = touchdown()
-        .args(["pad", "--layout"])
-        .arg(&layout)
-        .arg("--out")
-        .arg(dir.join("out"))
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2));
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(stderr.lines().count(), 1, "{stderr}");
-    assert!(
-        stderr.contains("overlap.toml") && stderr.contains("overlap") && stderr.contains("#1"),
-        "{stderr}"
-    );
-    assert!(!dir.join("out").join("pad.svg").exists());
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-#[test]
-fn pad_tiles_into_pages_and_counts_markers_in_words() {
-    let dir = scratch("pad-tiles");
-    let out = touchdown()
-        .args([
-            "pad",
-            "--design",
-            "paper-single",
-            "--tile",
-            "letter",
-            "--out",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("1 marker;"), "{stdout}");
-    // A 1300 x 1340 mm drawing (1.25 m sheet, 25 mm borders, 40 mm footer) on letter paper
-    // (195.9 x 259.4 mm inside the margins, stepping 185.9 x 249.4): 7 columns, 6 rows.
-    assert!(
-        stdout.contains("wrote 42 letter pages (6 rows x 7 columns"),
-        "{stdout}"
-    );
-    let pages: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .filter(|name| name.starts_with("pad-page-"))
-        .collect();
-    assert_eq!(pages.len(), 42);
-    assert!(pages.contains(&"pad-page-1-1.svg".to_string()));
-    assert!(pages.contains(&"pad-page-6-7.svg".to_string()));
-    let page = std::fs::read_to_string(dir.join("pad-page-2-3.svg")).unwrap();
-    assert!(
-        page.contains("width=\"215.9mm\" height=\"279.4mm\""),
-        "{}",
-        &page[..300]
-    );
-    assert!(page.contains("page row 2 column 3 of 6 x 7"));
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-#[test]
-fn pad_writes_svg_and_the_same_layout() {
-    let dir = scratch("pad");
-    let out = touchdown()
-        .args(["pad", "--design", "nested", "--out"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let svg = std::fs::read_to_string(dir.join("pad.svg")).unwrap();
-    assert!(svg.contains("mm\" height=\"") && svg.contains("viewBox"));
-    assert!(svg.contains("100 mm"));
-    let config = touchdown_host::formats::pad::load_pad(&dir.join("pad.toml")).unwrap();
-    assert_eq!(
-        config.layout().unwrap(),
-        touchdown_core::pad::designs::NESTED
-    );
-    // And a layout file gives the same pad back.
-    let again = scratch("pad-again");
-    let out = touchdown()
-        .args(["pad", "--layout"])
-        .arg(dir.join("pad.toml"))
-        .arg("--out")
-        .arg(&again)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    assert_eq!(std::fs::read_to_string(again.join("pad.svg")).unwrap(), svg);
-    let _ = std::fs::remove_dir_all(&dir);
-    let _ = std::fs::remove_dir_all(&again);
 }
 
 /// Writes one PNG per effect into `$TOUCHDOWN_SIM_GALLERY` (for looking at, not a check).

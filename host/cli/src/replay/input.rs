@@ -1,0 +1,215 @@
+//! Where a replay's frames come from: a recording read from disk or a scenario rendered in
+//! memory, behind one [`Input`], and the set points and attitudes derived from their truth.
+
+use super::ReplayArgs;
+use crate::CliError;
+use nalgebra::Matrix3;
+use std::path::Path;
+use touchdown_core::camera::CameraModel;
+use touchdown_eval::{Axis, SetPoint};
+use touchdown_formats::image_io::GrayFrame;
+use touchdown_formats::pad::PadConfig;
+use touchdown_formats::recording::{CameraTruth, RecordingReader};
+use touchdown_sim::scenario::{Scenario, SCENARIOS};
+use touchdown_sim::{math, Simulator};
+
+/// One frame from either input.
+pub(super) struct InputFrame {
+    pub(super) index: usize,
+    pub(super) t_us: u64,
+    pub(super) truth: Option<CameraTruth>,
+    pub(super) label: Option<String>,
+    pub(super) image: GrayFrame,
+}
+
+/// Where frames come from.
+pub(super) enum Source {
+    Simulator(Box<Simulator>),
+    Recording(RecordingReader),
+}
+
+/// The input of a replay: its description, camera, pad and frames.
+pub(super) struct Input {
+    /// For the header and the figures' titles.
+    pub(super) title: String,
+    /// For the default figure directory.
+    pub(super) short_name: String,
+    pub(super) camera: CameraModel,
+    pub(super) pad: PadConfig,
+    pub(super) has_truth: bool,
+    pub(super) frames: usize,
+    /// Every label, in order of first appearance.
+    pub(super) labels: Vec<String>,
+    pub(super) source: Source,
+}
+
+impl Input {
+    pub(super) fn open(args: &ReplayArgs) -> Result<Input, CliError> {
+        if args.frames == Some(0) {
+            return Err(CliError("--frames must be at least 1".into()));
+        }
+        if args.threads == Some(0) {
+            return Err(CliError("--threads must be at least 1".into()));
+        }
+        match (&args.recording, &args.scenario) {
+            (Some(_), Some(_)) => Err(CliError(
+                "give either a RECORDING directory or --scenario NAME, not both".into(),
+            )),
+            (None, None) => Err(CliError(
+                "nothing to replay: give a RECORDING directory or --scenario NAME".into(),
+            )),
+            (None, Some(name)) => Self::scenario(name, args),
+            (Some(dir), None) => {
+                if args.seed.is_some() || args.threads.is_some() {
+                    return Err(CliError(
+                        "--seed and --threads apply to --scenario only".into(),
+                    ));
+                }
+                Self::recording(dir, args.frames)
+            }
+        }
+    }
+
+    pub(super) fn scenario(name: &str, args: &ReplayArgs) -> Result<Input, CliError> {
+        let seed = args.seed.unwrap_or(1);
+        let mut scenario = Scenario::named(name, seed).ok_or_else(|| {
+            let names: Vec<&str> = SCENARIOS.iter().map(|s| s.0).collect();
+            CliError(format!(
+                "unknown scenario `{name}` (scenarios: {})",
+                names.join(", ")
+            ))
+        })?;
+        if let Some(n) = args.frames {
+            scenario.truncate(n);
+        }
+        let labels = distinct(scenario.frames.iter().map(|f| f.label.as_deref()));
+        let mut simulator = Simulator::new(scenario);
+        if let Some(threads) = args.threads {
+            simulator = simulator.with_threads(threads);
+        }
+        Ok(Input {
+            title: format!("scenario {name}, seed {seed}"),
+            short_name: name.to_string(),
+            camera: simulator.scenario.camera.model,
+            pad: simulator.scenario.pad.config.clone(),
+            has_truth: true,
+            frames: simulator.frame_count(),
+            labels,
+            source: Source::Simulator(Box::new(simulator)),
+        })
+    }
+
+    pub(super) fn recording(dir: &Path, frames: Option<usize>) -> Result<Input, CliError> {
+        let reader = RecordingReader::open(dir).map_err(CliError::new)?;
+        let count = frames.map_or(reader.len(), |n| n.min(reader.len()));
+        if count == 0 {
+            return Err(CliError(format!(
+                "{}: the recording has no frames",
+                dir.join("frames.csv").display()
+            )));
+        }
+        let labels = distinct(reader.labels.iter().take(count).map(Option::as_deref));
+        let short_name = dir
+            .file_name()
+            .map_or("recording".into(), |n| n.to_string_lossy().into_owned());
+        Ok(Input {
+            title: format!("recording {short_name}"),
+            short_name,
+            camera: reader.camera,
+            pad: reader.pad.clone(),
+            has_truth: reader.has_truth,
+            frames: count,
+            labels,
+            source: Source::Recording(reader),
+        })
+    }
+
+    /// Frame `k`.
+    pub(super) fn frame(&self, k: usize) -> Result<InputFrame, CliError> {
+        match &self.source {
+            Source::Simulator(simulator) => {
+                let frame = simulator
+                    .render(k)
+                    .ok_or_else(|| CliError(format!("the scenario has no frame {k}")))?;
+                Ok(InputFrame {
+                    index: frame.index,
+                    t_us: frame.t_us,
+                    truth: Some(frame.truth),
+                    label: frame.label,
+                    image: frame.image,
+                })
+            }
+            Source::Recording(reader) => {
+                let frame = reader.frame(k).map_err(CliError::new)?;
+                Ok(InputFrame {
+                    index: frame.index,
+                    t_us: frame.t_us,
+                    truth: frame.truth,
+                    label: frame.label,
+                    image: frame.image,
+                })
+            }
+        }
+    }
+}
+
+/// The distinct labels, in order of first appearance.
+pub(super) fn distinct<'a>(labels: impl Iterator<Item = Option<&'a str>>) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for label in labels.flatten() {
+        if !out.iter().any(|l| l == label) {
+            out.push(label.to_string());
+        }
+    }
+    out
+}
+
+/// The set point of a label (see the module docs).
+pub fn set_point_of_label(label: &str) -> SetPoint {
+    let parsed = label.split_once('=').and_then(|(key, value)| {
+        let axis = match key.trim().to_ascii_lowercase().as_str() {
+            "x" => Axis::X,
+            "y" => Axis::Y,
+            "z" | "hover" => Axis::Z,
+            _ => return None,
+        };
+        let value: f64 = value.trim().parse().ok().filter(|v: &f64| v.is_finite())?;
+        Some((axis, value))
+    });
+    let (axis, reference_m) = parsed.unwrap_or((Axis::Z, f64::NAN));
+    SetPoint {
+        label: label.to_string(),
+        axis,
+        reference_m,
+    }
+}
+
+/// The rotation matrix of a truth quaternion (camera to pad).
+pub(super) fn attitude_of(truth: &CameraTruth) -> Matrix3<f32> {
+    let m = math::quat_to_matrix(truth.orientation);
+    Matrix3::from_fn(|i, j| m[i][j] as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_give_axis_and_reference() {
+        let sp = set_point_of_label("x=1.2");
+        assert_eq!((sp.axis, sp.reference_m), (Axis::X, 1.2));
+        let sp = set_point_of_label("hover=3");
+        assert_eq!((sp.axis, sp.reference_m), (Axis::Z, 3.0));
+        let sp = set_point_of_label("Y = 6");
+        assert_eq!((sp.axis, sp.reference_m), (Axis::Y, 6.0));
+        let sp = set_point_of_label("approach");
+        assert!(sp.reference_m.is_nan() && sp.label == "approach");
+        assert!(set_point_of_label("z=far").reference_m.is_nan());
+    }
+
+    #[test]
+    fn distinct_keeps_first_appearance_order() {
+        let labels = [Some("b"), None, Some("a"), Some("b")];
+        assert_eq!(distinct(labels.into_iter()), ["b", "a"]);
+    }
+}

@@ -1,0 +1,412 @@
+//! `touchdown replay`: run the firmware's pipeline (detector, pose, filter) on a recording or
+//! on a scenario rendered in memory, for the paper's method and ours side by side, and print
+//! paper-style tables (submodule `tables`) and write figures ([`crate::plot`]).
+//!
+//! ## One path for both inputs
+//! An [`Input`] (submodule `input`) yields frames, either decoded from a recording
+//! ([`RecordingReader`](touchdown_formats::recording::RecordingReader)) or rendered by the
+//! [`Simulator`](touchdown_sim::Simulator); after that, everything is the same. Frames are produced on
+//! a second thread, a couple ahead, while this one runs the methods on the previous frame,
+//! so rendering (itself spread over the cores) and detection overlap and memory stays at a
+//! few frames whatever the length.
+//!
+//! ## What the methods are given
+//! Each frame goes through [`Experiment::process`] with both methods. With a truth, the
+//! camera-to-pad rotation the vehicle would know (its flight controller's attitude with the
+//! camera mount) is the truth's rotation, as in `eval::paper_geometry`: both methods are
+//! attitude-aided. A recording without truth runs vision only (each pose's own rotation),
+//! and the tables then give detection and estimate rates and the estimates, no errors.
+//!
+//! ## Sequences
+//! A recording may jump: the paper scenario records only the hovers, one second apart, and
+//! the vehicle is elsewhere at the next one. Whenever two frames are more than
+//! [`SEQUENCE_GAP_S`] apart the filters are reset ([`Experiment::start_sequence`]), as a
+//! restarted flight would; within a sequence they run on, through set-point changes.
+//!
+//! ## Set points
+//! Frames labelled in `setpoints.csv` (or in the scenario's frame plans) are scored per label.
+//! A label `x=1.2`, `y=2.4`, `z=5` (or `hover=3`, an altitude) gives the row's axis and
+//! reference in metres, and so the paper's published values for that row where it has one;
+//! any other label is a row of its own on the altitude axis without a reference.
+
+use super::{CliError, Outcome};
+use crate::plot;
+use clap::Args;
+use nalgebra::Vector3;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::sync::mpsc;
+use std::time::Instant;
+use touchdown_core::family::Family;
+use touchdown_core::pipeline::PipelineConfig;
+use touchdown_eval::trace::{MethodSummary, Trace, TraceFrame};
+use touchdown_eval::{Experiment, ExperimentError, Frame, Method, SetPoint};
+use touchdown_formats::families::{self, SelectedFamily};
+
+mod input;
+mod tables;
+
+pub use input::set_point_of_label;
+use input::{attitude_of, Input, InputFrame};
+use tables::{all_axes_table, altitude_table, set_point_table, summary_table, vision_only_table};
+
+/// Frames further apart than this (seconds) start a new sequence: the filters are reset.
+pub const SEQUENCE_GAP_S: f64 = 0.5;
+/// Altitudes (metres) at which a run without set points reports its error.
+pub const ALTITUDE_CHECKPOINTS_M: [f64; 7] = [40.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5];
+/// Frames whose true altitude is within this fraction of a checkpoint count for it.
+pub const ALTITUDE_TOLERANCE: f64 = 0.1;
+/// Frames rendered or decoded ahead of the one being processed.
+const FRAMES_AHEAD: usize = 2;
+
+/// `touchdown replay --help`.
+pub const LONG_HELP: &str = "\
+Replay a recording, or a simulated scenario, through the per-frame path the camera board
+runs (core's FramePipeline: detector, pad fix, estimator), beside the paper's method (in our
+code); print the paper's kind of tables and write figures of the estimates against the truth.
+
+Input, one of:
+  RECORDING          a recording directory (camera.toml, pad.toml, frames/NNNNNN.pgm,
+                     frames.csv and optionally setpoints.csv), written by `touchdown simulate`
+                     or dumped by the camera board
+  --scenario NAME    render the scenario in memory (nothing is written to disk); NAME is one
+                     of paper, lateral, descent, landing, sun, shadow, occlusion (see
+                     `touchdown simulate --help`); --seed picks the randomness
+
+Methods:
+  paper's method     the paper's detector, its homography pose of the largest pad marker,
+                     and its per-axis Kalman filter with Table 1's values (lag included)
+  ours               the board's pipeline as it ships: touchdown's detector, IPPE +
+                     Levenberg-Marquardt fix of the whole pad (flip choice by prediction,
+                     tilt from the attitude), the estimator; scored as the autopilot receives
+                     it: the LANDING_TARGET's body FRD vector turned with the autopilot's
+                     attitude
+  --pose-steps       adds the board's pipeline without the level fix, without the flip
+                     choice, and without both
+Both are given the camera's attitude from the truth (what the flight controller knows);
+a recording without truth runs vision only and prints no errors.
+
+Tables (centimetres; error = truth - estimate, the paper's sign):
+  set points         per set point (setpoints.csv label such as z=5, x=1.2, y=2.4): the
+                     reference, the paper's published estimate and error where it has the
+                     row, then per method the mean estimate, mean error, mean |error| and RMS
+                     on the row's axis, the detection rate (frames with a pose) and the
+                     estimate rate (frames with a filtered output); then the mean error on
+                     every axis
+  summary            over all frames: RMS error per axis (filtered and raw pose), detection
+                     and estimate rates, the longest gap without an estimate (frames and
+                     seconds), the slowest acquisition, and the filter lag in frames (the
+                     time shift that best aligns the estimate with the truth; not measurable
+                     while hovering)
+  altitudes          without set points: mean |error| per axis at 40, 20, 10, 5, 2, 1 and
+                     0.5 m (frames within 10 % of that altitude)
+Frames more than 0.5 s apart (the paper scenario records only its hovers) start a new
+sequence: the filters are reset.
+
+Figures (--plots DIR, default replay-NAME in the current directory; PNG and SVG):
+  position-x, -y, -z  truth, each method's filtered estimate (line) and raw pose (dots)
+  error-x, -y, -z     truth - estimate over time, filtered (line) and raw (dots), cm
+
+Exit status: 0 on success; 2 with one line on stderr for a bad option or an unreadable or
+corrupt recording (the line names the file, and the line of a CSV file).";
+
+/// Arguments of `touchdown replay`.
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// Recording directory to replay
+    #[arg(value_name = "RECORDING")]
+    pub recording: Option<PathBuf>,
+
+    /// Render this scenario in memory instead (paper, lateral, descent, landing, sun, shadow,
+    /// occlusion)
+    #[arg(long, value_name = "NAME")]
+    pub scenario: Option<String>,
+
+    /// Seed of the scenario's randomness (texture, wobble, noise) [default: 1]
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
+    pub seed: Option<u64>,
+
+    /// Replay only the first N frames
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
+    pub frames: Option<usize>,
+
+    /// Directory for the figures [default: replay-<NAME>]
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+
+    /// Write no figures
+    #[arg(long)]
+    pub no_plots: bool,
+
+    /// Also run the board's pipeline without each optional pad-fix step (the level fix, the
+    /// flip choice by prediction): the measurement behind what ships
+    #[arg(long)]
+    pub pose_steps: bool,
+
+    /// Rendering threads for --scenario [default: all cores]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        help_heading = "Advanced"
+    )]
+    pub threads: Option<usize>,
+}
+
+/// Progress on stderr: a bar, the frame count and the time left.
+struct Progress<'a> {
+    err: &'a mut dyn Write,
+    enabled: bool,
+    name: String,
+    total: usize,
+    started: Instant,
+}
+
+impl Progress<'_> {
+    fn update(&mut self, done: usize) {
+        if !self.enabled || (!done.is_multiple_of(4) && done != self.total) {
+            return;
+        }
+        const WIDTH: usize = 30;
+        let filled = WIDTH * done / self.total.max(1);
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let left = elapsed / done.max(1) as f64 * (self.total - done.min(self.total)) as f64;
+        // Progress is best effort: a closed stderr must not stop the run.
+        let _ = write!(
+            self.err,
+            "\rreplay {}: [{}{}] {}/{} frames, {:.0} s left   ",
+            self.name,
+            "#".repeat(filled),
+            "-".repeat(WIDTH - filled),
+            done,
+            self.total,
+            left
+        );
+    }
+
+    fn finish(&mut self) {
+        if self.enabled {
+            let _ = writeln!(self.err);
+        }
+    }
+}
+
+/// Runs `touchdown replay`.
+pub fn run(
+    args: &ReplayArgs,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<Outcome, CliError> {
+    let started = Instant::now();
+    let input = Input::open(args)?;
+    let layout = input
+        .pad
+        .layout()
+        .map_err(|e| CliError(format!("pad `{}`: invalid layout: {e:?}", input.pad.name)))?;
+    let mut names: Vec<String> = input.pad.markers.iter().map(|m| m.family.clone()).collect();
+    names.sort();
+    names.dedup();
+    let selected = families::resolve_all(&names).map_err(CliError::new)?;
+    let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
+    let family_refs: Vec<&Family<'_>> = views.iter().collect();
+    let mut methods: Vec<Method> = vec![Method::paper().named("paper's method"), Method::ours()];
+    if args.pose_steps {
+        let steps = |flip_by_prediction, level_fix| PipelineConfig {
+            flip_by_prediction,
+            level_fix,
+            ..PipelineConfig::default()
+        };
+        methods.extend([
+            Method::board("no level fix", steps(true, false)),
+            Method::board("no flip choice", steps(false, true)),
+            Method::board("neither step", steps(false, false)),
+        ]);
+    }
+    if !input.has_truth {
+        methods = methods.into_iter().map(Method::without_attitude).collect();
+    }
+    let mut experiment = Experiment::new(input.camera, &family_refs, layout, &methods)
+        .map_err(|e| CliError(format!("cannot set up the methods: {e:?}")))?;
+    let set_points: BTreeMap<String, SetPoint> = input
+        .labels
+        .iter()
+        .map(|l| (l.clone(), set_point_of_label(l)))
+        .collect();
+    let mut trace = Trace::new(methods.iter().map(|m| m.name.clone()).collect());
+    let mut progress = Progress {
+        err,
+        enabled: std::io::stderr().is_terminal(),
+        name: input.short_name.clone(),
+        total: input.frames,
+        started,
+    };
+
+    let (sender, receiver) = mpsc::sync_channel::<Result<InputFrame, CliError>>(FRAMES_AHEAD);
+    let processed: Result<(), CliError> = std::thread::scope(|scope| {
+        let input = &input;
+        scope.spawn(move || {
+            for k in 0..input.frames {
+                let frame = input.frame(k);
+                let failed = frame.is_err();
+                // A closed channel means the replay stopped: nothing more to produce.
+                if sender.send(frame).is_err() || failed {
+                    break;
+                }
+            }
+        });
+        let mut previous_t_us: Option<u64> = None;
+        let mut sequence = 0usize;
+        for received in receiver {
+            let frame = received?;
+            if let Some(previous) = previous_t_us {
+                if frame.t_us.saturating_sub(previous) as f64 * 1e-6 > SEQUENCE_GAP_S {
+                    experiment.start_sequence().map_err(experiment_error)?;
+                    sequence += 1;
+                }
+            }
+            previous_t_us = Some(frame.t_us);
+            let truth = frame.truth.as_ref().map(|t| Vector3::from(t.position));
+            let set_point = frame
+                .label
+                .as_ref()
+                .and_then(|l| set_points.get(l))
+                // Frames that lost their truth in a recording with truth are not scored.
+                .filter(|_| truth.is_some() || !input.has_truth);
+            let outcomes = experiment
+                .process(&Frame {
+                    set_point,
+                    t_us: frame.t_us,
+                    truth: truth.unwrap_or_else(Vector3::zeros),
+                    attitude: frame.truth.as_ref().map(attitude_of),
+                    image: frame.image.view(),
+                })
+                .map_err(|e| match e {
+                    ExperimentError::Detect(d) => CliError(format!(
+                        "frame {}: the detector refused it: {d:?}",
+                        frame.index
+                    )),
+                    other => experiment_error(other),
+                })?;
+            trace.frames.push(TraceFrame {
+                index: frame.index,
+                t_us: frame.t_us,
+                sequence,
+                truth,
+                label: frame.label,
+                outcomes,
+            });
+            progress.update(trace.frames.len());
+        }
+        Ok(())
+    });
+    progress.finish();
+    processed?;
+    let elapsed = started.elapsed().as_secs_f64();
+
+    let report = experiment.report();
+    let mut text = header(&input, &trace, elapsed);
+    if !report.rows.is_empty() {
+        if input.has_truth {
+            text.push_str(&set_point_table(&report));
+            text.push_str(&all_axes_table(&report));
+        } else {
+            text.push_str(&vision_only_table(&report));
+        }
+    }
+    let summaries: Vec<MethodSummary> =
+        (0..trace.methods.len()).map(|m| trace.summary(m)).collect();
+    text.push_str(&summary_table(&trace, &summaries, input.has_truth));
+    if report.rows.is_empty() && input.has_truth {
+        text.push_str(&altitude_table(&trace));
+    }
+    if !args.no_plots {
+        let dir = args
+            .plots
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(format!("replay-{}", input.short_name)));
+        let written = plot::write_figures(&trace, &dir, &input.title).map_err(CliError::new)?;
+        let _ = writeln!(
+            text,
+            "\nFigures: {} files in {} (position-x/y/z{}, .png and .svg)",
+            written.len(),
+            dir.display(),
+            if trace.has_truth() {
+                ", error-x/y/z"
+            } else {
+                ""
+            }
+        );
+    }
+    // Columns are padded to line up; the padding at the end of a line is noise.
+    let text: String = text
+        .lines()
+        .map(|l| format!("{}\n", l.trim_end()))
+        .collect();
+    out.write_all(text.as_bytes())
+        .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+    Ok(Outcome::Success)
+}
+
+fn experiment_error(e: ExperimentError) -> CliError {
+    CliError(format!("the replay failed: {e:?}"))
+}
+
+/// What was replayed, with what.
+fn header(input: &Input, trace: &Trace, elapsed_s: f64) -> String {
+    let mut s = String::new();
+    let c = &input.camera;
+    let markers = input.pad.markers.len();
+    let sequences = trace.sequences();
+    let _ = writeln!(
+        s,
+        "touchdown replay: {}: {} frames in {} sequence{} ({:.1} s of flight), replayed in {:.1} s",
+        input.title,
+        trace.frames.len(),
+        sequences,
+        if sequences == 1 { "" } else { "s" },
+        trace
+            .frames
+            .last()
+            .zip(trace.frames.first())
+            .map_or(0.0, |(b, a)| b.t_s() - a.t_s()),
+        elapsed_s
+    );
+    let _ = writeln!(
+        s,
+        "Camera {}x{} (f = {:.1} px{}), pad `{}` ({} marker{}). {}",
+        c.width,
+        c.height,
+        c.fx,
+        if c.has_distortion() {
+            ", distorted"
+        } else {
+            ""
+        },
+        input.pad.name,
+        markers,
+        if markers == 1 { "" } else { "s" },
+        if input.has_truth {
+            "Both methods get the camera's attitude\nfrom the truth; positions are the camera \
+             centre in the pad frame (x, y on the pad, z = altitude)."
+        } else {
+            "No truth in this recording: vision only\n(each pose's own rotation), no errors."
+        }
+    );
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use touchdown_sim::scenario::SCENARIOS;
+
+    use super::*;
+
+    #[test]
+    fn help_names_every_scenario() {
+        for (name, _) in SCENARIOS {
+            assert!(LONG_HELP.contains(name), "LONG_HELP lacks {name}");
+        }
+    }
+}

@@ -1,0 +1,202 @@
+//! `touchdown simulate`: render a named scenario into a recording (the contract's format).
+//!
+//! Frames are rendered and written one at a time, so memory does not grow with the length
+//! of the scenario. Progress goes to stderr only when it is a terminal, so logs and tests
+//! see one summary line on stdout.
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::builder::{PossibleValue, PossibleValuesParser};
+use clap::Args;
+
+use super::{CliError, Outcome};
+use touchdown_formats::recording::RecordingWriter;
+use touchdown_sim::scenario::{Scenario, SCENARIOS};
+use touchdown_sim::Simulator;
+
+/// `touchdown simulate --help`.
+pub const LONG_HELP: &str = "\
+Render a simulated flight over a landing pad into a recording.
+
+The simulator draws a textured ground plane with the pad's markers at true size, seen
+through a calibrated camera (intrinsics and Brown-Conrady distortion) on a vehicle whose
+attitude follows its motion; area sampling, motion blur over the exposure, lens blur and
+defocus, vignetting, exposure and gain, shot and read noise, clipping and blooming. Every
+frame carries the camera's true pose. The same --seed gives the same bytes.
+
+The recording (DIR) is the contract's format, the one `replay` reads and the camera board
+dumps: camera.toml, pad.toml, frames/000000.pgm ..., frames.csv (index,t_us and the truth
+cam_x,cam_y,cam_z,cam_qw,cam_qx,cam_qy,cam_qz: the camera's position in the pad frame,
+metres, and its camera-to-pad rotation), plus setpoints.csv (index,label) for scenarios
+with set points, and simulation.toml describing the run.
+
+Exit status: 0 on success; 2 with one line on stderr for a bad option or a write error.";
+
+/// Arguments of `touchdown simulate`.
+#[derive(Debug, Clone, Args)]
+pub struct SimulateArgs {
+    /// The scenario to fly
+    #[arg(long, value_name = "NAME", value_parser = scenario_parser())]
+    pub scenario: String,
+
+    /// Seed of everything random (texture, wobble, noise)
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        default_value_t = 1
+    )]
+    pub seed: u64,
+
+    /// Recording directory to write [default: sim-<SCENARIO>]
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+
+    /// Render only the first N frames
+    #[arg(long, allow_negative_numbers = true, value_name = "N")]
+    pub frames: Option<usize>,
+
+    /// Write into DIR even if it already holds files
+    #[arg(long)]
+    pub force: bool,
+
+    /// Rendering threads [default: all cores]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "N",
+        help_heading = "Advanced"
+    )]
+    pub threads: Option<usize>,
+}
+
+fn scenario_parser() -> PossibleValuesParser {
+    PossibleValuesParser::new(
+        SCENARIOS
+            .iter()
+            .map(|(name, help)| PossibleValue::new(*name).help(*help)),
+    )
+}
+
+/// Refuses to mix a new recording into a directory that holds something else.
+fn check_out_dir(dir: &Path, force: bool) -> Result<(), CliError> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(CliError(format!(
+            "{}: exists and is not a directory",
+            dir.display()
+        )));
+    }
+    if force || !dir.exists() {
+        return Ok(());
+    }
+    let mut entries = std::fs::read_dir(dir)
+        .map_err(|e| CliError(format!("{}: cannot read directory: {e}", dir.display())))?;
+    if entries.next().is_some() {
+        return Err(CliError(format!(
+            "{}: directory is not empty (use --force to write into it anyway)",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Runs `touchdown simulate`.
+pub fn run(
+    args: &SimulateArgs,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<Outcome, CliError> {
+    let mut scenario = Scenario::named(&args.scenario, args.seed)
+        .ok_or_else(|| CliError(format!("unknown scenario `{}`", args.scenario)))?;
+    if let Some(n) = args.frames {
+        if n == 0 {
+            return Err(CliError("--frames must be at least 1".into()));
+        }
+        scenario.truncate(n);
+    }
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("sim-{}", args.scenario)));
+    check_out_dir(&dir, args.force)?;
+    let started = Instant::now();
+    let mut simulator = Simulator::new(scenario);
+    if let Some(threads) = args.threads {
+        simulator = simulator.with_threads(threads);
+    }
+    let camera = simulator.scenario.camera.model;
+    let pad = simulator.scenario.pad.config.clone();
+    let mut writer = RecordingWriter::create(&dir, &camera, &pad, true).map_err(CliError::new)?;
+    std::fs::write(
+        dir.join("simulation.toml"),
+        simulation_toml(&simulator.scenario),
+    )
+    .map_err(|e| {
+        CliError(format!(
+            "{}: cannot write: {e}",
+            dir.join("simulation.toml").display()
+        ))
+    })?;
+    let total = simulator.frame_count();
+    let progress = std::io::stderr().is_terminal();
+    for k in 0..total {
+        let Some(frame) = simulator.render(k) else {
+            break;
+        };
+        writer
+            .push(
+                frame.t_us,
+                Some(&frame.truth),
+                frame.label.as_deref(),
+                &frame.image,
+            )
+            .map_err(CliError::new)?;
+        if progress && (k % 5 == 0 || k + 1 == total) {
+            let elapsed = started.elapsed().as_secs_f64();
+            let eta = elapsed / (k + 1) as f64 * (total - k - 1) as f64;
+            // Progress is best effort: a closed stderr must not stop the run.
+            let _ = write!(
+                err,
+                "\rrendering {}: frame {}/{} ({:.0} s left)   ",
+                args.scenario,
+                k + 1,
+                total,
+                eta
+            );
+        }
+    }
+    if progress {
+        let _ = writeln!(err);
+    }
+    let written = writer.finish().map_err(CliError::new)?;
+    writeln!(
+        out,
+        "wrote {written} frames of scenario `{}` (seed {}) to {} in {:.1} s",
+        args.scenario,
+        args.seed,
+        dir.display(),
+        started.elapsed().as_secs_f64()
+    )
+    .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+    Ok(Outcome::Success)
+}
+
+/// `simulation.toml`: what produced the recording (informational; readers ignore it).
+fn simulation_toml(s: &Scenario) -> String {
+    let lens = s.camera.model.distortion;
+    format!(
+        "# How this recording was simulated (touchdown simulate); informational.\n\
+         scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\
+         supersampling = {}\nground = {}\ndistortion = {:?}\n",
+        touchdown_formats::toml_string(&s.name),
+        touchdown_formats::toml_string(&s.description),
+        s.seed,
+        s.frames.len(),
+        s.exposure_time_s,
+        s.supersampling,
+        touchdown_formats::toml_string(&format!("{:?}", s.ground)),
+        lens
+    )
+}

@@ -1,0 +1,193 @@
+//! `touchdown simulate` and `touchdown pad` as a user runs them: a simulated recording that
+//! reads back (and renders again to the same bytes), a printable pad whose pad.toml gives the
+//! same layout back, page tiling, and one-line errors with status 2.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use touchdown_sim::scenario::Scenario;
+use touchdown_sim::Simulator;
+
+/// A fresh scratch directory path (removed if it exists, not created).
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("touchdown-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn touchdown() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_touchdown"))
+}
+
+#[test]
+fn simulate_writes_a_readable_recording() {
+    let dir = scratch("simulate");
+    let out = touchdown()
+        .args([
+            "simulate",
+            "--scenario",
+            "sun",
+            "--frames",
+            "2",
+            "--seed",
+            "3",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let recording = touchdown_formats::recording::Recording::read(&dir).unwrap();
+    assert_eq!(recording.frames.len(), 2);
+    assert_eq!(recording.frames[0].label.as_deref(), Some("hover=20"));
+    let truth = recording.frames[1].truth.unwrap();
+    assert!((truth.position[2] - 20.0).abs() < 0.2);
+    // Rendering again from the same seed gives the same bytes.
+    let mut scenario = Scenario::named("sun", 3).unwrap();
+    scenario.truncate(2);
+    let again = Simulator::new(scenario).render(1).unwrap();
+    assert_eq!(again.image, recording.frames[1].image);
+    // A non-empty directory is refused with one line and status 2.
+    let out = touchdown()
+        .args(["simulate", "--scenario", "sun", "--frames", "1", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("not empty"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_options_are_one_line_and_status_2() {
+    for args in [
+        vec!["simulate", "--scenario", "moon"],
+        vec!["simulate", "--scenario", "paper", "--frames", "0"],
+        vec!["pad", "--design", "nested"],
+        vec!["pad", "--layout", "/nonexistent/pad.toml", "--out", "/tmp"],
+    ] {
+        let out = touchdown().args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.starts_with("error:"), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn pad_refuses_overlapping_markers() {
+    let dir = scratch("pad-overlap");
+    std::fs::create_dir_all(&dir).unwrap();
+    let layout = dir.join("overlap.toml");
+    std::fs::write(
+        &layout,
+        "name = \"overlap\"\n\
+         [[marker]]\nfamily = \"tag36h11\"\nid = 0\nsize = 1.0\nx = 0.0\ny = 0.0\n\
+         [[marker]]\nfamily = \"tag36h11\"\nid = 1\nsize = 0.2\nx = 0.1\ny = 0.1\n",
+    )
+    .unwrap();
+    let out = touchdown()
+        .args(["pad", "--layout"])
+        .arg(&layout)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.contains("overlap.toml") && stderr.contains("overlap") && stderr.contains("#1"),
+        "{stderr}"
+    );
+    assert!(!dir.join("out").join("pad.svg").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn pad_tiles_into_pages_and_counts_markers_in_words() {
+    let dir = scratch("pad-tiles");
+    let out = touchdown()
+        .args([
+            "pad",
+            "--design",
+            "paper-single",
+            "--tile",
+            "letter",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("1 marker;"), "{stdout}");
+    // A 1300 x 1340 mm drawing (1.25 m sheet, 25 mm borders, 40 mm footer) on letter paper
+    // (195.9 x 259.4 mm inside the margins, stepping 185.9 x 249.4): 7 columns, 6 rows.
+    assert!(
+        stdout.contains("wrote 42 letter pages (6 rows x 7 columns"),
+        "{stdout}"
+    );
+    let pages: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|name| name.starts_with("pad-page-"))
+        .collect();
+    assert_eq!(pages.len(), 42);
+    assert!(pages.contains(&"pad-page-1-1.svg".to_string()));
+    assert!(pages.contains(&"pad-page-6-7.svg".to_string()));
+    let page = std::fs::read_to_string(dir.join("pad-page-2-3.svg")).unwrap();
+    assert!(
+        page.contains("width=\"215.9mm\" height=\"279.4mm\""),
+        "{}",
+        &page[..300]
+    );
+    assert!(page.contains("page row 2 column 3 of 6 x 7"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn pad_writes_svg_and_the_same_layout() {
+    let dir = scratch("pad");
+    let out = touchdown()
+        .args(["pad", "--design", "nested", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let svg = std::fs::read_to_string(dir.join("pad.svg")).unwrap();
+    assert!(svg.contains("mm\" height=\"") && svg.contains("viewBox"));
+    assert!(svg.contains("100 mm"));
+    let config = touchdown_formats::pad::load_pad(&dir.join("pad.toml")).unwrap();
+    assert_eq!(
+        config.layout().unwrap(),
+        touchdown_core::pad::designs::NESTED
+    );
+    // And a layout file gives the same pad back.
+    let again = scratch("pad-again");
+    let out = touchdown()
+        .args(["pad", "--layout"])
+        .arg(dir.join("pad.toml"))
+        .arg("--out")
+        .arg(&again)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert_eq!(std::fs::read_to_string(again.join("pad.svg")).unwrap(), svg);
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&again);
+}

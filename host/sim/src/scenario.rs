@@ -1,0 +1,446 @@
+//! The named scenarios: what is flown, over which pad, in which light, seen by which camera.
+//!
+//! | name | pad | what |
+//! |---|---|---|
+//! | `paper` | paper-single (1.0 m aruco_6x6_250) | the paper's set points: hover at Z = 5, 10, 15, 20, 25 m and on to 30, 40, 50 m; X and Y = 1.2 ... 6 m at 15 m |
+//! | `lateral` | paper-single | fast 4 m dashes at 12 m (tilting up to ~30 degrees, motion blur) |
+//! | `descent` | nested | 1 m/s down from 20 m to 1 m while drifting 0.5 m/s onto the pad |
+//! | `landing` | nested | approach and landing from 40 m to 0.3 m |
+//! | `sun` | nested | hover at 20 ... 1 m in strong sun, auto-exposure metering on grass: the pad clips |
+//! | `shadow` | nested | hover at 20 ... 1 m with a hard shadow edge across the pad on concrete |
+//! | `occlusion` | nested | hover at 20 ... 1 m with a dark object lying across part of the pad |
+//!
+//! The camera is the one of the paper's experiments: 640x480 with a 60
+//! degree horizontal field of view (f = 554.3 px), looking straight down, image top toward
+//! the nose. `paper` keeps it ideal (the paper used Gazebo's distortion-free camera); the
+//! others add a mild barrel distortion, defocus and vignetting of a board camera.
+//!
+//! `paper` flies the set points of the paper's Tables 2-4 ([`TABLE_ALTITUDES_M`],
+//! [`TABLE_OFFSETS_M`] at [`OFFSET_ROWS_ALTITUDE_M`], and [`EXTRA_ALTITUDES_M`] above them),
+//! Z rows first, then X, then Y, all at heading 0. These tables are the one definition of
+//! where the paper's experiment hovers: the evaluation's in-memory paper geometry
+//! (`touchdown_eval::paper_geometry`) hovers at the same points.
+//!
+//! Frames carry set-point labels where the scenario has set points (`z=5`, `x=1.2`,
+//! `hover=3`); the paper's tables group frames by them.
+
+use crate::camera::{CameraMount, SimCamera};
+use crate::math::Vec3;
+use crate::pad::PrintedPad;
+use crate::sensor::{Exposure, Optics, Sensor};
+use crate::texture::GroundKind;
+use crate::trajectory::{Profile, Segment, Trajectory, Wobble};
+use crate::world::{Lighting, Occluder, ShadowEdge};
+
+/// Altitude of the paper's X and Y rows (Tables 3 and 4), metres.
+pub const OFFSET_ROWS_ALTITUDE_M: f64 = 15.0;
+/// The altitudes of the paper's Table 2 (the Z rows), metres.
+pub const TABLE_ALTITUDES_M: [f64; 5] = [5.0, 10.0, 15.0, 20.0, 25.0];
+/// The horizontal offsets of the paper's Tables 3 and 4 (the X and Y rows, at
+/// [`OFFSET_ROWS_ALTITUDE_M`]), metres.
+pub const TABLE_OFFSETS_M: [f64; 5] = [1.2, 2.4, 3.6, 4.8, 6.0];
+/// The altitudes beyond Table 2 flown by default (Z rows without a published value), metres.
+pub const EXTRA_ALTITUDES_M: [f64; 3] = [30.0, 40.0, 50.0];
+
+/// Mild barrel distortion of a small M12 board lens at 60 degrees.
+pub const BOARD_LENS_DISTORTION: [f32; 5] = [-0.12, 0.03, 0.0005, -0.0003, 0.0];
+
+/// One frame to render.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FramePlan {
+    /// Middle of the exposure, microseconds from the start.
+    pub t_us: u64,
+    /// Set-point label, if the scenario has set points.
+    pub label: Option<String>,
+}
+
+/// Everything needed to render a recording.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// Name (`paper`, ...).
+    pub name: String,
+    /// One line about it.
+    pub description: String,
+    /// The seed everything random derives from.
+    pub seed: u64,
+    /// The camera.
+    pub camera: SimCamera,
+    /// How it is mounted.
+    pub mount: CameraMount,
+    /// The pad.
+    pub pad: PrintedPad,
+    /// The ground around the pad.
+    pub ground: GroundKind,
+    /// Sun, sky, shadow.
+    pub lighting: Lighting,
+    /// Something lying on the pad.
+    pub occluder: Option<Occluder>,
+    /// The lens.
+    pub optics: Optics,
+    /// The sensor.
+    pub sensor: Sensor,
+    /// Exposure time, seconds (what motion blurs over).
+    pub exposure_time_s: f64,
+    /// Sub-samples per pixel side (without motion blur).
+    pub supersampling: usize,
+    /// The flight.
+    pub trajectory: Trajectory,
+    /// The frames.
+    pub frames: Vec<FramePlan>,
+}
+
+/// The scenario names and what they are, for `--help`.
+pub const SCENARIOS: &[(&str, &str)] = &[
+    (
+        "paper",
+        "the paper's set points over a 1.0 m aruco_6x6_250: Z = 5..50 m, X and Y = 1.2..6 m at 15 m (288 frames)",
+    ),
+    (
+        "lateral",
+        "fast 4 m dashes at 12 m over the paper's marker, tilting ~30 deg, motion blur (330 frames)",
+    ),
+    (
+        "descent",
+        "1 m/s descent from 20 m to 1 m drifting 0.5 m/s onto the nested pad, 30 Hz (570 frames)",
+    ),
+    (
+        "landing",
+        "approach and landing from 40 m to 0.3 m over the nested pad, 15 Hz (630 frames)",
+    ),
+    (
+        "sun",
+        "hover at 20..1 m in strong sun with auto-exposure on grass: the white pad clips (60 frames)",
+    ),
+    (
+        "shadow",
+        "hover at 20..1 m with a hard shadow edge across the nested pad on concrete (60 frames)",
+    ),
+    (
+        "occlusion",
+        "hover at 20..1 m with a dark object lying across part of the nested pad (60 frames)",
+    ),
+];
+
+/// Microseconds of a frame period at `rate_hz`.
+fn period_us(rate_hz: f64) -> u64 {
+    (1e6 / rate_hz).round() as u64
+}
+
+/// Hover set points: `frames_per_point` frames at `rate_hz` at each, `gap_s` between them
+/// (the vehicle jumps: only the hovers are recorded).
+fn set_points(
+    points: &[(String, Vec3)],
+    frames_per_point: usize,
+    rate_hz: f64,
+    gap_s: f64,
+) -> (Vec<Segment>, Vec<FramePlan>) {
+    let period = period_us(rate_hz);
+    let mut segments = Vec::new();
+    let mut frames = Vec::new();
+    let mut t_us = 0u64;
+    for (label, position) in points {
+        let t0 = t_us as f64 * 1e-6;
+        for _ in 0..frames_per_point {
+            frames.push(FramePlan {
+                t_us,
+                label: Some(label.clone()),
+            });
+            t_us += period;
+        }
+        let t1 = t_us as f64 * 1e-6;
+        segments.push(Segment {
+            t0,
+            t1,
+            from: *position,
+            to: *position,
+            profile: Profile::Hold,
+        });
+        t_us += (gap_s * 1e6).round() as u64;
+    }
+    (segments, frames)
+}
+
+/// Evenly spaced frames over `[0, duration_s]`.
+fn uniform_frames(duration_s: f64, rate_hz: f64) -> Vec<FramePlan> {
+    let period = period_us(rate_hz);
+    let count = (duration_s * 1e6 / period as f64).floor() as u64 + 1;
+    (0..count)
+        .map(|k| FramePlan {
+            t_us: k * period,
+            label: None,
+        })
+        .collect()
+}
+
+fn label(axis: &str, value: f64) -> String {
+    format!("{axis}={value}")
+}
+
+impl Scenario {
+    /// The scenario called `name` with `seed`; `None` for an unknown name.
+    pub fn named(name: &str, seed: u64) -> Option<Scenario> {
+        let paper_pad = PrintedPad::design("paper-single")?;
+        let nested = PrintedPad::design("nested")?;
+        let ideal_camera = SimCamera::with_fov(640, 480, 60.0, [0.0; 5]);
+        let board_camera = SimCamera::with_fov(640, 480, 60.0, BOARD_LENS_DISTORTION);
+        let base = |name: &str, pad: PrintedPad, camera: SimCamera, trajectory, frames| Scenario {
+            name: name.to_string(),
+            description: SCENARIOS
+                .iter()
+                .find(|s| s.0 == name)
+                .map_or(String::new(), |s| s.1.to_string()),
+            seed,
+            camera,
+            mount: CameraMount::downward(),
+            pad,
+            ground: GroundKind::Grass,
+            lighting: Lighting::daylight(),
+            occluder: None,
+            optics: Optics::board_camera(),
+            sensor: Sensor::board_camera(),
+            exposure_time_s: 0.004,
+            supersampling: 4,
+            trajectory,
+            frames,
+        };
+        let hover_wobble = Wobble::new(0.02, 0.5, 0.4, seed);
+        let hover_set = |seed_salt: u64| {
+            let points: Vec<(String, Vec3)> = [20.0, 10.0, 5.0, 3.0, 2.0, 1.0]
+                .iter()
+                .map(|&h| (label("hover", h), [0.0, 0.0, h]))
+                .collect();
+            let (segments, frames) = set_points(&points, 10, 30.0, 1.0);
+            let trajectory = Trajectory {
+                segments,
+                yaw: 0.0,
+                wobble: Wobble::new(0.01, 0.5, 0.4, seed ^ seed_salt),
+                tilt_with_acceleration: false,
+                trim: (0.0, 0.0),
+            };
+            (trajectory, frames)
+        };
+        let scenario = match name {
+            "paper" => {
+                let mut points: Vec<(String, Vec3)> = Vec::new();
+                for &z in TABLE_ALTITUDES_M.iter().chain(&EXTRA_ALTITUDES_M) {
+                    points.push((label("z", z), [0.0, 0.0, z]));
+                }
+                let h = OFFSET_ROWS_ALTITUDE_M;
+                for x in TABLE_OFFSETS_M {
+                    points.push((label("x", x), [x, 0.0, h]));
+                }
+                for y in TABLE_OFFSETS_M {
+                    points.push((label("y", y), [0.0, y, h]));
+                }
+                let (segments, frames) = set_points(&points, 16, 30.0, 1.0);
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: hover_wobble,
+                    tilt_with_acceleration: false,
+                    trim: (0.0, 0.0),
+                };
+                Scenario {
+                    optics: Optics {
+                        focus_distance_m: f64::INFINITY,
+                        ..Optics::board_camera()
+                    },
+                    ..base(name, paper_pad, ideal_camera, trajectory, frames)
+                }
+            }
+            "lateral" => {
+                let h = 12.0;
+                let stops: [Vec3; 5] = [
+                    [0.0, 0.0, h],
+                    [4.0, 0.0, h],
+                    [0.0, 0.0, h],
+                    [0.0, 4.0, h],
+                    [0.0, 0.0, h],
+                ];
+                let mut segments = vec![Segment {
+                    t0: 0.0,
+                    t1: 1.0,
+                    from: stops[0],
+                    to: stops[0],
+                    profile: Profile::Hold,
+                }];
+                let mut t = 1.0;
+                for pair in stops.windows(2) {
+                    segments.push(Segment {
+                        t0: t,
+                        t1: t + 2.0,
+                        from: pair[0],
+                        to: pair[1],
+                        profile: Profile::MinimumJerk,
+                    });
+                    segments.push(Segment {
+                        t0: t + 2.0,
+                        t1: t + 2.5,
+                        from: pair[1],
+                        to: pair[1],
+                        profile: Profile::Hold,
+                    });
+                    t += 2.5;
+                }
+                let frames = uniform_frames(t - 1.0 / 30.0, 30.0);
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: Wobble::new(0.02, 0.7, 0.5, seed),
+                    tilt_with_acceleration: true,
+                    trim: (0.0, 0.0),
+                };
+                Scenario {
+                    exposure_time_s: 0.008,
+                    ..base(name, paper_pad, board_camera, trajectory, frames)
+                }
+            }
+            "descent" => {
+                let (top, bottom, speed, drift) = (20.0, 1.0, 1.0, 0.5);
+                let duration = (top - bottom) / speed;
+                // Drifting toward the pad from the south-west: over it at the bottom.
+                let offset = drift * duration;
+                let direction = 225f64.to_radians();
+                let start = [offset * direction.cos(), offset * direction.sin(), top];
+                let segments = vec![Segment {
+                    t0: 0.0,
+                    t1: duration,
+                    from: start,
+                    to: [0.0, 0.0, bottom],
+                    profile: Profile::Linear,
+                }];
+                let frames = uniform_frames(duration - 1.0 / 30.0, 30.0);
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: Wobble::new(0.03, 2.0, 0.3, seed),
+                    tilt_with_acceleration: true,
+                    trim: (0.0, 0.0),
+                };
+                base(name, nested, board_camera, trajectory, frames)
+            }
+            "landing" => {
+                let segments = vec![
+                    Segment {
+                        t0: 0.0,
+                        t1: 20.0,
+                        from: [-10.0, -6.0, 40.0],
+                        to: [0.0, 0.0, 15.0],
+                        profile: Profile::MinimumJerk,
+                    },
+                    Segment {
+                        t0: 20.0,
+                        t1: 32.0,
+                        from: [0.0, 0.0, 15.0],
+                        to: [0.0, 0.0, 3.0],
+                        profile: Profile::Linear,
+                    },
+                    Segment {
+                        t0: 32.0,
+                        t1: 41.0,
+                        from: [0.0, 0.0, 3.0],
+                        to: [0.0, 0.0, 0.3],
+                        profile: Profile::Linear,
+                    },
+                    Segment {
+                        t0: 41.0,
+                        t1: 42.0,
+                        from: [0.0, 0.0, 0.3],
+                        to: [0.0, 0.0, 0.3],
+                        profile: Profile::Hold,
+                    },
+                ];
+                let frames = uniform_frames(42.0, 15.0);
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: Wobble::new(0.015, 1.0, 0.3, seed),
+                    tilt_with_acceleration: true,
+                    trim: (0.0, 0.0),
+                };
+                base(name, nested, board_camera, trajectory, frames)
+            }
+            "sun" => {
+                let (trajectory, frames) = hover_set(1);
+                Scenario {
+                    lighting: Lighting {
+                        direct: 2.8,
+                        sky: 0.4,
+                        shadow: None,
+                    },
+                    sensor: Sensor {
+                        bloom: 0.8,
+                        bloom_sigma_px: 2.0,
+                        flare: 0.05,
+                        exposure: Exposure::Auto {
+                            target_mean: 140.0,
+                            limits: (50.0, 1e6),
+                        },
+                        ..Sensor::board_camera()
+                    },
+                    exposure_time_s: 0.001,
+                    ..base(name, nested, board_camera, trajectory, frames)
+                }
+            }
+            "shadow" => {
+                let (trajectory, frames) = hover_set(2);
+                Scenario {
+                    ground: GroundKind::Concrete,
+                    lighting: Lighting {
+                        shadow: Some(ShadowEdge::new([0.1, 0.3], 30.0, 0.02)),
+                        ..Lighting::daylight()
+                    },
+                    sensor: Sensor {
+                        exposure: Exposure::Auto {
+                            target_mean: 110.0,
+                            limits: (50.0, 1e6),
+                        },
+                        ..Sensor::board_camera()
+                    },
+                    ..base(name, nested, board_camera, trajectory, frames)
+                }
+            }
+            "occlusion" => {
+                let (trajectory, frames) = hover_set(3);
+                Scenario {
+                    ground: GroundKind::Asphalt,
+                    occluder: Some(Occluder {
+                        center: [0.3, 0.85],
+                        radii: [0.35, 0.14],
+                        angle_deg: 25.0,
+                        albedo: 0.06,
+                    }),
+                    ..base(name, nested, board_camera, trajectory, frames)
+                }
+            }
+            _ => return None,
+        };
+        Some(scenario)
+    }
+
+    /// Keeps only the first `count` frames.
+    pub fn truncate(&mut self, count: usize) {
+        self.frames.truncate(count);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_scenario_exists_with_the_frame_count_its_help_gives() {
+        for (name, help) in SCENARIOS {
+            let scenario = Scenario::named(name, 1).unwrap();
+            let count = help
+                .rsplit('(')
+                .next()
+                .and_then(|s| s.split(' ').next())
+                .and_then(|n| n.parse::<usize>().ok())
+                .unwrap();
+            assert_eq!(scenario.frames.len(), count, "{name}");
+            assert!(scenario.frames.windows(2).all(|w| w[0].t_us < w[1].t_us));
+        }
+        assert!(Scenario::named("moon", 1).is_none());
+    }
+}
