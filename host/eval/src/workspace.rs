@@ -1,5 +1,9 @@
 //! Heap-allocated detector work memory sized to any frame (the firmware uses the fixed
 //! `QvgaWorkspace` / `VgaWorkspace` of the core instead).
+//!
+//! It lives in the evaluation because the evaluation is where the host runs the detector
+//! over frames of any size; its other users (the command line's `detect` and `companion`,
+//! the integration tests, the benchmarks and examples) depend on the evaluation anyway.
 
 use touchdown_core::detect::{buffer_sizes, Buffers, DetectError, Detection, Detector};
 use touchdown_core::family::Family;
