@@ -385,6 +385,7 @@ fn report(
         refined,
         bordered,
         decoded,
+        fitted,
         trace_steps,
         work,
         truncated,
@@ -397,13 +398,14 @@ fn report(
         }
     };
     hprintln!(
-        "  detections {} contours {} quads {} refined {} bordered {} decoded {} trace_steps {} work {} truncated {}",
+        "  detections {} contours {} quads {} refined {} bordered {} decoded {} fitted {} trace_steps {} work {} truncated {}",
         count,
         contours,
         quads,
         refined,
         bordered,
         decoded,
+        fitted,
         trace_steps,
         work,
         truncated

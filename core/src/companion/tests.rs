@@ -1,5 +1,5 @@
 //! Unit tests of the companion's own behaviour (the end-to-end tests with a simulated
-//! autopilot are in host-tests/tests/companion.rs).
+//! autopilot are in core/tests/companion_*.rs).
 
 use super::*;
 use crate::filter::{FrameEstimate, PadEstimate};

@@ -84,6 +84,11 @@ impl Strategy for Paper {
     fn max_hamming(&self, _config: &DetectorConfig) -> u8 {
         0
     }
+
+    /// The paper's corners are its own step-back from the edge band, nothing else.
+    fn fits_patterns(&self, _config: &DetectorConfig) -> bool {
+        false
+    }
 }
 
 /// Gradient magnitude (|gx| + |gy| of the 3x3 Sobel on the normalised, blurred frame) above

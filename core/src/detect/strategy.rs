@@ -55,6 +55,9 @@ pub(super) trait Strategy {
     ) -> Option<decode::GridRead>;
     /// Most bits the code look-up may correct.
     fn max_hamming(&self, config: &DetectorConfig) -> u8;
+    /// Step 7: whether the small markers' corners are fitted with their decoded pattern
+    /// ([`super::pattern_fit`]).
+    fn fits_patterns(&self, config: &DetectorConfig) -> bool;
 }
 
 /// What the quick look ([`Strategy::quick_look`]) made of a candidate.
@@ -151,5 +154,9 @@ impl Strategy for Robust {
 
     fn max_hamming(&self, config: &DetectorConfig) -> u8 {
         config.max_hamming
+    }
+
+    fn fits_patterns(&self, config: &DetectorConfig) -> bool {
+        config.refine_edges && config.fit_small_markers
     }
 }
