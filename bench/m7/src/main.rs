@@ -25,7 +25,7 @@
 //! what the firmware posts then).
 //!
 //! Frames ([`FRAMES`]): the typical ones are rendered by the simulator
-//! (`cargo run --release -p touchdown-host --example m7_frames` writes `frames/*.pgm`); the
+//! (`cargo run --release -p touchdown-host-tests --example m7_frames` writes `frames/*.pgm`); the
 //! adversarial ones (noise, checkerboard, hundreds of small squares, marker look-alikes) and the flat ones (the
 //! floor: thresholding and the scan with nothing to trace) are generated here, outside the
 //! counted regions. Every frame is copied into one 32-byte-aligned RAM buffer first, as the
@@ -121,7 +121,8 @@ const PAD_MULTI_6: PadLayout<'static> = one_tag("multi-6", 0);
 const PAD_FAR_1: PadLayout<'static> = one_tag("far-1", 11);
 const PAD_VGA_LANDING_3: PadLayout<'static> = one_tag("vga-landing-3", 22);
 
-/// The simulator's camera for a frame (`PinholeCamera::for_frame` in host-tests' renderer):
+/// The simulator's camera for a frame (`PinholeCamera::for_frame` in touchdown-sim's renderer,
+/// host/sim/src/render/):
 /// focal length = the larger dimension, principal point at the centre, no distortion.
 fn camera_for(width: usize, height: usize) -> CameraModel {
     let focal = width.max(height) as f32;
