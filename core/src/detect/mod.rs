@@ -522,8 +522,7 @@ impl Detector {
             }
         }
         if strategy.fits_patterns(config) {
-            stats.fitted =
-                pattern_fit::fit_small_markers(image, families, detections, &mut tracer);
+            stats.fitted = pattern_fit::fit_small_markers(image, families, detections, &mut tracer);
         }
         stats.trace_steps = tracer.steps();
         stats.work = budget - tracer.remaining();

@@ -73,10 +73,12 @@ pub const MAX_CORNER_SHIFT_PX: f32 = 0.75;
 /// sets the pad fix's scale (its corners are the farthest apart); the bound keeps a frame
 /// of many small look-alikes from paying for many fits.
 pub const MAX_FITS_PER_FRAME: usize = 1;
-/// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`): measured on
-/// the Cortex-M7 benchmark (`bench/m7`, qvga-far-1), where one unit is 75 to 100
-/// instructions.
-pub const WORK_PATTERN_FIT: u32 = 2_500;
+/// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
+/// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
+/// qvga-far-1: one tag36h11 of 14 pixels): 1.62 million instructions for its 192 pixels and five
+/// passes. A fit is charged before it starts and skipped when the frame's budget cannot pay
+/// for it, so it never breaks the bound on the time per frame.
+pub const WORK_PATTERN_FIT: u32 = 20_000;
 /// Most cells per side of a family grid the fit models (with its assumed margin ring).
 const MAX_GRID: usize = 16;
 /// Blur range (pixels) a fit may end in: below, the pixel's own area; above, the marker is
@@ -316,7 +318,11 @@ impl Axis {
         // The known area's ends inside the window are its first and last edges; an end
         // beyond the window counts as at infinity.
         let below = if lo < 0.0 { start } else { (0.0, 0.0, 0.0) };
-        let above = if hi > cells as f32 { lower } else { (1.0, 0.0, 0.0) };
+        let above = if hi > cells as f32 {
+            lower
+        } else {
+            (1.0, 0.0, 0.0)
+        };
         axis.known = above.0 - below.0;
         axis.known_d_pos = -(above.1 - below.1) * inverse;
         axis.known_d_width = -(above.1 * above.2 - below.1 * below.2) * inverse;
@@ -828,7 +834,10 @@ pub(super) fn fit_small_markers(
     detections: &mut [Detection],
     tracer: &mut Tracer<'_>,
 ) -> u32 {
-    if detections.iter().any(|d| longest_side(&d.corners) > MAX_SIDE_PX) {
+    if detections
+        .iter()
+        .any(|d| longest_side(&d.corners) > MAX_SIDE_PX)
+    {
         return 0;
     }
     // The largest markers first: a single pass keeps the top few, largest first.
@@ -854,7 +863,13 @@ pub(super) fn fit_small_markers(
         if !tracer.charge(WORK_PATTERN_FIT) {
             break;
         }
-        let fit = fit_corners(image, family, detection.id, &detection.corners, detection.contrast);
+        let fit = fit_corners(
+            image,
+            family,
+            detection.id,
+            &detection.corners,
+            detection.contrast,
+        );
         if let Some(corners) = fit {
             detection.corners = corners;
             detection.center = diagonals_meet(&corners).unwrap_or(detection.center);

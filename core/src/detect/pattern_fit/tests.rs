@@ -155,7 +155,10 @@ fn small_markers_come_out_unbiased_in_scale_across_blurs() {
             100.0 * scale,
             100.0 * (perimeter(&start) / perimeter(&truth) - 1.0)
         );
-        assert!(scale.abs() < 0.003, "side {side} blur {sigma}: scale {scale}");
+        assert!(
+            scale.abs() < 0.003,
+            "side {side} blur {sigma}: scale {scale}"
+        );
         assert!(rms < 0.06, "side {side} blur {sigma}: corner rms {rms}");
         worst = worst.max(scale.abs());
     }
