@@ -1,0 +1,372 @@
+//! Step 7: corners of small markers from a fit of the decoded pattern to the pixels.
+//!
+//! ## Why
+//! Far from the pad a marker spans 10-20 pixels, a cell 1-2 pixels, and the blur is about
+//! as wide as a cell. The edge search of [`super::refine`] then reads a gradient lobe whose
+//! tails run into the neighbouring edges (the white ring's outer edge outside, the first data
+//! cells inside): the centroid moves by a few hundredths of a pixel per edge, in a direction
+//! set by the blur and by what lies around the marker. That is a scale error: on a 1 m marker
+//! at 50 m (11 pixels across) the altitude read 1.4 % high on our renderer and 1.4 % low on
+//! another, the largest error of the pose above 25 m once the tilt comes from the attitude.
+//!
+//! Once the marker is decoded, the whole pattern is known: every cell's colour, the white
+//! ring outside the border (the family's quiet ring, or the printed margin every family needs
+//! for its outline to be found). So the image of the marker is predicted, not searched:
+//! the known cells mapped through the corner homography, blurred by a Gaussian of unknown
+//! width, with unknown black and white levels and an unknown (uniform) level beyond the known
+//! area. A Gauss-Newton fit of the 4 corners, the blur, the two levels and the outside level
+//! to every pixel over the marker moves the corners to where the whole pattern agrees: each
+//! edge is placed with its neighbours modelled instead of trimmed, so the scale is unbiased
+//! whatever the blur.
+//!
+//! ## The model
+//! A pixel at image point `x` (pixel centres at integers) reads `a + c * B(u)`, where `u` is
+//! `x` in grid coordinates (cells; the detected corners sit at the border's outer corners,
+//! see [`Family::quad_offset`]) and `B` is the blurred pattern (1 white, 0 black). The blur
+//! is a Gaussian (the optics and the pixel's own area together) of one width in grid cells
+//! along both grid axes: exact for a marker seen square on, as every far marker is, and the
+//! corners' moves then leave it alone, which keeps the derivatives simple. A Gaussian over a grid of squares is separable, so `B` and its
+//! derivatives are sums of products of normal-distribution differences along the two axes.
+//!
+//! ## Cost and bounds
+//! Only markers whose longest side is at most [`MAX_SIDE_PX`] are fitted; above it the edge
+//! search is already within a tenth of a percent. At most [`MAX_PIXELS`] pixels (a regular
+//! subsample on the larger markers) and [`ITERATIONS`] iterations, so the time per marker is
+//! bounded whatever the image. A fit is kept only when it converged to a sane blur and
+//! moved no corner more than [`MAX_CORNER_SHIFT_PX`]; otherwise the edge corners stand.
+
+// The normal equations are fixed 12x12 arrays indexed by loop counters below 12, and the
+// normal tables by an index clamped to their length: never by data.
+#![allow(clippy::indexing_slicing)]
+
+mod model;
+mod solve;
+
+use super::contour::Tracer;
+use super::Detection;
+use crate::family::Family;
+use crate::geometry::{Homography, Point};
+use crate::image::GrayImage;
+use model::Pattern;
+use solve::{linearise, solve_damped, solve_levels, Pass};
+
+/// Longest marker side (pixels) that is fitted. At 40 pixels a cell of an 8-cell border
+/// square is 5 pixels, wider than any blur, and the edge search is unbiased there.
+pub const MAX_SIDE_PX: f32 = 40.0;
+/// Most pixels one fit reads. Larger markers are subsampled on a lattice, which leaves a
+/// little of the model's mismatch (the pixel's square area against the Gaussian) in the
+/// scale: within 0.15 % at 11 pixels across, 0.05 % from 18 pixels up (the tests). Each
+/// pixel costs about 1,700 Cortex-M7 instructions per pass with derivatives.
+pub const MAX_PIXELS: usize = 192;
+/// Levenberg-Marquardt steps. The edge corners start within a few tenths of a pixel and the
+/// model is smooth there: three steps converge to about a hundredth of a pixel (the last
+/// one's cost is evaluated without derivatives, only to keep or refuse it).
+pub const ITERATIONS: usize = 3;
+/// Range of the fitted contrast, as a multiple of the decoder's measure of it (a mean over
+/// blurred cells: lower than the real contrast on a small marker, never far above it).
+const CONTRAST_RANGE: (f32, f32) = (0.5, 4.0);
+/// Largest residual RMS a fit may leave, as a fraction of the fitted contrast.
+const MAX_RESIDUAL_OF_CONTRAST: f32 = 0.25;
+/// Starting Levenberg-Marquardt damping of the normal equations' diagonal: keeps a step
+/// finite when a parameter is barely observed (the outside level of a marker in a wide
+/// margin).
+const DAMPING: f32 = 1e-3;
+/// A fit that moves a corner further than this (pixels) is not the small correction it is
+/// for (a wrong decode, an occluded marker, another marker in the margin): refused.
+pub const MAX_CORNER_SHIFT_PX: f32 = 0.75;
+/// Most markers fitted in one frame: the largest. When every marker is small, the largest
+/// sets the pad fix's scale (its corners are the farthest apart); the bound keeps a frame
+/// of many small look-alikes from paying for many fits.
+pub const MAX_FITS_PER_FRAME: usize = 1;
+/// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
+/// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
+/// qvga-far-1: one tag36h11 of 14 pixels): 1.62 million instructions for its 192 pixels and five
+/// passes. A fit is charged before it starts and skipped when the frame's budget cannot pay
+/// for it, so it never breaks the bound on the time per frame.
+pub const WORK_PATTERN_FIT: u32 = 20_000;
+/// Most cells per side of a family grid the fit models (with its assumed margin ring).
+const MAX_GRID: usize = 16;
+/// Blur range (pixels) a fit may end in: below, the pixel's own area; above, the marker is
+/// not resolved.
+const BLUR_RANGE_PX: (f32, f32) = (0.25, 3.0);
+/// The Gaussian is summed over this many of its widths on either side of a point.
+const WINDOW_SIGMAS: f32 = 3.0;
+/// Most cells one axis of the window may cover: a blur of up to 1.1 cells (a marker of 8
+/// cells blurred by 1.2 pixels is 9 pixels across, the smallest the detector finds).
+const MAX_WINDOW: usize = 8;
+/// Blur the fit starts from (pixels): typical of a small lens at focus.
+const INITIAL_BLUR_PX: f32 = 0.8;
+/// Parameters: 4 corners (x, y), blur (the logarithm of its width in grid cells: always
+/// positive, and a step of a given size means the same at any blur), black level, contrast,
+/// outside level.
+const N: usize = 12;
+const BLUR: usize = 8;
+const BLACK: usize = 9;
+const CONTRAST: usize = 10;
+const OUTSIDE: usize = 11;
+
+/// The pixels a fit reads: the box around the known area's image, thinned to a lattice
+/// of every `step`-th pixel (a checkerboard for 2) when the box holds more than
+/// [`MAX_PIXELS`].
+struct Window {
+    x0: usize,
+    y0: usize,
+    x1: usize,
+    y1: usize,
+    step: usize,
+}
+
+impl Window {
+    /// Whether pixel (x, y) is on the lattice: rows shifted by half a step, so that every
+    /// column and every row is read.
+    fn reads(&self, x: usize, y: usize) -> bool {
+        (x + y * (self.step / 2).max(1)).is_multiple_of(self.step)
+    }
+}
+
+fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Option<Window> {
+    let to_image = Homography::from_4_points(&pattern.corner_points(), corners)?;
+    let c = pattern.side as f32;
+    let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+    for (u, v) in [(0.0, 0.0), (c, 0.0), (c, c), (0.0, c)] {
+        let p = to_image.map(u, v)?;
+        lo_x = lo_x.min(p.x);
+        lo_y = lo_y.min(p.y);
+        hi_x = hi_x.max(p.x);
+        hi_y = hi_y.max(p.y);
+    }
+    // The blur reaches a little beyond the known area: read it, the outside level models it.
+    let pad = 1.5;
+    let x0 = libm::floorf(lo_x - pad).max(0.0);
+    let y0 = libm::floorf(lo_y - pad).max(0.0);
+    let x1 = libm::ceilf(hi_x + pad).min(image.width() as f32 - 1.0);
+    let y1 = libm::ceilf(hi_y + pad).min(image.height() as f32 - 1.0);
+    if !(x1 > x0 && y1 > y0) {
+        return None;
+    }
+    let (x0, y0, x1, y1) = (x0 as usize, y0 as usize, x1 as usize, y1 as usize);
+    let area = (x1 - x0 + 1) * (y1 - y0 + 1);
+    Some(Window {
+        x0,
+        y0,
+        x1,
+        y1,
+        step: area.div_ceil(MAX_PIXELS).max(1),
+    })
+}
+
+/// Where the diagonals of a quad cross: the image of its centre under any homography.
+fn diagonals_meet(c: &[Point; 4]) -> Option<Point> {
+    let (d1x, d1y) = (c[2].x - c[0].x, c[2].y - c[0].y);
+    let (d2x, d2y) = (c[3].x - c[1].x, c[3].y - c[1].y);
+    let den = d1x * d2y - d1y * d2x;
+    if !(den.abs() > 1e-6) {
+        return None;
+    }
+    let s = ((c[1].x - c[0].x) * d2y - (c[1].y - c[0].y) * d2x) / den;
+    let p = Point::new(c[0].x + s * d1x, c[0].y + s * d1y);
+    (p.x.is_finite() && p.y.is_finite()).then_some(p)
+}
+
+/// The mean side of a quad, pixels.
+fn mean_side(c: &[Point; 4]) -> f32 {
+    0.25 * (0..4).map(|k| c[k].distance(c[(k + 1) % 4])).sum::<f32>()
+}
+
+/// The corners in a parameter vector.
+fn fitted_corners(params: &[f32; N]) -> [Point; 4] {
+    let mut corners = [Point::default(); 4];
+    for (k, c) in corners.iter_mut().enumerate() {
+        *c = Point::new(params[2 * k], params[2 * k + 1]);
+    }
+    corners
+}
+
+/// The longest side of a quad, pixels.
+pub(crate) fn longest_side(corners: &[Point; 4]) -> f32 {
+    (0..4)
+        .map(|k| corners[k].distance(corners[(k + 1) % 4]))
+        .fold(0.0, f32::max)
+}
+
+/// Corners of the decoded marker `id` of `family` at `corners` (detection order), fitted to
+/// the pixels as the module docs describe; `None` when the marker is not small, its family's
+/// layout is not modelled, or the fit is refused. `contrast` (grey levels) starts the fit.
+pub(crate) fn fit_corners(
+    image: &GrayImage<'_>,
+    family: &Family<'_>,
+    id: u16,
+    corners: &[Point; 4],
+    contrast: f32,
+) -> Option<[Point; 4]> {
+    fit(image, family, id, corners, contrast).ok()
+}
+
+/// Why a fit was not kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Refusal {
+    /// The marker is larger than [`MAX_SIDE_PX`].
+    Large,
+    /// The family's layout is not modelled, or the id is unknown.
+    Layout,
+    /// The marker's image is degenerate or outside the image.
+    Geometry,
+    /// The normal equations were singular.
+    Singular,
+    /// The model does not explain the pixels.
+    Residual,
+    /// The blur or the contrast ended outside their ranges.
+    Levels,
+    /// A corner moved more than [`MAX_CORNER_SHIFT_PX`].
+    Moved,
+}
+
+/// [`fit_corners`], with the reason of a refusal.
+pub(crate) fn fit(
+    image: &GrayImage<'_>,
+    family: &Family<'_>,
+    id: u16,
+    corners: &[Point; 4],
+    contrast: f32,
+) -> Result<[Point; 4], Refusal> {
+    if longest_side(corners) > MAX_SIDE_PX {
+        return Err(Refusal::Large);
+    }
+    let pattern = Pattern::new(family, id).ok_or(Refusal::Layout)?;
+    let win = window(image, &pattern, corners).ok_or(Refusal::Geometry)?;
+    let mut params = [0.0f32; N];
+    for (k, c) in corners.iter().enumerate() {
+        params[2 * k] = c.x;
+        params[2 * k + 1] = c.y;
+    }
+    // Levels: start from the darkest pixels as black and the detector's contrast; the
+    // outside as white (a printed margin). The first iteration solves them nearly exactly.
+    let cell_px = mean_side(corners) / (pattern.quad_hi - pattern.quad_lo);
+    if !(cell_px > 0.0) {
+        return Err(Refusal::Geometry);
+    }
+    params[BLUR] = libm::logf(INITIAL_BLUR_PX / cell_px);
+    params[BLACK] = darkest(image, &win);
+    let start_contrast = contrast.max(1.0);
+    params[CONTRAST] = start_contrast;
+    params[OUTSIDE] = 1.0;
+    // Levenberg-Marquardt: the start is within a few tenths of a pixel, where the model is
+    // nearly linear and the first step usually lands. A step that does not lower the cost
+    // is taken back and retried shorter.
+    solve_levels(image, &pattern, &win, &mut params)?;
+    let mut current =
+        linearise(image, &pattern, &win, &params, Pass::Full).ok_or(Refusal::Geometry)?;
+    let mut damping = DAMPING;
+    for iteration in 0..ITERATIONS {
+        let step = solve_damped(&current.jtj, &current.jte, damping).ok_or(Refusal::Singular)?;
+        let mut trial = params;
+        for (p, d) in trial.iter_mut().zip(step.iter()) {
+            *p += d;
+        }
+        let last = iteration + 1 == ITERATIONS;
+        let pass = if last { Pass::Cost } else { Pass::Full };
+        match linearise(image, &pattern, &win, &trial, pass) {
+            Some(next) if next.cost < current.cost => {
+                params = trial;
+                current = next;
+                damping = (damping * 0.1).max(DAMPING * 1e-3);
+            }
+            _ => damping *= 10.0,
+        }
+    }
+    // The model must explain the pixels: a residual of a few grey levels (sensor noise and
+    // the blur's shape), far below the contrast. A wrong pattern or clutter does not fit.
+    let rms = libm::sqrtf(current.cost / current.count.max(1) as f32);
+    if !(rms < MAX_RESIDUAL_OF_CONTRAST * params[CONTRAST]) {
+        return Err(Refusal::Residual);
+    }
+    let cells = pattern.quad_hi - pattern.quad_lo;
+    let blur = libm::expf(params[BLUR]) * mean_side(&fitted_corners(&params)) / cells;
+    // The fitted contrast must be the marker's: a fit that flattened it found something else.
+    let contrast_ratio = params[CONTRAST] / start_contrast;
+    let within = |x: f32, (lo, hi): (f32, f32)| x >= lo && x <= hi;
+    if !within(blur, BLUR_RANGE_PX) || !within(contrast_ratio, CONTRAST_RANGE) {
+        return Err(Refusal::Levels);
+    }
+    let mut out = [Point::default(); 4];
+    for (k, slot) in out.iter_mut().enumerate() {
+        let p = Point::new(params[2 * k], params[2 * k + 1]);
+        if !(p.distance(corners[k]) <= MAX_CORNER_SHIFT_PX) {
+            return Err(Refusal::Moved);
+        }
+        *slot = p;
+    }
+    Ok(out)
+}
+
+/// The darkest pixel of the window: the start of the black level (the first step solves the
+/// levels, which enter the model linearly, nearly exactly).
+fn darkest(image: &GrayImage<'_>, win: &Window) -> f32 {
+    let mut lowest = u8::MAX;
+    for y in win.y0..=win.y1 {
+        let row = image.row(y);
+        for &p in row.get(win.x0..=win.x1).unwrap_or(&[]) {
+            lowest = lowest.min(p);
+        }
+    }
+    f32::from(lowest)
+}
+
+/// Step 7 over a frame's `detections`: fits the largest small markers, at most
+/// [`MAX_FITS_PER_FRAME`], when every marker of the frame is small (see the module docs: a
+/// larger marker, or the spread of several, sets the pose's scale better than any small
+/// marker's own size). Charges [`WORK_PATTERN_FIT`] per fit to `tracer` and stops when the
+/// budget is spent. Returns the number of markers whose corners were replaced.
+pub(super) fn fit_small_markers(
+    image: &GrayImage<'_>,
+    families: &[&Family<'_>],
+    detections: &mut [Detection],
+    tracer: &mut Tracer<'_>,
+) -> u32 {
+    if detections
+        .iter()
+        .any(|d| longest_side(&d.corners) > MAX_SIDE_PX)
+    {
+        return 0;
+    }
+    // The largest markers first: a single pass keeps the top few, largest first.
+    let mut largest: [Option<(usize, f32)>; MAX_FITS_PER_FRAME] = [None; MAX_FITS_PER_FRAME];
+    for (k, d) in detections.iter().enumerate() {
+        let mut entry = Some((k, longest_side(&d.corners)));
+        for slot in largest.iter_mut() {
+            match (*slot, entry) {
+                (Some((_, kept)), Some((_, side))) if side <= kept => {}
+                (_, Some(_)) => core::mem::swap(slot, &mut entry),
+                (_, None) => break,
+            }
+        }
+    }
+    let mut fitted = 0u32;
+    for (k, _) in largest.iter().flatten() {
+        let Some(detection) = detections.get_mut(*k) else {
+            continue;
+        };
+        let Some(family) = families.get(usize::from(detection.family)) else {
+            continue;
+        };
+        if !tracer.charge(WORK_PATTERN_FIT) {
+            break;
+        }
+        let fit = fit_corners(
+            image,
+            family,
+            detection.id,
+            &detection.corners,
+            detection.contrast,
+        );
+        if let Some(corners) = fit {
+            detection.corners = corners;
+            detection.center = diagonals_meet(&corners).unwrap_or(detection.center);
+            fitted += 1;
+        }
+    }
+    fitted
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,251 @@
+//! The least-squares machinery of the fit: one pass of the model over the window's pixels
+//! into normal equations, the linear solve of the levels, and the damped Cholesky solve of
+//! a step.
+
+// The normal equations are fixed 12x12 arrays indexed by loop counters below 12.
+#![allow(clippy::indexing_slicing)]
+
+use super::model::{blurred, Axis, Pattern};
+use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE};
+use crate::geometry::{Homography, Point};
+use crate::image::GrayImage;
+
+/// Normal equations of one iteration: `J^T J`, `J^T e` and the residual sum of squares.
+pub(super) struct Normal {
+    pub(super) jtj: [[f32; N]; N],
+    pub(super) jte: [f32; N],
+    pub(super) cost: f32,
+    pub(super) count: usize,
+}
+
+/// What one pass over the window computes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum Pass {
+    /// The cost and the normal equations of every parameter.
+    Full,
+    /// The cost only.
+    Cost,
+    /// The least-squares normal equations of the levels alone, which enter the model
+    /// linearly: the pixel is `black + contrast * cells + (contrast * outside) * beyond`, so
+    /// the first three rows and columns hold the system in (black, contrast, contrast *
+    /// outside) against the pixels themselves.
+    Levels,
+}
+
+/// The model at every window pixel for `params`, accumulated as `pass` says.
+///
+/// The corners' derivatives are closed-form: for the homography of the unit square onto
+/// itself, moving corner k by (dx, dy) moves the point (s, t) by
+/// `(N_k dx + sign_k s(1-s) dy, sign_k t(1-t) dx + N_k dy)`, with `N_k` the bilinear weight
+/// of the corner and `sign_k` -1 for the top-left and bottom-right corners, +1 for the
+/// others (solve the four corner conditions of `I + e A` to first order). The quad's affine
+/// part carries image moves into the square and back: exact to first order for a
+/// parallelogram, and a far marker is one to within its small perspective. It saves eight
+/// homographies per pixel.
+pub(super) fn linearise(
+    image: &GrayImage<'_>,
+    pattern: &Pattern,
+    win: &Window,
+    params: &[f32; N],
+    pass: Pass,
+) -> Option<Normal> {
+    let corners = fitted_corners(params);
+    let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
+    let (blur, black, contrast, outside) = (
+        libm::expf(params[BLUR]),
+        params[BLACK],
+        params[CONTRAST],
+        params[OUTSIDE],
+    );
+    let (lo, span) = (pattern.quad_lo, pattern.quad_hi - pattern.quad_lo);
+    let square_from_image = square_from_image(&corners)?;
+    let mut normal = Normal {
+        jtj: [[0.0; N]; N],
+        jte: [0.0; N],
+        cost: 0.0,
+        count: 0,
+    };
+    for y in win.y0..=win.y1 {
+        let row = image.row(y);
+        for x in win.x0..=win.x1 {
+            if !win.reads(x, y) {
+                continue;
+            }
+            let observed = f32::from(row.get(x).copied().unwrap_or(0));
+            let g = map.map(x as f32, y as f32)?;
+            let (Some(au), Some(av)) = (
+                Axis::new(g.x, blur, pattern.side),
+                Axis::new(g.y, blur, pattern.side),
+            ) else {
+                return None;
+            };
+            let b = blurred(pattern, &au, &av, outside);
+            let e = observed - (black + contrast * b.value);
+            normal.cost += e * e;
+            normal.count += 1;
+            match pass {
+                Pass::Cost => continue,
+                Pass::Levels => {
+                    let cells = b.value - outside * b.outside;
+                    let regressors = [1.0, cells, b.outside];
+                    for (r, &x) in regressors.iter().enumerate() {
+                        normal.jte[r] += x * observed;
+                        for (c, &y) in regressors.iter().enumerate() {
+                            normal.jtj[r][c] += x * y;
+                        }
+                    }
+                    continue;
+                }
+                Pass::Full => {}
+            }
+            // The model's gradient over the square (s, t), and the corners' moves of (s, t).
+            let (gs, gt) = (contrast * b.d_u * span, contrast * b.d_v * span);
+            let (s, t) = ((g.x - lo) / span, (g.y - lo) / span);
+            let (ss, tt) = (s * (1.0 - s), t * (1.0 - t));
+            let weights = [(1.0 - s) * (1.0 - t), s * (1.0 - t), s * t, (1.0 - s) * t];
+            let mut jac = [0.0f32; N];
+            for (k, w) in weights.iter().enumerate() {
+                let sign = if k % 2 == 0 { -1.0 } else { 1.0 };
+                // The model's change for a unit move of the corner along s and along t.
+                let along_s = gs * w + gt * sign * tt;
+                let along_t = gs * sign * ss + gt * w;
+                let [[a, b_], [c, d]] = square_from_image;
+                jac[2 * k] = -(along_s * a + along_t * c);
+                jac[2 * k + 1] = -(along_s * b_ + along_t * d);
+            }
+            jac[BLUR] = contrast * (b.d_width_u + b.d_width_v) * blur;
+            jac[BLACK] = 1.0;
+            jac[CONTRAST] = b.value;
+            jac[OUTSIDE] = contrast * b.outside;
+            for r in 0..N {
+                normal.jte[r] += jac[r] * e;
+                for c in r..N {
+                    normal.jtj[r][c] += jac[r] * jac[c];
+                }
+            }
+        }
+    }
+    for r in 0..N {
+        for c in 0..r {
+            if pass == Pass::Full {
+                normal.jtj[r][c] = normal.jtj[c][r];
+            }
+        }
+    }
+    Some(normal)
+}
+
+/// The inverse of the quad's affine part (its mean side vectors as the square's axes): how
+/// an image move of a corner moves it in the unit square. Row-major `[[ds/dx, ds/dy],
+/// [dt/dx, dt/dy]]`.
+pub(super) fn square_from_image(c: &[Point; 4]) -> Option<[[f32; 2]; 2]> {
+    let (sx, sy) = (
+        0.5 * (c[1].x - c[0].x + c[2].x - c[3].x),
+        0.5 * (c[1].y - c[0].y + c[2].y - c[3].y),
+    );
+    let (tx, ty) = (
+        0.5 * (c[3].x - c[0].x + c[2].x - c[1].x),
+        0.5 * (c[3].y - c[0].y + c[2].y - c[1].y),
+    );
+    let det = sx * ty - tx * sy;
+    if !(det.abs() > 1e-6) {
+        return None;
+    }
+    Some([[ty / det, -tx / det], [-sy / det, sx / det]])
+}
+
+/// Sets the levels of `params` to their least-squares values for its geometry and blur:
+/// the levels enter the model linearly, so one pass finds them exactly, and the nonlinear
+/// steps start with only the geometry and the blur to move. The decoder's contrast is a
+/// mean over blurred cells, often half the real one on a small marker.
+pub(super) fn solve_levels(
+    image: &GrayImage<'_>,
+    pattern: &Pattern,
+    win: &Window,
+    params: &mut [f32; N],
+) -> Result<(), Refusal> {
+    let levels = linearise(image, pattern, win, params, Pass::Levels).ok_or(Refusal::Geometry)?;
+    let a = &levels.jtj;
+    let b = &levels.jte;
+    let det3 = |m: [[f32; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let m = [
+        [a[0][0], a[0][1], a[0][2]],
+        [a[1][0], a[1][1], a[1][2]],
+        [a[2][0], a[2][1], a[2][2]],
+    ];
+    // A marker in a wide printed margin has almost no pixel beyond the known area: keep the
+    // outside level then (its column is nearly zero) and solve the other two.
+    let d = det3(m);
+    let scale = m[0][0] * m[1][1] * m[2][2];
+    let mut x = [0.0f32; 3];
+    if d.abs() > 1e-6 * scale.abs() {
+        for (k, slot) in x.iter_mut().enumerate() {
+            let mut mk = m;
+            for (row, rhs) in mk.iter_mut().zip(b.iter()) {
+                row[k] = *rhs;
+            }
+            *slot = det3(mk) / d;
+        }
+    } else {
+        let o = params[OUTSIDE];
+        let d2 = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+        if !(d2.abs() > 0.0) {
+            return Err(Refusal::Singular);
+        }
+        x[0] = (b[0] * m[1][1] - m[0][1] * b[1]) / d2;
+        x[1] = (m[0][0] * b[1] - b[0] * m[1][0]) / d2;
+        x[2] = o * x[1];
+    }
+    if !(x[1] > 0.0) || !x.iter().all(|v| v.is_finite()) {
+        return Err(Refusal::Levels);
+    }
+    params[BLACK] = x[0];
+    params[CONTRAST] = x[1];
+    params[OUTSIDE] = x[2] / x[1];
+    Ok(())
+}
+
+/// Solves `(A + lambda diag A) x = b` by Cholesky; `None` when not positive definite.
+pub(super) fn solve_damped(a: &[[f32; N]; N], b: &[f32; N], lambda: f32) -> Option<[f32; N]> {
+    let mut l = [[0.0f32; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let mut sum = a[i][j];
+            if i == j {
+                sum += lambda * a[i][i];
+            }
+            for (lik, ljk) in l[i].iter().zip(l[j].iter()).take(j) {
+                sum -= lik * ljk;
+            }
+            if i == j {
+                if !(sum > 0.0) {
+                    return None;
+                }
+                l[i][i] = libm::sqrtf(sum);
+            } else {
+                l[i][j] = sum / l[j][j];
+            }
+        }
+    }
+    let mut z = [0.0f32; N];
+    for i in 0..N {
+        let mut sum = b[i];
+        for k in 0..i {
+            sum -= l[i][k] * z[k];
+        }
+        z[i] = sum / l[i][i];
+    }
+    let mut x = [0.0f32; N];
+    for i in (0..N).rev() {
+        let mut sum = z[i];
+        for k in i + 1..N {
+            sum -= l[k][i] * x[k];
+        }
+        x[i] = sum / l[i][i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
