@@ -30,9 +30,9 @@
 //!
 //! ## Cost and bounds
 //! Only markers whose longest side is at most [`MAX_SIDE_PX`] are fitted; above it the edge
-//! search is already within a tenth of a percent. At most [`MAX_PIXELS`] pixels (a regular
-//! subsample on the larger markers) and [`ITERATIONS`] iterations, so the time per marker is
-//! bounded whatever the image. A fit is kept only when it converged to a sane blur and
+//! search is already within a tenth of a percent. About [`MAX_PIXELS`] pixels (a fixed
+//! scatter over the larger markers; never more than twice as many) and [`ITERATIONS`]
+//! iterations, so the time per marker is bounded whatever the image. A fit is kept only when it converged to a sane blur and
 //! moved no corner more than [`MAX_CORNER_SHIFT_PX`]; otherwise the edge corners stand.
 
 // The normal equations are fixed 12x12 arrays indexed by loop counters below 12, and the
@@ -53,11 +53,12 @@ use solve::{linearise, solve_damped, solve_levels, Pass};
 /// Longest marker side (pixels) that is fitted. At 40 pixels a cell of an 8-cell border
 /// square is 5 pixels, wider than any blur, and the edge search is unbiased there.
 pub const MAX_SIDE_PX: f32 = 40.0;
-/// Most pixels one fit reads. Larger markers are subsampled on a lattice, which leaves a
-/// little of the model's mismatch (the pixel's square area against the Gaussian) in the
-/// scale: within 0.15 % at 11 pixels across, 0.05 % from 18 pixels up (the tests). Each
-/// pixel costs about 1,700 Cortex-M7 instructions per pass with derivatives.
-pub const MAX_PIXELS: usize = 192;
+/// Pixels one fit reads, about: a marker's box of more pixels is read at a fixed scatter of
+/// them (see `Window::reads`), at most twice this many. Measured in the tests, the scale is
+/// within 0.15 % at 11 pixels across with 128 pixels (96 gave 0.29 %, and a regular lattice of
+/// 96 0.35 %: it beats against the cell grid). Each pixel costs about 1,700 Cortex-M7
+/// instructions per pass with derivatives.
+pub const MAX_PIXELS: usize = 128;
 /// Levenberg-Marquardt steps. The edge corners start within a few tenths of a pixel and the
 /// model is smooth there: three steps converge to about a hundredth of a pixel (the last
 /// one's cost is evaluated without derivatives, only to keep or refuse it).
@@ -105,9 +106,8 @@ const BLACK: usize = 9;
 const CONTRAST: usize = 10;
 const OUTSIDE: usize = 11;
 
-/// The pixels a fit reads: the box around the known area's image, thinned to a lattice
-/// of every `step`-th pixel (a checkerboard for 2) when the box holds more than
-/// [`MAX_PIXELS`].
+/// The pixels a fit reads: the box around the known area's image, thinned to one pixel in
+/// `step` when the box holds more than [`MAX_PIXELS`].
 struct Window {
     x0: usize,
     y0: usize,
@@ -117,10 +117,12 @@ struct Window {
 }
 
 impl Window {
-    /// Whether pixel (x, y) is on the lattice: rows shifted by half a step, so that every
-    /// column and every row is read.
+    /// Whether pixel (x, y) is read: a fixed scatter of `1/step` of the pixels (a hash of the
+    /// position), which unlike a lattice cannot beat against the marker's cell grid.
     fn reads(&self, x: usize, y: usize) -> bool {
-        (x + y * (self.step / 2).max(1)).is_multiple_of(self.step)
+        let h = (x as u32).wrapping_mul(0x9E37_79B1) ^ (y as u32).wrapping_mul(0x85EB_CA77);
+        let h = h ^ (h >> 15);
+        (h.wrapping_mul(0x2C1B_3C6D) >> 16).is_multiple_of(self.step as u32)
     }
 }
 

@@ -6,7 +6,7 @@
 #![allow(clippy::indexing_slicing)]
 
 use super::model::{blurred, Axis, Pattern};
-use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE};
+use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, MAX_PIXELS, N, OUTSIDE};
 use crate::geometry::{Homography, Point};
 use crate::image::GrayImage;
 
@@ -70,6 +70,10 @@ pub(super) fn linearise(
         for x in win.x0..=win.x1 {
             if !win.reads(x, y) {
                 continue;
+            }
+            if normal.count >= 2 * MAX_PIXELS {
+                // The scatter is uniform to a few percent; this only bounds the worst case.
+                break;
             }
             let observed = f32::from(row.get(x).copied().unwrap_or(0));
             let g = map.map(x as f32, y as f32)?;
