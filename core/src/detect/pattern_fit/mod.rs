@@ -82,10 +82,10 @@ pub const MAX_FITS_PER_FRAME: usize = 1;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
 /// qvga-far-1: one tag36h11 of 14 pixels): 1.32 million instructions for its pixels and five
-/// passes; with the scatter's worst case (twice [`MAX_PIXELS`]) about 2 million. A fit is
-/// charged before it starts and skipped when the frame's budget cannot pay for it, so it
-/// never breaks the bound on the time per frame.
-pub const WORK_PATTERN_FIT: u32 = 24_000;
+/// passes, about 16,500 units. A fit is charged that before it starts and skipped when the
+/// frame's budget cannot pay for it; the scatter's worst case (twice [`MAX_PIXELS`]) costs
+/// half as much again, so, like a candidate, a fit can overrun the budget by at most itself.
+pub const WORK_PATTERN_FIT: u32 = 16_500;
 /// Most cells per side of a family grid the fit models (with its assumed margin ring).
 const MAX_GRID: usize = 16;
 /// Blur range (pixels) a fit may end in: below, the pixel's own area; above, the marker is
