@@ -126,8 +126,9 @@ fn period_us(rate_hz: f64) -> u64 {
     (1e6 / rate_hz).round() as u64
 }
 
-/// Hover set points: `frames_per_point` frames at `rate_hz` at each, `gap_s` between them
-/// (the vehicle jumps: only the hovers are recorded).
+/// Hover set points: `frames_per_point` frames at `rate_hz` at each, `gap_s` between them.
+/// Only the hovers are recorded: the vehicle jumps to the next set point in the middle of the
+/// gap (a [`Profile::Jump`]), so every frame is exposed at its own set point alone.
 fn set_points(
     points: &[(String, Vec3)],
     frames_per_point: usize,
@@ -138,8 +139,19 @@ fn set_points(
     let mut segments = Vec::new();
     let mut frames = Vec::new();
     let mut t_us = 0u64;
+    let gap_us = (gap_s * 1e6).round() as u64;
     for (label, position) in points {
         let t0 = t_us as f64 * 1e-6;
+        if let Some(previous) = segments.last().map(|s: &Segment| s.to) {
+            let jump = t0 - 0.5 * gap_us as f64 * 1e-6;
+            segments.push(Segment {
+                t0: jump,
+                t1: jump,
+                from: previous,
+                to: *position,
+                profile: Profile::Jump,
+            });
+        }
         for _ in 0..frames_per_point {
             frames.push(FramePlan {
                 t_us,
@@ -155,7 +167,7 @@ fn set_points(
             to: *position,
             profile: Profile::Hold,
         });
-        t_us += (gap_s * 1e6).round() as u64;
+        t_us += gap_us;
     }
     (segments, frames)
 }

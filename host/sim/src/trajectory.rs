@@ -8,6 +8,13 @@
 //! from the path by a central difference over [`ACCELERATION_SPAN_S`], which smooths the
 //! corners between path segments the way the vehicle's own response would.
 //!
+//! A path can also jump: a [`Profile::Jump`] segment moves the vehicle without flying, as a
+//! recording that keeps only the hovers of a set-point experiment does (the vehicle is
+//! elsewhere at the next hover). The path is continuous between jumps
+//! ([`Trajectory::continuous_span`]); the simulator exposes no frame across one, and the
+//! acceleration is taken within the span, so a jump neither ghosts an image nor tilts the
+//! vehicle.
+//!
 //! Positions are in the pad frame (x east, y north, z up, metres); attitudes are body FRD to
 //! NED (see [`super::camera`]).
 
@@ -20,6 +27,9 @@ use super::math::{cross, from_columns, from_euler, mul, normalize, scale, Mat3, 
 pub const GRAVITY: f64 = 9.80665;
 /// Half-width of the central difference that gives the acceleration, seconds.
 pub const ACCELERATION_SPAN_S: f64 = 0.15;
+/// How far before a jump the path is still read as the span's end, seconds: the path at the
+/// jump's own time is already past it.
+pub const JUMP_GUARD_S: f64 = 1e-7;
 
 /// Where the vehicle is and how it is turned.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,6 +105,10 @@ pub enum Profile {
     MinimumJerk,
     /// Stay at the start (a hover set point; `to` is ignored).
     Hold,
+    /// Be at `to` from `t0` on without having flown there from `from` (where the previous
+    /// segment left the vehicle): a discontinuity of the path, not a motion. `t1` is
+    /// ignored (a jump takes no time).
+    Jump,
 }
 
 /// A piece of the path.
@@ -147,6 +161,8 @@ impl Trajectory {
             Profile::Linear => u,
             Profile::MinimumJerk => u * u * u * (10.0 - 15.0 * u + 6.0 * u * u),
             Profile::Hold => 0.0,
+            // Before the jump the previous segment holds the vehicle; from it on, `to`.
+            Profile::Jump => 1.0,
         };
         let (a, b) = (segment.from, segment.to);
         [
@@ -156,6 +172,25 @@ impl Trajectory {
         ]
     }
 
+    /// The times `[start, end)` around `t` within which the path is continuous: from the
+    /// last jump at or before `t` to the next one after it (infinite without one).
+    pub fn continuous_span(&self, t: f64) -> (f64, f64) {
+        let jumps = self
+            .segments
+            .iter()
+            .filter(|s| s.profile == Profile::Jump)
+            .map(|s| s.t0);
+        let mut span = (f64::NEG_INFINITY, f64::INFINITY);
+        for jump in jumps {
+            if jump <= t {
+                span.0 = span.0.max(jump);
+            } else {
+                span.1 = span.1.min(jump);
+            }
+        }
+        span
+    }
+
     /// Position and attitude at `t`.
     pub fn state(&self, t: f64) -> VehicleState {
         let jitter = self.wobble.position(t);
@@ -163,7 +198,14 @@ impl Trajectory {
         let position = [p[0] + jitter[0], p[1] + jitter[1], p[2] + jitter[2]];
         let level = if self.tilt_with_acceleration {
             let h = ACCELERATION_SPAN_S;
-            let (a, b) = (self.path(t - h), self.path(t + h));
+            // Across a jump the vehicle did not accelerate: the difference stays on this
+            // side of it (holding the span's ends, as the path holds its own ends).
+            let (start, end) = self.continuous_span(t);
+            let last_before_end = end - JUMP_GUARD_S;
+            let (a, b) = (
+                self.path((t - h).max(start)),
+                self.path((t + h).min(last_before_end)),
+            );
             let accel_pad = [0, 1, 2].map(|k| (a[k] - 2.0 * p[k] + b[k]) / (h * h));
             attitude_for(accel_pad, self.yaw)
         } else {
@@ -237,5 +279,53 @@ mod tests {
         assert_eq!(t.path(3.5), [4.0, 0.0, 10.0]);
         assert!((t.path(2.0)[0] - 2.0).abs() < 1e-12);
         assert!(max_difference(&t.state(0.0).attitude, &from_euler(0.0, 0.0, 0.0)) < 1e-12);
+    }
+
+    /// Two hovers 5 m apart with a jump between them, tilting with acceleration.
+    fn hovers_with_a_jump() -> Trajectory {
+        let (a, b) = ([0.0, 0.0, 10.0], [0.0, 0.0, 15.0]);
+        let hold = |t0, t1, p| Segment {
+            t0,
+            t1,
+            from: p,
+            to: p,
+            profile: Profile::Hold,
+        };
+        Trajectory {
+            segments: vec![
+                hold(0.0, 1.0, a),
+                Segment {
+                    t0: 1.5,
+                    t1: 1.5,
+                    from: a,
+                    to: b,
+                    profile: Profile::Jump,
+                },
+                hold(2.0, 3.0, b),
+            ],
+            yaw: 0.0,
+            wobble: Wobble::none(),
+            tilt_with_acceleration: true,
+            trim: (0.0, 0.0),
+        }
+    }
+
+    #[test]
+    fn a_jump_splits_the_path_without_tilting_the_vehicle() {
+        let t = hovers_with_a_jump();
+        assert_eq!(t.path(1.4), [0.0, 0.0, 10.0]);
+        assert_eq!(t.path(1.5), [0.0, 0.0, 15.0]);
+        assert_eq!(t.path(2.5), [0.0, 0.0, 15.0]);
+        assert_eq!(t.continuous_span(0.5), (f64::NEG_INFINITY, 1.5));
+        assert_eq!(t.continuous_span(1.5), (1.5, f64::INFINITY));
+        // A central difference across the jump would read 5 m in 0.15 s as a climb of
+        // hundreds of m/s^2; the vehicle hovers, level, on both sides.
+        for time in [1.45, 1.5, 1.55] {
+            let level = from_euler(0.0, 0.0, 0.0);
+            assert!(
+                max_difference(&t.state(time).attitude, &level) < 1e-12,
+                "tilted at {time} s"
+            );
+        }
     }
 }
