@@ -21,10 +21,17 @@
 //! The data path is one straight line:
 //! frame ([`image::GrayImage`]) -> candidates ([`detect`]) -> decoded markers
 //! ([`detect::Detection`]) -> pad fix ([`pose`], with the [`camera`] model and the [`pad`]
-//! layout) -> estimator ([`filter`], with the vehicle's attitude and the [`filter::axes`]) ->
-//! messages ([`companion`]). Everything up to the estimate is one type that every caller uses,
-//! [`pipeline::FramePipeline`]; the MAVLink side turns its output into bytes. The MAVLink
-//! parameters and what they set are [`params`].
+//! layout) -> estimator ([`filter`], with the vehicle's [`filter::Attitude`] and
+//! [`filter::CameraMount`]) -> messages ([`companion`]). Everything up to the estimate is one
+//! type that every caller uses, [`pipeline::FramePipeline`]; the MAVLink side turns its output
+//! into bytes. The MAVLink parameters and what they set are [`params`].
+//!
+//! Each module is one concern: its stages are private submodules and its entry types are
+//! re-exported at the module (`filter::PadEstimator`, not a path through the file it is
+//! written in), so a stage can be split or moved without changing any caller. The only public
+//! submodules are namespaces of data, not stages: the generated family tables
+//! ([`family::tables`]), the pad designs by name ([`pad::designs`]) and the MAVLink crate with
+//! its message types ([`companion::mavlink`]).
 //!
 //! Conventions (the project's contract, see `README.md`): pixel (0, 0) is the centre of the
 //! top-left pixel, x right, y down; marker corners are the outer corners of the black border,

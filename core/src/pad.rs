@@ -211,6 +211,9 @@ const fn or_empty(layout: Result<PadLayout<'static>, PadError>) -> PadLayout<'st
 
 /// The shipped pad designs; identical to `pads/*.toml` (a host test compares them).
 ///
+/// A public module because it is a namespace of data, not a stage: the designs by name
+/// (`designs::NESTED`, `designs::PAPER_SINGLE`) and all of them (`designs::ALL`).
+///
 /// Coverage arithmetic, for a 640x480 camera with a 70 degree horizontal field of view
 /// (`f = 320 / tan 35deg = 457 px`), looking straight down from altitude `h` above the
 /// landing point: a marker of edge `s` is `457 s / h` pixels wide. It is decodable down to

@@ -19,7 +19,7 @@ mod autopilot_sim;
 
 use touchdown_core::companion::mavlink::dialects::common::MavAutopilot;
 use touchdown_core::companion::{Companion, CompanionConfig, Profile, TargetOutcome};
-use touchdown_core::filter::axes::CameraMount;
+use touchdown_core::filter::CameraMount;
 
 use autopilot_sim::{
     Autopilot, AutopilotClock, Exposure, Flight, LinkDelay, Rng, VehiclePath, STEP_US,

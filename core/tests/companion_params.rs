@@ -12,10 +12,11 @@ use touchdown_core::companion::{Companion, CompanionConfig, FrameParser, MAX_FRA
 use touchdown_core::detect::DetectorConfig;
 use touchdown_core::pad::designs;
 use touchdown_core::params::name_str;
-use touchdown_core::params::persist::{self, FlashFailed, SlotFlash, ERASED, SLOT_LEN};
-use touchdown_core::params::{ParamId, ParamSet, PipelineSettings, PARAM_COUNT};
-use touchdown_core::sensor::exposure::AutoExposureLimits;
-use touchdown_core::sensor::GainX16;
+use touchdown_core::params::{
+    FlashFailed, Geometry, ParamId, ParamSet, PipelineSettings, SlotFlash, SlotKey, Store, ERASED,
+    PARAM_COUNT, SECTORS, SLOT_LEN,
+};
+use touchdown_core::sensor::{AutoExposureLimits, GainX16};
 
 use autopilot_sim::{gcs_message, ParamAction};
 
@@ -117,18 +118,17 @@ fn camera_params_are_range_checked_applied_and_persisted() {
 
     // Saved to the flash log the way the firmware saves (core's `Store`, after a first save
     // of the defaults), restored at the next boot.
-    let geometry = persist::Geometry::new(8 * SLOT_LEN as u32).unwrap();
+    let geometry = Geometry::new(8 * SLOT_LEN as u32).unwrap();
     let mut flash = RamSectors::new(geometry);
     let mut fresh = ParamSet::default();
-    let (mut store, boot) =
-        persist::Store::open(geometry, |s, o, b| flash.read(s, o, b), &mut fresh);
+    let (mut store, boot) = Store::open(geometry, |s, o, b| flash.read(s, o, b), &mut fresh);
     assert_eq!(boot.restored, None);
     block_on(store.save(&mut flash, &ParamSet::default())).unwrap();
     block_on(store.save(&mut flash, companion.params())).unwrap();
     let mut restored = ParamSet::default();
-    let (_, boot) = persist::Store::open(geometry, |s, o, b| flash.read(s, o, b), &mut restored);
+    let (_, boot) = Store::open(geometry, |s, o, b| flash.read(s, o, b), &mut restored);
     let found = boot.restored.expect("a valid slot");
-    assert_eq!(found.key, persist::SlotKey::Seq(1));
+    assert_eq!(found.key, SlotKey::Seq(1));
     assert_eq!(usize::from(found.report.applied), PARAM_COUNT);
     assert_eq!((found.report.rejected, found.report.unknown), (0, 0));
     assert_eq!(boot.bad_slots, 0);
@@ -171,11 +171,11 @@ struct RamSectors {
 }
 
 impl RamSectors {
-    fn new(geometry: persist::Geometry) -> Self {
+    fn new(geometry: Geometry) -> Self {
         let len = geometry.sector_len() as usize;
         RamSectors {
             len,
-            bytes: vec![ERASED; persist::SECTORS * len],
+            bytes: vec![ERASED; SECTORS * len],
         }
     }
 

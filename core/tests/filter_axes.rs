@@ -4,8 +4,10 @@
 //! MAVLink and ArduPilot read them.
 
 use nalgebra::{Matrix3, Vector3};
-use touchdown_core::filter::axes::{self, Attitude, CameraMount, RotationError};
-use touchdown_core::filter::Measurement;
+use touchdown_core::filter::{
+    distance, landing_angles, level_measurement, local_ned_position, ned_to_camera, Attitude,
+    CameraMount, Measurement, RotationError,
+};
 
 fn close(a: &Vector3<f32>, b: &Vector3<f32>) -> bool {
     (a - b).norm() < 1e-5
@@ -111,7 +113,7 @@ fn level_frames() {
     // PX4's absolute LOCAL_NED.
     let vehicle = Vector3::new(10.0, -4.0, -20.0);
     assert!(close(
-        &axes::local_ned_position(&vehicle, &Vector3::new(1.0, 1.0, 20.0)),
+        &local_ned_position(&vehicle, &Vector3::new(1.0, 1.0, 20.0)),
         &Vector3::new(11.0, -3.0, 0.0)
     ));
 }
@@ -125,16 +127,13 @@ fn level_measurement_rotates_position_and_covariance() {
         position: Vector3::new(0.5, -0.3, 12.0),
         covariance: Matrix3::from_diagonal(&Vector3::new(0.01, 0.02, 0.5)),
     };
-    let l = axes::level_measurement(&m, &a, &mount);
+    let l = level_measurement(&m, &a, &mount);
     assert_eq!(l.t_us, 42);
     assert!(close(
         &l.position,
         &a.body_to_ned(&mount.camera_to_body(&m.position))
     ));
-    assert!(close(
-        &axes::ned_to_camera(&l.position, &a, &mount),
-        &m.position
-    ));
+    assert!(close(&ned_to_camera(&l.position, &a, &mount), &m.position));
     let mut e0: Vec<f32> = m
         .covariance
         .symmetric_eigenvalues()
@@ -153,7 +152,7 @@ fn level_measurement_rotates_position_and_covariance() {
         assert!((x - y).abs() < 1e-5);
     }
     // Level, nose north: the pad straight below is straight below, image right = east.
-    let n = axes::level_measurement(&m, &Attitude::level_north(), &mount);
+    let n = level_measurement(&m, &Attitude::level_north(), &mount);
     assert!(close(&n.position, &Vector3::new(0.3, 0.5, 12.0)));
 }
 
@@ -161,15 +160,15 @@ fn level_measurement_rotates_position_and_covariance() {
 fn landing_angles_match_mavlink_and_ardupilot() {
     // Right of and below the image centre.
     let p = Vector3::new(1.0, 2.0, 10.0);
-    let a = axes::landing_angles(&p).unwrap();
+    let a = landing_angles(&p).unwrap();
     assert!((a.angle_x - (0.1f32).atan()).abs() < 1e-6);
     assert!((a.angle_y - (0.2f32).atan()).abs() < 1e-6);
     // ArduPilot rebuilds the body-frame line of sight as (-tan(angle_y), tan(angle_x), 1).
     let los = Vector3::new(-a.angle_y.tan(), a.angle_x.tan(), 1.0).normalize();
     let body = CameraMount::downward().camera_to_body(&p).normalize();
     assert!(close(&los, &body));
-    assert!((axes::distance(&p) - p.norm()).abs() < 1e-6);
+    assert!((distance(&p) - p.norm()).abs() < 1e-6);
     // Behind the camera or not finite: no angles.
-    assert!(axes::landing_angles(&Vector3::new(0.0, 0.0, -1.0)).is_none());
-    assert!(axes::landing_angles(&Vector3::new(f32::NAN, 0.0, 1.0)).is_none());
+    assert!(landing_angles(&Vector3::new(0.0, 0.0, -1.0)).is_none());
+    assert!(landing_angles(&Vector3::new(f32::NAN, 0.0, 1.0)).is_none());
 }

@@ -38,8 +38,7 @@ use embassy_stm32::usart::BufferedUart;
 use embassy_time::{Duration, Instant, Ticker};
 use embedded_io_async::{Read, Write};
 use touchdown_core::companion::{Companion, MavSeverity, MAX_FRAME_LEN};
-use touchdown_core::params::persist::SaveDebounce;
-use touchdown_core::params::{ParamId, PipelineSettings};
+use touchdown_core::params::{ParamId, PipelineSettings, SaveDebounce};
 
 use crate::channels::{self, LinkEvent, LINK_EVENTS, PIPELINE_SETTINGS, SAVE};
 use crate::config;

@@ -4,7 +4,7 @@
 //! 2 MiB) hold a log of parameter slots that survives a power cut at any point of a save:
 //! slots are appended to one sector, and only when it is full is the other (older) one erased
 //! and written. The format, the scan, which sector and slot come next, when to erase and what
-//! to do after a failed write are all `touchdown_core::params::persist::Store`
+//! to do after a failed write are all `touchdown_core::params::Store`
 //! (host-tested against a flash model that cuts the power at every program and erase step);
 //! this module only gives it the flash driver ([`ParamFlash`]) and reports what happened.
 //! `memory.x` ends the FLASH region before these sectors, so code can never land in them.
@@ -23,10 +23,9 @@
 use defmt::{info, warn};
 use embassy_stm32::flash::{Async, Flash, FLASH_SIZE};
 use touchdown_core::companion::MavSeverity;
-use touchdown_core::params::persist::{
-    Boot, FlashFailed, Geometry, SaveError, SlotFlash, SlotKey, Store, SECTORS,
+use touchdown_core::params::{
+    Boot, FlashFailed, Geometry, ParamSet, SaveError, SlotFlash, SlotKey, Store, SECTORS,
 };
-use touchdown_core::params::ParamSet;
 
 use crate::channels::{self, LinkEvent, SAVE};
 

@@ -74,8 +74,7 @@ use touchdown_core::filter::{EstimatorConfig, PadEstimator, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
-use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, ExposureSetting};
-use touchdown_core::sensor::FrameTiming;
+use touchdown_core::sensor::{mean_brightness, AutoExposure, ExposureSetting, FrameTiming};
 use touchdown_sensors::any::{self, Camera};
 
 use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, SENSOR_RESOLUTION, WIDTH};

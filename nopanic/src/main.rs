@@ -41,8 +41,7 @@ use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_core::pose::{marker_pose, PoseMethod};
-use touchdown_core::sensor::exposure::{mean_brightness, AutoExposure, AutoExposureLimits};
-use touchdown_core::sensor::FrameTiming;
+use touchdown_core::sensor::{mean_brightness, AutoExposure, AutoExposureLimits, FrameTiming};
 
 /// QVGA, the firmware's frame size.
 const WIDTH: usize = 320;

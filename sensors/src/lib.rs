@@ -101,7 +101,7 @@ pub enum Exposure {
         max_gain: GainX16,
     },
     /// Fixed exposure and gain (also what
-    /// [`touchdown_core::sensor::exposure::AutoExposure`] drives).
+    /// [`touchdown_core::sensor::AutoExposure`] drives).
     Manual {
         /// Exposure in sensor line periods ([`FrameTiming::line_ns`]), at least 1.
         lines: u16,

@@ -1,11 +1,20 @@
 //! The companion: the MAVLink side of the landing aid, as a sans-IO state machine.
 //!
+//! What this module offers: [`Companion`] (configured by [`CompanionConfig`]), which takes each
+//! frame's estimate from [`crate::filter`] and the bytes the autopilot sends, and hands out the
+//! MAVLink frames to transmit; what it counts and decides, [`CompanionStats`] and
+//! [`TargetOutcome`]; the message format per autopilot, [`Profile`]; the clock relation,
+//! [`TimeSync`]; and the byte-stream parser, [`FrameParser`], for tools that read MAVLink
+//! themselves. [`mavlink`] is the MAVLink crate itself, re-exported as a namespace of message
+//! types (not a stage) so that callers build and match messages with the very version and
+//! dialect the companion speaks.
+//!
 //! The board sits on a UART to the flight controller (ArduPilot or PX4). [`Companion`] owns
 //! everything between "a frame was estimated" and "these bytes go on the wire", and nothing
 //! that touches hardware, the detector or the sensor: the caller feeds it
 //!
 //! - received bytes, [`Companion::receive`] (any chunking; garbage and broken frames are
-//!   survived, see [`framing`]),
+//!   survived, see [`FrameParser`]),
 //! - each frame's estimate, [`Companion::on_estimate`] (what
 //!   [`crate::pipeline::FramePipeline::process`] returns, read with this companion's
 //!   [`Companion::vehicle`] state),
@@ -16,16 +25,17 @@
 //! (UDP, serial) run the very same code; the host tests drive it with a simulated autopilot and
 //! check every byte with pymavlink.
 //!
-//! The module is split by concern: [`framing`] (the byte stream), `receive` (what each
-//! incoming message does), `target` (an estimate to a LANDING_TARGET, [`profile`] for the two
-//! formats), `transmit` (scheduling and serialising), [`timesync`] (the autopilot's clock);
-//! the parameter table is [`crate::params`], the estimator [`crate::filter::estimator`].
+//! The module is split by concern, in private submodules: `framing` (the byte stream),
+//! `receive` (what each incoming message does), `target` (an estimate to a LANDING_TARGET,
+//! `profile` for the two formats), `transmit` (scheduling and serialising), `timesync` (the
+//! autopilot's clock); the parameter table is [`crate::params`], the estimator
+//! [`crate::filter::PadEstimator`].
 //!
 //! # What it sends
 //!
 //! - HEARTBEAT at 1 Hz (`MAV_TYPE_ONBOARD_CONTROLLER`, `MAV_AUTOPILOT_INVALID`).
 //! - LANDING_TARGET for every frame that has a pad fix and a fresh estimate, in the
-//!   ArduPilot or PX4 format ([`profile`]), MAVLink 2 with the extension fields. Never a stale
+//!   ArduPilot or PX4 format ([`Profile`]), MAVLink 2 with the extension fields. Never a stale
 //!   one: only frames *with* a fix produce a target (a frame without one produces nothing, so
 //!   the flight controller's own timeout sees the pad disappear), the estimator must have a
 //!   confirmed estimate at that frame's exposure time whose last measurement is fresh
@@ -40,7 +50,7 @@
 //! the profile come from it alone.
 //! - VISION_POSITION_ESTIMATE (optional, TD_VPE_EN): the vehicle in a pad-centred NED frame,
 //!   with covariance.
-//! - TIMESYNC requests (1 Hz) and answers to the autopilot's requests ([`timesync`]), the
+//! - TIMESYNC requests (1 Hz) and answers to the autopilot's requests ([`TimeSync`]), the
 //!   answers ahead of everything else waiting (PX4 discards round trips of 10 ms or more).
 //! - COMMAND_LONG `MAV_CMD_SET_MESSAGE_INTERVAL` for the vehicle state it needs
 //!   (ATTITUDE_QUATERNION; LOCAL_POSITION_NED too for PX4), repeated every second while that
@@ -59,8 +69,8 @@
 //! the mount; ArduPilot does not need our vehicle state, so targets keep flowing when the
 //! autopilot's messages stop (decided: a silent *telemetry* direction does not mean the
 //! autopilot cannot hear us). PX4 profile: only with attitude and LOCAL_POSITION_NED at the
-//! exposure, so when the autopilot goes silent targets stop within
-//! [`crate::filter::vehicle::MAX_EXTRAPOLATION_US`] and resume with its first samples.
+//! exposure, so when the autopilot goes silent targets stop within the vehicle state's
+//! extrapolation limit ([`crate::filter::VehicleState`]) and resume with its first samples.
 //!
 //! # Time
 //!
@@ -71,20 +81,20 @@
 //! offset and the vehicle state (whose reboot count restarts the estimator's level track), and
 //! triggers a new TIMESYNC and new message-interval requests at once.
 
-pub mod framing;
-pub mod profile;
+mod framing;
+mod profile;
 mod receive;
 mod state;
 mod stats;
 mod target;
-pub mod timesync;
+mod timesync;
 mod transmit;
 
 pub use mavlink;
 
 pub use framing::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
 pub use mavlink::dialects::common::MavSeverity;
-pub use profile::{Profile, ProfileSetting, TargetFields, TargetFrame};
+pub use profile::{Profile, ProfileSetting};
 pub use stats::{CompanionStats, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
 

@@ -36,7 +36,7 @@
 //!   its exposure, for heading-aligned landings;
 //! - `type = LANDING_TARGET_TYPE_VISION_FIDUCIAL`.
 
-use crate::filter::axes::{distance, local_ned_position, Attitude};
+use crate::filter::{distance, local_ned_position, Attitude};
 use mavlink::dialects::common::MavAutopilot;
 use nalgebra::Vector3;
 
@@ -145,7 +145,7 @@ pub struct TargetFields {
     /// `distance` from the camera, metres (> 0).
     pub distance: f32,
     /// `q`: the pad's orientation in the frame of `position`, `[w, x, y, z]`
-    /// ([`crate::filter::axes::pad_orientation`]).
+    /// (the orientations of [`crate::filter::PadEstimate`]).
     pub q: [f32; 4],
 }
 

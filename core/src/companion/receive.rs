@@ -11,7 +11,7 @@ use super::{
     Pending, State, MAV_COMP_ID_AUTOPILOT1, MAX_STAMP_DISAGREEMENT_US, MSG_ATTITUDE_QUATERNION,
     MSG_LOCAL_POSITION_NED,
 };
-use crate::filter::axes::Attitude;
+use crate::filter::Attitude;
 use crate::filter::PositionSample;
 use crate::params::{self, ParamId};
 use mavlink::dialects::common::{MavAutopilot, MavCmd, MavMessage, MavResult};

@@ -12,7 +12,7 @@
 
 use super::profile::{self, Profile, TargetFrame};
 use super::{PendingTarget, PendingVpe, State, TargetOutcome, TimeBase, UNKNOWN_Q};
-use crate::filter::axes::Attitude;
+use crate::filter::Attitude;
 use crate::filter::{Estimate, FrameEstimate};
 use crate::params::ParamId;
 use mavlink::dialects::common::{

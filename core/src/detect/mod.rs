@@ -1,19 +1,27 @@
 //! Marker detection: grey frame in, decoded markers with sub-pixel corners out.
 //!
+//! What this module offers: [`Detector`] (configured by [`DetectorConfig`], with the
+//! [`Method`] it runs), whose [`Detector::detect`] takes a frame ([`crate::image::GrayImage`]),
+//! the families to look for ([`crate::family`]) and the caller's work memory ([`Buffers`],
+//! sized by [`buffer_sizes`] or owned by a [`Workspace`]), finds the candidates and returns
+//! the decoded markers, [`Detection`]s (with the frame's [`DetectStats`]; or a
+//! [`DetectError`]). The markers go on to the pad fix, [`crate::pose`]. The steps below are
+//! private submodules.
+//!
 //! ## Pipeline (one function per step, see the submodules)
-//! 1. [`threshold`]: binarise against a local (tile min/max) threshold, so shadows and
+//! 1. `threshold`: binarise against a local (tile min/max) threshold, so shadows and
 //!    brightness gradients across the frame do not matter; pixels without local contrast are
 //!    never "dark".
-//! 2. [`contour`]: scan the binary image for the tops of dark regions and follow each
+//! 2. `contour`: scan the binary image for the tops of dark regions and follow each
 //!    region's outer boundary (Moore neighbour tracing, iterative); holes only for
 //!    white-on-black families.
-//! 3. [`quad`]: screen each boundary (length, compactness, sampled convexity, diameter), then
+//! 3. `quad`: screen each boundary (length, compactness, sampled convexity, diameter), then
 //!    simplify the survivors with Douglas-Peucker and keep convex four-corner shapes with
-//!    sane edges and angles. A quick look at the rough corners ([`decode::precheck`]: border
+//!    sane edges and angles. A quick look at the rough corners (`decode::precheck`: border
 //!    ring, margin, flat interior) turns down most non-markers before step 4.
-//! 4. [`refine`]: move each edge onto the image's intensity edge with sub-pixel precision
+//! 4. `refine`: move each edge onto the image's intensity edge with sub-pixel precision
 //!    (line fits to gradient peaks) and intersect neighbouring edges for the corners.
-//! 5. [`decode`]: map the family's cell grid through the corner homography, sample each cell
+//! 5. `decode`: map the family's cell grid through the corner homography, sample each cell
 //!    centre, threshold against black/white levels learnt from the marker's own border and
 //!    margin, and look the code up in all four rotations with bounded error correction.
 //! 6. De-duplicate: the same marker found twice (two contours, two families) is kept once,
@@ -26,7 +34,7 @@
 //! [`Method::Paper`] reproduces the reference paper's tables. What it does differently
 //! (an edge map instead of step 1, every contour traced, no quick look, corners stepped back
 //! from the edge band instead of step 4, cells read as area means and matched exactly) is
-//! all in [`paper`], as one implementation of the private `Strategy` trait that
+//! all in `paper`, as one implementation of the private `Strategy` trait that
 //! [`Detector::detect`] picks once per frame; the steps above only ask the strategy, so the
 //! production path has no branches for the paper.
 //!

@@ -1,5 +1,12 @@
 //! Marker families: cell layouts, code tables and decoding.
 //!
+//! What this module offers: [`Family`] (a family's layout and codes, and [`Family::decode`],
+//! which the detector, [`crate::detect`], uses to turn a sampled cell grid into a marker id),
+//! the shipped families in [`tables`] and user families read by [`parse_family`]. [`tables`]
+//! stays a public module because it is a namespace of data, not a stage: one generated table
+//! per family (`tables::TAG36H11`, ...) and the look-ups by name. The look-up index,
+//! [`MultiIndex`], is in the private submodule `index`, the parser in `parse`.
+//!
 //! A family is a set of square cell grids (the codes), each drawn with row 0 at the top,
 //! white = 1, black = 0, exactly as in the text files of `shared/data/families`. Any grid
 //! with one all-black ring works, which is what lets users bring ArUco, AprilTag or their
@@ -26,12 +33,12 @@
 //!
 //! ## Look-up
 //! [`Family::decode`] finds exact matches by binary search in `sorted_ids`. Corrected matches
-//! go through the family's [`MultiIndex`] (multi-index hashing, see [`index`]), which verifies
+//! go through the family's [`MultiIndex`] (multi-index hashing), which verifies
 //! only the few codes that share a chunk of bits with a reading; a family without one (a user
 //! family parsed at run time) compares the readings with every code. Both give the same
 //! answer: the nearest code, ties broken by the smallest id, then the smallest rotation.
 
-pub mod index;
+mod index;
 mod parse;
 pub mod tables;
 

@@ -314,11 +314,6 @@ pub fn local_ned_position(
     vehicle_position_ned + relative_ned
 }
 
-/// A covariance expressed in another frame: `r c r^T`.
-pub fn rotate_covariance(r: &Matrix3<f32>, c: &Matrix3<f32>) -> Matrix3<f32> {
-    r * c * r.transpose()
-}
-
 /// LANDING_TARGET's `angle_x`, `angle_y`, radians (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LandingAngles {

@@ -198,7 +198,7 @@ impl VehicleState {
     }
 
     /// The autopilot rebooted: forgets the samples and counts the reboot, so that whoever
-    /// filters positions in the autopilot's frames ([`super::estimator`]) restarts too.
+    /// filters positions in the autopilot's frames ([`super::PadEstimator`]) restarts too.
     pub fn on_reboot(&mut self) {
         self.clear_samples();
         self.reboots = self.reboots.wrapping_add(1);

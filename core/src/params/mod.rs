@@ -1,5 +1,13 @@
 //! The board's MAVLink parameters: a fixed table, range-checked, exportable for flash.
 //!
+//! What this module offers: [`ParamSet`] (the values, by [`ParamId`], of the table [`PARAMS`]),
+//! which the [`crate::companion::Companion`] reads and writes for the ground station;
+//! [`PipelineSettings`], what the values set on the per-frame path
+//! ([`crate::pipeline::FramePipeline::apply`]); and the flash log the firmware keeps them in,
+//! [`Store`] (over the firmware's [`SlotFlash`], in [`Geometry`]) with [`SaveDebounce`] to
+//! decide when to save. The log is in the private submodule `persist`, the settings in
+//! `settings`.
+//!
 //! Users tune the board from Mission Planner or QGroundControl through the MAVLink parameter
 //! protocol (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET / PARAM_VALUE); the
 //! [`crate::companion::Companion`] speaks the protocol, this module holds the values.
@@ -16,7 +24,7 @@
 //!
 //! The parameters of the per-frame path (TD_TAG_SIZE, TD_MAX_HAMMING, TD_CAM_YAW, the
 //! auto-exposure limits TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are turned into the settings
-//! the pipeline applies by [`settings::PipelineSettings::from_params`].
+//! the pipeline applies by [`PipelineSettings::from_params`].
 //!
 //! Persistence is the firmware's job: [`ParamSet::export`] writes the values as bytes
 //! (magic, version, `name + value` records, CRC) and [`ParamSet::import`] reads them back.
@@ -25,10 +33,15 @@
 
 use crate::crc::crc16_x25;
 
-pub mod persist;
+mod persist;
 mod settings;
 
-pub use settings::{largest_marker_size, scale_pad, PipelineSettings};
+pub use persist::{
+    Boot, Cleanup, FlashFailed, Geometry, Op, Restored, SaveDebounce, SaveError, Saved, SlotFlash,
+    SlotKey, Store, ERASED, SAVE_DEBOUNCE_US, SECTORS, SLOT_LEN,
+};
+
+pub use settings::PipelineSettings;
 
 /// Longest parameter name (MAVLink's `param_id`, not NUL-terminated when exactly 16).
 pub const PARAM_NAME_LEN: usize = 16;

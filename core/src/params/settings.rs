@@ -28,7 +28,7 @@
 use super::{ParamId, ParamSet};
 use crate::detect::DetectorConfig;
 use crate::pad::{PadError, PadLayout, PadMarker, MAX_PAD_MARKERS};
-use crate::sensor::exposure::AutoExposureLimits;
+use crate::sensor::AutoExposureLimits;
 use crate::sensor::GainX16;
 
 /// What the per-frame path takes from the parameters.

@@ -1,6 +1,12 @@
 //! The per-frame path, in one place: frame -> candidates -> decoded markers -> pad fix ->
 //! estimate, with the parameters that tune it applied between frames.
 //!
+//! What this module offers: [`FramePipeline`] (configured by [`PipelineConfig`]), whose
+//! [`FramePipeline::process`] runs one frame through [`crate::detect`], [`crate::pose`] and
+//! [`crate::filter`] and returns a [`FrameReport`], whose estimate goes on to the messages,
+//! [`crate::companion`]; and the reference paper's chain, [`PaperPipeline`] with its
+//! [`PaperReport`].
+//!
 //! The firmware's vision task, the host's `touchdown companion` and `touchdown replay`, the
 //! benchmarks and the no-panic and fuzz harnesses all run exactly this: what a bench or a
 //! replay measures through [`FramePipeline`] is what the camera board does with the same
@@ -26,7 +32,7 @@
 //!
 //! - **flip by prediction**: a single small marker seen nearly head-on has two mirror poses
 //!   that reproject almost equally well; the one nearer the estimator's prediction wins.
-//! - **level fix** ([`level_pad_fix`]): with the attitude at the exposure, the pad's tilt is
+//! - **level fix** ([`PipelineConfig::level_fix`]): with the attitude at the exposure, the pad's tilt is
 //!   taken from gravity instead of the image (where it is barely observable on a small
 //!   marker), which removes the range bias the tilt-range coupling gives at altitude.
 //!
@@ -48,9 +54,9 @@ pub use paper::{PaperPipeline, PaperReport};
 use crate::camera::CameraModel;
 use crate::detect::{Buffers, DetectError, Detector, DetectorConfig};
 use crate::family::Family;
-use crate::filter::axes::camera_to_ned_matrix;
 use crate::filter::{
-    ConfigError, EstimatorConfig, FrameEstimate, PadEstimator, VehicleAtExposure, VehicleState,
+    camera_to_ned_matrix, ConfigError, EstimatorConfig, FrameEstimate, PadEstimator,
+    VehicleAtExposure, VehicleState,
 };
 use crate::image::GrayImage;
 use crate::pad::{PadError, PadLayout};

@@ -1,5 +1,12 @@
 //! Marker and pad pose from detected corners.
 //!
+//! What this module offers: [`marker_pose`] (one decoded marker's [`MarkerPose`], both
+//! candidate [`Pose`]s, by a [`PoseMethod`]) and the pad fix, [`pad_pose`] and
+//! [`pad_pose_with_prediction`] (a [`PadFix`] from every marker of the pad in view, with a
+//! covariance; [`crate::pipeline::FramePipeline`] also levels it with the attitude). It takes
+//! the decoded markers of [`crate::detect`] with the [`crate::camera`] model and the
+//! [`crate::pad`] layout; the fix goes on to the estimator, [`crate::filter`].
+//!
 //! A [`Pose`] maps points of a marker (or pad) frame into the camera frame,
 //! `X_cam = R X_marker + t`, with the contract's frames: marker x right, y up, z out of the
 //! printed face towards the viewer; camera x right, y down, z forward. The camera's own
@@ -9,32 +16,33 @@
 //! - [`PoseMethod::Ippe`] (the one touchdown uses): the planar square has two poses that
 //!   explain four corners almost equally well when the marker is small or seen nearly
 //!   face-on (the "flip" ambiguity). Infinitesimal Plane-based Pose Estimation (Collins and
-//!   Bartoli 2014, [`ippe`]) gives both in closed form from the corner homography; each is
+//!   Bartoli 2014, in `ippe`) gives both in closed form from the corner homography; each is
 //!   polished by Levenberg-Marquardt on the pixel reprojection error with the lens
-//!   distortion included ([`levenberg_marquardt`]), and the one with the lower error is reported first.
+//!   distortion included (`levenberg_marquardt`), and the one with the lower error is reported
+//!   first.
 //!   The other is kept so a caller with a prediction (the filter) can choose
 //!   ([`MarkerPose::choose_by_predicted_camera_position`]).
 //! - [`PoseMethod::PaperHomography`]: the paper's equations 5-7, `H = K [r1 r2 t]` decomposed
-//!   directly with no refinement ([`homography_decomposition`]); kept so the paper's tables
+//!   directly with no refinement (`homography_decomposition`); kept so the paper's tables
 //!   can be reproduced.
 //!
 //! The whole landing pad (all corners of all visible markers in one refinement, with a
-//! covariance) is [`pad_pose`].
+//! covariance) is [`pad_pose`], in `pad_pose`; the fix with the tilt taken from gravity
+//! instead of the image is in `level`. These submodules are private: the functions and types
+//! above are the module's surface.
 //!
 //! Every iterative step has a fixed iteration cap; nothing allocates; bad input is a
 //! [`PoseError`].
 
-pub mod homography_decomposition;
-pub mod ippe;
-pub mod level;
-pub mod levenberg_marquardt;
-pub mod pad_pose;
+mod homography_decomposition;
+mod ippe;
+mod level;
+mod levenberg_marquardt;
+mod pad_pose;
 
-pub use level::level_pad_fix;
-pub use pad_pose::{
-    largest_layout_marker, marker_to_pad, pad_pose, pad_pose_with_prediction, PadFix,
-    PIXEL_NOISE_FLOOR_PX,
-};
+pub(crate) use level::level_pad_fix;
+pub(crate) use pad_pose::{largest_layout_marker, marker_to_pad};
+pub use pad_pose::{pad_pose, pad_pose_with_prediction, PadFix, PIXEL_NOISE_FLOOR_PX};
 
 use crate::camera::CameraModel;
 use crate::geometry::Point;

@@ -2,7 +2,13 @@
 //! bus: the units a sensor is set in ([`GainX16`]; exposure counts in line periods), the
 //! timing a configured sensor runs at ([`FrameTiming`]: frame period, rolling-shutter
 //! readout, frame time stamps, capture timeouts, settling time) and the software
-//! auto-exposure loop that drives it ([`exposure`]).
+//! auto-exposure loop that drives it.
+//!
+//! What this module offers: [`GainX16`] and [`FrameTiming`], which the drivers report and the
+//! per-frame path stamps frames with, and the auto-exposure loop, [`AutoExposure`] (within
+//! [`AutoExposureLimits`], a new [`ExposureSetting`] per frame from the frame's
+//! [`mean_brightness`]), which sets up the frames the detector ([`crate::detect`]) reads. The
+//! loop is in the private submodule `exposure`.
 //!
 //! The drivers that talk to a sensor (OV7725, OV2640: register tables and SCCB transactions)
 //! are not here but in the `touchdown-sensors` crate (`sensors/`), which builds on these
@@ -13,7 +19,9 @@
 //! tested on the host, and used by the firmware's vision task, the parameters
 //! ([`crate::params`]) and the no-panic proof of the per-frame path.
 
-pub mod exposure;
+mod exposure;
+
+pub use exposure::{mean_brightness, AutoExposure, AutoExposureLimits, ExposureSetting};
 
 /// Analog gain as a multiple of 1/16 (16 = 1x, 32 = 2x, ...).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]

@@ -19,7 +19,7 @@ use touchdown_core::companion::mavlink::dialects::common::{
     PARAM_SET_DATA,
 };
 use touchdown_core::companion::{Companion, CompanionConfig, CompanionStats, Profile};
-use touchdown_core::filter::axes::CameraMount;
+use touchdown_core::filter::CameraMount;
 use touchdown_core::params::ParamId;
 
 use super::{

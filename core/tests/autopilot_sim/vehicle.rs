@@ -7,7 +7,7 @@
 use std::collections::VecDeque;
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
-use touchdown_core::filter::axes::{camera_to_ned_matrix, Attitude, CameraMount};
+use touchdown_core::filter::{camera_to_ned_matrix, Attitude, CameraMount};
 use touchdown_core::pose::PadFix;
 
 use super::{pad_fix, pad_ned, Rng, FRAME_PERIOD_US, PROCESS_DELAY_US, SIGMA_LATERAL, SIGMA_RANGE};

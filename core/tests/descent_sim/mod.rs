@@ -30,8 +30,10 @@
 use nalgebra::{Matrix3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use touchdown_core::filter::axes::{self, Attitude, CameraMount};
-use touchdown_core::filter::{Measurement, PaperKalman, Tracker, TrackerConfig, UpdateOutcome};
+use touchdown_core::filter::{
+    camera_to_ned_matrix, level_measurement, ned_to_camera, Attitude, CameraMount, Measurement,
+    PaperKalman, Tracker, TrackerConfig, UpdateOutcome,
+};
 
 /// The scenario.
 #[derive(Debug, Clone)]
@@ -135,7 +137,7 @@ impl SimConfig {
             let t = i as f64 / self.rate_hz;
             let attitude = self.attitude(t);
             let truth_ned = self.truth_ned(t);
-            let r_nc = axes::camera_to_ned_matrix(&attitude, &mount).cast::<f64>();
+            let r_nc = camera_to_ned_matrix(&attitude, &mount).cast::<f64>();
             let truth_cam = r_nc.transpose() * truth_ned;
             let dropped = rng.random_bool(self.drop_probability)
                 || (i >= self.burst.0 && i < self.burst.0 + self.burst.1);
@@ -330,7 +332,7 @@ pub fn compare(cfg: &SimConfig) -> Comparison {
                 Vector3::new(e[0] as f64, e[1] as f64, e[2] as f64),
                 f.truth_cam,
             ));
-            let lm = axes::level_measurement(m, &f.attitude, &mount);
+            let lm = level_measurement(m, &f.attitude, &mount);
             match level.update(&lm) {
                 UpdateOutcome::Gated(_) => {
                     gated += 1;
@@ -347,7 +349,7 @@ pub fn compare(cfg: &SimConfig) -> Comparison {
             camera.predict_to(f.t_us);
         }
         if let Some(e) = level.estimate(f.t_us) {
-            let p = axes::ned_to_camera(&e.position, &f.attitude, &mount).cast::<f64>();
+            let p = ned_to_camera(&e.position, &f.attitude, &mount).cast::<f64>();
             ours.points.push((t, p, f.truth_cam));
         }
         if let Some(e) = camera.estimate(f.t_us) {
@@ -358,7 +360,7 @@ pub fn compare(cfg: &SimConfig) -> Comparison {
     }
     // The truth in the camera frame at an arbitrary time, for the lag search.
     let truth_cam = |t: f64| {
-        let r = axes::camera_to_ned_matrix(&cfg.attitude(t), &mount).cast::<f64>();
+        let r = camera_to_ned_matrix(&cfg.attitude(t), &mount).cast::<f64>();
         r.transpose() * cfg.truth_ned(t)
     };
     let weight = |t: f64| {

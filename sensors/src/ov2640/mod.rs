@@ -54,7 +54,7 @@
 //! - **Exposure and gain**: the sensor's own AEC/AGC with a gain ceiling (COM8, COM9), or
 //!   manual exposure (16 bits of line periods split over REG45, AEC and REG04) and gain
 //!   (GAIN). With a hard exposure limit, run
-//!   [`touchdown_core::sensor::exposure::AutoExposure`] and feed its manual settings here.
+//!   [`touchdown_core::sensor::AutoExposure`] and feed its manual settings here.
 //!   The banding filter stays off in both.
 //!
 //! The whole set-up is data: the tables and the values derived here are lists of

@@ -18,7 +18,7 @@
 //! - **Exposure and gain**: the sensor's own AEC/AGC with a gain ceiling (COM9), or manual
 //!   exposure (AEC/AECH, in line periods) and gain (GAIN). The sensor's AEC has no exposure
 //!   ceiling below the frame period; for a hard exposure limit (motion blur in bright sun) run
-//!   [`touchdown_core::sensor::exposure::AutoExposure`] and feed its manual settings here.
+//!   [`touchdown_core::sensor::AutoExposure`] and feed its manual settings here.
 //!
 //! The bus is SCCB, which is I2C-compatible for writes but does not support a repeated
 //! start: a register read is a write of the register address, a STOP, then a separate read

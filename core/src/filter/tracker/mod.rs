@@ -94,8 +94,6 @@ use nalgebra::{Matrix3, Matrix6, Vector3};
 
 /// Chi-square quantile, 3 degrees of freedom, 99.9 %.
 pub const CHI2_3DOF_999: f32 = 16.27;
-/// Chi-square quantile, 3 degrees of freedom, 99 %.
-pub const CHI2_3DOF_99: f32 = 11.34;
 
 /// Largest accepted |position| coordinate, metres: anything beyond is not a landing pad.
 const MAX_ABS_POSITION_M: f32 = 1.0e4;

@@ -6,7 +6,7 @@
 //! [`SLOT_LEN`]-byte slot to a log and never rewrites anything; [`SaveDebounce`] makes a ground
 //! station writing ten parameters in a row cost one slot, not ten.
 //!
-//! A slot (format version [`SLOT_VERSION`]) is whole flash words: a header word that is the
+//! A slot (format version [`SLOT_VERSION`](slot::SLOT_VERSION)) is whole flash words: a header word that is the
 //! same for every slot (magic, version, length in words), the sequence number, the export
 //! blob, zero padding, and a trailer (magic, CRC-32 of everything before it) in its **last**
 //! word. The flash driver programs words in ascending order, so the trailer is the last word
@@ -42,7 +42,7 @@
 //! otherwise it could never be written. A sector holding a valid slot is never erased at boot.
 //!
 //! **Older logs.** The firmware before this design (slot format 1) kept a log of bare export
-//! blobs, one per [`LEGACY_SLOT_LEN`] bytes, in the last sector. A sector with no version-2
+//! blobs, one per [`LEGACY_SLOT_LEN`](slot::LEGACY_SLOT_LEN) bytes, in the last sector. A sector with no version-2
 //! slot is also read that way ([`SlotKey::Legacy`], older than any version-2 slot); it is never
 //! appended to, so the first save after the update goes to the other sector and the old sector
 //! keeps the user's values until that one has filled up and it is erased in turn.
@@ -73,8 +73,10 @@ mod store_tests;
 
 pub use debounce::{SaveDebounce, SAVE_DEBOUNCE_US};
 #[cfg(test)]
-pub use legacy::{encode_slot, scan, Restore, ScanResult};
-pub use slot::{crc32, LEGACY_SLOT_LEN, MAX_SLOT_LEN, SLOT_LEN, SLOT_VERSION};
+pub use legacy::{encode_slot, scan};
+#[cfg(test)]
+pub use slot::LEGACY_SLOT_LEN;
+pub use slot::SLOT_LEN;
 pub use store::{
     Boot, Cleanup, FlashFailed, Geometry, Op, Restored, SaveError, Saved, SlotFlash, SlotKey, Store,
 };
