@@ -1,7 +1,7 @@
 //! `touchdown replay` as a user sees it: the tables for a small simulated recording, the
 //! figures, the same results from a recording and from the scenario rendered in memory,
-//! vision-only replay without truth, and one-line errors (exit status 2) naming the file and
-//! line of a truncated or corrupt recording.
+//! `--json` against the text of the same run, vision-only replay without truth, and one-line
+//! errors (exit status 2) naming the file and line of a truncated or corrupt recording.
 //!
 //! One small recording (the first [`FRAMES`] frames of the paper scenario: its 5 m hover) is
 //! written once with `touchdown simulate` and copied for the tests that damage it.
@@ -287,6 +287,137 @@ fn bad_inputs_are_one_line_and_status_2() {
     }
 }
 
+/// The summary row starting with `row`: one cell per method.
+fn summary_cells(stdout: &str, row: &str) -> Vec<String> {
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with(row))
+        .unwrap_or_else(|| panic!("no summary row `{row}` in:\n{stdout}"));
+    line.split('|')
+        .skip(1)
+        .map(|c| c.trim().to_string())
+        .collect()
+}
+
+/// `value` as the tables print it, with `decimals` decimals.
+fn printed(value: &serde_json::Value, decimals: usize) -> String {
+    let v = value
+        .as_f64()
+        .unwrap_or_else(|| panic!("not a number: {value}"));
+    format!("{v:.decimals$}")
+}
+
+#[test]
+fn json_has_every_table_and_the_numbers_of_the_text() {
+    let frames = FRAMES.to_string();
+    let args = [
+        "replay",
+        "--scenario",
+        "paper",
+        "--frames",
+        &frames,
+        "--pose-steps",
+    ];
+    let text_run = touchdown(&[&args[..], &["--no-plots"]].concat());
+    assert!(text_run.status.success(), "{}", text(&text_run.stderr));
+    let plots = scratch("json-figures");
+    let json_run = touchdown(&[&args[..], &["--json", "--plots", path_str(&plots)]].concat());
+    assert!(json_run.status.success(), "{}", text(&json_run.stderr));
+    let (stdout, json_stdout) = (text(&text_run.stdout), text(&json_run.stdout));
+    assert_eq!(
+        json_stdout.lines().count(),
+        1,
+        "only the JSON: {json_stdout}"
+    );
+    let doc: serde_json::Value = serde_json::from_str(&json_stdout).expect("valid JSON");
+    for key in ["setup", "set_points", "summary", "altitudes", "figures"] {
+        assert!(doc.get(key).is_some(), "no `{key}` in {doc}");
+    }
+
+    let setup = &doc["setup"];
+    assert_eq!(setup["input"]["kind"], "scenario");
+    assert_eq!(setup["input"]["scenario"], "paper");
+    assert_eq!(setup["input"]["seed"], 1);
+    assert_eq!(setup["frames"], FRAMES);
+    assert_eq!(setup["camera"]["width"], 640);
+    assert_eq!(setup["pad"]["markers"][0]["family"], "aruco_6x6_250");
+    // The variant columns keep their order; the pattern fit's is last.
+    let methods = setup["methods"].as_array().expect("methods");
+    let names: Vec<&str> = methods.iter().filter_map(|m| m["name"].as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "paper's method",
+            "ours",
+            "no level fix",
+            "no flip choice",
+            "neither step",
+            "no pattern fit"
+        ]
+    );
+    assert!(methods.iter().all(|m| m["attitude_given"] == true));
+    let fits: Vec<bool> = methods[1..]
+        .iter()
+        .map(|m| m["settings"]["detector"]["fit_small_markers"] == true)
+        .collect();
+    assert_eq!(fits, [true, true, true, true, false]);
+
+    // The summary: the same numbers as the text's, per method, in the same order.
+    let summary = doc["summary"]["methods"].as_array().expect("summary");
+    assert_eq!(summary.len(), names.len());
+    let detected = summary_cells(&stdout, "frames with a pose");
+    let rms = summary_cells(&stdout, "RMS error x / y / z, cm (filtered)");
+    let raw = summary_cells(&stdout, "RMS error x / y / z, cm (raw pose)");
+    for (k, m) in summary.iter().enumerate() {
+        assert_eq!(m["name"], names[k]);
+        let rate = 100.0 * m["detection_rate"].as_f64().expect("rate");
+        assert_eq!(detected[k], format!("{} ({rate:.1} %)", m["detected"]));
+        let xyz = |v: &serde_json::Value| {
+            format!(
+                "{} / {} / {}",
+                printed(&v["x"], 2),
+                printed(&v["y"], 2),
+                printed(&v["z"], 2)
+            )
+        };
+        assert_eq!(rms[k], xyz(&m["rms_error_cm"]), "{}", names[k]);
+        assert_eq!(raw[k], xyz(&m["raw_rms_error_cm"]), "{}", names[k]);
+    }
+
+    // The set-point table's row for the 5 m hover, ours.
+    let row = &doc["set_points"][0];
+    assert_eq!((&row["label"], &row["axis"]), (&"z=5".into(), &"z".into()));
+    assert_eq!(row["reference_cm"], 500.0);
+    assert_eq!(row["published"]["estimate_cm"], 502.0);
+    let ours = &row["methods"][1]["on_axis"];
+    let cells = row_cells(&stdout, "Z   500");
+    assert_eq!(cells[3][0], printed(&ours["mean_estimate_cm"], 1));
+    assert_eq!(cells[3][3], printed(&ours["rms_error_cm"], 2));
+
+    // --json with --plots still writes the figures, and says where.
+    assert_eq!(doc["figures"]["files"], 12);
+    assert!(plots.join("error-z.svg").is_file());
+}
+
+#[test]
+fn json_alone_writes_no_figures() {
+    let cwd = scratch("json-no-figures");
+    std::fs::create_dir_all(&cwd).expect("scratch dir");
+    let output = Command::new(env!("CARGO_BIN_EXE_touchdown"))
+        .args(["replay", "--scenario", "paper", "--frames", "3", "--json"])
+        .current_dir(&cwd)
+        .output()
+        .expect("the touchdown binary runs");
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&output.stdout).expect("valid JSON");
+    assert!(doc["figures"].is_null(), "{doc}");
+    let entries = std::fs::read_dir(&cwd).expect("read scratch").count();
+    assert_eq!(
+        entries, 0,
+        "--json without --plots wrote into the current directory"
+    );
+}
+
 #[test]
 fn help_explains_inputs_methods_tables_and_figures() {
     let output = touchdown(&["replay", "--help"]);
@@ -302,6 +433,8 @@ fn help_explains_inputs_methods_tables_and_figures() {
         "lag",
         "--plots",
         "--no-plots",
+        "--json",
+        "no pattern fit",
         "position-x",
         "Exit status",
     ] {

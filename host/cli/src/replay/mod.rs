@@ -46,6 +46,7 @@ use touchdown_eval::{Experiment, ExperimentError, Frame, Method, SetPoint};
 use touchdown_formats::families::{self, SelectedFamily};
 
 mod input;
+mod json;
 mod tables;
 
 pub use input::set_point_of_label;
@@ -84,7 +85,8 @@ Methods:
                      it: the LANDING_TARGET's body FRD vector turned with the autopilot's
                      attitude
   --pose-steps       adds the board's pipeline without the level fix, without the flip
-                     choice, and without both
+                     choice, without both, and without the detector's pattern fit of small
+                     markers' corners on far frames (no pattern fit), in that order
 Both are given the camera's attitude from the truth (what the flight controller knows);
 a recording without truth runs vision only and prints no errors.
 
@@ -104,6 +106,12 @@ Tables (centimetres; error = truth - estimate, the paper's sign):
                      0.5 m (frames within 10 % of that altitude)
 Frames more than 0.5 s apart (the paper scenario records only its hovers) start a new
 sequence: the filters are reset.
+
+JSON (--json): one JSON object on stdout instead of the text, with every table's numbers
+unrounded (\"setup\": input, seed, frames, camera, pad, the methods and their settings;
+\"set_points\", \"summary\", \"altitudes\", \"figures\"): lengths in cm (keys ending in _cm),
+altitudes in m (_m), rates as fractions (0-1); keys in docs/interfaces.md. Figures are
+written only with --plots DIR.
 
 Figures (--plots DIR, default replay-NAME in the current directory; PNG and SVG):
   position-x, -y, -z  truth, each method's filtered estimate (line) and raw pose (dots)
@@ -140,8 +148,14 @@ pub struct ReplayArgs {
     #[arg(long)]
     pub no_plots: bool,
 
-    /// Also run the board's pipeline without each optional pad-fix step (the level fix, the
-    /// flip choice by prediction): the measurement behind what ships
+    /// Print one JSON object with every table and the replay's setup instead of the text
+    /// (figures only with --plots)
+    #[arg(long)]
+    pub json: bool,
+
+    /// Also run the board's pipeline without each optional step (the pad fix's level fix and
+    /// flip choice by prediction, the detector's pattern fit): the measurement behind what
+    /// ships
     #[arg(long)]
     pub pose_steps: bool,
 
@@ -218,10 +232,13 @@ pub fn run(
             level_fix,
             ..PipelineConfig::default()
         };
+        let mut no_pattern_fit = PipelineConfig::default();
+        no_pattern_fit.detector.fit_small_markers = false;
         methods.extend([
             Method::board("no level fix", steps(true, false)),
             Method::board("no flip choice", steps(false, true)),
             Method::board("neither step", steps(false, false)),
+            Method::board("no pattern fit", no_pattern_fit),
         ]);
     }
     if !input.has_truth {
@@ -306,6 +323,37 @@ pub fn run(
     let elapsed = started.elapsed().as_secs_f64();
 
     let report = experiment.report();
+    let summaries: Vec<MethodSummary> =
+        (0..trace.methods.len()).map(|m| trace.summary(m)).collect();
+    let figure_dir = match (&args.plots, args.no_plots) {
+        (_, true) => None,
+        (Some(dir), false) => Some(dir.clone()),
+        // A script asking for JSON gets no directory it did not ask for.
+        (None, false) if args.json => None,
+        (None, false) => Some(PathBuf::from(format!("replay-{}", input.short_name))),
+    };
+    let figures = match &figure_dir {
+        Some(dir) => Some(plot::write_figures(&trace, dir, &input.title).map_err(CliError::new)?),
+        None => None,
+    };
+    if args.json {
+        let document = json::document(
+            args,
+            &input,
+            &methods,
+            &report,
+            &trace,
+            &summaries,
+            elapsed,
+            figure_dir.as_deref().zip(figures.as_ref().map(Vec::len)),
+        );
+        let mut line = serde_json::to_string(&document)
+            .map_err(|e| CliError(format!("cannot write the JSON: {e}")))?;
+        line.push('\n');
+        out.write_all(line.as_bytes())
+            .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+        return Ok(Outcome::Success);
+    }
     let mut text = header(&input, &trace, elapsed);
     if !report.rows.is_empty() {
         if input.has_truth {
@@ -315,18 +363,11 @@ pub fn run(
             text.push_str(&vision_only_table(&report));
         }
     }
-    let summaries: Vec<MethodSummary> =
-        (0..trace.methods.len()).map(|m| trace.summary(m)).collect();
     text.push_str(&summary_table(&trace, &summaries, input.has_truth));
     if report.rows.is_empty() && input.has_truth {
         text.push_str(&altitude_table(&trace));
     }
-    if !args.no_plots {
-        let dir = args
-            .plots
-            .clone()
-            .unwrap_or_else(|| PathBuf::from(format!("replay-{}", input.short_name)));
-        let written = plot::write_figures(&trace, &dir, &input.title).map_err(CliError::new)?;
+    if let Some((dir, written)) = figure_dir.as_ref().zip(figures.as_ref()) {
         let _ = writeln!(
             text,
             "\nFigures: {} files in {} (position-x/y/z{}, .png and .svg)",

@@ -1,0 +1,300 @@
+//! `touchdown replay --json`: every table of the text output as one JSON object, for scripts
+//! and CI (the keys are documented in `docs/interfaces.md`, "touchdown replay").
+//!
+//! The numbers are the ones the tables print, unrounded, from the same [`Report`] and
+//! [`Trace`]: lengths in centimetres where the tables give centimetres (keys ending in `_cm`),
+//! altitudes in metres (`_m`), rates as fractions of frames (`_rate`, 0 to 1, where the
+//! tables print percent). A value a table prints as `-` (no frame to average) is `null`.
+
+use serde_json::{json, Map, Value};
+
+use super::{ReplayArgs, ALTITUDE_CHECKPOINTS_M, ALTITUDE_TOLERANCE};
+use crate::replay::input::Input;
+use touchdown_eval::trace::{MethodSummary, Trace};
+use touchdown_eval::{published, AxisStats, Method, MethodKind, Report, SetPointResult};
+
+/// Metres as centimetres; `null` when absent or not finite.
+fn cm(v: Option<f64>) -> Value {
+    v.filter(|v| v.is_finite())
+        .map_or(Value::Null, |v| json!(100.0 * v))
+}
+
+/// A finite number, else `null`.
+fn finite(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// Three metre values as `{"x", "y", "z"}` in centimetres.
+fn xyz_cm(v: [Option<f64>; 3]) -> Value {
+    json!({"x": cm(v[0]), "y": cm(v[1]), "z": cm(v[2])})
+}
+
+fn xyz_of(v: Option<[f64; 3]>) -> Value {
+    match v {
+        Some(v) => xyz_cm(v.map(Some)),
+        None => Value::Null,
+    }
+}
+
+/// One line of the on-axis statistics (estimate, error, |error|, RMS), centimetres.
+fn on_axis(a: &AxisStats) -> Value {
+    json!({
+        "frames": a.count(),
+        "mean_estimate_cm": cm(a.mean_estimate()),
+        "mean_error_cm": cm(a.mean_error()),
+        "mean_abs_error_cm": cm(a.mean_abs_error()),
+        "rms_error_cm": cm(a.rms_error()),
+    })
+}
+
+/// The whole replay as one JSON object (see the module docs).
+pub(super) fn document(
+    args: &ReplayArgs,
+    input: &Input,
+    methods: &[Method],
+    report: &Report,
+    trace: &Trace,
+    summaries: &[MethodSummary],
+    elapsed_s: f64,
+    figures: Option<(&std::path::Path, usize)>,
+) -> Value {
+    let mut root = Map::new();
+    root.insert(
+        "setup".into(),
+        setup(args, input, methods, trace, elapsed_s),
+    );
+    root.insert(
+        "set_points".into(),
+        Value::Array(
+            report
+                .rows
+                .iter()
+                .map(|r| set_point(r, &report.methods, input))
+                .collect(),
+        ),
+    );
+    root.insert("summary".into(), summary(trace, summaries, input.has_truth));
+    // The text prints the altitude table only for a run with truth and without set points.
+    let altitudes = if report.rows.is_empty() && input.has_truth {
+        altitudes(trace)
+    } else {
+        Vec::new()
+    };
+    root.insert("altitudes".into(), Value::Array(altitudes));
+    root.insert(
+        "figures".into(),
+        figures.map_or(
+            Value::Null,
+            |(dir, files)| json!({"dir": dir.display().to_string(), "files": files}),
+        ),
+    );
+    Value::Object(root)
+}
+
+/// What was replayed, with what: the input, camera, pad and the methods' settings.
+fn setup(
+    args: &ReplayArgs,
+    input: &Input,
+    methods: &[Method],
+    trace: &Trace,
+    elapsed_s: f64,
+) -> Value {
+    let source = match (&args.scenario, &args.recording) {
+        (Some(name), _) => json!({
+            "kind": "scenario",
+            "scenario": name,
+            "seed": args.seed.unwrap_or(1),
+        }),
+        (None, dir) => json!({
+            "kind": "recording",
+            "recording": dir.as_ref().map(|d| d.display().to_string()),
+        }),
+    };
+    let c = &input.camera;
+    let flight_s = trace
+        .frames
+        .last()
+        .zip(trace.frames.first())
+        .map_or(0.0, |(b, a)| b.t_s() - a.t_s());
+    json!({
+        "input": source,
+        "title": input.title,
+        "frames": trace.frames.len(),
+        "frames_limit": args.frames,
+        "sequences": trace.sequences(),
+        "flight_s": flight_s,
+        "replay_s": elapsed_s,
+        "frame_rate_hz": trace.frame_period_s().map(|p| 1.0 / p),
+        "has_truth": input.has_truth,
+        "camera": {
+            "width": c.width,
+            "height": c.height,
+            "fx": c.fx,
+            "fy": c.fy,
+            "cx": c.cx,
+            "cy": c.cy,
+            "distortion": c.distortion,
+            "distorted": c.has_distortion(),
+        },
+        "pad": {
+            "name": input.pad.name,
+            "markers": input.pad.markers.iter().map(|m| json!({
+                "family": m.family,
+                "id": m.id,
+                "size_m": m.size,
+                "x_m": m.x,
+                "y_m": m.y,
+                "yaw_deg": m.yaw_deg,
+            })).collect::<Vec<_>>(),
+        },
+        "methods": methods.iter().map(method).collect::<Vec<_>>(),
+    })
+}
+
+/// A method's name, path and settings.
+fn method(m: &Method) -> Value {
+    let (kind, settings) = match &m.kind {
+        MethodKind::Paper(filter) => (
+            "paper",
+            json!({"filter": {
+                "x0": filter.x0,
+                "v0": filter.v0,
+                "p0": filter.p0,
+                "r": filter.r,
+                "q": filter.q,
+            }}),
+        ),
+        MethodKind::Board(config) => (
+            "board",
+            json!({
+                "level_fix": config.level_fix,
+                "flip_by_prediction": config.flip_by_prediction,
+                "detector": {"fit_small_markers": config.detector.fit_small_markers},
+            }),
+        ),
+    };
+    json!({
+        "name": m.name,
+        "kind": kind,
+        "attitude_given": m.use_attitude,
+        "settings": settings,
+    })
+}
+
+/// One set point: the set-point table's row and the all-axes table's (with truth), or the
+/// vision-only table's (without).
+fn set_point(results: &[SetPointResult], names: &[String], input: &Input) -> Value {
+    let Some(first) = results.first() else {
+        return Value::Null;
+    };
+    let sp = &first.set_point;
+    let reference = sp.reference_m.is_finite().then(|| 100.0 * sp.reference_m);
+    let published = published(sp.axis, sp.reference_m)
+        .map(|p| json!({"estimate_cm": p.estimate_cm, "error_cm": p.error_cm}));
+    let methods: Vec<Value> = results
+        .iter()
+        .zip(names)
+        .map(|(r, name)| {
+            let estimate = [0, 1, 2].map(|k| r.filtered[k].mean_estimate());
+            let mut m = json!({
+                "name": name,
+                "frames": r.frames,
+                "detection_rate": r.detection_rate(),
+                "estimate_rate": r.estimate_rate(),
+                "mean_estimate_cm": xyz_cm(estimate),
+            });
+            if input.has_truth {
+                let error = [0, 1, 2].map(|k| r.filtered[k].mean_error());
+                m["on_axis"] = on_axis(r.on_axis());
+                m["mean_error_cm"] = xyz_cm(error);
+                m["raw_on_axis"] = on_axis(r.raw_on_axis());
+            }
+            m
+        })
+        .collect();
+    json!({
+        "label": sp.label,
+        "axis": sp.axis.name().to_ascii_lowercase(),
+        "reference_cm": reference,
+        "published": published,
+        "methods": methods,
+    })
+}
+
+/// The summary table, per method.
+fn summary(trace: &Trace, summaries: &[MethodSummary], has_truth: bool) -> Value {
+    let methods: Vec<Value> = summaries
+        .iter()
+        .zip(&trace.methods)
+        .map(|(m, name)| {
+            json!({
+                "name": name,
+                "frames": m.frames,
+                "detected": m.detected,
+                "detection_rate": m.detection_rate(),
+                "estimated": m.estimated,
+                "estimate_rate": m.estimate_rate(),
+                "scored": m.scored,
+                "rms_error_cm": if has_truth { xyz_of(m.rms) } else { Value::Null },
+                "raw_rms_error_cm": if has_truth { xyz_of(m.raw_rms) } else { Value::Null },
+                "longest_gap": m.longest_gap.map(|g| json!({
+                    "frames": g.frames,
+                    "seconds": g.seconds,
+                    "first_index": g.first_index,
+                })),
+                "slowest_first_estimate": m.slowest_acquisition.map(|a| json!({
+                    "frames": a.frames,
+                    "index": a.index,
+                    "altitude_m": a.altitude_m,
+                })),
+                "sequences_without_estimate": m.sequences_without_estimate,
+                "lag_frames": m.lag_frames.map_or(Value::Null, finite),
+            })
+        })
+        .collect();
+    json!({
+        "frames": trace.frames.len(),
+        "frame_rate_hz": trace.frame_period_s().map(|p| 1.0 / p),
+        "methods": methods,
+    })
+}
+
+/// The altitude table: one entry per checkpoint the flight passes.
+fn altitudes(trace: &Trace) -> Vec<Value> {
+    ALTITUDE_CHECKPOINTS_M
+        .iter()
+        .filter_map(|&altitude| {
+            let stats: Vec<_> = (0..trace.methods.len())
+                .map(|m| trace.at_altitude(m, altitude, ALTITUDE_TOLERANCE))
+                .collect();
+            let frames = stats.first().map_or(0, |a| a.frames);
+            if frames == 0 {
+                return None;
+            }
+            let methods: Vec<Value> = stats
+                .iter()
+                .zip(&trace.methods)
+                .map(|(a, name)| {
+                    let n = a.frames.max(1) as f64;
+                    json!({
+                        "name": name,
+                        "detection_rate": a.detected as f64 / n,
+                        "estimate_rate": a.estimated as f64 / n,
+                        "mean_abs_error_cm": xyz_of(a.mean_abs),
+                        "mean_error_norm_cm": cm(a.mean_norm),
+                    })
+                })
+                .collect();
+            Some(json!({
+                "altitude_m": altitude,
+                "tolerance": ALTITUDE_TOLERANCE,
+                "frames": frames,
+                "methods": methods,
+            }))
+        })
+        .collect()
+}
