@@ -124,9 +124,11 @@ pub async fn task(uart: BufferedUart<'static>, mut companion: Companion) {
             next_summary += SUMMARY_PERIOD;
             let s = companion.stats();
             info!(
-                "link: tx {} frames, {} targets, {} status; rx {} frames ({} bad crc, {} uart errors); autopilot {}, dropped events {}",
+                "link: tx {} frames, {} targets (exposure to send: mean {} us, max {} us), {} status; rx {} frames ({} bad crc, {} uart errors); autopilot {}, dropped events {}",
                 s.tx_frames,
                 s.landing_targets,
+                s.target_latency.mean_us().unwrap_or(0),
+                s.target_latency.max_us,
                 s.status_texts,
                 s.link.frames,
                 s.link.bad_crc,

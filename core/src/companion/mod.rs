@@ -95,7 +95,7 @@ pub use mavlink;
 pub use framing::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
 pub use mavlink::dialects::common::MavSeverity;
 pub use profile::{Profile, ProfileSetting};
-pub use stats::{CompanionStats, TargetOutcome};
+pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
 
 use crate::filter::{FrameEstimate, VehicleState};
@@ -242,6 +242,8 @@ struct StatusText {
 #[derive(Debug, Clone, PartialEq)]
 struct PendingTarget {
     created_us: u64,
+    /// The frame's exposure (our clock), for the exposure-to-send delay.
+    exposure_us: u64,
     data: LANDING_TARGET_DATA,
 }
 

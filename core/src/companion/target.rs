@@ -105,6 +105,7 @@ impl State {
         }
         self.target = Some(PendingTarget {
             created_us: now_us,
+            exposure_us: t,
             data,
         });
         if self.params.get_int(ParamId::VpeEnable) == 1 {

@@ -1,6 +1,9 @@
 //! Unit tests of the companion's own behaviour (the end-to-end tests with a simulated
 //! autopilot are in core/tests/companion_*.rs).
 
+extern crate std;
+use std::string::{String, ToString};
+
 use super::*;
 use crate::filter::{FrameEstimate, PadEstimate};
 use mavlink::dialects::common::{
@@ -117,6 +120,58 @@ fn auto_profile_latches_on_the_autopilot_only() {
     // A forced profile wins.
     c.set_param(ParamId::Profile, 1.0).unwrap();
     assert_eq!(c.profile(), Some(Profile::Px4));
+}
+
+/// Every sent target's exposure-to-send delay is counted, and the figures reach the ground
+/// station after 100 targets and at each doubling of the count, not in between.
+#[test]
+fn target_latency_is_measured_and_reported_at_doublings() {
+    let mut c = Companion::new(CompanionConfig::default());
+    heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut reports = std::vec::Vec::new();
+    let mut parser = FrameParser::new();
+    let mut drain = |c: &mut Companion, now_us: u64, reports: &mut std::vec::Vec<(u32, String)>| {
+        while let Some(n) = c.poll_transmit(now_us, &mut out) {
+            parser.push(&out[..n], |frame| {
+                if let Ok(MavMessage::STATUSTEXT(s)) = frame.decode() {
+                    let text = s.text.to_str().unwrap_or("").to_string();
+                    if text.contains("lag") {
+                        reports.push((c.stats().target_latency.count, text));
+                    }
+                }
+            });
+        }
+    };
+    drain(&mut c, 0, &mut reports);
+    let period_us = 100_000; // 10 Hz, TD_RATE_HZ's default passes every frame
+    for k in 0..400u64 {
+        let exposure_us = 1_000_000 + k * period_us;
+        let frame = FrameEstimate {
+            exposure_us,
+            fix_found: true,
+            estimate: Some(PadEstimate {
+                body_frd: Vector3::new(0.1, -0.2, 5.0),
+                level: None,
+                vehicle_position: None,
+                orientation_body: None,
+                orientation_ned: None,
+            }),
+        };
+        // Processing takes 20 ms, the 100th frame 45 ms.
+        let delay_us = if k == 99 { 45_000 } else { 20_000 };
+        let now_us = exposure_us + delay_us;
+        assert_eq!(c.on_estimate(&frame, now_us), TargetOutcome::TargetQueued, "frame {k}");
+        drain(&mut c, now_us, &mut reports);
+    }
+    let latency = c.stats().target_latency;
+    assert_eq!(latency.count, 400);
+    assert_eq!((latency.max_us, latency.last_us), (45_000, 20_000));
+    assert_eq!(latency.mean_us(), Some(20_062)); // (399 * 20,000 + 45,000) / 400
+    let counts: std::vec::Vec<u32> = reports.iter().map(|(n, _)| *n).collect();
+    assert_eq!(counts, [100, 200, 400]);
+    assert_eq!(reports[0].1, "touchdown: lag 20.3 ms mean, 45.0 ms max");
+    assert_eq!(reports[2].1, "touchdown: lag 20.1 ms mean, 45.0 ms max");
 }
 
 #[test]

@@ -6,15 +6,23 @@
 //!
 //! Frames are serialised here, one per call, into the caller's buffer.
 
+use core::fmt::Write;
+
 use super::framing;
 use super::profile::Profile;
-use super::{Pending, State, MAX_FRAME_LEN, MSG_ATTITUDE_QUATERNION, TX_QUEUE_CAPACITY};
+use super::{
+    Pending, State, MAX_FRAME_LEN, MSG_ATTITUDE_QUATERNION, STATUS_TEXT_LEN, TX_QUEUE_CAPACITY,
+};
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavState, MavType,
-    COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA, STATUSTEXT_DATA,
-    TIMESYNC_DATA,
+    COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, MavSeverity, PARAM_VALUE_DATA,
+    STATUSTEXT_DATA, TIMESYNC_DATA,
 };
+
+/// Targets sent before the first report of their exposure-to-send delay; the report repeats
+/// each time the count doubles.
+const LATENCY_REPORT_FIRST: u32 = 100;
 
 impl State {
     /// Queues what is due at `now_us`.
@@ -97,6 +105,7 @@ impl State {
                 continue;
             }
             self.stats.landing_targets = self.stats.landing_targets.saturating_add(1);
+            self.record_target_latency(now_us.saturating_sub(p.exposure_us));
             return self.emit(&MavMessage::LANDING_TARGET(p.data), out);
         }
         if let Some(p) = self.vpe.take() {
@@ -171,6 +180,36 @@ impl State {
                 param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
             }),
         }
+    }
+
+    /// Counts a sent target's exposure-to-send delay and tells the ground station the
+    /// figures after 100 targets and then each time the count doubles (a few times a flight):
+    /// the delay to set the autopilot's lag to (ArduPilot's PLND_LAG) is measured, not
+    /// guessed.
+    fn record_target_latency(&mut self, delay_us: u64) {
+        let latency = &mut self.stats.target_latency;
+        latency.record(delay_us);
+        let count = latency.count;
+        let due = count % LATENCY_REPORT_FIRST == 0 && (count / LATENCY_REPORT_FIRST).is_power_of_two();
+        if !due {
+            return;
+        }
+        // Tenths of milliseconds in integers: float formatting would cost the firmware
+        // kilobytes of flash for one message.
+        let tenths = |us: u32| us.saturating_add(50) / 100;
+        let (mean, max) = (tenths(latency.mean_us().unwrap_or(0)), tenths(latency.max_us));
+        let mut text = heapless::String::<STATUS_TEXT_LEN>::new();
+        // 50 bytes hold the longest figures (two ten-digit numbers and the words): the write
+        // cannot run out of room.
+        let _ = write!(
+            text,
+            "touchdown: lag {}.{} ms mean, {}.{} ms max",
+            mean / 10,
+            mean % 10,
+            max / 10,
+            max % 10
+        );
+        self.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, &text);
     }
 
     fn emit(&mut self, msg: &MavMessage, out: &mut [u8]) -> Option<usize> {

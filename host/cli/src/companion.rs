@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, ValueEnum};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, Profile, TargetOutcome, TimeSource, MAX_FRAME_LEN,
+    Companion, CompanionConfig, Profile, TargetLatency, TargetOutcome, TimeSource, MAX_FRAME_LEN,
 };
 use touchdown_core::family::Family;
 use touchdown_core::params::PipelineSettings;
@@ -94,6 +94,18 @@ pub enum ProfileArg {
     Ardupilot,
     /// LANDING_TARGET in MAV_FRAME_LOCAL_NED (PX4; needs its attitude and local position).
     Px4,
+}
+
+/// The exposure-to-send delay of the targets sent, for the summary line (empty when none).
+fn latency_summary(latency: &TargetLatency) -> String {
+    match latency.mean_us() {
+        Some(mean) => format!(
+            " (exposure to send: mean {:.1} ms, max {:.1} ms)",
+            f64::from(mean) / 1000.0,
+            f64::from(latency.max_us) / 1000.0
+        ),
+        None => String::new(),
+    }
 }
 
 /// The autopilot as the summary names it.
@@ -296,10 +308,11 @@ pub fn run(
     let s = companion.stats();
     writeln!(
         out,
-        "{next} frames, {targets} LANDING_TARGET queued, {} sent; tx {} frames ({send_errors} \
+        "{next} frames, {targets} LANDING_TARGET queued, {} sent{}; tx {} frames ({send_errors} \
          send errors); rx {} frames ({} with a bad CRC, {} of messages outside the \
          common dialect, skipped; {} garbage bytes); {}; {}",
         s.landing_targets,
+        latency_summary(&s.target_latency),
         s.tx_frames,
         s.link.frames,
         s.link.bad_crc,
