@@ -51,17 +51,30 @@ fn on_axis(a: &AxisStats) -> Value {
     })
 }
 
-/// The whole replay as one JSON object (see the module docs).
+/// What a replay produced: what the text tables are printed from.
+pub(super) struct Results<'a> {
+    pub(super) report: &'a Report,
+    pub(super) trace: &'a Trace,
+    pub(super) summaries: &'a [MethodSummary],
+    /// Wall-clock time of the replay, seconds.
+    pub(super) elapsed_s: f64,
+}
+
+/// The whole replay as one JSON object (see the module docs); `figures` is the directory
+/// and the number of files written, if any.
 pub(super) fn document(
     args: &ReplayArgs,
     input: &Input,
     methods: &[Method],
-    report: &Report,
-    trace: &Trace,
-    summaries: &[MethodSummary],
-    elapsed_s: f64,
+    results: &Results<'_>,
     figures: Option<(&std::path::Path, usize)>,
 ) -> Value {
+    let &Results {
+        report,
+        trace,
+        summaries,
+        elapsed_s,
+    } = results;
     let mut root = Map::new();
     root.insert(
         "setup".into(),
@@ -192,7 +205,7 @@ fn set_point(results: &[SetPointResult], names: &[String], input: &Input) -> Val
         return Value::Null;
     };
     let sp = &first.set_point;
-    let reference = sp.reference_m.is_finite().then(|| 100.0 * sp.reference_m);
+    let reference = sp.reference_m.is_finite().then_some(100.0 * sp.reference_m);
     let published = published(sp.axis, sp.reference_m)
         .map(|p| json!({"estimate_cm": p.estimate_cm, "error_cm": p.error_cm}));
     let methods: Vec<Value> = results

@@ -341,10 +341,12 @@ pub fn run(
             args,
             &input,
             &methods,
-            &report,
-            &trace,
-            &summaries,
-            elapsed,
+            &json::Results {
+                report: &report,
+                trace: &trace,
+                summaries: &summaries,
+                elapsed_s: elapsed,
+            },
             figure_dir.as_deref().zip(figures.as_ref().map(Vec::len)),
         );
         let mut line = serde_json::to_string(&document)
