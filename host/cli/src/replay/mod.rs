@@ -1,6 +1,7 @@
 //! `touchdown replay`: run the firmware's pipeline (detector, pose, filter) on a recording or
 //! on a scenario rendered in memory, for the paper's method and ours side by side, and print
-//! paper-style tables (submodule `tables`) and write figures ([`crate::plot`]).
+//! paper-style tables (submodule `tables`), or the same numbers as one JSON object with the
+//! replay's setup (`--json`, submodule `json`), and write figures ([`crate::plot`]).
 //!
 //! ## One path for both inputs
 //! An [`Input`] (submodule `input`) yields frames, either decoded from a recording
