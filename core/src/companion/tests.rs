@@ -161,7 +161,11 @@ fn target_latency_is_measured_and_reported_at_doublings() {
         // Processing takes 20 ms, the 100th frame 45 ms.
         let delay_us = if k == 99 { 45_000 } else { 20_000 };
         let now_us = exposure_us + delay_us;
-        assert_eq!(c.on_estimate(&frame, now_us), TargetOutcome::TargetQueued, "frame {k}");
+        assert_eq!(
+            c.on_estimate(&frame, now_us),
+            TargetOutcome::TargetQueued,
+            "frame {k}"
+        );
         drain(&mut c, now_us, &mut reports);
     }
     let latency = c.stats().target_latency;

@@ -15,8 +15,8 @@ use super::{
 };
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
-    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavState, MavType,
-    COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, MavSeverity, PARAM_VALUE_DATA,
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
+    MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA,
     STATUSTEXT_DATA, TIMESYNC_DATA,
 };
 
@@ -190,14 +190,18 @@ impl State {
         let latency = &mut self.stats.target_latency;
         latency.record(delay_us);
         let count = latency.count;
-        let due = count % LATENCY_REPORT_FIRST == 0 && (count / LATENCY_REPORT_FIRST).is_power_of_two();
+        let due = count.is_multiple_of(LATENCY_REPORT_FIRST)
+            && (count / LATENCY_REPORT_FIRST).is_power_of_two();
         if !due {
             return;
         }
         // Tenths of milliseconds in integers: float formatting would cost the firmware
         // kilobytes of flash for one message.
         let tenths = |us: u32| us.saturating_add(50) / 100;
-        let (mean, max) = (tenths(latency.mean_us().unwrap_or(0)), tenths(latency.max_us));
+        let (mean, max) = (
+            tenths(latency.mean_us().unwrap_or(0)),
+            tenths(latency.max_us),
+        );
         let mut text = heapless::String::<STATUS_TEXT_LEN>::new();
         // 50 bytes hold the longest figures (two ten-digit numbers and the words): the write
         // cannot run out of room.

@@ -192,19 +192,6 @@ pub(crate) fn longest_side(corners: &[Point; 4]) -> f32 {
         .fold(0.0, f32::max)
 }
 
-/// Corners of the decoded marker `id` of `family` at `corners` (detection order), fitted to
-/// the pixels as the module docs describe; `None` when the marker is not small, its family's
-/// layout is not modelled, or the fit is refused. `contrast` (grey levels) starts the fit.
-pub(crate) fn fit_corners(
-    image: &GrayImage<'_>,
-    family: &Family<'_>,
-    id: u16,
-    corners: &[Point; 4],
-    contrast: f32,
-) -> Option<[Point; 4]> {
-    fit(image, family, id, corners, contrast).ok()
-}
-
 /// Why a fit was not kept.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Refusal {
@@ -224,7 +211,10 @@ pub(crate) enum Refusal {
     Moved,
 }
 
-/// [`fit_corners`], with the reason of a refusal.
+/// Corners of the decoded marker `id` of `family` at `corners` (detection order), fitted to
+/// the pixels as the module docs describe, or why the fit was refused (the marker is not
+/// small, its family's layout is not modelled, the model does not fit). `contrast` (grey
+/// levels, the decoder's) checks the fitted contrast.
 pub(crate) fn fit(
     image: &GrayImage<'_>,
     family: &Family<'_>,
@@ -355,14 +345,14 @@ pub(super) fn fit_small_markers(
         if !tracer.charge(WORK_PATTERN_FIT) {
             break;
         }
-        let fit = fit_corners(
+        let refit = fit(
             image,
             family,
             detection.id,
             &detection.corners,
             detection.contrast,
         );
-        if let Some(corners) = fit {
+        if let Ok(corners) = refit {
             detection.corners = corners;
             detection.center = diagonals_meet(&corners).unwrap_or(detection.center);
             fitted += 1;

@@ -138,7 +138,8 @@ fn small_markers_come_out_unbiased_in_scale_across_blurs() {
         let (pixels, truth) = draw(id, side, angle, centre, sigma);
         let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
         let start = start_from(&truth);
-        let fitted = fit_corners(&image, &TAG36H11, id, &start, WHITE - BLACK)
+        let fitted = fit(&image, &TAG36H11, id, &start, WHITE - BLACK)
+            .ok()
             .unwrap_or_else(|| panic!("side {side} blur {sigma}: fit refused"));
         let scale = perimeter(&fitted) / perimeter(&truth) - 1.0;
         let rms = libm::sqrtf(
@@ -169,12 +170,15 @@ fn small_markers_come_out_unbiased_in_scale_across_blurs() {
 fn large_markers_and_flat_images_are_left_to_the_edge_search() {
     let (pixels, truth) = draw(3, 44.0, 0.1, Point::new(32.0, 32.0), 0.8);
     let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
-    assert!(fit_corners(&image, &TAG36H11, 3, &truth, WHITE - BLACK).is_none());
+    assert_eq!(
+        fit(&image, &TAG36H11, 3, &truth, WHITE - BLACK),
+        Err(Refusal::Large)
+    );
 
     let flat = std::vec![128u8; SIZE * SIZE];
     let image = GrayImage::new(&flat, SIZE, SIZE).unwrap();
     let (_, truth) = draw(3, 12.0, 0.1, Point::new(32.0, 32.0), 0.8);
-    assert!(fit_corners(&image, &TAG36H11, 3, &truth, WHITE - BLACK).is_none());
+    assert!(fit(&image, &TAG36H11, 3, &truth, WHITE - BLACK).is_err());
 }
 
 #[test]
@@ -182,7 +186,7 @@ fn a_marker_at_the_image_border_is_fitted_or_refused_without_panic() {
     for (x, y) in [(2.0, 2.0), (61.5, 30.0), (30.0, 63.0), (-3.0, -3.0)] {
         let (pixels, truth) = draw(5, 12.0, 0.3, Point::new(x, y), 0.7);
         let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
-        if let Some(fitted) = fit_corners(&image, &TAG36H11, 5, &truth, WHITE - BLACK) {
+        if let Ok(fitted) = fit(&image, &TAG36H11, 5, &truth, WHITE - BLACK) {
             for (f, t) in fitted.iter().zip(truth.iter()) {
                 assert!(f.distance(*t) <= MAX_CORNER_SHIFT_PX);
             }
