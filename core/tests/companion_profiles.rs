@@ -13,7 +13,7 @@ use touchdown_core::params::PARAM_COUNT;
 
 use autopilot_sim::{
     accuracy, decode_with_pymavlink, f, heartbeats_ok, landing_targets, pad_ned, report, simulate,
-    ParamAction, Run, Scenario, Target, VehiclePath, AP_AHEAD_US,
+    ParamAction, Run, Scenario, Target, VehiclePath, AP_AHEAD_US, PROCESS_DELAY_US,
 };
 
 /// Flies `s` and checks what pymavlink decoded of it: our HEARTBEATs, every LANDING_TARGET's
@@ -248,7 +248,27 @@ fn auto_profile_follows_the_autopilot_heartbeat_not_a_gimbal() {
         assert!(run.stats.no_profile >= 20, "{}", run.stats.no_profile);
         // The autopilot is 1/1, the gimbal never took over, the choice announced once.
         assert_eq!(run.stats.autopilot, Some((1, 1)));
-        assert_eq!(status_texts(&msgs), vec![announcement.to_string()]);
+        let (announced, lags): (Vec<String>, Vec<String>) = status_texts(&msgs)
+            .into_iter()
+            .partition(|t| t.starts_with("touchdown: profile"));
+        assert_eq!(announced, vec![announcement.to_string()]);
+        // The exposure-to-send delay, reported after 100 targets and at each doubling: the
+        // simulated processing delay (PROCESS_DELAY_US) plus up to one poll of the loop.
+        let sent = run.stats.landing_targets;
+        let expected = [100, 200, 400, 800].iter().filter(|&&n| sent >= n).count();
+        assert_eq!(lags.len(), expected, "{lags:?} after {sent} targets");
+        let process_ms = PROCESS_DELAY_US as f64 / 1000.0;
+        for lag in &lags {
+            let mean: f64 = lag
+                .strip_prefix("touchdown: lag ")
+                .and_then(|rest| rest.split(' ').next())
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("not a lag report: {lag}"));
+            assert!(
+                (process_ms..process_ms + 2.0).contains(&mean),
+                "{lag}: expected {process_ms} ms and a little"
+            );
+        }
         println!(
             "[{name}] first target at {:.3} s; {} frames with a fix before the autopilot was \
              identified; announced: {announcement}",

@@ -12,7 +12,10 @@ use super::Rng;
 pub enum LinkDelay {
     /// Always this long, µs.
     Fixed(u64),
-    /// 0.5-4 ms, drawn for each message (round trips of 1-8 ms).
+    /// 0.5-4 ms for each message (round trips of 1-8 ms), drawn from the time it is sent
+    /// (and its place among the messages sent at that same time), not from a shared random
+    /// sequence: a message added to the stream (a new STATUSTEXT, say) then leaves the other
+    /// messages' delays as they were, and a test's figures do not move with the traffic.
     Random,
 }
 
@@ -22,6 +25,8 @@ pub struct Link {
     /// (arrival time, bytes, tag), in arrival order.
     queue: VecDeque<(u64, Vec<u8>, Option<u64>)>,
     last_arrival: u64,
+    /// The send time of the last message and how many were sent at it.
+    last_send: (u64, u64),
 }
 
 impl Link {
@@ -30,15 +35,25 @@ impl Link {
             delay,
             queue: VecDeque::new(),
             last_arrival: 0,
+            last_send: (u64::MAX, 0),
         }
     }
 
-    /// Sends `bytes` at `now`; `rng` draws a [`LinkDelay::Random`] delay (a fixed one draws
-    /// nothing, so the caller's random sequence does not depend on the link).
-    pub fn send(&mut self, rng: &mut Rng, now: u64, bytes: Vec<u8>, tag: Option<u64>) {
+    /// Sends `bytes` at `now`. Neither kind of delay draws from `rng`, so the caller's random
+    /// sequence does not depend on the traffic.
+    pub fn send(&mut self, _rng: &mut Rng, now: u64, bytes: Vec<u8>, tag: Option<u64>) {
+        let index = if self.last_send.0 == now {
+            self.last_send.1 + 1
+        } else {
+            0
+        };
+        self.last_send = (now, index);
         let delay = match self.delay {
             LinkDelay::Fixed(us) => us,
-            LinkDelay::Random => 500 + (rng.uniform() * 3500.0) as u64,
+            LinkDelay::Random => {
+                let mut draw = Rng(now ^ index.rotate_left(48) ^ 0x5EED_0F_11_4B);
+                500 + (draw.uniform() * 3500.0) as u64
+            }
         };
         // Never ahead of an earlier message: in order.
         let at = (now + delay).max(self.last_arrival);
