@@ -51,7 +51,7 @@ impl Link {
         let delay = match self.delay {
             LinkDelay::Fixed(us) => us,
             LinkDelay::Random => {
-                let mut draw = Rng(now ^ index.rotate_left(48) ^ 0x5EED_0F_11_4B);
+                let mut draw = Rng(now ^ index.rotate_left(48) ^ 0x005E_ED0F_114B);
                 500 + (draw.uniform() * 3500.0) as u64
             }
         };

@@ -107,28 +107,31 @@ const BLACK: usize = 9;
 const CONTRAST: usize = 10;
 const OUTSIDE: usize = 11;
 
-/// The pixels a fit reads: the box around the known area's image, thinned to one pixel in
-/// `step` when the box holds more than [`MAX_PIXELS`].
-struct Window {
-    x0: usize,
-    y0: usize,
-    x1: usize,
-    y1: usize,
-    step: usize,
+/// One pixel a fit reads: its position and grey level.
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    x: u16,
+    y: u16,
+    value: u8,
 }
 
-impl Window {
-    /// Whether pixel (x, y) is read: a fixed scatter of `1/step` of the pixels (a hash of the
-    /// position), which unlike a lattice cannot beat against the marker's cell grid.
-    fn reads(&self, x: usize, y: usize) -> bool {
-        let h = (x as u32).wrapping_mul(0x9E37_79B1) ^ (y as u32).wrapping_mul(0x85EB_CA77);
-        let h = h ^ (h >> 15);
-        (h.wrapping_mul(0x2C1B_3C6D) >> 16).is_multiple_of(self.step as u32)
-    }
+/// The pixels a fit reads, chosen once from the start corners so that every pass reads the
+/// same ones: those of the marker's box within reach of an edge of the pattern (a change of
+/// colour, or the end of the known area). Only they tell where the edges are; a uniform
+/// sample of a large, sharp marker had so few of them that its corners drifted by half a
+/// pixel in a flat cost. When there are more than [`MAX_PIXELS`], a fixed scatter (a hash of
+/// the position, which unlike a lattice cannot beat against the cell grid) keeps that many.
+struct Window {
+    samples: heapless::Vec<Sample, MAX_PIXELS>,
 }
+
+/// Distance from a pattern edge (pixels) within which a pixel is read: the blur's reach (2.5
+/// of the widest blur the fit starts near) and the pixel's own half width.
+const EDGE_REACH_PX: f32 = 2.5;
 
 fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Option<Window> {
     let to_image = Homography::from_4_points(&pattern.corner_points(), corners)?;
+    let to_grid = Homography::from_4_points(corners, &pattern.corner_points())?;
     let c = pattern.side as f32;
     let (mut lo_x, mut lo_y, mut hi_x, mut hi_y) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
     for (u, v) in [(0.0, 0.0), (c, 0.0), (c, c), (0.0, c)] {
@@ -144,18 +147,61 @@ fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Opt
     let y0 = libm::floorf(lo_y - pad).max(0.0);
     let x1 = libm::ceilf(hi_x + pad).min(image.width() as f32 - 1.0);
     let y1 = libm::ceilf(hi_y + pad).min(image.height() as f32 - 1.0);
-    if !(x1 > x0 && y1 > y0) {
+    if !(x1 > x0 && y1 > y0) || x1 > f32::from(u16::MAX) || y1 > f32::from(u16::MAX) {
         return None;
     }
     let (x0, y0, x1, y1) = (x0 as usize, y0 as usize, x1 as usize, y1 as usize);
-    let area = (x1 - x0 + 1) * (y1 - y0 + 1);
-    Some(Window {
-        x0,
-        y0,
-        x1,
-        y1,
-        step: area.div_ceil(MAX_PIXELS).max(1),
-    })
+    // The reach in grid cells: pixels times cells per pixel.
+    let reach = EDGE_REACH_PX * (pattern.quad_hi - pattern.quad_lo) / mean_side(corners).max(1.0);
+    // A pixel is near an edge when the colour (None beyond the known area) at its grid point
+    // differs from the colour `reach` cells away along either grid axis.
+    let near_edge = |x: usize, y: usize| -> bool {
+        let Some(g) = to_grid.map(x as f32, y as f32) else {
+            return false;
+        };
+        let here = pattern.colour_at(g.x, g.y);
+        [(reach, 0.0), (-reach, 0.0), (0.0, reach), (0.0, -reach)]
+            .iter()
+            .any(|(du, dv)| pattern.colour_at(g.x + du, g.y + dv) != here)
+    };
+    let mut edges = 0usize;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            edges += usize::from(near_edge(x, y));
+        }
+    }
+    let step = edges.div_ceil(MAX_PIXELS).max(1);
+    let mut samples = heapless::Vec::new();
+    'rows: for y in y0..=y1 {
+        let row = image.row(y);
+        for x in x0..=x1 {
+            if !scattered(x, y, step) || !near_edge(x, y) {
+                continue;
+            }
+            let value = row.get(x).copied().unwrap_or(0);
+            if samples
+                .push(Sample {
+                    x: x as u16,
+                    y: y as u16,
+                    value,
+                })
+                .is_err()
+            {
+                break 'rows;
+            }
+        }
+    }
+    Some(Window { samples })
+}
+
+/// Whether pixel (x, y) is in a fixed scatter of one pixel in `step`.
+fn scattered(x: usize, y: usize, step: usize) -> bool {
+    if step <= 1 {
+        return true;
+    }
+    let h = (x as u32).wrapping_mul(0x9E37_79B1) ^ (y as u32).wrapping_mul(0x85EB_CA77);
+    let h = h ^ (h >> 15);
+    (h.wrapping_mul(0x2C1B_3C6D) >> 16).is_multiple_of(step as u32)
 }
 
 /// Where the diagonals of a quad cross: the image of its centre under any homography.
@@ -239,16 +285,15 @@ pub(crate) fn fit(
         return Err(Refusal::Geometry);
     }
     params[BLUR] = libm::logf(INITIAL_BLUR_PX / cell_px);
-    params[BLACK] = darkest(image, &win);
+    params[BLACK] = darkest(&win);
     let start_contrast = contrast.max(1.0);
     params[CONTRAST] = start_contrast;
     params[OUTSIDE] = 1.0;
     // Levenberg-Marquardt: the start is within a few tenths of a pixel, where the model is
     // nearly linear and the first step usually lands. A step that does not lower the cost
     // is taken back and retried shorter.
-    solve_levels(image, &pattern, &win, &mut params)?;
-    let mut current =
-        linearise(image, &pattern, &win, &params, Pass::Full).ok_or(Refusal::Geometry)?;
+    solve_levels(&pattern, &win, &mut params)?;
+    let mut current = linearise(&pattern, &win, &params, Pass::Full).ok_or(Refusal::Geometry)?;
     let mut damping = DAMPING;
     for iteration in 0..ITERATIONS {
         let step = solve_damped(&current.jtj, &current.jte, damping).ok_or(Refusal::Singular)?;
@@ -258,7 +303,7 @@ pub(crate) fn fit(
         }
         let last = iteration + 1 == ITERATIONS;
         let pass = if last { Pass::Cost } else { Pass::Full };
-        match linearise(image, &pattern, &win, &trial, pass) {
+        match linearise(&pattern, &win, &trial, pass) {
             Some(next) if next.cost < current.cost => {
                 params = trial;
                 current = next;
@@ -292,17 +337,10 @@ pub(crate) fn fit(
     Ok(out)
 }
 
-/// The darkest pixel of the window: the start of the black level (the first step solves the
-/// levels, which enter the model linearly, nearly exactly).
-fn darkest(image: &GrayImage<'_>, win: &Window) -> f32 {
-    let mut lowest = u8::MAX;
-    for y in win.y0..=win.y1 {
-        let row = image.row(y);
-        for &p in row.get(win.x0..=win.x1).unwrap_or(&[]) {
-            lowest = lowest.min(p);
-        }
-    }
-    f32::from(lowest)
+/// The darkest pixel read: the start of the black level (the first step solves the levels,
+/// which enter the model linearly, nearly exactly).
+fn darkest(win: &Window) -> f32 {
+    f32::from(win.samples.iter().map(|s| s.value).min().unwrap_or(0))
 }
 
 /// Step 7 over a frame's `detections`: fits the largest small markers, at most

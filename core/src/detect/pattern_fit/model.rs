@@ -10,9 +10,10 @@ use super::{MAX_GRID, MAX_WINDOW, WINDOW_SIGMAS};
 use crate::family::Family;
 use crate::geometry::Point;
 
-/// The known pattern of one decoded marker: which cells are white, in the canonical grid
-/// with one ring added around it when the family has no quiet ring of its own (the printed
-/// margin), and the grid coordinates of the detected corners.
+/// The known pattern of one decoded marker: which cells are white, in the family's canonical
+/// grid (its quiet rings included), and the grid coordinates of the detected corners. What
+/// lies beyond the grid is not known: for a family without a quiet ring (ArUco) the printed
+/// margin may be narrower than a cell, or the ground; the fit gives it a level of its own.
 pub(super) struct Pattern {
     /// Row bitmaps (bit = column), white = 1, of the extended grid.
     pub(super) white: [u32; MAX_GRID],
@@ -26,35 +27,38 @@ pub(super) struct Pattern {
 impl Pattern {
     pub(super) fn new(family: &Family<'_>, id: u16) -> Option<Pattern> {
         let n = family.grid as usize;
-        // The detected square is the border's outer edge; outside it must lie white cells
-        // for the outline to be found: the family's quiet ring or the printed margin.
-        let margin = usize::from(family.quiet_rings == 0 && !family.reversed());
-        let cells = n + 2 * margin;
-        if cells > MAX_GRID || n == 0 || family.reversed() {
+        if n > MAX_GRID || n == 0 || family.reversed() {
             // Reversed families (data outside the border) are found by their inner edge;
             // their layout is not modelled here.
             return None;
         }
+        // Only the family's own cells are known. Assuming a printed margin of one cell around
+        // a family without a quiet ring put a wrong edge into the model where the margin is
+        // narrower (0.6 px off on 32-pixel ArUco markers drawn with a thin one).
         let mut white = [0u32; MAX_GRID];
-        for (row, bits) in white.iter_mut().enumerate().take(cells) {
-            for col in 0..cells {
-                let inside = |k: usize| k.checked_sub(margin).filter(|&k| k < n);
-                let is_white = match (inside(row), inside(col)) {
-                    (Some(r), Some(c)) => family.cell_is_white(usize::from(id), r, c)?,
-                    _ => true,
-                };
-                if is_white {
+        for (row, bits) in white.iter_mut().enumerate().take(n) {
+            for col in 0..n {
+                if family.cell_is_white(usize::from(id), row, col)? {
                     *bits |= 1 << col;
                 }
             }
         }
-        let b = (family.border_ring as usize + margin) as f32;
+        let b = family.border_ring as f32;
         Some(Pattern {
             white,
-            side: cells,
+            side: n,
             quad_lo: b,
-            quad_hi: cells as f32 - b,
+            quad_hi: n as f32 - b,
         })
+    }
+
+    /// Whether the cell at grid point (u, v) is white; `None` beyond the known area.
+    pub(super) fn colour_at(&self, u: f32, v: f32) -> Option<bool> {
+        let side = self.side as f32;
+        if !(u >= 0.0 && v >= 0.0 && u < side && v < side) {
+            return None;
+        }
+        Some(self.row_from(v as usize, u as usize) & 1 == 1)
     }
 
     /// Row `row`'s white bits from column `first` on (bit 0 = column `first`).

@@ -6,9 +6,8 @@
 #![allow(clippy::indexing_slicing)]
 
 use super::model::{blurred, Axis, Pattern};
-use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, MAX_PIXELS, N, OUTSIDE};
+use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE};
 use crate::geometry::{Homography, Point};
-use crate::image::GrayImage;
 
 /// Normal equations of one iteration: `J^T J`, `J^T e` and the residual sum of squares.
 pub(super) struct Normal {
@@ -43,7 +42,6 @@ pub(super) enum Pass {
 /// parallelogram, and a far marker is one to within its small perspective. It saves eight
 /// homographies per pixel.
 pub(super) fn linearise(
-    image: &GrayImage<'_>,
     pattern: &Pattern,
     win: &Window,
     params: &[f32; N],
@@ -65,67 +63,58 @@ pub(super) fn linearise(
         cost: 0.0,
         count: 0,
     };
-    for y in win.y0..=win.y1 {
-        let row = image.row(y);
-        for x in win.x0..=win.x1 {
-            if !win.reads(x, y) {
+    for sample in &win.samples {
+        let observed = f32::from(sample.value);
+        let (x, y) = (sample.x, sample.y);
+        let g = map.map(f32::from(x), f32::from(y))?;
+        let (Some(au), Some(av)) = (
+            Axis::new(g.x, blur, pattern.side),
+            Axis::new(g.y, blur, pattern.side),
+        ) else {
+            return None;
+        };
+        let b = blurred(pattern, &au, &av, outside);
+        let e = observed - (black + contrast * b.value);
+        normal.cost += e * e;
+        normal.count += 1;
+        match pass {
+            Pass::Cost => continue,
+            Pass::Levels => {
+                let cells = b.value - outside * b.outside;
+                let regressors = [1.0, cells, b.outside];
+                for (r, &x) in regressors.iter().enumerate() {
+                    normal.jte[r] += x * observed;
+                    for (c, &y) in regressors.iter().enumerate() {
+                        normal.jtj[r][c] += x * y;
+                    }
+                }
                 continue;
             }
-            if normal.count >= 2 * MAX_PIXELS {
-                // The scatter is uniform to a few percent; this only bounds the worst case.
-                break;
-            }
-            let observed = f32::from(row.get(x).copied().unwrap_or(0));
-            let g = map.map(x as f32, y as f32)?;
-            let (Some(au), Some(av)) = (
-                Axis::new(g.x, blur, pattern.side),
-                Axis::new(g.y, blur, pattern.side),
-            ) else {
-                return None;
-            };
-            let b = blurred(pattern, &au, &av, outside);
-            let e = observed - (black + contrast * b.value);
-            normal.cost += e * e;
-            normal.count += 1;
-            match pass {
-                Pass::Cost => continue,
-                Pass::Levels => {
-                    let cells = b.value - outside * b.outside;
-                    let regressors = [1.0, cells, b.outside];
-                    for (r, &x) in regressors.iter().enumerate() {
-                        normal.jte[r] += x * observed;
-                        for (c, &y) in regressors.iter().enumerate() {
-                            normal.jtj[r][c] += x * y;
-                        }
-                    }
-                    continue;
-                }
-                Pass::Full => {}
-            }
-            // The model's gradient over the square (s, t), and the corners' moves of (s, t).
-            let (gs, gt) = (contrast * b.d_u * span, contrast * b.d_v * span);
-            let (s, t) = ((g.x - lo) / span, (g.y - lo) / span);
-            let (ss, tt) = (s * (1.0 - s), t * (1.0 - t));
-            let weights = [(1.0 - s) * (1.0 - t), s * (1.0 - t), s * t, (1.0 - s) * t];
-            let mut jac = [0.0f32; N];
-            for (k, w) in weights.iter().enumerate() {
-                let sign = if k % 2 == 0 { -1.0 } else { 1.0 };
-                // The model's change for a unit move of the corner along s and along t.
-                let along_s = gs * w + gt * sign * tt;
-                let along_t = gs * sign * ss + gt * w;
-                let [[a, b_], [c, d]] = square_from_image;
-                jac[2 * k] = -(along_s * a + along_t * c);
-                jac[2 * k + 1] = -(along_s * b_ + along_t * d);
-            }
-            jac[BLUR] = contrast * (b.d_width_u + b.d_width_v) * blur;
-            jac[BLACK] = 1.0;
-            jac[CONTRAST] = b.value;
-            jac[OUTSIDE] = contrast * b.outside;
-            for r in 0..N {
-                normal.jte[r] += jac[r] * e;
-                for c in r..N {
-                    normal.jtj[r][c] += jac[r] * jac[c];
-                }
+            Pass::Full => {}
+        }
+        // The model's gradient over the square (s, t), and the corners' moves of (s, t).
+        let (gs, gt) = (contrast * b.d_u * span, contrast * b.d_v * span);
+        let (s, t) = ((g.x - lo) / span, (g.y - lo) / span);
+        let (ss, tt) = (s * (1.0 - s), t * (1.0 - t));
+        let weights = [(1.0 - s) * (1.0 - t), s * (1.0 - t), s * t, (1.0 - s) * t];
+        let mut jac = [0.0f32; N];
+        for (k, w) in weights.iter().enumerate() {
+            let sign = if k % 2 == 0 { -1.0 } else { 1.0 };
+            // The model's change for a unit move of the corner along s and along t.
+            let along_s = gs * w + gt * sign * tt;
+            let along_t = gs * sign * ss + gt * w;
+            let [[a, b_], [c, d]] = square_from_image;
+            jac[2 * k] = -(along_s * a + along_t * c);
+            jac[2 * k + 1] = -(along_s * b_ + along_t * d);
+        }
+        jac[BLUR] = contrast * (b.d_width_u + b.d_width_v) * blur;
+        jac[BLACK] = 1.0;
+        jac[CONTRAST] = b.value;
+        jac[OUTSIDE] = contrast * b.outside;
+        for r in 0..N {
+            normal.jte[r] += jac[r] * e;
+            for c in r..N {
+                normal.jtj[r][c] += jac[r] * jac[c];
             }
         }
     }
@@ -163,12 +152,11 @@ pub(super) fn square_from_image(c: &[Point; 4]) -> Option<[[f32; 2]; 2]> {
 /// steps start with only the geometry and the blur to move. The decoder's contrast is a
 /// mean over blurred cells, often half the real one on a small marker.
 pub(super) fn solve_levels(
-    image: &GrayImage<'_>,
     pattern: &Pattern,
     win: &Window,
     params: &mut [f32; N],
 ) -> Result<(), Refusal> {
-    let levels = linearise(image, pattern, win, params, Pass::Levels).ok_or(Refusal::Geometry)?;
+    let levels = linearise(pattern, win, params, Pass::Levels).ok_or(Refusal::Geometry)?;
     let a = &levels.jtj;
     let b = &levels.jte;
     let det3 = |m: [[f32; 3]; 3]| {
