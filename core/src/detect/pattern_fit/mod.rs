@@ -81,7 +81,7 @@ pub const MAX_CORNER_SHIFT_PX: f32 = 0.75;
 pub const MAX_FITS_PER_FRAME: usize = 1;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
-/// qvga-far-1: one tag36h11 of 14 pixels): 1.32 million instructions for its pixels and five
+/// qvga-far-1: one tag36h11 of 14 pixels): 1.41 million instructions for its pixels and five
 /// passes, about 16,500 units. A fit is charged that before it starts and skipped when the
 /// frame's budget cannot pay for it; the scatter's worst case (twice [`MAX_PIXELS`]) costs
 /// half as much again, so, like a candidate, a fit can overrun the budget by at most itself.
