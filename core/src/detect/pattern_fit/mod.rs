@@ -30,10 +30,11 @@
 //!
 //! ## Cost and bounds
 //! Only markers whose longest side is at most [`MAX_SIDE_PX`] are fitted; above it the edge
-//! search is already within a tenth of a percent. About [`MAX_PIXELS`] pixels (a fixed
-//! scatter over the larger markers; never more than twice as many) and [`ITERATIONS`]
-//! iterations, so the time per marker is bounded whatever the image. A fit is kept only when it converged to a sane blur and
-//! moved no corner more than [`MAX_CORNER_SHIFT_PX`]; otherwise the edge corners stand.
+//! search is already within a tenth of a percent. At most [`MAX_PIXELS`] pixels, those near
+//! the pattern's edges (a fixed scatter of them on the larger markers), and [`ITERATIONS`]
+//! iterations, so the time per marker is bounded whatever the image. A fit is kept only
+//! when the model explains the pixels, the blur and contrast are sane and no corner moved
+//! more than [`MAX_CORNER_SHIFT_PX`]; otherwise the edge corners stand.
 
 // The normal equations are fixed 12x12 arrays indexed by loop counters below 12, and the
 // normal tables by an index clamped to their length: never by data.
@@ -53,11 +54,11 @@ use solve::{linearise, solve_damped, solve_levels, Pass};
 /// Longest marker side (pixels) that is fitted. At 40 pixels a cell of an 8-cell border
 /// square is 5 pixels, wider than any blur, and the edge search is unbiased there.
 pub const MAX_SIDE_PX: f32 = 40.0;
-/// Pixels one fit reads, about: a marker's box of more pixels is read at a fixed scatter of
-/// them (see `Window::reads`), at most twice this many. Measured in the tests, the scale is
-/// within 0.15 % at 11 pixels across with 128 pixels (96 gave 0.29 %, and a regular lattice of
-/// 96 0.35 %: it beats against the cell grid). Each pixel costs about 1,700 Cortex-M7
-/// instructions per pass with derivatives.
+/// Most pixels one fit reads: those near the pattern's edges (see `window`), a fixed scatter
+/// of them when there are more. Measured in the tests, the scale is within 0.15 % at 11
+/// pixels across with 128 pixels (96 gave 0.29 %, and a regular lattice of 96 0.35 %: it
+/// beats against the cell grid). Each pixel costs about 1,700 Cortex-M7 instructions per
+/// pass with derivatives.
 pub const MAX_PIXELS: usize = 128;
 /// Levenberg-Marquardt steps. The edge corners start within a few tenths of a pixel and the
 /// model is smooth there: three steps converge to about a hundredth of a pixel (the last
@@ -82,11 +83,10 @@ pub const MAX_FITS_PER_FRAME: usize = 1;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
 /// qvga-far-1: one tag36h11 of 14 pixels): 1.41 million instructions for its pixels and five
-/// passes, about 16,500 units. A fit is charged that before it starts and skipped when the
-/// frame's budget cannot pay for it; the scatter's worst case (twice [`MAX_PIXELS`]) costs
-/// half as much again, so, like a candidate, a fit can overrun the budget by at most itself.
+/// passes, about 16,500 units (a fit never reads more pixels than there). It is charged
+/// before it starts and skipped when the frame's budget cannot pay for it.
 pub const WORK_PATTERN_FIT: u32 = 16_500;
-/// Most cells per side of a family grid the fit models (with its assumed margin ring).
+/// Most cells per side of a family grid the fit models.
 const MAX_GRID: usize = 16;
 /// Blur range (pixels) a fit may end in: below, the pixel's own area; above, the marker is
 /// not resolved.
