@@ -315,7 +315,7 @@ def max_correction_for(bits: int, codes: int, min_hamming_: int) -> int:
 # Multi-index (core/src/family/index.rs)
 # --------------------------------------------------------------------------------------
 
-MAX_CHUNK_BITS = 16  # core::family::index::MAX_CHUNK_BITS
+MAX_CHUNK_BITS = 16  # MAX_CHUNK_BITS in core/src/family/index.rs
 # Cortex-M7 instructions, for `choose_chunks`: one bucket look-up of one reading in one chunk
 # and one code verified against a reading (xor, software popcount of a u64, compare) are
 # estimates; one code of the linear scan (four readings) is measured on bench/m7: ~47,000

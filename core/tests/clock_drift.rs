@@ -157,7 +157,7 @@ fn simulate(name: &str, clock: AutopilotClock, duration_us: u64, window_us: u64)
 
 /// How long after the jump frames may lack vehicle state. The jump is confirmed by the
 /// third consecutive TIMESYNC answer that disagrees with the estimate
-/// (`timesync::JUMP_CONFIRM`, one a second: ~2 s after the jump); until then the stamps, 3 s
+/// (`JUMP_CONFIRM` in core's companion time sync, one a second: ~2 s after the jump); until then the stamps, 3 s
 /// off, are refused by the companion's plausibility check and the receive time is used, so
 /// vehicle state stays available. On confirmation the histories are cleared (stamps from
 /// before and after are not comparable) and the frames exposed before the first new samples

@@ -208,7 +208,7 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "time_usec clock: 0 by profile, 1 autopilot (TIMESYNC), 2 companion boot",
     },
-    // The auto-exposure limits (`sensor::exposure::AutoExposureLimits`); the defaults are
+    // The auto-exposure limits (`sensor::AutoExposureLimits`); the defaults are
     // `AutoExposureLimits::default()` (a test checks it).
     ParamDef {
         name: "TD_EXP_MAX_US",
