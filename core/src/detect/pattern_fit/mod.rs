@@ -68,14 +68,14 @@ pub const ITERATIONS: usize = 3;
 /// blurred cells: lower than the real contrast on a small marker, never far above it).
 const CONTRAST_RANGE: (f32, f32) = (0.5, 4.0);
 /// Largest residual RMS a fit may leave, as a fraction of the fitted contrast.
-const MAX_RESIDUAL_OF_CONTRAST: f32 = 0.25;
+const MAX_RESIDUAL_OF_CONTRAST: f32 = 0.15;
 /// Starting Levenberg-Marquardt damping of the normal equations' diagonal: keeps a step
 /// finite when a parameter is barely observed (the outside level of a marker in a wide
 /// margin).
 const DAMPING: f32 = 1e-3;
 /// A fit that moves a corner further than this (pixels) is not the small correction it is
 /// for (a wrong decode, an occluded marker, another marker in the margin): refused.
-pub const MAX_CORNER_SHIFT_PX: f32 = 0.75;
+pub const MAX_CORNER_SHIFT_PX: f32 = 0.4;
 /// Most markers fitted in one frame: the largest. When every marker is small, the largest
 /// sets the pad fix's scale (its corners are the farthest apart); the bound keeps a frame
 /// of many small look-alikes from paying for many fits.
