@@ -530,7 +530,12 @@ impl Detector {
             }
         }
         if strategy.fits_patterns(config) {
-            stats.fitted = pattern_fit::fit_small_markers(image, families, detections, &mut tracer);
+            stats.fitted = u32::from(pattern_fit::fit_small_markers(
+                image,
+                families,
+                detections,
+                &mut tracer,
+            ));
         }
         stats.trace_steps = tracer.steps();
         stats.work = budget - tracer.remaining();

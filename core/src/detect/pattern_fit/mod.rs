@@ -25,8 +25,9 @@
 //! see [`Family::quad_offset`]) and `B` is the blurred pattern (1 white, 0 black). The blur
 //! is a Gaussian (the optics and the pixel's own area together) of one width in grid cells
 //! along both grid axes: exact for a marker seen square on, as every far marker is, and the
-//! corners' moves then leave it alone, which keeps the derivatives simple. A Gaussian over a grid of squares is separable, so `B` and its
-//! derivatives are sums of products of normal-distribution differences along the two axes.
+//! corners' moves then leave it alone, which keeps the derivatives simple. A Gaussian over a
+//! grid of squares is separable, so `B` and its derivatives are sums of products of
+//! normal-distribution differences along the two axes.
 //!
 //! ## Cost and bounds
 //! Only markers whose longest side is at most [`MAX_SIDE_PX`] are fitted; above it the edge
@@ -79,10 +80,6 @@ const DAMPING: f32 = 1e-3;
 /// must be allowed to correct; at 0.75 px a fit on a real photo (the apriltag test set)
 /// moved a corner to 1.3 px from the truth.
 pub const MAX_CORNER_SHIFT_PX: f32 = 0.6;
-/// Most markers fitted in one frame: the largest. When every marker is small, the largest
-/// sets the pad fix's scale (its corners are the farthest apart); the bound keeps a frame
-/// of many small look-alikes from paying for many fits.
-pub const MAX_FITS_PER_FRAME: usize = 1;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
 /// qvga-far-1: one tag36h11 of 14 pixels): 1.41 million instructions for its pixels and five
@@ -207,19 +204,6 @@ fn scattered(x: usize, y: usize, step: usize) -> bool {
     (h.wrapping_mul(0x2C1B_3C6D) >> 16).is_multiple_of(step as u32)
 }
 
-/// Where the diagonals of a quad cross: the image of its centre under any homography.
-fn diagonals_meet(c: &[Point; 4]) -> Option<Point> {
-    let (d1x, d1y) = (c[2].x - c[0].x, c[2].y - c[0].y);
-    let (d2x, d2y) = (c[3].x - c[1].x, c[3].y - c[1].y);
-    let den = d1x * d2y - d1y * d2x;
-    if !(den.abs() > 1e-6) {
-        return None;
-    }
-    let s = ((c[1].x - c[0].x) * d2y - (c[1].y - c[0].y) * d2x) / den;
-    let p = Point::new(c[0].x + s * d1x, c[0].y + s * d1y);
-    (p.x.is_finite() && p.y.is_finite()).then_some(p)
-}
-
 /// The mean side of a quad, pixels.
 fn mean_side(c: &[Point; 4]) -> f32 {
     0.25 * (0..4).map(|k| c[k].distance(c[(k + 1) % 4])).sum::<f32>()
@@ -261,16 +245,16 @@ pub(crate) enum Refusal {
 }
 
 /// Corners of the decoded marker `id` of `family` at `corners` (detection order), fitted to
-/// the pixels as the module docs describe, or why the fit was refused (the marker is not
-/// small, its family's layout is not modelled, the model does not fit). `contrast` (grey
-/// levels, the decoder's) checks the fitted contrast.
+/// the pixels as the module docs describe, with the image of the marker's centre; or why
+/// the fit was refused (the marker is not small, its family's layout is not modelled, the
+/// model does not fit). `contrast` (grey levels, the decoder's) checks the fitted contrast.
 pub(crate) fn fit(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     id: u16,
     corners: &[Point; 4],
     contrast: f32,
-) -> Result<[Point; 4], Refusal> {
+) -> Result<([Point; 4], Point), Refusal> {
     if longest_side(corners) > MAX_SIDE_PX {
         return Err(Refusal::Large);
     }
@@ -281,21 +265,19 @@ pub(crate) fn fit(
         params[2 * k] = c.x;
         params[2 * k + 1] = c.y;
     }
-    // Levels: start from the darkest pixels as black and the detector's contrast; the
-    // outside as white (a printed margin). The first iteration solves them nearly exactly.
     let cell_px = mean_side(corners) / (pattern.quad_hi - pattern.quad_lo);
     if !(cell_px > 0.0) {
         return Err(Refusal::Geometry);
     }
     params[BLUR] = libm::logf(INITIAL_BLUR_PX / cell_px);
-    params[BLACK] = darkest(&win);
-    let start_contrast = contrast.max(1.0);
-    params[CONTRAST] = start_contrast;
+    // The levels enter the model linearly: solved exactly for the start geometry and blur
+    // (the outside level stays white, a printed margin, when no pixel lies beyond the known
+    // area to measure it).
     params[OUTSIDE] = 1.0;
+    solve_levels(&pattern, &win, &mut params)?;
     // Levenberg-Marquardt: the start is within a few tenths of a pixel, where the model is
     // nearly linear and the first step usually lands. A step that does not lower the cost
     // is taken back and retried shorter.
-    solve_levels(&pattern, &win, &mut params)?;
     let mut current = linearise(&pattern, &win, &params, Pass::Full).ok_or(Refusal::Geometry)?;
     let mut damping = DAMPING;
     for iteration in 0..ITERATIONS {
@@ -321,85 +303,73 @@ pub(crate) fn fit(
     if !(rms < MAX_RESIDUAL_OF_CONTRAST * params[CONTRAST]) {
         return Err(Refusal::Residual);
     }
+    let fitted = fitted_corners(&params);
     let cells = pattern.quad_hi - pattern.quad_lo;
-    let blur = libm::expf(params[BLUR]) * mean_side(&fitted_corners(&params)) / cells;
+    let blur = libm::expf(params[BLUR]) * mean_side(&fitted) / cells;
     // The fitted contrast must be the marker's: a fit that flattened it found something else.
-    let contrast_ratio = params[CONTRAST] / start_contrast;
+    let contrast_ratio = params[CONTRAST] / contrast.max(1.0);
     let within = |x: f32, (lo, hi): (f32, f32)| x >= lo && x <= hi;
     if !within(blur, BLUR_RANGE_PX) || !within(contrast_ratio, CONTRAST_RANGE) {
         return Err(Refusal::Levels);
     }
-    let mut out = [Point::default(); 4];
-    for (k, slot) in out.iter_mut().enumerate() {
-        let p = Point::new(params[2 * k], params[2 * k + 1]);
-        if !(p.distance(corners[k]) <= MAX_CORNER_SHIFT_PX) {
-            return Err(Refusal::Moved);
-        }
-        *slot = p;
+    if fitted
+        .iter()
+        .zip(corners.iter())
+        .any(|(f, c)| !(f.distance(*c) <= MAX_CORNER_SHIFT_PX))
+    {
+        return Err(Refusal::Moved);
     }
-    Ok(out)
+    // The centre as the decoder maps it: the grid's middle through the corner homography.
+    let middle = 0.5 * pattern.side as f32;
+    let center = Homography::from_4_points(&pattern.corner_points(), &fitted)
+        .and_then(|h| h.map(middle, middle))
+        .ok_or(Refusal::Geometry)?;
+    Ok((fitted, center))
 }
 
-/// The darkest pixel read: the start of the black level (the first step solves the levels,
-/// which enter the model linearly, nearly exactly).
-fn darkest(win: &Window) -> f32 {
-    f32::from(win.samples.iter().map(|s| s.value).min().unwrap_or(0))
-}
-
-/// Step 7 over a frame's `detections`: fits the largest small markers, at most
-/// [`MAX_FITS_PER_FRAME`], when every marker of the frame is small (see the module docs: a
-/// larger marker, or the spread of several, sets the pose's scale better than any small
-/// marker's own size). Charges [`WORK_PATTERN_FIT`] per fit to `tracer` and stops when the
-/// budget is spent. Returns the number of markers whose corners were replaced.
+/// Step 7 over a frame's `detections`: fits the largest marker when every marker of the
+/// frame is small. The largest sets the pad fix's scale (its corners are the farthest
+/// apart; a larger marker, or the spread of several, would set it better than any small
+/// marker's own size), and one fit a frame keeps a frame of many small look-alikes from
+/// paying for many. Charges [`WORK_PATTERN_FIT`] to `tracer`, and fits nothing when the
+/// budget cannot pay. Returns whether the largest marker's corners were replaced.
 pub(super) fn fit_small_markers(
     image: &GrayImage<'_>,
     families: &[&Family<'_>],
     detections: &mut [Detection],
     tracer: &mut Tracer<'_>,
-) -> u32 {
-    if detections
-        .iter()
-        .any(|d| longest_side(&d.corners) > MAX_SIDE_PX)
-    {
-        return 0;
-    }
-    // The largest markers first: a single pass keeps the top few, largest first.
-    let mut largest: [Option<(usize, f32)>; MAX_FITS_PER_FRAME] = [None; MAX_FITS_PER_FRAME];
-    for (k, d) in detections.iter().enumerate() {
-        let mut entry = Some((k, longest_side(&d.corners)));
-        for slot in largest.iter_mut() {
-            match (*slot, entry) {
-                (Some((_, kept)), Some((_, side))) if side <= kept => {}
-                (_, Some(_)) => core::mem::swap(slot, &mut entry),
-                (_, None) => break,
-            }
+) -> bool {
+    let mut largest: Option<(&mut Detection, f32)> = None;
+    for d in detections.iter_mut() {
+        let side = longest_side(&d.corners);
+        if side > MAX_SIDE_PX {
+            return false;
+        }
+        if largest.as_ref().is_none_or(|(_, s)| side > *s) {
+            largest = Some((d, side));
         }
     }
-    let mut fitted = 0u32;
-    for (k, _) in largest.iter().flatten() {
-        let Some(detection) = detections.get_mut(*k) else {
-            continue;
-        };
-        let Some(family) = families.get(usize::from(detection.family)) else {
-            continue;
-        };
-        if !tracer.charge(WORK_PATTERN_FIT) {
-            break;
-        }
-        let refit = fit(
-            image,
-            family,
-            detection.id,
-            &detection.corners,
-            detection.contrast,
-        );
-        if let Ok(corners) = refit {
-            detection.corners = corners;
-            detection.center = diagonals_meet(&corners).unwrap_or(detection.center);
-            fitted += 1;
-        }
+    let Some((detection, _)) = largest else {
+        return false;
+    };
+    let Some(family) = families.get(usize::from(detection.family)) else {
+        return false;
+    };
+    if !tracer.charge(WORK_PATTERN_FIT) {
+        return false;
     }
-    fitted
+    let Ok((corners, center)) = fit(
+        image,
+        family,
+        detection.id,
+        &detection.corners,
+        detection.contrast,
+    ) else {
+        return false;
+    };
+    detection.corners = corners;
+    detection.center = center;
+    true
 }
 
 #[cfg(test)]

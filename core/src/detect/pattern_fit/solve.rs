@@ -8,6 +8,7 @@
 use super::model::{blurred, Axis, Pattern};
 use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE};
 use crate::geometry::{Homography, Point};
+use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
 /// Normal equations of one iteration: `J^T J`, `J^T e` and the residual sum of squares.
 pub(super) struct Normal {
@@ -157,41 +158,22 @@ pub(super) fn solve_levels(
     params: &mut [f32; N],
 ) -> Result<(), Refusal> {
     let levels = linearise(pattern, win, params, Pass::Levels).ok_or(Refusal::Geometry)?;
-    let a = &levels.jtj;
-    let b = &levels.jte;
-    let det3 = |m: [[f32; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let m = [
-        [a[0][0], a[0][1], a[0][2]],
-        [a[1][0], a[1][1], a[1][2]],
-        [a[2][0], a[2][1], a[2][2]],
-    ];
+    let (a, b) = (&levels.jtj, &levels.jte);
+    let m = Matrix3::from_fn(|r, c| a[r][c]);
+    let rhs = Vector3::new(b[0], b[1], b[2]);
     // A marker in a wide printed margin has almost no pixel beyond the known area: keep the
     // outside level then (its column is nearly zero) and solve the other two.
-    let d = det3(m);
-    let scale = m[0][0] * m[1][1] * m[2][2];
-    let mut x = [0.0f32; 3];
-    if d.abs() > 1e-6 * scale.abs() {
-        for (k, slot) in x.iter_mut().enumerate() {
-            let mut mk = m;
-            for (row, rhs) in mk.iter_mut().zip(b.iter()) {
-                row[k] = *rhs;
-            }
-            *slot = det3(mk) / d;
-        }
+    let scale = m[(0, 0)] * m[(1, 1)] * m[(2, 2)];
+    let x = if m.determinant().abs() > 1e-6 * scale.abs() {
+        m.try_inverse().map(|inv| inv * rhs)
     } else {
         let o = params[OUTSIDE];
-        let d2 = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-        if !(d2.abs() > 0.0) {
-            return Err(Refusal::Singular);
-        }
-        x[0] = (b[0] * m[1][1] - m[0][1] * b[1]) / d2;
-        x[1] = (m[0][0] * b[1] - b[0] * m[1][0]) / d2;
-        x[2] = o * x[1];
-    }
+        Matrix2::new(m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)])
+            .try_inverse()
+            .map(|inv| inv * Vector2::new(b[0], b[1]))
+            .map(|x| Vector3::new(x[0], x[1], o * x[1]))
+    };
+    let x = x.ok_or(Refusal::Singular)?;
     if !(x[1] > 0.0) || !x.iter().all(|v| v.is_finite()) {
         return Err(Refusal::Levels);
     }

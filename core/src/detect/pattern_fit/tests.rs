@@ -138,7 +138,7 @@ fn small_markers_come_out_unbiased_in_scale_across_blurs() {
         let (pixels, truth) = draw(id, side, angle, centre, sigma);
         let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
         let start = start_from(&truth);
-        let fitted = fit(&image, &TAG36H11, id, &start, WHITE - BLACK)
+        let (fitted, _) = fit(&image, &TAG36H11, id, &start, WHITE - BLACK)
             .ok()
             .unwrap_or_else(|| panic!("side {side} blur {sigma}: fit refused"));
         let scale = perimeter(&fitted) / perimeter(&truth) - 1.0;
@@ -186,7 +186,7 @@ fn a_marker_at_the_image_border_is_fitted_or_refused_without_panic() {
     for (x, y) in [(2.0, 2.0), (61.5, 30.0), (30.0, 63.0), (-3.0, -3.0)] {
         let (pixels, truth) = draw(5, 12.0, 0.3, Point::new(x, y), 0.7);
         let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
-        if let Ok(fitted) = fit(&image, &TAG36H11, 5, &truth, WHITE - BLACK) {
+        if let Ok((fitted, _)) = fit(&image, &TAG36H11, 5, &truth, WHITE - BLACK) {
             for (f, t) in fitted.iter().zip(truth.iter()) {
                 assert!(f.distance(*t) <= MAX_CORNER_SHIFT_PX);
             }

@@ -46,7 +46,7 @@ impl SaveDebounce {
 
 #[cfg(test)]
 mod tests {
-    use super::super::fixtures::with_profile;
+    use super::super::test_fixtures::with_profile;
     use super::*;
     use crate::params::ParamId;
 

@@ -101,7 +101,7 @@ pub fn encode_slot(params: &ParamSet, out: &mut [u8]) {
 /// The format-1 reader.
 #[cfg(test)]
 mod tests {
-    use super::super::fixtures::with_profile;
+    use super::super::test_fixtures::with_profile;
     use super::super::FLASH_WORD;
     use super::*;
 

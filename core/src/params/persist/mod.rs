@@ -55,12 +55,10 @@
 //! The module is split by concern: `slot` is the slot format (layout, header, trailer, CRC-32,
 //! and the format-1 blob), `scan` the replay of a sector's log at boot, `store` the [`Store`]
 //! that decides where a save goes and what is erased, `debounce` when to save. The tests run
-//! against `fixtures`, a model of the H7's flash: `power_loss_tests` cut the power at every
+//! against `test_fixtures`, a model of the H7's flash: `power_loss_tests` cut the power at every
 //! step, `store_tests` cover the store's other cases.
 
 mod debounce;
-#[cfg(test)]
-mod fixtures;
 #[cfg(test)]
 mod legacy;
 #[cfg(test)]
@@ -70,6 +68,8 @@ mod slot;
 mod store;
 #[cfg(test)]
 mod store_tests;
+#[cfg(test)]
+mod test_fixtures;
 
 pub use debounce::{SaveDebounce, SAVE_DEBOUNCE_US};
 #[cfg(test)]

@@ -1,5 +1,5 @@
 //! Power-loss tests of the parameter log against the model of the STM32H7's flash
-//! ([`super::fixtures::Model`]): the power is cut at every word program and every sector
+//! ([`super::test_fixtures::Model`]): the power is cut at every word program and every sector
 //! erase of a run, each way a step can be torn, and every cut must restore the old or the new
 //! values, never a mix or the defaults. The one-sector design this log replaces fails the
 //! same test, which shows that it can fail.
@@ -11,7 +11,7 @@ use std::string::String;
 use std::vec;
 use std::vec::Vec;
 
-use super::fixtures::*;
+use super::test_fixtures::*;
 use super::*;
 use crate::params::ParamSet;
 

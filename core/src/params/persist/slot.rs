@@ -127,7 +127,7 @@ const CRC32_NIBBLES: [u32; 16] = {
 
 #[cfg(test)]
 mod tests {
-    use super::super::fixtures::values;
+    use super::super::test_fixtures::values;
     use super::*;
 
     const _: () =

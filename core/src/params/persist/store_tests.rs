@@ -9,8 +9,8 @@ use std::vec::Vec;
 
 use embassy_futures::block_on;
 
-use super::fixtures::*;
 use super::slot::encode_v2;
+use super::test_fixtures::*;
 use super::*;
 use crate::params::ParamSet;
 
