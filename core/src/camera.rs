@@ -49,7 +49,13 @@ pub enum CameraError {
     BadPrincipalPoint,
     /// A distortion coefficient is not finite.
     BadDistortion,
+    /// The line time is negative, not finite, or the frame's readout exceeds
+    /// [`MAX_READOUT_US`].
+    BadLineTime,
 }
+
+/// Longest accepted frame readout (`line_time_us * height`), microseconds.
+pub const MAX_READOUT_US: f32 = 1.0e6;
 
 /// Largest accepted ratio between `fx` and `fy` (either way round).
 pub const MAX_ASPECT: f32 = 4.0;
@@ -72,6 +78,12 @@ pub struct CameraModel {
     pub cy: f32,
     /// `[k1, k2, p1, p2, k3]`, OpenCV's order; all zero for an ideal pinhole.
     pub distortion: [f32; 5],
+    /// Rolling shutter: the time from one row's exposure to the next row's, microseconds
+    /// (row `v` is exposed `(v - (height - 1) / 2) * line_time_us` after the frame's time,
+    /// which is the middle row's); 0 for a global shutter. A property of the sensor as
+    /// clocked (pixel clock and line length), not of the lens, but it travels with the
+    /// calibration because both describe how a pixel came to be.
+    pub line_time_us: f32,
 }
 
 impl CameraModel {
@@ -86,6 +98,7 @@ impl CameraModel {
             cx,
             cy,
             distortion: [0.0; 5],
+            line_time_us: 0.0,
         }
     }
 
@@ -105,6 +118,7 @@ impl CameraModel {
             cx: principal_point.0,
             cy: principal_point.1,
             distortion,
+            line_time_us: 0.0,
         };
         camera.validate()?;
         Ok(camera)
@@ -128,6 +142,14 @@ impl CameraModel {
         }
         if self.distortion.iter().any(|k| !k.is_finite()) {
             return Err(CameraError::BadDistortion);
+        }
+        // A frame's rows cannot take longer to read than a second: anything beyond is a typo
+        // (milliseconds for microseconds) that would skew every corner.
+        if !(self.line_time_us.is_finite()
+            && self.line_time_us >= 0.0
+            && self.line_time_us * self.height as f32 <= MAX_READOUT_US)
+        {
+            return Err(CameraError::BadLineTime);
         }
         Ok(())
     }

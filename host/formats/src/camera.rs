@@ -26,6 +26,8 @@ struct CameraFile {
     cy: f64,
     #[serde(default)]
     distortion: Option<Vec<f64>>,
+    #[serde(default)]
+    line_time_us: f64,
 }
 
 /// Parses the text of a camera file (the contract's `CAMERA.toml`).
@@ -59,6 +61,7 @@ pub fn parse_camera(text: &str) -> Result<CameraModel, ParseError> {
         cx: file.cx as f32,
         cy: file.cy as f32,
         distortion,
+        line_time_us: file.line_time_us as f32,
     };
     camera.validate().map_err(|e| match e {
         CameraError::EmptyImage => fail(
@@ -96,6 +99,15 @@ pub fn parse_camera(text: &str) -> Result<CameraModel, ParseError> {
             "distortion",
             "coefficients must be finite numbers".to_string(),
         ),
+        CameraError::BadLineTime => fail(
+            "line_time_us",
+            format!(
+                "must be 0 (global shutter) or a row-to-row time in microseconds whose \
+                 frame readout ({:.0} µs) is under {:.0} µs",
+                file.line_time_us * f64::from(file.height),
+                touchdown_core::camera::MAX_READOUT_US
+            ),
+        ),
     })?;
     Ok(camera)
 }
@@ -123,6 +135,12 @@ pub fn camera_toml(camera: &CameraModel) -> String {
         out.push_str(&format!(
             "distortion = [{}]   # k1, k2, p1, p2, k3 (OpenCV order)\n",
             d.join(", ")
+        ));
+    }
+    if camera.line_time_us != 0.0 {
+        out.push_str(&format!(
+            "line_time_us = {}   # rolling shutter: row-to-row exposure time\n",
+            exact_f32(camera.line_time_us)
         ));
     }
     out
@@ -193,5 +211,22 @@ mod tests {
         assert_eq!(back, camera);
         let pinhole = CameraModel::pinhole(64, 48, 1.0e-1, 0.1, 31.5, 23.5);
         assert_eq!(parse_camera(&camera_toml(&pinhole)).unwrap(), pinhole);
+        let rolling = CameraModel {
+            line_time_us: 63.492_06,
+            ..pinhole
+        };
+        assert_eq!(parse_camera(&camera_toml(&rolling)).unwrap(), rolling);
+    }
+
+    #[test]
+    fn a_line_time_in_milliseconds_is_refused_by_name() {
+        // 480 rows of 30 ms: a 14 s readout, surely milliseconds typed for microseconds.
+        let text = format!("{CAMERA}line_time_us = 30000\n");
+        let e = parse_camera(&text).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("line_time_us"), "{e:?}");
+        let e = parse_camera(&format!("{CAMERA}line_time_us = -1\n")).unwrap_err();
+        assert_eq!(e.key.as_deref(), Some("line_time_us"), "{e:?}");
+        let ok = parse_camera(&format!("{CAMERA}line_time_us = 52.5\n")).unwrap();
+        assert_eq!(ok.line_time_us, 52.5);
     }
 }
