@@ -21,9 +21,7 @@ use touchdown_core::companion::mavlink::dialects::common::MavAutopilot;
 use touchdown_core::companion::{Companion, CompanionConfig, Profile, TargetOutcome};
 use touchdown_core::filter::CameraMount;
 
-use autopilot_sim::{
-    Autopilot, AutopilotClock, Exposure, Flight, LinkDelay, Rng, VehiclePath, STEP_US,
-};
+use autopilot_sim::{Autopilot, AutopilotClock, Exposure, Flight, LinkDelay, VehiclePath, STEP_US};
 
 /// The autopilot booted 200 s before us.
 const AP_START_US: f64 = 200.0e6;
@@ -72,15 +70,14 @@ fn simulate(name: &str, clock: AutopilotClock, duration_us: u64, window_us: u64)
         LinkDelay::Random,
         LinkDelay::Random,
     );
-    let mut rng = Rng(0x15_C10C);
     let mut fig = Figures::default();
     let mut sq = 0.0f64;
     let mut n_err = 0u32;
     let in_window = |t: u64| clock.jump.is_some_and(|(j, _)| t >= j && t < j + window_us);
     let mut now = 0u64;
     while now < duration_us {
-        flight.uplink_to_autopilot(now, &mut rng, true);
-        flight.autopilot_tick(now, &mut rng);
+        flight.uplink_to_autopilot(now, true);
+        flight.autopilot_tick(now);
         while let Some((bytes, tag)) = flight.downlink.due(now) {
             flight.companion.receive(&bytes, now);
             if let Some(ap_us) = tag {
@@ -125,7 +122,7 @@ fn simulate(name: &str, clock: AutopilotClock, duration_us: u64, window_us: u64)
                 _ => {}
             }
         });
-        flight.transmit(now, &mut rng, |_| {});
+        flight.transmit(now, |_| {});
         now += STEP_US;
     }
     fig.rms_map_error_us = (sq / f64::from(n_err.max(1))).sqrt();

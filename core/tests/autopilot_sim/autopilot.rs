@@ -14,7 +14,7 @@ use touchdown_core::companion::mavlink::dialects::common::{
 };
 use touchdown_core::companion::{Companion, FrameParser, TargetOutcome, MAX_FRAME_LEN};
 
-use super::{encode, heartbeat, CameraFrames, FixEstimator, Link, LinkDelay, Rng, VehiclePath};
+use super::{encode, heartbeat, CameraFrames, FixEstimator, Link, LinkDelay, VehiclePath};
 
 /// The autopilot's clock against the true time `t` (= the companion's clock), µs:
 /// `start_us + rate * t`, plus `jump.1` from true time `jump.0` on.
@@ -101,20 +101,13 @@ impl Autopilot {
     }
 
     /// `msg` down `link` at `now`, tagged with `tag`.
-    fn send(
-        &mut self,
-        link: &mut Link,
-        rng: &mut Rng,
-        now: u64,
-        msg: MavMessage,
-        tag: Option<u64>,
-    ) {
+    fn send(&mut self, link: &mut Link, now: u64, msg: MavMessage, tag: Option<u64>) {
         let bytes = encode(&mut self.seq, 1, 1, &msg);
-        link.send(rng, now, bytes, tag);
+        link.send(now, bytes, tag);
     }
 
     /// Bytes from the companion, arriving at `now`; the answers go down `link`.
-    pub fn hear(&mut self, bytes: &[u8], now: u64, link: &mut Link, rng: &mut Rng) {
+    pub fn hear(&mut self, bytes: &[u8], now: u64, link: &mut Link) {
         let mut msgs = Vec::new();
         self.parser.push(bytes, |f| {
             if let Ok(m) = f.decode() {
@@ -131,7 +124,7 @@ impl Autopilot {
                         target_system: 1,
                         target_component: 191,
                     });
-                    self.send(link, rng, now, reply, None);
+                    self.send(link, now, reply, None);
                 }
                 MavMessage::COMMAND_LONG(c)
                     if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL =>
@@ -147,7 +140,7 @@ impl Autopilot {
                         result: MavResult::MAV_RESULT_ACCEPTED,
                         ..COMMAND_ACK_DATA::DEFAULT
                     });
-                    self.send(link, rng, now, ack, None);
+                    self.send(link, now, ack, None);
                 }
                 _ => {}
             }
@@ -156,7 +149,7 @@ impl Autopilot {
 
     /// What the autopilot sends at `now`, down `link`. ATTITUDE_QUATERNION and
     /// LOCAL_POSITION_NED are tagged with their time stamp in the autopilot's clock, µs.
-    pub fn tick(&mut self, now: u64, link: &mut Link, rng: &mut Rng) {
+    pub fn tick(&mut self, now: u64, link: &mut Link) {
         let t = now as f32 * 1e-6;
         let ap_us = self.clock.at(now);
         let boot_ms = (ap_us / 1000) as u32;
@@ -172,10 +165,10 @@ impl Autopilot {
                     mavlink_version: 3,
                 });
                 let bytes = encode(&mut self.seq, 1, 154, &gimbal);
-                link.send(rng, now, bytes, None);
+                link.send(now, bytes, None);
             }
             let hb = heartbeat(self.kind);
-            self.send(link, rng, now, hb, None);
+            self.send(link, now, hb, None);
         }
         if now >= self.next_systime {
             self.next_systime = now + 1_000_000;
@@ -183,7 +176,7 @@ impl Autopilot {
                 time_unix_usec: 0,
                 time_boot_ms: boot_ms,
             });
-            self.send(link, rng, now, st, None);
+            self.send(link, now, st, None);
         }
         if now >= self.next_timesync {
             self.next_timesync = now + 1_000_000;
@@ -193,7 +186,7 @@ impl Autopilot {
                 target_system: 0,
                 target_component: 0,
             });
-            self.send(link, rng, now, req, None);
+            self.send(link, now, req, None);
         }
         if let Some(iv) = self.att_interval {
             if now >= self.next_att {
@@ -207,7 +200,7 @@ impl Autopilot {
                     q4,
                     ..ATTITUDE_QUATERNION_DATA::DEFAULT
                 });
-                self.send(link, rng, now, msg, Some(ap_us));
+                self.send(link, now, msg, Some(ap_us));
             }
         }
         if let Some(iv) = self.pos_interval {
@@ -223,7 +216,7 @@ impl Autopilot {
                     vy: v.y,
                     vz: v.z,
                 });
-                self.send(link, rng, now, msg, Some(ap_us));
+                self.send(link, now, msg, Some(ap_us));
             }
         }
     }
@@ -264,17 +257,17 @@ impl Flight {
 
     /// The companion's bytes that arrived by `now` reach the autopilot; `heard` false: they
     /// are lost (it is down).
-    pub fn uplink_to_autopilot(&mut self, now: u64, rng: &mut Rng, heard: bool) {
+    pub fn uplink_to_autopilot(&mut self, now: u64, heard: bool) {
         while let Some((bytes, _)) = self.uplink.due(now) {
             if heard {
-                self.autopilot.hear(&bytes, now, &mut self.downlink, rng);
+                self.autopilot.hear(&bytes, now, &mut self.downlink);
             }
         }
     }
 
     /// The autopilot's own life at `now`.
-    pub fn autopilot_tick(&mut self, now: u64, rng: &mut Rng) {
-        self.autopilot.tick(now, &mut self.downlink, rng);
+    pub fn autopilot_tick(&mut self, now: u64) {
+        self.autopilot.tick(now, &mut self.downlink);
     }
 
     /// Every frame processed by `now` goes through the estimator stage to the companion;
@@ -289,11 +282,11 @@ impl Flight {
     }
 
     /// Everything the companion sends at `now` goes up the link; `sent` sees each frame.
-    pub fn transmit(&mut self, now: u64, rng: &mut Rng, mut sent: impl FnMut(&[u8])) {
+    pub fn transmit(&mut self, now: u64, mut sent: impl FnMut(&[u8])) {
         while let Some(n) = self.companion.poll_transmit(now, &mut self.out) {
             let bytes = self.out[..n].to_vec();
             sent(&bytes);
-            self.uplink.send(rng, now, bytes, None);
+            self.uplink.send(now, bytes, None);
         }
     }
 }

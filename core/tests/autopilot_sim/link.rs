@@ -39,9 +39,9 @@ impl Link {
         }
     }
 
-    /// Sends `bytes` at `now`. Neither kind of delay draws from `rng`, so the caller's random
-    /// sequence does not depend on the traffic.
-    pub fn send(&mut self, _rng: &mut Rng, now: u64, bytes: Vec<u8>, tag: Option<u64>) {
+    /// Sends `bytes` at `now`. The delay draws from no shared random sequence (see
+    /// [`LinkDelay::Random`]), so a caller's own random sequence does not depend on the traffic.
+    pub fn send(&mut self, now: u64, bytes: Vec<u8>, tag: Option<u64>) {
         let index = if self.last_send.0 == now {
             self.last_send.1 + 1
         } else {

@@ -222,7 +222,7 @@ pub fn simulate(s: &Scenario) -> Run {
 
     let mut now = 0u64;
     while now < s.duration_us {
-        flight.uplink_to_autopilot(now, &mut rng, !in_window(reboot_window, now));
+        flight.uplink_to_autopilot(now, !in_window(reboot_window, now));
         // The autopilot's own life.
         if let Some((r, back)) = reboot_window {
             if now >= r && !rebooted {
@@ -237,7 +237,7 @@ pub fn simulate(s: &Scenario) -> Run {
         }
         let talking = !in_window(s.silent, now) && !in_window(reboot_window, now);
         if talking {
-            flight.autopilot_tick(now, &mut rng);
+            flight.autopilot_tick(now);
         }
         // Autopilot -> companion (damaged when asked).
         while let Some((mut bytes, _)) = flight.downlink.due(now) {
@@ -299,7 +299,7 @@ pub fn simulate(s: &Scenario) -> Run {
             flight.camera.process(te, fix);
         }
         flight.deliver_frames(now, |_| {});
-        flight.transmit(now, &mut rng, |bytes| tx.push((now, bytes.to_vec())));
+        flight.transmit(now, |bytes| tx.push((now, bytes.to_vec())));
         now += STEP_US;
     }
     Run {
