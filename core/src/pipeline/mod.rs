@@ -36,6 +36,11 @@
 //!   taken from gravity instead of the image (where it is barely observable on a small
 //!   marker), which removes the range bias the tilt-range coupling gives at altitude.
 //!
+//! Before the fix, on a rolling-shutter camera ([`CameraModel::line_time_us`] above 0), the
+//! pad's corners are moved to where the camera saw them at the frame's time, from the body
+//! rates and the velocity at the exposure ([`PipelineConfig::correct_rolling_shutter`], in
+//! `shutter`): both the fix and the level fix are solved on the corrected corners.
+//!
 //! # Settings
 //!
 //! [`FramePipeline::apply`] changes the detector's correction cap, the pad's scale and the
@@ -48,18 +53,19 @@
 //! that its tables can be reproduced on the same frames.
 
 mod paper;
+mod shutter;
 
 pub use paper::{PaperPipeline, PaperReport};
 
 use crate::camera::CameraModel;
-use crate::detect::{Buffers, DetectError, Detector, DetectorConfig};
+use crate::detect::{Buffers, DetectError, Detection, Detector, DetectorConfig};
 use crate::family::Family;
 use crate::filter::{
     camera_to_ned_matrix, ConfigError, EstimatorConfig, FrameEstimate, PadEstimator,
     VehicleAtExposure, VehicleState,
 };
 use crate::image::GrayImage;
-use crate::pad::{PadError, PadLayout};
+use crate::pad::{PadError, PadLayout, MAX_PAD_MARKERS};
 use crate::params::PipelineSettings;
 use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix};
 use nalgebra::{Matrix3, Vector3};
@@ -77,6 +83,10 @@ pub struct PipelineConfig {
     pub flip_by_prediction: bool,
     /// Re-solve the fix with the tilt from the attitude at the exposure, when known.
     pub level_fix: bool,
+    /// Correct the corners for the rolling shutter (the camera's turn and travel between a
+    /// corner's row time and the frame's), when the camera has a line time and the body rates
+    /// at the exposure are known. False solves on the corners as detected.
+    pub correct_rolling_shutter: bool,
 }
 
 impl Default for PipelineConfig {
@@ -86,6 +96,7 @@ impl Default for PipelineConfig {
             estimator: EstimatorConfig::default(),
             flip_by_prediction: true,
             level_fix: true,
+            correct_rolling_shutter: true,
         }
     }
 }
@@ -207,7 +218,15 @@ impl<'a> FramePipeline<'a> {
     ) -> FrameReport {
         // The vehicle state is read once, at the exposure, for every step that needs it.
         let at_exposure = vehicle.at(exposure_us);
-        let predicted = self.predicted_camera_position(&at_exposure);
+        // The prediction is of use with a last fix's rotation, to the flip choice or (as the
+        // pad's plane) to the rolling-shutter correction.
+        let wants_prediction = self.config.flip_by_prediction
+            || (self.config.correct_rolling_shutter && self.camera.line_time_us > 0.0);
+        let pad_in_camera = (wants_prediction && self.last_rotation.is_some())
+            .then(|| self.estimator.predicted_in_camera(&at_exposure))
+            .flatten();
+        let predicted = self.predicted_camera_position(pad_in_camera.as_ref());
+        let readout_motion = self.readout_motion(&at_exposure, pad_in_camera.as_ref());
         let camera_from_level = at_exposure
             .attitude
             .as_ref()
@@ -217,8 +236,25 @@ impl<'a> FramePipeline<'a> {
             });
         let (markers, fix, detect_error) = match self.detector.detect(image, self.families, buffers)
         {
-            Ok(detections) => {
+            Ok(raw) => {
                 let (families, pad, camera) = (self.families, &self.pad, &self.camera);
+                // The pad's markers as a global shutter would have seen them (both fixes
+                // solve on these); the count reported is the detector's.
+                let mut corrected = heapless::Vec::<Detection, MAX_PAD_MARKERS>::new();
+                let detections = match &readout_motion {
+                    Some(motion) => {
+                        shutter::correct_pad_detections(
+                            raw,
+                            families,
+                            pad,
+                            camera,
+                            motion,
+                            &mut corrected,
+                        );
+                        &corrected[..]
+                    }
+                    None => raw,
+                };
                 // The level fix falls back to the image's own fix when it cannot be solved.
                 let fix =
                     pad_pose_with_prediction(detections, families, pad, camera, predicted.as_ref())
@@ -228,7 +264,7 @@ impl<'a> FramePipeline<'a> {
                                 .unwrap_or(fix),
                             None => fix,
                         });
-                (detections.len(), fix, None)
+                (raw.len(), fix, None)
             }
             Err(e) => (0, None, Some(e)),
         };
@@ -244,15 +280,45 @@ impl<'a> FramePipeline<'a> {
     }
 
     /// The camera's position in the pad frame that the estimator predicts at the exposure, for
-    /// the flip choice: its predicted pad position (camera frame) turned with the last fix's
-    /// rotation. `None` when the step is off or there is no track.
-    fn predicted_camera_position(&self, vehicle: &VehicleAtExposure) -> Option<Vector3<f32>> {
+    /// the flip choice: its predicted pad position (`pad_in_camera`, camera frame) turned with
+    /// the last fix's rotation. `None` when the step is off or there is no track.
+    fn predicted_camera_position(
+        &self,
+        pad_in_camera: Option<&Vector3<f32>>,
+    ) -> Option<Vector3<f32>> {
         if !self.config.flip_by_prediction {
             return None;
         }
         let rotation = self.last_rotation?;
-        let pad_in_camera = self.estimator.predicted_in_camera(vehicle)?;
-        Some(-(rotation.transpose() * pad_in_camera))
+        Some(-(rotation.transpose() * pad_in_camera?))
+    }
+
+    /// How the camera moves over this frame's readout, for the rolling-shutter correction:
+    /// the body rates through the mount and, with the attitude at the exposure, the NED
+    /// velocity in the camera's axes, over the pad's plane as predicted (the estimator's pad
+    /// position in the camera frame, `pad_in_camera`, and the normal of the last fix).
+    /// `None` when the correction is off, the camera has a global shutter or the body rates
+    /// are unknown; without the attitude, the velocity or a prediction only the rotation is
+    /// corrected.
+    fn readout_motion(
+        &self,
+        vehicle: &VehicleAtExposure,
+        pad_in_camera: Option<&Vector3<f32>>,
+    ) -> Option<shutter::ReadoutMotion> {
+        if !(self.config.correct_rolling_shutter && self.camera.line_time_us > 0.0) {
+            return None;
+        }
+        let mount = self.estimator.mount();
+        let rate = mount.body_to_camera(&vehicle.body_rate?);
+        let velocity = vehicle
+            .attitude
+            .as_ref()
+            .zip(vehicle.position.as_ref())
+            .map(|(att, p)| camera_to_ned_matrix(att, mount).transpose() * p.velocity);
+        let plane = pad_in_camera
+            .zip(self.last_rotation.as_ref())
+            .and_then(|(p, r)| shutter::PadPlane::through(p, &r.column(2).into_owned()));
+        shutter::ReadoutMotion::new(&self.camera, rate, velocity, plane)
     }
 
     /// The settings in force.
