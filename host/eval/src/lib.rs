@@ -77,11 +77,13 @@ use touchdown_core::pad::PadLayout;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PaperPipeline, PipelineConfig};
 
+pub mod flight;
 pub mod paper_geometry;
 pub mod scoring;
 pub mod trace;
 pub mod workspace;
 
+use crate::flight::{FlightOutcome, FlightRun, FlightSetup, TruthSource};
 use crate::workspace::HostWorkspace;
 
 /// One of the paper's position axes (see the module docs for the mapping to the pad frame).
@@ -386,20 +388,27 @@ pub fn published(axis: Axis, reference_m: f64) -> Option<&'static PublishedRow> 
         .find(|r| r.axis == axis && (r.reference_cm - 100.0 * reference_m).abs() < 0.5)
 }
 
-/// `R_ned_from_pad`: the pad frame (x right, y up on the print, z up) in NED axes, taking
-/// pad +x as north. Any fixed choice does: the estimator works in NED axes and the score is
-/// turned back into the pad frame with the same matrix.
-const NED_FROM_PAD: Matrix3<f32> = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+/// `R_ned_from_pad`: the pad frame (x right, y up on the print, z up) in NED axes, the
+/// simulator's convention (pad +x east, +y north; [`flight::NED_FROM_PAD`]), so that a
+/// recording's vehicle attitude and the simulated autopilot agree with it.
+const NED_FROM_PAD: Matrix3<f32> = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
 
 /// A method's path with its state.
 #[derive(Debug)]
 // Both paths boxed: each holds a detector with its contour buffer (tens of KiB).
 enum Runner<'a> {
-    Paper(Box<PaperPipeline<'a>>),
+    Paper {
+        paper: Box<PaperPipeline<'a>>,
+        /// In flight: the companion (for the attitude it received) and the autopilot.
+        flight: Option<Box<FlightRun>>,
+    },
     Board {
         pipeline: Box<FramePipeline<'a>>,
         /// The attitude stream the autopilot would send, as the companion keeps it.
         vehicle: Box<VehicleState>,
+        /// In flight: the companion and the simulated autopilot, which then replace
+        /// `vehicle`.
+        flight: Option<Box<FlightRun>>,
     },
 }
 
@@ -416,11 +425,19 @@ impl<'a> Pipeline<'a> {
         camera: CameraModel,
         families: &'a [&'a Family<'a>],
         layout: &PadLayout<'a>,
+        flight: Option<&FlightSetup>,
     ) -> Result<Self, ExperimentError> {
+        let flight_run = || -> Result<Option<Box<FlightRun>>, ExperimentError> {
+            flight
+                .map(|s| FlightRun::new(s).map(Box::new))
+                .transpose()
+                .map_err(|_| ExperimentError::BadFlightSetup)
+        };
         let runner = match method.kind {
-            MethodKind::Paper(filter) => Runner::Paper(Box::new(PaperPipeline::new(
-                families, layout, camera, filter,
-            ))),
+            MethodKind::Paper(filter) => Runner::Paper {
+                paper: Box::new(PaperPipeline::new(families, layout, camera, filter)),
+                flight: flight_run()?,
+            },
             MethodKind::Board(config) => Runner::Board {
                 pipeline: Box::new(
                     FramePipeline::new(
@@ -433,6 +450,7 @@ impl<'a> Pipeline<'a> {
                     .map_err(|_| ExperimentError::BadTrackerConfig)?,
                 ),
                 vehicle: Box::new(VehicleState::new()),
+                flight: flight_run()?,
             },
         };
         Ok(Pipeline {
@@ -443,36 +461,177 @@ impl<'a> Pipeline<'a> {
 
     fn reset(&mut self) {
         match &mut self.runner {
-            Runner::Paper(paper) => paper.reset(),
-            Runner::Board { pipeline, vehicle } => {
+            Runner::Paper { paper, .. } => paper.reset(),
+            Runner::Board {
+                pipeline, vehicle, ..
+            } => {
                 pipeline.reset();
                 vehicle.clear();
             }
         }
     }
 
-    /// Runs the path on `frame`.
+    /// Runs the path on `frame`; in flight (the method has a [`FlightRun`]) with the truth
+    /// between frames from `truth`, and then also returns the three errors.
     fn process(
         &mut self,
         frame: &Frame<'_>,
         workspace: &mut HostWorkspace,
-    ) -> Result<MethodOutcome, ExperimentError> {
+        truth: Option<&dyn TruthSource>,
+    ) -> Result<(MethodOutcome, Option<FlightOutcome>), ExperimentError> {
         let mut buffers = workspace.buffers(frame.image.width(), frame.image.height());
-        let attitude = frame.attitude.filter(|_| self.method.use_attitude);
+        let use_attitude = self.method.use_attitude;
+        let attitude = frame.attitude.filter(|_| use_attitude);
         match &mut self.runner {
-            Runner::Paper(paper) => {
+            Runner::Paper {
+                paper,
+                flight: Some(flight),
+            } => {
+                let truth = truth.ok_or(ExperimentError::NoTruthSource)?;
+                let exposure = flight.clock().board_us(frame.t_us);
+                let delivery = flight.delivery_us(exposure);
+                flight.advance_to(delivery, truth);
+                let vehicle = flight.companion.vehicle().at(exposure);
+                // The attitude it is given is the one the board received, with the mount it
+                // believes.
+                let given = vehicle
+                    .attitude
+                    .filter(|_| use_attitude)
+                    .map(|a| NED_FROM_PAD * a.matrix() * flight_paper_mount(flight).matrix());
+                let report = paper.process(&frame.image, exposure, given.as_ref(), &mut buffers);
+                if let Some(e) = report.detect_error {
+                    return Err(ExperimentError::Detect(e));
+                }
+                // Its estimate as a body vector, turned with the attitude it was given.
+                let body = report.estimate.zip(vehicle.attitude).map(|(c, a)| {
+                    a.matrix().cast::<f64>().transpose() * flight::relative_ned(&c.cast::<f64>())
+                });
+                let mut outcome = FlightOutcome::default();
+                if let Some(body) = body {
+                    let receipt = flight.arrival_us(delivery);
+                    outcome.sent = flight.sent(&body, exposure, &frame.truth, truth);
+                    outcome.reconstructed =
+                        flight.reconstruct(&body, exposure, receipt, &vehicle, truth);
+                    outcome.ideal =
+                        flight
+                            .ideal_body(exposure, &frame.truth, truth)
+                            .and_then(|ideal| {
+                                flight.reconstruct(&ideal, exposure, receipt, &vehicle, truth)
+                            });
+                    outcome.latency_us = Some(receipt - exposure);
+                }
+                // Keep the link running while the next frame is processed.
+                flight.advance_to(delivery + flight::SETTLE_US, truth);
+                Ok((
+                    MethodOutcome {
+                        pose_found: report.raw.is_some(),
+                        raw: report.raw.map(|r| r.cast::<f64>()),
+                        estimate: outcome.sent.map(|s| s.value),
+                    },
+                    Some(outcome),
+                ))
+            }
+            Runner::Paper {
+                paper,
+                flight: None,
+            } => {
                 let report =
                     paper.process(&frame.image, frame.t_us, attitude.as_ref(), &mut buffers);
                 if let Some(e) = report.detect_error {
                     return Err(ExperimentError::Detect(e));
                 }
-                Ok(MethodOutcome {
-                    pose_found: report.raw.is_some(),
-                    raw: report.raw.map(|r| r.cast::<f64>()),
-                    estimate: report.estimate.map(|e| e.cast::<f64>()),
-                })
+                Ok((
+                    MethodOutcome {
+                        pose_found: report.raw.is_some(),
+                        raw: report.raw.map(|r| r.cast::<f64>()),
+                        estimate: report.estimate.map(|e| e.cast::<f64>()),
+                    },
+                    None,
+                ))
             }
-            Runner::Board { pipeline, vehicle } => {
+            Runner::Board {
+                pipeline,
+                flight: Some(flight),
+                ..
+            } => {
+                let truth = truth.ok_or(ExperimentError::NoTruthSource)?;
+                let exposure = flight.clock().board_us(frame.t_us);
+                let delivery = flight.delivery_us(exposure);
+                flight.advance_to(delivery, truth);
+                let report = pipeline.process(
+                    &frame.image,
+                    exposure,
+                    flight.companion.vehicle(),
+                    &mut buffers,
+                );
+                if let Some(e) = report.detect_error {
+                    return Err(ExperimentError::Detect(e));
+                }
+                let vehicle = flight.companion.vehicle().at(exposure);
+                let _ = flight.take_targets();
+                let queued = flight.companion.on_estimate(&report.estimate, delivery)
+                    == touchdown_core::companion::TargetOutcome::TargetQueued;
+                // The companion may have adopted a mount correction (TD_CAM_ROLL/PITCH): the
+                // pipeline takes the new settings before the next frame, as the firmware's
+                // vision task does.
+                let settings = PipelineSettings::from_params(flight.companion.params());
+                if settings != *pipeline.settings() {
+                    let _ = pipeline.apply(settings);
+                }
+                flight.advance_to(delivery + flight::SETTLE_US, truth);
+                let received = flight.take_targets().pop();
+                let mut outcome = FlightOutcome::default();
+                let estimate_body = report
+                    .estimate
+                    .estimate
+                    .map(|e| e.body_frd.cast::<f64>())
+                    .filter(|_| queued);
+                let decoded = received.as_ref().and_then(|r| {
+                    let d = &r.data;
+                    (d.frame
+                        == touchdown_core::companion::mavlink::dialects::common::MavFrame::MAV_FRAME_BODY_FRD)
+                        .then(|| Vector3::new(d.x, d.y, d.z).cast::<f64>())
+                });
+                if let Some(body) = decoded.or(estimate_body) {
+                    outcome.sent = flight.sent(&body, exposure, &frame.truth, truth);
+                }
+                if let Some(r) = &received {
+                    let d = &r.data;
+                    let xyz = Vector3::new(d.x, d.y, d.z).cast::<f64>();
+                    outcome.reconstructed = match flight.autopilot.kind {
+                        flight::AutopilotKind::ArduPilot => flight.reconstruct_body(
+                            &xyz,
+                            f64::from(d.distance),
+                            exposure,
+                            r.receipt_us,
+                            truth,
+                        ),
+                        flight::AutopilotKind::Px4 => {
+                            flight.reconstruct_local_ned(&xyz, d.time_usec, r.receipt_us, truth)
+                        }
+                    };
+                    outcome.ideal =
+                        flight
+                            .ideal_body(exposure, &frame.truth, truth)
+                            .and_then(|ideal| {
+                                flight.reconstruct(&ideal, exposure, r.receipt_us, &vehicle, truth)
+                            });
+                    outcome.latency_us = Some(r.receipt_us.saturating_sub(exposure));
+                }
+                Ok((
+                    MethodOutcome {
+                        pose_found: report.fix.is_some(),
+                        raw: report.fix.map(|f| f.camera_position().cast::<f64>()),
+                        estimate: outcome.sent.map(|s| s.value),
+                    },
+                    Some(outcome),
+                ))
+            }
+            Runner::Board {
+                pipeline,
+                vehicle,
+                flight: None,
+            } => {
                 // The mount in force, the one the estimator turns body FRD with.
                 let mount = *pipeline.estimator().mount();
                 if let Some(r) = &attitude {
@@ -500,14 +659,22 @@ impl<'a> Pipeline<'a> {
                     .estimate
                     .zip(camera_to_pad)
                     .map(|(e, r)| (-(r * mount.body_to_camera(&e.body_frd))).cast::<f64>());
-                Ok(MethodOutcome {
-                    pose_found: report.fix.is_some(),
-                    raw: report.fix.map(|f| f.camera_position().cast::<f64>()),
-                    estimate,
-                })
+                Ok((
+                    MethodOutcome {
+                        pose_found: report.fix.is_some(),
+                        raw: report.fix.map(|f| f.camera_position().cast::<f64>()),
+                        estimate,
+                    },
+                    None,
+                ))
             }
         }
     }
+}
+
+/// The mount the paper's method believes in flight.
+fn flight_paper_mount(flight: &FlightRun) -> touchdown_core::filter::CameraMount {
+    flight.paper_mount()
 }
 
 /// Why an experiment could not be set up or run.
@@ -519,6 +686,10 @@ pub enum ExperimentError {
     MissingFamily,
     /// The detector refused a frame.
     Detect(DetectError),
+    /// A flight's setup is refused (a parameter unknown or out of range).
+    BadFlightSetup,
+    /// A method in flight was given a frame without a truth source.
+    NoTruthSource,
 }
 
 /// Methods run side by side on the same frames, with per-set-point statistics.
@@ -530,25 +701,57 @@ pub struct Experiment<'a> {
     set_points: Vec<SetPoint>,
     /// Per set point (same order), one result per method.
     results: Vec<Vec<SetPointResult>>,
+    /// In flight, the last frame's three errors per method.
+    flight: Vec<FlightOutcome>,
 }
 
 impl<'a> Experiment<'a> {
-    /// An experiment on frames from `camera` of the pad `layout`, searching `families`.
+    /// An experiment on frames from `camera` of the pad `layout`, searching `families`; the
+    /// methods are given each frame's attitude directly (no autopilot, no errors).
     pub fn new(
         camera: CameraModel,
         families: &'a [&'a Family<'a>],
         layout: PadLayout<'a>,
         methods: &[Method],
     ) -> Result<Self, ExperimentError> {
+        Self::build(camera, families, layout, methods, None)
+    }
+
+    /// The same in flight ([`flight`]): every method runs with the board's companion against
+    /// a simulated autopilot of `setup` (each method its own, with the same errors), and
+    /// [`Experiment::process_with`] scores what the autopilot reconstructs.
+    pub fn in_flight(
+        camera: CameraModel,
+        families: &'a [&'a Family<'a>],
+        layout: PadLayout<'a>,
+        methods: &[Method],
+        setup: &FlightSetup,
+    ) -> Result<Self, ExperimentError> {
+        Self::build(camera, families, layout, methods, Some(setup))
+    }
+
+    fn build(
+        camera: CameraModel,
+        families: &'a [&'a Family<'a>],
+        layout: PadLayout<'a>,
+        methods: &[Method],
+        setup: Option<&FlightSetup>,
+    ) -> Result<Self, ExperimentError> {
         Ok(Experiment {
             pipelines: methods
                 .iter()
-                .map(|m| Pipeline::new(m, camera, families, &layout))
+                .map(|m| Pipeline::new(m, camera, families, &layout, setup))
                 .collect::<Result<_, _>>()?,
             workspace: HostWorkspace::new(),
             set_points: Vec::new(),
             results: Vec::new(),
+            flight: Vec::new(),
         })
+    }
+
+    /// The three errors of the last frame processed, per method (empty unless in flight).
+    pub fn flight_outcomes(&self) -> &[FlightOutcome] {
+        &self.flight
     }
 
     /// Resets every method's filter: the next frame starts a new, independent sequence.
@@ -560,9 +763,25 @@ impl<'a> Experiment<'a> {
     /// Runs every method on `frame` and scores it if it carries a set point; returns what each
     /// method made of it, in method order.
     pub fn process(&mut self, frame: &Frame<'_>) -> Result<Vec<MethodOutcome>, ExperimentError> {
+        self.process_with(frame, None)
+    }
+
+    /// [`Experiment::process`] with the truth between frames from `truth`, which an
+    /// experiment in flight needs; the three errors are then in
+    /// [`Experiment::flight_outcomes`].
+    pub fn process_with(
+        &mut self,
+        frame: &Frame<'_>,
+        truth: Option<&dyn TruthSource>,
+    ) -> Result<Vec<MethodOutcome>, ExperimentError> {
         let mut outcomes = Vec::with_capacity(self.pipelines.len());
+        self.flight.clear();
         for pipeline in &mut self.pipelines {
-            outcomes.push(pipeline.process(frame, &mut self.workspace)?);
+            let (outcome, flight) = pipeline.process(frame, &mut self.workspace, truth)?;
+            outcomes.push(outcome);
+            if let Some(f) = flight {
+                self.flight.push(f);
+            }
         }
         if let Some(set_point) = frame.set_point {
             let index = match self
