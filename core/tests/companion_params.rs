@@ -1,5 +1,6 @@
-//! The camera parameters (TD_TAG_SIZE, TD_MAX_HAMMING and the auto-exposure limits
-//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET), without pymavlink: a ground station's
+//! The camera parameters (TD_TAG_SIZE, TD_MAX_HAMMING, the auto-exposure limits
+//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET, and the mount's TD_CAM_ROLL and TD_CAM_CAL),
+//! without pymavlink: a ground station's
 //! PARAM_SETs are range-checked, the resulting vision settings are what the firmware's vision
 //! task applies, and the values survive the flash log across a reboot, read back by name and by
 //! index. (The parameter protocol on the wire, decoded by pymavlink, is in
@@ -10,6 +11,7 @@ mod autopilot_sim;
 use touchdown_core::companion::mavlink::dialects::common::MavMessage;
 use touchdown_core::companion::{Companion, CompanionConfig, FrameParser, MAX_FRAME_LEN};
 use touchdown_core::detect::DetectorConfig;
+use touchdown_core::filter::MountCalibrationMode;
 use touchdown_core::pad::designs;
 use touchdown_core::params::name_str;
 use touchdown_core::params::{
@@ -48,7 +50,7 @@ fn camera_params_are_range_checked_applied_and_persisted() {
     let mut seq = 0u8;
     let mut now = 1_000_000u64;
     // (name, value sent, value answered: the new one if accepted, else the old one)
-    let sets: [(&str, f32, f32); 17] = [
+    let sets: [(&str, f32, f32); 21] = [
         ("TD_EXP_MAX_US", 2_000.0, 2_000.0),
         ("TD_EXP_MAX_US", 50.0, 2_000.0),     // below 100 us
         ("TD_EXP_MAX_US", 40_000.0, 2_000.0), // above 33 ms
@@ -66,6 +68,10 @@ fn camera_params_are_range_checked_applied_and_persisted() {
         ("TD_TAG_SIZE", f32::INFINITY, 0.625),
         ("TD_MAX_HAMMING", 2.0, 2.0),
         ("TD_MAX_HAMMING", 4.0, 2.0), // above 3
+        ("TD_CAM_ROLL", 1.5, 1.5),
+        ("TD_CAM_ROLL", 12.0, 1.5), // beyond +-10 degrees
+        ("TD_CAM_CAL", 1.0, 1.0),
+        ("TD_CAM_CAL", 3.0, 1.0), // 0, 1 or 2
     ];
     for (name, sent, answered) in sets {
         now += 10_000;
@@ -79,7 +85,7 @@ fn camera_params_are_range_checked_applied_and_persisted() {
     let stats = companion.stats();
     assert_eq!(
         (stats.param_sets_accepted, stats.param_sets_rejected),
-        (5, 12)
+        (7, 14)
     );
 
     // What the firmware's vision task gets.
@@ -96,6 +102,9 @@ fn camera_params_are_range_checked_applied_and_persisted() {
                 ..AutoExposureLimits::default()
             },
             cam_yaw_deg: 0.0,
+            cam_roll_deg: 1.5,
+            cam_pitch_deg: 0.0,
+            mount_calibration: MountCalibrationMode::Report,
         }
     );
     assert_eq!(
@@ -154,6 +163,8 @@ fn camera_params_are_range_checked_applied_and_persisted() {
         (ParamId::ExpMaxUs, 2_000.0),
         (ParamId::GainMax, 2.5),
         (ParamId::ExpTarget, 90.0),
+        (ParamId::CamRoll, 1.5),
+        (ParamId::CamCal, 1.0),
     ] {
         let i = id.index() as i16;
         assert_eq!(

@@ -21,8 +21,10 @@
 //!
 //! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
 //! stable for two seconds ([`SaveDebounce`]): the link signals [`SAVE`] to the
-//! parameter store task. Those of the camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure
-//! limits, TD_CAM_YAW) take effect at once: after every input the link converts the parameters
+//! parameter store task. So are TD_CAM_ROLL and TD_CAM_PITCH when the companion adopts the
+//! mount calibration that came with a frame's estimate (in [`Companion::on_estimate`]: the
+//! same parameter path). Those of the camera (TD_MAX_HAMMING, TD_TAG_SIZE, the auto-exposure
+//! limits, the mount's TD_CAM_YAW, TD_CAM_ROLL, TD_CAM_PITCH, TD_CAM_CAL) take effect at once: after every input the link converts the parameters
 //! with [`PipelineSettings::from_params`] and, when the result differs from what it last
 //! published, signals [`PIPELINE_SETTINGS`] (the vision task started with the settings of the
 //! parameters

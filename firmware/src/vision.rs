@@ -16,11 +16,14 @@
 //! line and frame timing the driver reports ([`FrameTiming`]: exposure units, readout time
 //! for the time stamp) differ between them.
 //!
-//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_CAM_YAW,
-//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) arrive as a [`PipelineSettings`]: at boot as the
-//! task's argument (from the parameters restored from flash, before the first frame),
-//! afterwards through [`PIPELINE_SETTINGS`], which the link task signals whenever a PARAM_SET
-//! changed them. They are taken before a frame is processed, never during it: the detector's
+//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, the mount's TD_CAM_YAW,
+//! TD_CAM_ROLL, TD_CAM_PITCH and TD_CAM_CAL, TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) arrive
+//! as a [`PipelineSettings`]: at boot as the task's argument (from the parameters restored
+//! from flash, before the first frame), afterwards through [`PIPELINE_SETTINGS`], which the
+//! link task signals whenever the parameters changed them: a ground station's PARAM_SET, or
+//! the companion adopting the estimator's mount calibration (which arrives with a frame's
+//! estimate, [`touchdown_core::filter::FrameEstimate::mount_correction`], posted to the link
+//! like every estimate). They are taken before a frame is processed, never during it: the detector's
 //! correction cap, the pad (the built [`config::PAD`], scaled to TD_TAG_SIZE) and the camera
 //! mount, all by [`FramePipeline::apply`],
 //! and the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
@@ -189,11 +192,14 @@ fn apply_settings(pipeline: &mut FramePipeline<'static>, settings: PipelineSetti
         warn!("vision: pad '{}' not scaled: {}", config::PAD.name(), e);
     }
     info!(
-        "vision: max hamming {}, pad '{}' at {} % of its built size, camera yaw {} deg, exposure {}",
+        "vision: max hamming {}, pad '{}' at {} % of its built size, camera yaw {} roll {} pitch {} deg (calibration {}), exposure {}",
         settings.max_hamming,
         pipeline.pad().name(),
         config::pad_scale_percent(&settings),
         settings.cam_yaw_deg,
+        settings.cam_roll_deg,
+        settings.cam_pitch_deg,
+        settings.mount_calibration,
         settings.exposure
     );
 }

@@ -87,6 +87,7 @@ fn per_frame(pipeline: &mut Pipeline<'_>, pixels: &[u8], rx: &[u8], now_us: u64)
             exposure_us,
             fix_found: false,
             estimate: None,
+            mount_correction: None,
         },
     };
     // Not on the firmware's path, but a public core function the host tools call on the same

@@ -26,7 +26,8 @@
 //! check every byte with pymavlink.
 //!
 //! The module is split by concern, in private submodules: `framing` (the byte stream),
-//! `receive` (what each incoming message does), `target` (an estimate to a LANDING_TARGET,
+//! `receive` (what each incoming message does), `mount` (adopting a mount correction),
+//! `target` (an estimate to a LANDING_TARGET,
 //! `profile` for the two formats), `transmit` (scheduling and serialising), `timesync` (the
 //! autopilot's clock); the parameter table is [`crate::params`], the estimator
 //! [`crate::filter::PadEstimator`].
@@ -58,7 +59,20 @@
 //! - PARAM_VALUE for the parameter protocol ([`crate::params`]); a full list is paced at one
 //!   PARAM_VALUE per [`CompanionConfig::param_stream_interval_us`].
 //! - STATUSTEXT when the firmware reports a fault ([`Companion::queue_status_text`]: camera
-//!   lost, parameters reset), which ground stations show to the pilot.
+//!   lost, parameters reset), which ground stations show to the pilot, and when the
+//!   estimator's mount calibration reports a correction.
+//!
+//! # Mount calibration
+//!
+//! A frame's estimate may carry a [`crate::filter::MountCorrection`] (the estimator's in-flight
+//! calibration of the camera mount's roll and pitch became confident, or moved
+//! significantly). [`Companion::on_estimate`] adopts it itself: with TD_CAM_CAL = 2 it sets
+//! TD_CAM_ROLL and TD_CAM_PITCH through the normal parameter path (announced by PARAM_VALUE,
+//! saved to flash by the firmware like a ground station's PARAM_SET) and says so by
+//! STATUSTEXT; with TD_CAM_CAL = 1 it only says so. The new mount reaches the per-frame path
+//! the way every parameter does: the caller converts [`Companion::params`] with
+//! [`crate::params::PipelineSettings::from_params`] and, when that changed, applies it
+//! ([`crate::pipeline::FramePipeline::apply`]).
 //!
 //! # Vehicle state
 //!
@@ -82,6 +96,7 @@
 //! triggers a new TIMESYNC and new message-interval requests at once.
 
 mod framing;
+mod mount;
 mod profile;
 mod receive;
 mod state;

@@ -84,6 +84,10 @@ pub struct CompanionStats {
     pub autopilot: Option<(u8, u8)>,
     /// Delay from each sent target's exposure to its hand-out for sending.
     pub target_latency: TargetLatency,
+    /// Mount corrections received with the estimates (reported by STATUSTEXT).
+    pub mount_corrections: u32,
+    /// Of those, set into TD_CAM_ROLL/TD_CAM_PITCH (TD_CAM_CAL = 2, in range).
+    pub mount_corrections_applied: u32,
 }
 
 /// Delay from a frame's exposure to the moment its LANDING_TARGET is handed to the link for

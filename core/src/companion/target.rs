@@ -23,6 +23,9 @@ use nalgebra::UnitQuaternion;
 impl State {
     pub(super) fn on_estimate(&mut self, frame: &FrameEstimate, now_us: u64) -> TargetOutcome {
         self.stats.frames = self.stats.frames.saturating_add(1);
+        if let Some(c) = &frame.mount_correction {
+            self.on_mount_correction(c);
+        }
         if !frame.fix_found {
             return TargetOutcome::NoFix;
         }

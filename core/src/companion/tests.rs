@@ -99,6 +99,7 @@ fn auto_profile_latches_on_the_autopilot_only() {
             orientation_body: None,
             orientation_ned: None,
         }),
+        mount_correction: None,
     };
     assert_eq!(c.on_estimate(&frame, 1000), TargetOutcome::NoProfile);
     assert_eq!(c.stats().no_profile, 1);
@@ -157,6 +158,7 @@ fn target_latency_is_measured_and_reported_at_doublings() {
                 orientation_body: None,
                 orientation_ned: None,
             }),
+            mount_correction: None,
         };
         // Processing takes 20 ms, the 100th frame 45 ms.
         let delay_us = if k == 99 { 45_000 } else { 20_000 };
@@ -176,6 +178,123 @@ fn target_latency_is_measured_and_reported_at_doublings() {
     assert_eq!(counts, [100, 200, 400]);
     assert_eq!(reports[0].1, "touchdown: lag 20.3 ms mean, 45.0 ms max");
     assert_eq!(reports[2].1, "touchdown: lag 20.1 ms mean, 45.0 ms max");
+}
+
+/// Every frame sent, decoded: the STATUSTEXTs and the PARAM_VALUEs.
+fn drain_texts_and_params(
+    c: &mut Companion,
+    now_us: u64,
+) -> (std::vec::Vec<String>, std::vec::Vec<(String, f32)>) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut parser = FrameParser::new();
+    let (mut texts, mut values) = (std::vec::Vec::new(), std::vec::Vec::new());
+    while let Some(n) = c.poll_transmit(now_us, &mut out) {
+        parser.push(&out[..n], |frame| match frame.decode() {
+            Ok(MavMessage::STATUSTEXT(s)) => texts.push(s.text.to_str().unwrap().to_string()),
+            Ok(MavMessage::PARAM_VALUE(v)) => values.push((
+                crate::params::name_str(&v.param_id[..]).to_string(),
+                v.param_value,
+            )),
+            _ => {}
+        });
+    }
+    (texts, values)
+}
+
+/// A frame (no fix) carrying a mount correction of the mount (0.2, -0.1) deg to (1.21, -1.58).
+fn frame_with_correction(exposure_us: u64) -> FrameEstimate {
+    FrameEstimate {
+        exposure_us,
+        fix_found: false,
+        estimate: None,
+        mount_correction: Some(crate::filter::MountCorrection {
+            roll_deg: 1.01,
+            pitch_deg: -1.48,
+            mount_roll_deg: 1.21,
+            mount_pitch_deg: -1.58,
+            sigma_deg: 0.06,
+            frames: 240,
+        }),
+    }
+}
+
+#[test]
+fn a_mount_correction_is_set_announced_and_reported() {
+    let mut params = ParamSet::default();
+    params.set(ParamId::CamRoll, 0.2).unwrap();
+    params.set(ParamId::CamPitch, -0.1).unwrap();
+    let mut c = Companion::new(CompanionConfig {
+        params,
+        ..CompanionConfig::default()
+    });
+    drain_texts_and_params(&mut c, 0);
+    c.on_estimate(&frame_with_correction(1_000_000), 1_020_000);
+    assert_eq!(
+        (
+            c.params().get(ParamId::CamRoll),
+            c.params().get(ParamId::CamPitch)
+        ),
+        (1.21, -1.58)
+    );
+    let (texts, values) = drain_texts_and_params(&mut c, 1_020_000);
+    assert_eq!(texts, ["touchdown: mount r+1.21 p-1.58 deg +-0.06 applied"]);
+    assert_eq!(
+        values,
+        [
+            ("TD_CAM_ROLL".to_string(), 1.21),
+            ("TD_CAM_PITCH".to_string(), -1.58)
+        ]
+    );
+    let s = c.stats();
+    assert_eq!((s.mount_corrections, s.mount_corrections_applied), (1, 1));
+    // The settings the pipeline gets next carry the new mount.
+    let settings = crate::params::PipelineSettings::from_params(c.params());
+    assert_eq!(
+        (settings.cam_roll_deg, settings.cam_pitch_deg),
+        (1.21, -1.58)
+    );
+}
+
+#[test]
+fn with_td_cam_cal_1_a_correction_is_only_reported_and_with_0_ignored() {
+    let mut c = Companion::new(CompanionConfig::default());
+    c.set_param(ParamId::CamCal, 1.0).unwrap();
+    drain_texts_and_params(&mut c, 0);
+    c.on_estimate(&frame_with_correction(1_000_000), 1_020_000);
+    assert_eq!(c.params().get(ParamId::CamRoll), 0.0);
+    let (texts, values) = drain_texts_and_params(&mut c, 1_020_000);
+    assert_eq!(texts, ["touchdown: mount r+1.21 p-1.58 deg +-0.06 not set"]);
+    assert!(values.is_empty());
+    assert_eq!(
+        (
+            c.stats().mount_corrections,
+            c.stats().mount_corrections_applied
+        ),
+        (1, 0)
+    );
+    c.set_param(ParamId::CamCal, 0.0).unwrap();
+    c.on_estimate(&frame_with_correction(2_000_000), 2_020_000);
+    assert_eq!(drain_texts_and_params(&mut c, 2_020_000).0.len(), 0);
+    // Out of range (an estimate beyond +-10 degrees): reported, nothing set.
+    c.set_param(ParamId::CamCal, 2.0).unwrap();
+    let mut far = frame_with_correction(3_000_000);
+    if let Some(m) = far.mount_correction.as_mut() {
+        m.mount_roll_deg = -11.5;
+    }
+    c.on_estimate(&far, 3_020_000);
+    assert_eq!(
+        (
+            c.params().get(ParamId::CamRoll),
+            c.params().get(ParamId::CamPitch)
+        ),
+        (0.0, 0.0)
+    );
+    let (texts, values) = drain_texts_and_params(&mut c, 3_020_000);
+    assert_eq!(
+        texts,
+        ["touchdown: mount r-11.50 p-1.58 deg +-0.06 too big"]
+    );
+    assert!(values.is_empty());
 }
 
 #[test]

@@ -256,6 +256,21 @@ impl CameraMount {
             q: UnitQuaternion::new_normalize((self.q * turn).into_inner()),
         }
     }
+
+    /// This mount tilted in the body frame: turned by `roll_deg` about body x (forward), then
+    /// by `pitch_deg` about body y (right), degrees: camera-to-body = `R_y(pitch) R_x(roll)
+    /// self` (TD_CAM_ROLL, TD_CAM_PITCH; the simulator's mount misalignment is the same
+    /// product). Unchanged when an angle is not finite.
+    pub fn tilted(&self, roll_deg: f32, pitch_deg: f32) -> CameraMount {
+        if !(roll_deg.is_finite() && pitch_deg.is_finite()) {
+            return *self;
+        }
+        let roll = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), roll_deg.to_radians());
+        let pitch = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), pitch_deg.to_radians());
+        CameraMount {
+            q: UnitQuaternion::new_normalize((pitch * roll * self.q).into_inner()),
+        }
+    }
 }
 
 /// The pad's orientation: the rotation from the pad frame to body FRD (`attitude` `None`) or
@@ -373,5 +388,27 @@ mod tests {
         bad[(0, 0)] = f32::NAN;
         assert!(pad_orientation(&bad, &mount, None).is_none());
         assert!(pad_orientation(&(upright * 2.0), &mount, None).is_none());
+    }
+
+    #[test]
+    fn a_tilted_mount_is_pitch_times_roll_times_the_mount() {
+        // The simulator's misaligned mount, written out: camera-to-body = R_y(p) R_x(r) N.
+        let (r, p) = (1.5f32.to_radians(), (-1.0f32).to_radians());
+        let rx = Matrix3::new(1.0, 0.0, 0.0, 0.0, r.cos(), -r.sin(), 0.0, r.sin(), r.cos());
+        let ry = Matrix3::new(p.cos(), 0.0, p.sin(), 0.0, 1.0, 0.0, -p.sin(), 0.0, p.cos());
+        for yaw_deg in [0.0f32, 30.0, -90.0] {
+            let nominal = CameraMount::downward().turned_about_optical_axis(yaw_deg);
+            let want = ry * rx * nominal.matrix();
+            let got = nominal.tilted(1.5, -1.0).matrix();
+            assert!((got - want).amax() < 1e-6, "{got} vs {want}");
+        }
+        // Roll turns the optical axis (body down) toward body -y: the right wing up sees left.
+        let rolled = CameraMount::downward().tilted(10.0, 0.0);
+        let axis = rolled.camera_to_body(&Vector3::z());
+        assert!(axis.y < -0.17 && axis.x.abs() < 1e-6, "{axis}");
+        assert_eq!(
+            CameraMount::downward().tilted(f32::NAN, 0.0),
+            CameraMount::downward()
+        );
     }
 }

@@ -25,11 +25,31 @@
 //! tracker restarts, since NED positions from before an autopilot reboot are in a frame that
 //! no longer exists.
 //!
-//! The camera mount (TD_CAM_YAW) is set between frames ([`PadEstimator::set_mount_yaw`]); a
-//! changed mount restarts both trackers, because measurements before and after it are in
-//! different frames.
+//! The camera mount is set between frames ([`PadEstimator::set_mount`]): the configured mount
+//! turned by TD_CAM_YAW about the optical axis, then tilted by TD_CAM_ROLL about body x and
+//! TD_CAM_PITCH about body y ([`CameraMount::tilted`]). A changed yaw restarts both trackers:
+//! it is a reconfiguration (often by 90 or 180 degrees) after which the camera-to-body
+//! positions before and after are unrelated. A changed roll or pitch restarts neither: it is a
+//! mount calibration of a few degrees at most, the camera-frame track does not depend on the
+//! mount at all, and the level track sees its measurements move by the change times the range
+//! (3.5 cm at 2 m for a degree), which it fuses or, beyond its gate, takes over through its
+//! jump recovery after a few frames, where a restart would drop every target until a new
+//! track is confirmed, in the middle of a landing.
+//!
+//! Every frame with a fix and the attitude also feeds the [`MountCalibrator`]
+//! ([`super::mount_calibration`]), unless TD_CAM_CAL is off
+//! ([`PadEstimator::set_mount_calibration`]); a confident estimate comes out as
+//! [`FrameEstimate::mount_correction`], which the MAVLink side adopts into
+//! TD_CAM_ROLL/TD_CAM_PITCH. The calibrator needs the tilt the *image* measured: a fix
+//! levelled with the attitude ([`crate::pose::level_pad_fix`]) has the attitude's tilt
+//! through the mount in force, so the pipeline hands the image's fix separately
+//! ([`PadEstimator::update_with_image_fix`]); a levelled fix given alone is refused by the
+//! calibrator (its tilt covariance shows it was not measured).
 
 use super::axes::{level_measurement, pad_orientation, Attitude, CameraMount};
+use super::mount_calibration::{
+    MountCalibrationConfig, MountCalibrator, MountCorrection, MountEstimate,
+};
 use super::tracker::{ConfigError, Estimate, Tracker, TrackerConfig};
 use super::vehicle::{PositionSample, VehicleAtExposure};
 use super::Measurement;
@@ -45,6 +65,8 @@ pub struct EstimatorConfig {
     pub level_tracker: TrackerConfig,
     /// The camera-frame tracker (no attitude).
     pub camera_tracker: TrackerConfig,
+    /// The mount calibrator's thresholds and error model.
+    pub mount_calibration: MountCalibrationConfig,
 }
 
 impl Default for EstimatorConfig {
@@ -53,6 +75,7 @@ impl Default for EstimatorConfig {
             mount: CameraMount::downward(),
             level_tracker: TrackerConfig::level(),
             camera_tracker: TrackerConfig::camera_frame(),
+            mount_calibration: MountCalibrationConfig::default(),
         }
     }
 }
@@ -94,15 +117,26 @@ pub struct FrameEstimate {
     /// The estimate at the exposure: `None` without a fix, or while no tracker has a confirmed
     /// estimate whose last measurement is fresh (see [`TrackerConfig::max_coast_us`]).
     pub estimate: Option<PadEstimate>,
+    /// A confident mount estimate, as the change to the mount in force, on the frame the
+    /// calibrator first becomes confident and again only when it moves significantly
+    /// ([`super::mount_calibration`]); `None` on every other frame.
+    pub mount_correction: Option<MountCorrection>,
 }
 
 /// The two trackers and the mount (see the module docs).
 #[derive(Debug, Clone)]
 pub struct PadEstimator {
     config: EstimatorConfig,
+    /// The configured mount turned by TD_CAM_YAW (what the calibrator measures against).
+    base_mount: CameraMount,
+    /// `base_mount` tilted by TD_CAM_ROLL and TD_CAM_PITCH: the mount in force.
     mount: CameraMount,
     /// TD_CAM_YAW in force, degrees.
     mount_yaw_deg: f32,
+    /// TD_CAM_ROLL and TD_CAM_PITCH in force, degrees.
+    mount_tilt_deg: (f32, f32),
+    calibrator: MountCalibrator,
+    calibrating: bool,
     level: Tracker,
     camera: Tracker,
     /// [`super::VehicleState::reboots`] when the level tracker last ran.
@@ -114,32 +148,81 @@ impl PadEstimator {
     pub fn new(config: EstimatorConfig) -> Result<Self, ConfigError> {
         Ok(PadEstimator {
             config,
+            base_mount: config.mount,
             mount: config.mount,
             mount_yaw_deg: 0.0,
+            mount_tilt_deg: (0.0, 0.0),
+            calibrator: MountCalibrator::new(config.mount_calibration),
+            calibrating: true,
             level: Tracker::new(config.level_tracker)?,
             camera: Tracker::new(config.camera_tracker)?,
             vehicle_reboots: 0,
         })
     }
 
-    /// Turns the configured mount by `yaw_deg` about the optical axis (TD_CAM_YAW). A change
-    /// restarts both trackers.
+    /// Turns the configured mount by `yaw_deg` about the optical axis (TD_CAM_YAW), keeping
+    /// the roll and pitch in force. A change restarts both trackers.
     pub fn set_mount_yaw(&mut self, yaw_deg: f32) {
-        // Compared as the parameter, not as the turned quaternion, whose last bits a turn by
-        // zero may change.
-        if yaw_deg != self.mount_yaw_deg {
-            self.mount_yaw_deg = yaw_deg;
-            self.mount = self.config.mount.turned_about_optical_axis(yaw_deg);
-            self.reset();
-        }
+        let (roll, pitch) = self.mount_tilt_deg;
+        self.set_mount(yaw_deg, roll, pitch);
     }
 
-    /// The mount in force (the configured one turned by TD_CAM_YAW).
+    /// The mount in force: the configured one turned by `yaw_deg` about the optical axis
+    /// (TD_CAM_YAW), then by `roll_deg` about body x (TD_CAM_ROLL) and `pitch_deg` about
+    /// body y (TD_CAM_PITCH), degrees: camera-to-body = `R_y(pitch) R_x(roll) M R_z(yaw)`
+    /// with `M` the configured mount. A changed yaw restarts both trackers and the mount
+    /// calibration; a changed roll or pitch neither (see the module docs). A value that is
+    /// not finite keeps its old one.
+    pub fn set_mount(&mut self, yaw_deg: f32, roll_deg: f32, pitch_deg: f32) {
+        // Compared as the parameters, not as the turned quaternion, whose last bits a turn by
+        // zero may change.
+        let keep = |new: f32, old: f32| if new.is_finite() { new } else { old };
+        let yaw = keep(yaw_deg, self.mount_yaw_deg);
+        let tilt = (
+            keep(roll_deg, self.mount_tilt_deg.0),
+            keep(pitch_deg, self.mount_tilt_deg.1),
+        );
+        if yaw != self.mount_yaw_deg {
+            self.mount_yaw_deg = yaw;
+            self.base_mount = self.config.mount.turned_about_optical_axis(yaw);
+            self.calibrator.reset();
+            self.reset();
+        } else if tilt == self.mount_tilt_deg {
+            return;
+        }
+        self.mount_tilt_deg = tilt;
+        self.mount = self.base_mount.tilted(tilt.0, tilt.1);
+    }
+
+    /// The mount in force (the configured one turned by TD_CAM_YAW, tilted by TD_CAM_ROLL
+    /// and TD_CAM_PITCH).
     pub fn mount(&self) -> &CameraMount {
         &self.mount
     }
 
-    /// Forgets both tracks (a new, independent flight).
+    /// TD_CAM_ROLL and TD_CAM_PITCH in force, degrees.
+    pub fn mount_tilt_deg(&self) -> (f32, f32) {
+        self.mount_tilt_deg
+    }
+
+    /// Feeds the mount calibrator or not (TD_CAM_CAL off). Turning it off keeps what it has
+    /// accumulated.
+    pub fn set_mount_calibration(&mut self, on: bool) {
+        self.calibrating = on;
+    }
+
+    /// The mount calibrator (its estimate and counts).
+    pub fn mount_calibrator(&self) -> &MountCalibrator {
+        &self.calibrator
+    }
+
+    /// The mount calibrator's estimate so far.
+    pub fn mount_estimate(&self) -> Option<MountEstimate> {
+        self.calibrator.estimate()
+    }
+
+    /// Forgets both tracks (a new, independent flight). The mount calibration is kept: the
+    /// mount belongs to the airframe.
     pub fn reset(&mut self) {
         self.level.reset();
         self.camera.reset();
@@ -157,8 +240,36 @@ impl PadEstimator {
     }
 
     /// Feeds one frame: `fix` (if the pad was found), exposed at `vehicle.t_us`, with the
-    /// vehicle state read at that time when the frame was processed.
+    /// vehicle state read at that time when the frame was processed. The mount calibrator
+    /// gets `fix` too (see [`PadEstimator::update_with_image_fix`] for a levelled fix).
     pub fn update(&mut self, fix: Option<&PadFix>, vehicle: &VehicleAtExposure) -> FrameEstimate {
+        self.update_with_image_fix(fix, fix, vehicle)
+    }
+
+    /// [`PadEstimator::update`] with the fix the image alone measured, `image_fix`, for the
+    /// mount calibrator, when `fix` is that fix levelled with the attitude (whose tilt is the
+    /// attitude's through the mount in force, useless for calibrating it).
+    pub fn update_with_image_fix(
+        &mut self,
+        fix: Option<&PadFix>,
+        image_fix: Option<&PadFix>,
+        vehicle: &VehicleAtExposure,
+    ) -> FrameEstimate {
+        let mount_correction = match (image_fix, &vehicle.attitude) {
+            (Some(f), Some(att)) if self.calibrating => self
+                .calibrator
+                .observe(f, att, &self.base_mount, vehicle.t_us, self.mount_tilt_deg)
+                .ok()
+                .flatten(),
+            _ => None,
+        };
+        FrameEstimate {
+            mount_correction,
+            ..self.track(fix, vehicle)
+        }
+    }
+
+    fn track(&mut self, fix: Option<&PadFix>, vehicle: &VehicleAtExposure) -> FrameEstimate {
         if vehicle.reboots != self.vehicle_reboots {
             self.vehicle_reboots = vehicle.reboots;
             self.level.reset();
@@ -171,6 +282,7 @@ impl PadEstimator {
                 exposure_us: t,
                 fix_found: false,
                 estimate: None,
+                mount_correction: None,
             };
         };
         let m = Measurement {
@@ -208,6 +320,7 @@ impl PadEstimator {
             exposure_us: t,
             fix_found: true,
             estimate,
+            mount_correction: None,
         }
     }
 }
@@ -308,5 +421,100 @@ mod tests {
         e.set_mount_yaw(90.0);
         let (turned, _) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 1);
         assert!(turned.fix_found && turned.estimate.is_none());
+    }
+
+    #[test]
+    fn a_mount_tilt_keeps_the_tracks_and_the_yaw_is_kept_with_it() {
+        let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut vehicle = VehicleState::new();
+        e.set_mount(30.0, 0.0, 0.0);
+        let (_, t) = feed(&mut e, &mut vehicle, true, 0, 6);
+        e.set_mount(30.0, 1.5, -1.0);
+        assert_eq!(e.mount_tilt_deg(), (1.5, -1.0));
+        let want = CameraMount::downward()
+            .turned_about_optical_axis(30.0)
+            .tilted(1.5, -1.0);
+        assert_eq!(*e.mount(), want);
+        let (after, t) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 1);
+        assert!(
+            after.estimate.and_then(|e| e.level).is_some(),
+            "not restarted"
+        );
+        // Not finite: the old values stay; set_mount_yaw keeps the tilt.
+        e.set_mount(f32::NAN, f32::INFINITY, -1.0);
+        assert_eq!(*e.mount(), want);
+        e.set_mount_yaw(30.0);
+        assert_eq!(e.mount_tilt_deg(), (1.5, -1.0));
+        let (still, _) = feed(&mut e, &mut vehicle, true, t + PERIOD_US, 1);
+        assert!(still.estimate.is_some());
+    }
+
+    /// The fix a camera on the mount tilted by (1.5, -1.0) degrees sees of a level pad below
+    /// a level vehicle, with a small isotropic tilt sigma (a close multi-marker fix).
+    fn misaligned_fix() -> PadFix {
+        let truth = CameraMount::downward().tilted(1.5, -1.0);
+        let ned_from_pad = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
+        let mut covariance = Matrix6::identity() * 1e-6;
+        for k in 0..3 {
+            covariance[(k, k)] = 0.05f32.to_radians().powi(2);
+        }
+        PadFix {
+            pose: Pose {
+                rotation: truth.matrix().transpose() * ned_from_pad,
+                translation: Vector3::new(0.1, 0.1, 3.0),
+            },
+            covariance,
+            ..fix()
+        }
+    }
+
+    #[test]
+    fn the_calibrator_reports_once_from_the_image_fix_and_not_when_off() {
+        for (on, levelled) in [(true, false), (true, true), (false, false)] {
+            let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+            e.set_mount_calibration(on);
+            let mut vehicle = VehicleState::new();
+            let image = misaligned_fix();
+            // A levelled fix: the tilt's covariance gone (only the heading left).
+            let mut flat = image;
+            for r in 0..3 {
+                for c in 0..3 {
+                    flat.covariance[(r, c)] = if r == 2 && c == 2 { 1e-4 } else { 0.0 };
+                }
+            }
+            let mut reports = 0;
+            for k in 0..400u64 {
+                let t = k * PERIOD_US;
+                vehicle.push_attitude(t, &Attitude::level_north(), t);
+                let f = if levelled { &flat } else { &image };
+                let out = e.update_with_image_fix(Some(f), Some(f), &vehicle.at(t));
+                if let Some(c) = out.mount_correction {
+                    reports += 1;
+                    assert!((c.roll_deg - 1.5).abs() < 0.01, "{c:?}");
+                    assert!((c.pitch_deg + 1.0).abs() < 0.01, "{c:?}");
+                    assert!(c.sigma_deg > 0.1 && c.sigma_deg < 0.5, "{c:?}");
+                }
+            }
+            let want = if on && !levelled { 1 } else { 0 };
+            assert_eq!(reports, want, "on {on}, levelled {levelled}");
+            if on && levelled {
+                assert_eq!(e.mount_calibrator().stats().tilt_not_measured, 400);
+            }
+        }
+    }
+
+    #[test]
+    fn a_reset_keeps_the_mount_calibration_and_a_yaw_change_drops_it() {
+        let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut vehicle = VehicleState::new();
+        for k in 0..50u64 {
+            let t = k * PERIOD_US;
+            vehicle.push_attitude(t, &Attitude::level_north(), t);
+            e.update(Some(&misaligned_fix()), &vehicle.at(t));
+        }
+        e.reset();
+        assert_eq!(e.mount_estimate().map(|m| m.frames), Some(50));
+        e.set_mount(5.0, 0.0, 0.0);
+        assert_eq!(e.mount_estimate(), None);
     }
 }

@@ -31,12 +31,17 @@
 //! frame's exposure from [`VehicleState`], and the camera frame as the fallback), run by
 //! [`crate::pipeline::FramePipeline`] after each pad fix.
 //!
+//! The camera mount's roll and pitch are calibrated in flight by [`MountCalibrator`] (in
+//! `mount_calibration`), which the estimator feeds: its [`MountCorrection`]s come out in
+//! [`FrameEstimate::mount_correction`].
+//!
 //! The module is split by concern, in private submodules: `estimator` (the [`PadEstimator`]),
 //! `tracker` and `paper` (the two filters), `vehicle` (the vehicle state history) and `axes`
 //! (the frames and the rotations between them).
 
 mod axes;
 mod estimator;
+mod mount_calibration;
 mod paper;
 mod tracker;
 mod vehicle;
@@ -46,6 +51,11 @@ pub use axes::{
     ned_to_camera, Attitude, CameraMount, LandingAngles, RotationError,
 };
 pub use estimator::{EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate, PadEstimator};
+pub use mount_calibration::{
+    roll_pitch_aligning, MountCalibrationConfig, MountCalibrationMode, MountCalibrationStats,
+    MountCalibrator, MountCorrection, MountEstimate, MountRefusal, FRAME_DECORRELATION_US,
+    MIN_REREPORT_DEG, REREPORT_SIGMAS, RESTART_AFTER_OUTLIERS,
+};
 pub use paper::{PaperConfig, PaperKalman};
 pub use tracker::{
     ConfigError, Estimate, RejectReason, TrackState, Tracker, TrackerConfig, UpdateOutcome,

@@ -22,9 +22,12 @@
 //! and is answered with the **old** value, which is how a ground station learns that the write
 //! failed.
 //!
-//! The parameters of the per-frame path (TD_TAG_SIZE, TD_MAX_HAMMING, TD_CAM_YAW, the
-//! auto-exposure limits TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are turned into the settings
-//! the pipeline applies by [`PipelineSettings::from_params`].
+//! The parameters of the per-frame path (TD_TAG_SIZE, TD_MAX_HAMMING, the mount TD_CAM_YAW,
+//! TD_CAM_ROLL, TD_CAM_PITCH and its calibration TD_CAM_CAL, the auto-exposure limits
+//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) are turned into the settings the pipeline
+//! applies by [`PipelineSettings::from_params`]. New parameters are appended to the table:
+//! its order is the MAVLink `param_index`, and a blob saved by an older firmware (which ends
+//! before them) imports with the new ones at their defaults.
 //!
 //! Persistence is the firmware's job: [`ParamSet::export`] writes the values as bytes
 //! (magic, version, `name + value` records, CRC) and [`ParamSet::import`] reads them back.
@@ -109,10 +112,17 @@ pub enum ParamId {
     GainMax,
     /// Auto-exposure: mean grey level aimed for.
     ExpTarget,
+    /// Camera mount: roll about body x (forward) after TD_CAM_YAW, degrees.
+    CamRoll,
+    /// Camera mount: pitch about body y (right) after TD_CAM_ROLL, degrees.
+    CamPitch,
+    /// In-flight mount calibration: 0 off, 1 estimate and report, 2 estimate, report and
+    /// set TD_CAM_ROLL/TD_CAM_PITCH.
+    CamCal,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 13;
+pub const PARAM_COUNT: usize = 16;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -237,6 +247,38 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "mean grey level (0-255) the auto-exposure aims for",
     },
+    // The mount's tilt (see `PipelineSettings::mount`): appended, so the blobs of older
+    // firmware, which end before them, keep importing. The range: a camera screwed on by hand
+    // is 1-3 degrees off; 10 is far beyond any misalignment and still small enough that the
+    // small-tilt reasoning of the estimator holds (a mount meant to look elsewhere is another
+    // configured mount, not a calibration).
+    ParamDef {
+        name: "TD_CAM_ROLL",
+        kind: ParamKind::Real,
+        default: 0.0,
+        min: -10.0,
+        max: 10.0,
+        zero_is_unset: false,
+        help: "camera mount roll about body x (after TD_CAM_YAW), degrees (TD_CAM_CAL=2 sets it)",
+    },
+    ParamDef {
+        name: "TD_CAM_PITCH",
+        kind: ParamKind::Real,
+        default: 0.0,
+        min: -10.0,
+        max: 10.0,
+        zero_is_unset: false,
+        help: "camera mount pitch about body y (after the roll), degrees (TD_CAM_CAL=2 sets it)",
+    },
+    ParamDef {
+        name: "TD_CAM_CAL",
+        kind: ParamKind::Int,
+        default: 2.0,
+        min: 0.0,
+        max: 2.0,
+        zero_is_unset: false,
+        help: "in-flight mount calibration: 0 off, 1 report, 2 report and set TD_CAM_ROLL/PITCH",
+    },
 ];
 
 impl ParamId {
@@ -255,6 +297,9 @@ impl ParamId {
         ParamId::ExpMaxUs,
         ParamId::GainMax,
         ParamId::ExpTarget,
+        ParamId::CamRoll,
+        ParamId::CamPitch,
+        ParamId::CamCal,
     ];
 
     /// The id at table `index`.
@@ -329,6 +374,7 @@ const HEADER_LEN: usize = 8;
 const RECORD_LEN: usize = PARAM_NAME_LEN + 4;
 /// Bytes [`ParamSet::export`] needs.
 pub const EXPORT_LEN: usize = HEADER_LEN + PARAM_COUNT * RECORD_LEN;
+const _: () = assert!(PARAM_COUNT <= u8::MAX as usize);
 
 /// The parameter values.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -395,7 +441,16 @@ impl ParamSet {
     /// Writes the values into `out` for flash; returns the bytes written (0 when `out` is
     /// shorter than [`EXPORT_LEN`]).
     pub fn export(&self, out: &mut [u8]) -> usize {
-        let Some(out) = out.get_mut(..EXPORT_LEN) else {
+        self.export_records(PARAM_COUNT, out)
+    }
+
+    /// [`ParamSet::export`] of the first `records` parameters of the table only: the blob a
+    /// firmware whose table ended there wrote (the tests' older firmware). Returns the bytes
+    /// written (0 when `out` is too short); `records` is capped at [`PARAM_COUNT`].
+    pub(crate) fn export_records(&self, records: usize, out: &mut [u8]) -> usize {
+        let count = records.min(PARAM_COUNT);
+        let len = HEADER_LEN + count * RECORD_LEN;
+        let Some(out) = out.get_mut(..len) else {
             return 0;
         };
         let (header, records) = out.split_at_mut(HEADER_LEN);
@@ -415,10 +470,11 @@ impl ParamSet {
         let mut h = [0u8; HEADER_LEN];
         h[..4].copy_from_slice(&MAGIC);
         h[4] = FORMAT_VERSION;
-        h[5] = PARAM_COUNT as u8;
+        // PARAM_COUNT fits a byte (checked below).
+        h[5] = count as u8;
         h[6..8].copy_from_slice(&crc.to_le_bytes());
         header.copy_from_slice(&h);
-        EXPORT_LEN
+        len
     }
 
     /// Reads a blob written by [`ParamSet::export`] (this or another firmware version):
@@ -563,6 +619,51 @@ mod tests {
         // Not in the blob: unchanged.
         assert_eq!(now.get(ParamId::ExpMaxUs), 4_000.0);
         assert_eq!(now.get(ParamId::GainMax), 4.0);
+    }
+
+    #[test]
+    fn a_blob_of_the_thirteen_parameter_firmware_keeps_the_mount_defaults() {
+        // The table before TD_CAM_ROLL, TD_CAM_PITCH and TD_CAM_CAL was appended.
+        let mut saved = ParamSet::default();
+        saved.set(ParamId::CamYaw, 90.0).unwrap();
+        saved.set(ParamId::ExpTarget, 120.0).unwrap();
+        saved.set(ParamId::CamRoll, 3.0).unwrap();
+        let blob = older_blob(&saved, 13);
+        assert_eq!(ParamId::CamRoll.index(), 13);
+        let mut now = ParamSet::default();
+        let r = now.import(&blob).unwrap();
+        assert_eq!((r.applied, r.rejected, r.unknown), (13, 0, 0));
+        assert_eq!(
+            (now.get(ParamId::CamYaw), now.get(ParamId::ExpTarget)),
+            (90.0, 120.0)
+        );
+        assert_eq!(
+            (
+                now.get(ParamId::CamRoll),
+                now.get(ParamId::CamPitch),
+                now.get(ParamId::CamCal)
+            ),
+            (0.0, 0.0, 2.0)
+        );
+    }
+
+    #[test]
+    fn the_mount_parameters_validate_and_round_trip() {
+        let mut p = ParamSet::default();
+        assert_eq!(p.set(ParamId::CamRoll, 10.5), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::CamPitch, -10.5), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::CamCal, 3.0), Err(ParamError::OutOfRange));
+        assert_eq!(p.set(ParamId::CamCal, 1.5), Err(ParamError::NotIntegral));
+        p.set(ParamId::CamRoll, 1.21).unwrap();
+        p.set(ParamId::CamPitch, -1.58).unwrap();
+        p.set(ParamId::CamCal, 1.0).unwrap();
+        let mut blob = [0u8; EXPORT_LEN];
+        assert_eq!(p.export(&mut blob), EXPORT_LEN);
+        let mut q = ParamSet::default();
+        assert_eq!(q.import(&blob).unwrap().applied as usize, PARAM_COUNT);
+        assert_eq!(q, p);
+        assert_eq!(ParamId::from_name("TD_CAM_PITCH"), Some(ParamId::CamPitch));
+        assert_eq!(ParamId::from_index(15), Some(ParamId::CamCal));
     }
 
     #[test]

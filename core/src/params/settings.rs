@@ -2,7 +2,8 @@
 //!
 //! Four groups of MAVLink parameters tune what happens between a frame and its estimate:
 //! TD_MAX_HAMMING (the decoder's correction cap), TD_TAG_SIZE (the printed size of the pad),
-//! TD_CAM_YAW (the camera's turn about its optical axis, for the estimator's mount) and
+//! the mount (TD_CAM_YAW, TD_CAM_ROLL, TD_CAM_PITCH: see [`PipelineSettings::mount`]; and
+//! TD_CAM_CAL, whether the estimator calibrates it in flight) and
 //! TD_EXP_MAX_US / TD_GAIN_MAX / TD_EXP_TARGET (the software auto-exposure's limits, see
 //! [`crate::sensor::exposure`]). The MAVLink side ([`crate::companion::Companion`]) owns the
 //! [`ParamSet`], but the detector, the pad layout, the estimator and the exposure loop live
@@ -27,6 +28,7 @@
 
 use super::{ParamId, ParamSet};
 use crate::detect::DetectorConfig;
+use crate::filter::{CameraMount, MountCalibrationMode};
 use crate::pad::{PadError, PadLayout, PadMarker, MAX_PAD_MARKERS};
 use crate::sensor::AutoExposureLimits;
 use crate::sensor::GainX16;
@@ -43,6 +45,12 @@ pub struct PipelineSettings {
     pub exposure: AutoExposureLimits,
     /// The camera's turn about its optical axis from the built mount, degrees (TD_CAM_YAW).
     pub cam_yaw_deg: f32,
+    /// The mount's roll about body x after the yaw, degrees (TD_CAM_ROLL).
+    pub cam_roll_deg: f32,
+    /// The mount's pitch about body y after the roll, degrees (TD_CAM_PITCH).
+    pub cam_pitch_deg: f32,
+    /// The in-flight mount calibration (TD_CAM_CAL).
+    pub mount_calibration: MountCalibrationMode,
 }
 
 impl Default for PipelineSettings {
@@ -73,7 +81,21 @@ impl PipelineSettings {
                 max_gain: GainX16((gain_x16 as u16).max(GainX16::ONE.0)),
             },
             cam_yaw_deg: params.get(ParamId::CamYaw),
+            cam_roll_deg: params.get(ParamId::CamRoll),
+            cam_pitch_deg: params.get(ParamId::CamPitch),
+            mount_calibration: MountCalibrationMode::from_param(params.get_int(ParamId::CamCal)),
         }
+    }
+
+    /// The mount in force for the `configured` one (the build's, camera to body): turned by
+    /// TD_CAM_YAW about the optical axis, then by TD_CAM_ROLL about body x, then by
+    /// TD_CAM_PITCH about body y: camera-to-body = `R_y(pitch) R_x(roll) configured
+    /// R_z(yaw)`, the simulator's misaligned mount `R_y(pitch) R_x(roll) nominal` for a
+    /// yaw of 0 ([`CameraMount::turned_about_optical_axis`], [`CameraMount::tilted`]).
+    pub fn mount(&self, configured: &CameraMount) -> CameraMount {
+        configured
+            .turned_about_optical_axis(self.cam_yaw_deg)
+            .tilted(self.cam_roll_deg, self.cam_pitch_deg)
     }
 
     /// `base` with these settings' correction cap.
@@ -183,8 +205,13 @@ mod tests {
         );
         assert_eq!(s.tag_size_m, Some(0.625));
         p.set(ParamId::CamYaw, 90.0).unwrap();
+        p.set(ParamId::CamRoll, 1.5).unwrap();
+        p.set(ParamId::CamPitch, -1.0).unwrap();
+        p.set(ParamId::CamCal, 1.0).unwrap();
         let s = PipelineSettings::from_params(&p);
         assert_eq!(s.cam_yaw_deg, 90.0);
+        assert_eq!((s.cam_roll_deg, s.cam_pitch_deg), (1.5, -1.0));
+        assert_eq!(s.mount_calibration, MountCalibrationMode::Report);
         // Parameters of the MAVLink side change nothing here.
         let mut q = p;
         q.set(ParamId::RateHz, 5.0).unwrap();
@@ -237,6 +264,35 @@ mod tests {
                 assert!((largest - want).abs() <= 1e-6 * want, "{largest} vs {want}");
             }
         }
+    }
+
+    #[test]
+    fn the_mount_is_the_simulators_misaligned_mount() {
+        use nalgebra::Matrix3;
+        let mut p = ParamSet::default();
+        p.set(ParamId::CamRoll, 1.2).unwrap();
+        p.set(ParamId::CamPitch, -1.6).unwrap();
+        let s = PipelineSettings::from_params(&p);
+        assert_eq!(s.mount_calibration, MountCalibrationMode::Apply);
+        // touchdown-sim's mount: camera-to-body = R_y(pitch) R_x(roll) nominal, nominal the
+        // downward mount (camera x = body y, camera y = body -x, camera z = body z).
+        let (r, q) = (1.2f32.to_radians(), (-1.6f32).to_radians());
+        let rx = Matrix3::new(1.0, 0.0, 0.0, 0.0, r.cos(), -r.sin(), 0.0, r.sin(), r.cos());
+        let ry = Matrix3::new(q.cos(), 0.0, q.sin(), 0.0, 1.0, 0.0, -q.sin(), 0.0, q.cos());
+        let nominal = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let want = ry * rx * nominal;
+        let got = s.mount(&CameraMount::downward()).matrix();
+        assert!((got - want).amax() < 1e-6, "{got} vs {want}");
+        // The yaw turns the camera about its own axis first.
+        p.set(ParamId::CamYaw, 90.0).unwrap();
+        let s = PipelineSettings::from_params(&p);
+        let yawed = Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let want = ry * rx * nominal * yawed;
+        let got = s.mount(&CameraMount::downward()).matrix();
+        assert!((got - want).amax() < 1e-6, "{got} vs {want}");
+        // The defaults: the built mount.
+        let d = PipelineSettings::default().mount(&CameraMount::downward());
+        assert!((d.matrix() - nominal).amax() < 1e-6);
     }
 
     #[test]

@@ -181,14 +181,22 @@ impl<'a> FramePipeline<'a> {
     }
 
     /// Takes new settings (call between frames): the detector's correction cap, the pad
-    /// scaled to TD_TAG_SIZE and the mount turned by TD_CAM_YAW (a changed mount restarts the
-    /// estimator). If the pad cannot be scaled, the pad as built is searched and the error
-    /// returned; the other settings apply either way.
+    /// scaled to TD_TAG_SIZE, the whole mount (turned by TD_CAM_YAW, tilted by TD_CAM_ROLL
+    /// and TD_CAM_PITCH: [`PipelineSettings::mount`]; a changed yaw restarts the estimator, a
+    /// changed tilt does not, see [`PadEstimator::set_mount`]) and whether the mount is
+    /// calibrated in flight (TD_CAM_CAL). If the pad cannot be scaled, the pad as built is
+    /// searched and the error returned; the other settings apply either way.
     pub fn apply(&mut self, settings: PipelineSettings) -> Result<(), PadError> {
         self.settings = settings;
         self.detector
             .set_config(settings.detector_config(self.config.detector));
-        self.estimator.set_mount_yaw(settings.cam_yaw_deg);
+        self.estimator.set_mount(
+            settings.cam_yaw_deg,
+            settings.cam_roll_deg,
+            settings.cam_pitch_deg,
+        );
+        self.estimator
+            .set_mount_calibration(settings.mount_calibration.estimates());
         match settings.pad(&self.built_pad) {
             Ok(pad) => {
                 self.pad = pad;
@@ -234,6 +242,9 @@ impl<'a> FramePipeline<'a> {
             .map(|att| {
                 camera_to_ned_matrix(att, self.estimator.mount()).transpose() * NED_FROM_LEVEL
             });
+        // The image's own fix is kept beside the levelled one for the mount calibration, which
+        // needs the tilt the image measured (the levelled fix's is the attitude's).
+        let mut image_fix = None;
         let (markers, fix, detect_error) = match self.detector.detect(image, self.families, buffers)
         {
             Ok(raw) => {
@@ -255,15 +266,16 @@ impl<'a> FramePipeline<'a> {
                     }
                     None => raw,
                 };
-                // The level fix falls back to the image's own fix when it cannot be solved.
-                let fix =
+                image_fix =
                     pad_pose_with_prediction(detections, families, pad, camera, predicted.as_ref())
-                        .ok()
-                        .map(|fix| match &camera_from_level {
-                            Some(c) => level_pad_fix(&fix, detections, families, pad, camera, c)
-                                .unwrap_or(fix),
-                            None => fix,
-                        });
+                        .ok();
+                // The level fix falls back to the image's own fix when it cannot be solved.
+                let fix = image_fix.map(|fix| match &camera_from_level {
+                    Some(c) => {
+                        level_pad_fix(&fix, detections, families, pad, camera, c).unwrap_or(fix)
+                    }
+                    None => fix,
+                });
                 (raw.len(), fix, None)
             }
             Err(e) => (0, None, Some(e)),
@@ -272,7 +284,11 @@ impl<'a> FramePipeline<'a> {
             self.last_rotation = Some(f.pose.rotation);
         }
         FrameReport {
-            estimate: self.estimator.update(fix.as_ref(), &at_exposure),
+            estimate: self.estimator.update_with_image_fix(
+                fix.as_ref(),
+                image_fix.as_ref(),
+                &at_exposure,
+            ),
             fix,
             markers,
             detect_error,

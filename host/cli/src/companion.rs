@@ -238,7 +238,9 @@ pub fn run(
     let mut companion = Companion::new(config);
     // The camera board's per-frame path, with the parameters applied between frames exactly
     // as its vision task applies them (TD_TAG_SIZE, TD_MAX_HAMMING, TD_CAM_YAW over MAVLink
-    // included), and the estimator reading the vehicle state the companion decodes.
+    // included, and TD_CAM_ROLL/TD_CAM_PITCH when the companion adopts the estimator's mount
+    // calibration in `on_estimate`: applied before the next frame), and the estimator reading
+    // the vehicle state the companion decodes.
     let mut pipeline_settings = PipelineSettings::from_params(companion.params());
     let mut pipeline = FramePipeline::new(
         &family_refs,

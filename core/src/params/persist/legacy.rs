@@ -89,13 +89,17 @@ pub fn scan<const N: usize>(
     ScanResult { restore, next_free }
 }
 
-/// Fills `out` with a format-1 slot for `params` (export blob, zero padding): what the
-/// firmware wrote before slot format 2, for tests of the upgrade path.
+/// Parameters in the table of the firmware that wrote format 1 (up to TD_EXP_TARGET).
+pub const LEGACY_PARAM_COUNT: usize = 13;
+
+/// Fills `out` with a format-1 slot for `params` (the export blob of the first
+/// [`LEGACY_PARAM_COUNT`] parameters, zero padding): what the firmware wrote before slot
+/// format 2, for tests of the upgrade path.
 ///
 /// `out` is normally [`LEGACY_SLOT_LEN`] bytes; shorter than the blob, it is left all zeros.
 pub fn encode_slot(params: &ParamSet, out: &mut [u8]) {
     out.fill(0);
-    params.export(out);
+    params.export_records(LEGACY_PARAM_COUNT, out);
 }
 
 /// The format-1 reader.

@@ -20,8 +20,10 @@ use crate::params::ParamSet;
 struct SingleSector;
 
 impl SingleSector {
+    /// Four slots, whatever the model's sector holds beyond them (it is sized for the current
+    /// slot format), so the sector is full at saves 4, 8 and 12.
     fn slots(m: &Model) -> usize {
-        m.sector_len / LEGACY_SLOT_LEN
+        (m.sector_len / LEGACY_SLOT_LEN).min(4)
     }
 }
 

@@ -130,8 +130,11 @@ mod tests {
     use super::super::test_fixtures::values;
     use super::*;
 
-    const _: () =
-        assert!(LEGACY_SLOT_LEN.is_multiple_of(FLASH_WORD) && LEGACY_SLOT_LEN >= EXPORT_LEN);
+    // A format-1 slot held the 13-parameter blob.
+    const _: () = assert!(
+        LEGACY_SLOT_LEN.is_multiple_of(FLASH_WORD)
+            && LEGACY_SLOT_LEN >= 8 + super::super::legacy::LEGACY_PARAM_COUNT * 20
+    );
 
     /// The slot size the module documentation's save count is worked out from.
     #[test]
@@ -139,22 +142,57 @@ mod tests {
         assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 409 slots per sector after
-        // the first boot's free word.
-        assert_eq!(SLOT_LEN, 320);
-        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 409);
+        // Format 2: a header word and the sequence number more; 16 parameters (the mount's
+        // TD_CAM_ROLL, TD_CAM_PITCH, TD_CAM_CAL appended to the 13 of the first format-2
+        // firmware, whose 320-byte slots still read back) take 12 words: 341 slots per
+        // sector after the first boot's free word.
+        assert_eq!(SLOT_LEN, 384);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 341);
+    }
+
+    /// A format-2 slot of the 13-parameter firmware (10 words), as it wrote it.
+    fn thirteen_parameter_slot(params: &ParamSet, seq: u32) -> [u8; 320] {
+        let mut out = [0u8; 320];
+        out[..4].copy_from_slice(&SLOT_MAGIC);
+        out[4] = SLOT_VERSION;
+        out[5] = 10;
+        out[FLASH_WORD..SLOT_HEADER_LEN].copy_from_slice(&seq.to_le_bytes());
+        params.export_records(13, &mut out[SLOT_HEADER_LEN..]);
+        out[320 - 8..320 - 4].copy_from_slice(&TRAILER_MAGIC);
+        let crc = crc32(&out[..320 - 4]);
+        out[320 - 4..].copy_from_slice(&crc.to_le_bytes());
+        out
+    }
+
+    #[test]
+    fn a_slot_of_the_thirteen_parameter_firmware_imports_with_the_mount_defaults() {
+        use crate::params::ParamId;
+        let mut saved = values(5);
+        saved.set(ParamId::CamRoll, 2.0).unwrap();
+        let slot = thirteen_parameter_slot(&saved, 9);
+        assert_eq!(
+            slot_header(slot[..FLASH_WORD].try_into().unwrap()),
+            Some(10)
+        );
+        let (seq, p, report) = check_v2(&slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied), (9, 13));
+        // Everything it knew, and the defaults of what it did not.
+        let mut want = saved;
+        want.set(ParamId::CamRoll, 0.0).unwrap();
+        assert_eq!(p, want);
+        assert_eq!(p.get(ParamId::CamCal), 2.0);
     }
 
     #[test]
     fn slot_layout() {
-        assert_eq!(SLOT_LEN, 320);
+        assert_eq!(SLOT_LEN, 384);
         let mut slot = [0u8; SLOT_LEN];
         encode_v2(&values(3), 0x0102_0304, &mut slot);
         let mut other = [0u8; SLOT_LEN];
         encode_v2(&values(4), 7, &mut other);
         // The first word is the same in every slot (see the module documentation).
         assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
-        assert_eq!(&slot[..6], b"TDSL\x02\x0a");
+        assert_eq!(&slot[..6], b"TDSL\x02\x0c");
         assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
         assert_eq!(slot[32..36], [4, 3, 2, 1]);
         // The export blob starts mid-word, so it can never pass for a format-1 slot.
