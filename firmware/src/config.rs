@@ -39,8 +39,8 @@ pub fn sensor_config() -> Config {
 /// Nominal pinhole model of the OV7725 with the usual 2.8 mm M12 lens: 6 µm pixels at VGA, so
 /// f = 2.8 mm / 6 µm = 467 px at 640x480 (233.5 px at QVGA), principal point at the centre.
 /// Calibrate your own lens (e.g. with OpenCV's chessboard calibration) and put the numbers here for
-/// metre-accurate poses.
-pub const CAMERA: CameraModel = centred_pinhole(467.0);
+/// metre-accurate poses. Its line time is [`OV7725_LINE_TIME_US`].
+pub const CAMERA: CameraModel = centred_pinhole(467.0, OV7725_LINE_TIME_US);
 
 /// Nominal pinhole model of the OV2640 with the same 2.8 mm lens.
 ///
@@ -59,14 +59,52 @@ pub const CAMERA: CameraModel = centred_pinhole(467.0);
 /// window, so pixels stay square and the principal point stays at the centre. The array is
 /// 8 % narrower than the OV7725's (3.52 mm against 3.84 mm), so the same lens sees 64° across
 /// instead of 69°. OV2640 modules come with many lenses: f scales with the lens focal length,
-/// and a calibration (as for [`CAMERA`]) replaces all of this.
-pub const CAMERA_OV2640: CameraModel = centred_pinhole(509.0);
+/// and a calibration (as for [`CAMERA`]) replaces all of this. Its line time is
+/// [`OV2640_LINE_TIME_US`].
+pub const CAMERA_OV2640: CameraModel = centred_pinhole(509.0, OV2640_LINE_TIME_US);
 
-/// A pinhole model with focal length `f_vga` pixels at 640x480 (half that at QVGA) and the
-/// principal point at the centre of the sensor's frame. With `camera-vga` the DCMI crops 40
-/// rows off the top, so the centre row 239.5 becomes 199.5.
-const fn centred_pinhole(f_vga: f32) -> CameraModel {
-    if cfg!(feature = "camera-vga") {
+// The line times below are for the clock plans of FPS frames per second (other rates add
+// dummy lines or change the pixel clock, and the row-to-row time with them).
+const _: () = assert!(FPS == 30, "recompute the line times for the new frame rate");
+
+/// The OV7725's rolling shutter: the time from one output row's exposure to the next's, µs,
+/// at 30 fps (the pipeline corrects the corners for the camera's motion over it:
+/// [`CameraModel::line_time_us`]). The sensor outputs its array rows one to one, so a row
+/// takes one sensor line: the datasheet's line length in pixel periods, two pixel clocks
+/// each in YUV, over the pixel clock of the 30 fps plan (`touchdown_sensors::ov7725`'s
+/// `plan_clock`, the same from a 12 or a 24 MHz XCLK):
+///
+/// - QVGA: 576 pixel periods per line (576 x 278 per frame) = 1152 clocks at 9.6 MHz
+///   (24 MHz x 4 / 10): 120.0 µs; the 240 rows read in 28.8 ms;
+/// - VGA: 784 pixel periods per line (784 x 510 per frame) = 1568 clocks at 24 MHz:
+///   65.33 µs; 480 rows in 31.4 ms, of which the 400 kept (`camera-vga`) span 26.1 ms.
+///
+/// The frame's time stamp is the middle row of the rows kept (`crate::capture`), which is
+/// the model's `(height - 1) / 2` also for the cropped VGA frame.
+pub const OV7725_LINE_TIME_US: f32 = if cfg!(feature = "camera-vga") {
+    1568.0 / 24.0
+} else {
+    120.0
+};
+
+/// The OV2640's rolling shutter, µs per output row at 30 fps (see [`OV7725_LINE_TIME_US`]).
+/// The driver's SVGA mode reads 600 array lines per frame of 1190 sensor clocks each
+/// (OmniVision's frame-rate note: 1190 x 672 clocks per frame) at a 24 MHz sensor clock
+/// (the 30 fps plan, from 24 MHz directly or 12 MHz doubled): 49.583 µs a line, 29.75 ms for
+/// the 600 lines. The DSP scales those 600 lines to the output rows evenly, so an output row
+/// takes 600 / rows sensor lines: VGA (480 rows) 61.98 µs, QVGA (240 rows) 123.96 µs.
+pub const OV2640_LINE_TIME_US: f32 = if cfg!(feature = "camera-vga") {
+    1190.0 / 24.0 * 600.0 / 480.0
+} else {
+    1190.0 / 24.0 * 600.0 / 240.0
+};
+
+/// A pinhole model with focal length `f_vga` pixels at 640x480 (half that at QVGA), the
+/// principal point at the centre of the sensor's frame and the rolling shutter's
+/// `line_time_us`. With `camera-vga` the DCMI crops 40 rows off the top, so the centre row
+/// 239.5 becomes 199.5.
+const fn centred_pinhole(f_vga: f32, line_time_us: f32) -> CameraModel {
+    let pinhole = if cfg!(feature = "camera-vga") {
         CameraModel::pinhole(
             WIDTH as u32,
             HEIGHT as u32,
@@ -78,6 +116,10 @@ const fn centred_pinhole(f_vga: f32) -> CameraModel {
     } else {
         let f = f_vga * 0.5;
         CameraModel::pinhole(WIDTH as u32, HEIGHT as u32, f, f, 159.5, 119.5)
+    };
+    CameraModel {
+        line_time_us,
+        ..pinhole
     }
 }
 

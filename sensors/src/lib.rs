@@ -181,4 +181,27 @@ mod tests {
         assert_eq!(gain_ceiling_log2(GainX16(16 * 32)), 5);
         assert_eq!(gain_ceiling_log2(GainX16(u16::MAX)), 5); // above 32x: 32x
     }
+
+    /// The rolling shutter's row-to-row time of the 30 fps set-ups from the board clocks
+    /// (12 MHz OpenMV, 24 MHz NUCLEO), ns: the readout of the array lines spread over the
+    /// output rows. The firmware's camera models (firmware/src/config.rs,
+    /// OV7725_LINE_TIME_US and OV2640_LINE_TIME_US) carry these figures; a changed clock
+    /// plan must change them too.
+    #[test]
+    fn row_times_of_the_30_fps_plans_are_the_firmwares_line_times() {
+        let row_ns = |timing: FrameTiming, resolution: Resolution| {
+            u64::from(timing.line_ns) * u64::from(timing.active_lines)
+                / u64::from(resolution.height())
+        };
+        for xclk_hz in [12_000_000, 24_000_000] {
+            let ov7725 = |r| row_ns(ov7725::plan_clock(xclk_hz, r, 30).unwrap().timing, r);
+            let ov2640 = |r| row_ns(ov2640::plan_clock(xclk_hz, r, 30).unwrap().timing, r);
+            // 1152 clocks at 9.6 MHz; 1568 at 24 MHz.
+            assert_eq!(ov7725(Resolution::Qvga), 120_000);
+            assert_eq!(ov7725(Resolution::Vga), 65_333);
+            // 600 lines of 1190 clocks at 24 MHz (49,583 ns, truncated) over 240 or 480 rows.
+            assert_eq!(ov2640(Resolution::Qvga), 123_957);
+            assert_eq!(ov2640(Resolution::Vga), 61_978);
+        }
+    }
 }
