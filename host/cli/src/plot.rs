@@ -15,6 +15,17 @@
 //!
 //! Axis ranges follow the truth and the filtered estimates; raw poses far outside (a wrong
 //! pose at 40 m, say) are left out of the picture, and the figure's title says how many.
+//!
+//! ## Layout
+//! Top to bottom: the title; the legend, in a band of its own above the plotting area (it
+//! flows into as many rows as the methods need, so it never covers data, however many
+//! methods there are and wherever their data lie); the plotting area; the time axis. Under
+//! the time axis's tick labels, the set points: each run of frames with the same label is
+//! named at its middle, in up to [`MARK_ROWS`] staggered rows so that no two names overlap,
+//! with a light vertical line between set points across the plot. A trace without labels but
+//! with a truth (the landing scenario) gets the true altitude at a few round times instead.
+//! The figure's height grows with the legend's and the set points' rows; its width is
+//! [`FIGURE_WIDTH`].
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -22,20 +33,60 @@ use std::sync::OnceLock;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use touchdown_eval::trace::{Trace, TraceFrame};
 
-/// Figure size, pixels (PNG) and user units (SVG).
-pub const FIGURE_SIZE: (u32, u32) = (1200, 520);
+/// Figure width, pixels (PNG) and user units (SVG).
+pub const FIGURE_WIDTH: u32 = 1200;
+/// Height of the plotting area, pixels; the figure adds the title, the legend and the axes.
+const PLOT_HEIGHT: i32 = 380;
+/// Space around the figure, pixels.
+const MARGIN: i32 = 14;
+/// Height of the title row, pixels.
+const TITLE_HEIGHT: i32 = 34;
+const TITLE_FONT: u32 = 22;
+/// Width of the y axis' tick labels and description, pixels.
+const Y_LABEL_AREA: i32 = 72;
+/// Space right of the plotting area, for the last time tick label.
+const RIGHT_GAP: i32 = 16;
+/// Legend: row height, font size, the sample's width, the gaps between entries, pixels.
+const LEGEND_ROW: i32 = 22;
+const LEGEND_FONT: u32 = 15;
+const LEGEND_SAMPLE: i32 = 26;
+const LEGEND_ENTRY_GAP: i32 = 24;
+/// Between the legend band and the plotting area, pixels.
+const LEGEND_GAP: i32 = 8;
+/// The time axis: its tick labels' band, the set points' rows, the description's band.
+const TICK_LABEL_BAND: i32 = 26;
+const MARK_ROW: i32 = 17;
+const MARK_FONT: u32 = 13;
+/// Most rows of set-point names; a name that fits in none is left out (never drawn over
+/// another).
+pub const MARK_ROWS: usize = 3;
+/// Least space between two names in a row, pixels.
+const MARK_GAP: i32 = 6;
+const X_DESC_BAND: i32 = 28;
+/// Altitude marks (a trace without set points): at most this many.
+const ALTITUDE_MARKS: usize = 10;
 
-/// Colours of the methods, in order (Okabe-Ito, told apart with colour blindness too).
-const METHOD_COLOURS: [RGBColor; 4] = [
+/// Colours of the methods, in order: Okabe-Ito without black and yellow, then two of Paul
+/// Tol's muted colours (wine, olive), told apart with colour blindness too. A ninth method
+/// takes the first colour again.
+const METHOD_COLOURS: [RGBColor; 8] = [
     RGBColor(213, 94, 0),
     RGBColor(0, 114, 178),
     RGBColor(0, 158, 115),
     RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(136, 34, 85),
+    RGBColor(153, 153, 51),
 ];
 const TRUTH_COLOUR: RGBColor = RGBColor(0, 0, 0);
+/// Separators between set points and their ticks: light enough not to compete with data.
+const SEPARATOR_COLOUR: RGBColor = RGBColor(200, 200, 200);
+const NOTE_COLOUR: RGBColor = RGBColor(90, 90, 90);
 const FONT: &str = "sans-serif";
 
 /// A figure that could not be drawn or written: one line naming the file.
@@ -66,6 +117,15 @@ fn register_font() -> Result<(), PlotError> {
     }
 }
 
+/// Width and height of `text` in the embedded font at `size`, pixels.
+fn text_size(text: &str, size: u32) -> Result<(i32, i32), PlotError> {
+    let (w, h) = (FONT, size)
+        .into_font()
+        .box_size(text)
+        .map_err(|e| PlotError(format!("cannot measure the text {text:?}: {e:?}")))?;
+    Ok((w as i32, h as i32))
+}
+
 /// What a figure shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Kind {
@@ -88,6 +148,7 @@ pub fn write_figures(trace: &Trace, dir: &Path, title: &str) -> Result<Vec<PathB
     for &kind in kinds {
         for axis in 0..3 {
             let figure = Figure::new(trace, kind, axis, title);
+            let layout = Layout::new(&figure)?;
             let stem = format!(
                 "{}-{}",
                 match kind {
@@ -97,13 +158,16 @@ pub fn write_figures(trace: &Trace, dir: &Path, title: &str) -> Result<Vec<PathB
                 ["x", "y", "z"][axis]
             );
             let png = dir.join(format!("{stem}.png"));
-            let (w, h) = FIGURE_SIZE;
-            let mut pixels = vec![0u8; (w * h * 3) as usize];
+            let (w, h) = layout.size;
+            let mut pixels = vec![0u8; (w as usize) * (h as usize) * 3];
             {
-                let root = BitMapBackend::with_buffer(&mut pixels, FIGURE_SIZE).into_drawing_area();
-                figure
-                    .draw(&root)
+                let root = BitMapBackend::with_buffer(&mut pixels, layout.size).into_drawing_area();
+                let drawn = figure
+                    .draw(&layout, &root)
                     .map_err(|e| PlotError(format!("{}: cannot draw: {e}", png.display())))?;
+                // The layout's promise, checked on every figure a debug build draws (the
+                // tests check it on traces made to break it).
+                debug_assert_eq!(drawn.check(), Ok(()), "{}", png.display());
             }
             image::save_buffer(&png, &pixels, w, h, image::ExtendedColorType::Rgb8)
                 .map_err(|e| PlotError(format!("{}: cannot write: {e}", png.display())))?;
@@ -111,9 +175,9 @@ pub fn write_figures(trace: &Trace, dir: &Path, title: &str) -> Result<Vec<PathB
             let svg = dir.join(format!("{stem}.svg"));
             let mut text = String::new();
             {
-                let root = SVGBackend::with_string(&mut text, FIGURE_SIZE).into_drawing_area();
+                let root = SVGBackend::with_string(&mut text, layout.size).into_drawing_area();
                 figure
-                    .draw(&root)
+                    .draw(&layout, &root)
                     .map_err(|e| PlotError(format!("{}: cannot draw: {e}", svg.display())))?;
             }
             std::fs::write(&svg, text)
@@ -132,6 +196,22 @@ struct MethodSeries {
     dots: Vec<(f64, f64)>,
 }
 
+/// What the time axis names under its tick labels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum MarkKind {
+    /// Each set point (a run of frames with one label), at its middle.
+    SetPoints,
+    /// The true altitude at a few round times.
+    Altitudes,
+}
+
+/// A text on the time axis at time `t` (seconds from the first frame).
+#[derive(Debug, Clone, PartialEq)]
+struct Mark {
+    t: f64,
+    text: String,
+}
+
 /// Everything one figure draws, in plot units (seconds; metres or centimetres).
 struct Figure {
     caption: String,
@@ -141,6 +221,10 @@ struct Figure {
     truth: Vec<Vec<(f64, f64)>>,
     methods: Vec<MethodSeries>,
     zero_line: bool,
+    mark_kind: MarkKind,
+    marks: Vec<Mark>,
+    /// Times of the lines between set points.
+    separators: Vec<f64>,
 }
 
 /// Splits `frames` into runs where `value` gives a point, breaking at sequence changes.
@@ -170,6 +254,86 @@ fn pieces(
         out.push(current);
     }
     out
+}
+
+/// A run of consecutive frames of one sequence with the same label: first and last frame's
+/// time (seconds from `t0`) and the label.
+#[derive(Debug, Clone, PartialEq)]
+struct SetPointRun {
+    start: f64,
+    end: f64,
+    label: String,
+}
+
+/// The set points of `frames` in time order. An unlabelled frame or a new sequence ends a
+/// run, so a label that comes back later is a run (and a name on the axis) of its own.
+fn set_point_runs(frames: &[TraceFrame], t0: f64) -> Vec<SetPointRun> {
+    let mut runs: Vec<SetPointRun> = Vec::new();
+    let mut previous: Option<(usize, &str)> = None;
+    for f in frames {
+        let t = f.t_s() - t0;
+        let Some(label) = f.label.as_deref() else {
+            previous = None;
+            continue;
+        };
+        match runs.last_mut() {
+            Some(run) if previous == Some((f.sequence, label)) => run.end = t,
+            _ => runs.push(SetPointRun {
+                start: t,
+                end: t,
+                label: label.to_string(),
+            }),
+        }
+        previous = Some((f.sequence, label));
+    }
+    runs
+}
+
+/// A round step (1, 2 or 5 times a power of ten) that cuts `span` into at most `count`
+/// pieces.
+fn round_step(span: f64, count: usize) -> f64 {
+    let raw = span / count.max(1) as f64;
+    if !(raw.is_finite() && raw > 0.0) {
+        return 1.0;
+    }
+    let power = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * power)
+        .find(|&s| s >= raw)
+        .unwrap_or(10.0 * power)
+}
+
+/// The true altitude at round times: at each multiple of a round step, the altitude of the
+/// nearest frame with a truth if one lies within half a step (none in a gap between
+/// sequences).
+fn altitude_marks(frames: &[TraceFrame], t0: f64, span: f64) -> Vec<Mark> {
+    let step = round_step(span, ALTITUDE_MARKS);
+    let with_truth: Vec<(f64, f64)> = frames
+        .iter()
+        .filter_map(|f| f.truth.map(|t| (f.t_s() - t0, t.z)))
+        .filter(|(_, z)| z.is_finite())
+        .collect();
+    let mut marks = Vec::new();
+    let mut k = 0u32;
+    loop {
+        let t = f64::from(k) * step;
+        if t > span + 1e-9 || marks.len() > ALTITUDE_MARKS {
+            break;
+        }
+        k += 1;
+        let nearest = with_truth
+            .iter()
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
+        if let Some(&(_, z)) = nearest.filter(|(tf, _)| (tf - t).abs() <= 0.5 * step) {
+            let decimals = if z.abs() >= 10.0 { 0 } else { 1 };
+            marks.push(Mark {
+                t,
+                text: format!("{z:.decimals$} m"),
+            });
+        }
+    }
+    marks
 }
 
 /// A padded range around `values` (at least `min_span` wide).
@@ -274,6 +438,28 @@ impl Figure {
             (Kind::Position, _) => format!("camera position {axis_name} (m)"),
             (Kind::Error, _) => format!("error in {axis_name} (cm)"),
         };
+        let runs = set_point_runs(frames, t0);
+        let (mark_kind, marks, separators) = if runs.is_empty() {
+            let span = x_range.end - x_range.start;
+            (
+                MarkKind::Altitudes,
+                altitude_marks(frames, t0, span),
+                Vec::new(),
+            )
+        } else {
+            let marks = runs
+                .iter()
+                .map(|r| Mark {
+                    t: 0.5 * (r.start + r.end),
+                    text: r.label.clone(),
+                })
+                .collect();
+            let separators = runs
+                .windows(2)
+                .map(|w| 0.5 * (w[0].end + w[1].start))
+                .collect();
+            (MarkKind::SetPoints, marks, separators)
+        };
         Figure {
             caption,
             y_label,
@@ -282,19 +468,279 @@ impl Figure {
             truth,
             methods,
             zero_line: kind == Kind::Error,
+            mark_kind,
+            marks,
+            separators,
         }
     }
+}
 
+/// A rectangle in figure pixels: `x0 <= x < x1`, `y0 <= y < y1`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct PixelRect {
+    x0: i32,
+    y0: i32,
+    x1: i32,
+    y1: i32,
+}
+
+impl PixelRect {
+    fn contains(&self, (x, y): (i32, i32)) -> bool {
+        x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
+    }
+
+    fn overlaps(&self, other: &PixelRect) -> bool {
+        self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
+    }
+}
+
+/// What a legend entry shows beside its text.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Sample {
+    /// The truth's black line.
+    Truth,
+    /// A method's line with a dot on it.
+    Method(RGBColor),
+    /// No sample: a note on how to read the figure.
+    Note,
+}
+
+/// One legend entry: its sample, text and where it goes.
+struct LegendEntry {
+    sample: Sample,
+    text: String,
+    rect: PixelRect,
+}
+
+/// Where everything of a figure goes, computed before drawing (the figure's height follows
+/// from the legend's and the time axis' rows).
+struct Layout {
+    size: (u32, u32),
+    /// The legend band (all its entries).
+    legend: PixelRect,
+    entries: Vec<LegendEntry>,
+    /// The area given to the chart (plotting area, axes' labels).
+    chart: PixelRect,
+    /// The plotting area's left and right pixels (the time axis' ends).
+    plot_x: (i32, i32),
+    /// Height of the chart's time-axis band.
+    x_label_area: i32,
+    /// Each mark's text box, or `None` when it fits in no row (in `figure.marks` order).
+    marks: Vec<Option<PixelRect>>,
+    /// Rows of marks in use.
+    mark_rows: usize,
+}
+
+/// Where each text goes on the time axis: boxes of `widths` centred on `centres` (clamped
+/// inside `bounds`), each in the first of `rows` rows where it keeps [`MARK_GAP`] from the
+/// previous text of that row; `None` when no row has room. Returns `(row, left)`.
+fn place_marks(
+    centres: &[i32],
+    widths: &[i32],
+    bounds: (i32, i32),
+    rows: usize,
+) -> Vec<Option<(usize, i32)>> {
+    let mut row_end = vec![i32::MIN / 2; rows];
+    centres
+        .iter()
+        .zip(widths)
+        .map(|(&c, &w)| {
+            let left = (c - w / 2).min(bounds.1 - w).max(bounds.0);
+            let row = row_end.iter().position(|&end| left >= end + MARK_GAP)?;
+            row_end[row] = left + w;
+            Some((row, left))
+        })
+        .collect()
+}
+
+/// The pixel column of time `t` on an axis from `range.start` at `plot_x.0` to `range.end`
+/// at `plot_x.1` (as plotters maps it: its last pixel is one short of the area's end).
+fn time_pixel(t: f64, range: &Range<f64>, plot_x: (i32, i32)) -> i32 {
+    let span = range.end - range.start;
+    let f = if span > 0.0 {
+        (t - range.start) / span
+    } else {
+        0.5
+    };
+    plot_x.0 + (f * f64::from(plot_x.1 - 1 - plot_x.0)).round() as i32
+}
+
+impl Layout {
+    fn new(figure: &Figure) -> Result<Layout, PlotError> {
+        let width = FIGURE_WIDTH as i32;
+        let plot_x = (MARGIN + Y_LABEL_AREA, width - MARGIN - RIGHT_GAP);
+
+        // The legend: entries flow left to right over the plotting area's width.
+        let mut items: Vec<(Sample, String)> = Vec::new();
+        if !figure.truth.is_empty() {
+            items.push((Sample::Truth, "truth".into()));
+        }
+        for m in &figure.methods {
+            items.push((Sample::Method(m.colour), m.name.clone()));
+        }
+        if !figure.methods.is_empty() {
+            items.push((
+                Sample::Note,
+                "line: filtered estimate, dots: raw pose of each frame".into(),
+            ));
+        }
+        let legend_top = MARGIN + TITLE_HEIGHT;
+        let mut entries = Vec::new();
+        let (mut x, mut row) = (plot_x.0, 0);
+        for (sample, text) in items {
+            let sample_w = if sample == Sample::Note {
+                0
+            } else {
+                LEGEND_SAMPLE + 6
+            };
+            let w = sample_w + text_size(&text, LEGEND_FONT)?.0;
+            if x > plot_x.0 && x + w > plot_x.1 {
+                x = plot_x.0;
+                row += 1;
+            }
+            let y0 = legend_top + row * LEGEND_ROW;
+            entries.push(LegendEntry {
+                sample,
+                text,
+                rect: PixelRect {
+                    x0: x,
+                    y0,
+                    x1: x + w,
+                    y1: y0 + LEGEND_ROW,
+                },
+            });
+            x += w + LEGEND_ENTRY_GAP;
+        }
+        let legend = PixelRect {
+            x0: plot_x.0,
+            y0: legend_top,
+            x1: entries.iter().map(|e| e.rect.x1).max().unwrap_or(plot_x.0),
+            y1: entries
+                .iter()
+                .map(|e| e.rect.y1)
+                .max()
+                .unwrap_or(legend_top),
+        };
+
+        // The time axis' marks, in rows under the tick labels.
+        let rows = match figure.mark_kind {
+            MarkKind::SetPoints => MARK_ROWS,
+            MarkKind::Altitudes => 1,
+        };
+        let mut centres = Vec::with_capacity(figure.marks.len());
+        let mut widths = Vec::with_capacity(figure.marks.len());
+        for mark in &figure.marks {
+            centres.push(time_pixel(mark.t, &figure.x_range, plot_x));
+            widths.push(text_size(&mark.text, MARK_FONT)?.0);
+        }
+        let placed = place_marks(&centres, &widths, plot_x, rows);
+        let mark_rows = placed
+            .iter()
+            .flatten()
+            .map(|(r, _)| r + 1)
+            .max()
+            .unwrap_or(0);
+        let x_label_area = TICK_LABEL_BAND + MARK_ROW * mark_rows as i32 + X_DESC_BAND;
+        let chart_top = legend.y1 + LEGEND_GAP;
+        let chart = PixelRect {
+            x0: MARGIN,
+            y0: chart_top,
+            x1: width - MARGIN,
+            y1: chart_top + PLOT_HEIGHT + x_label_area,
+        };
+        let plot_bottom = chart.y0 + PLOT_HEIGHT;
+        let marks = placed
+            .iter()
+            .zip(&widths)
+            .map(|(p, &w)| {
+                p.map(|(row, left)| {
+                    let y0 = plot_bottom + TICK_LABEL_BAND + MARK_ROW * row as i32;
+                    PixelRect {
+                        x0: left,
+                        y0,
+                        x1: left + w,
+                        y1: y0 + MARK_ROW,
+                    }
+                })
+            })
+            .collect();
+        Ok(Layout {
+            size: (FIGURE_WIDTH, (chart.y1 + MARGIN) as u32),
+            legend,
+            entries,
+            chart,
+            plot_x,
+            x_label_area,
+            marks,
+            mark_rows,
+        })
+    }
+}
+
+/// What was drawn where, for the tests: the plotting area, the legend band, the marks' text
+/// boxes and the pixel of every data point (line vertices and dots).
+struct Drawn {
+    plot: PixelRect,
+    legend: PixelRect,
+    marks: Vec<PixelRect>,
+    points: Vec<(i32, i32)>,
+}
+
+impl Drawn {
+    /// What the layout promises: no data point under the legend or outside the plotting
+    /// area, the legend and the marks off the plotting area, no two marks over each other.
+    /// `Err` names the first breach.
+    fn check(&self) -> Result<(), String> {
+        if self.legend.overlaps(&self.plot) {
+            return Err(format!(
+                "legend {:?} on the plot {:?}",
+                self.legend, self.plot
+            ));
+        }
+        if let Some(p) = self.points.iter().find(|&&p| self.legend.contains(p)) {
+            return Err(format!("point {p:?} under the legend {:?}", self.legend));
+        }
+        if let Some(p) = self.points.iter().find(|&&p| !self.plot.contains(p)) {
+            return Err(format!("point {p:?} outside the plot {:?}", self.plot));
+        }
+        for (i, a) in self.marks.iter().enumerate() {
+            if a.overlaps(&self.plot) {
+                return Err(format!("mark {a:?} on the plot"));
+            }
+            if let Some(b) = self.marks[i + 1..].iter().find(|b| a.overlaps(b)) {
+                return Err(format!("marks {a:?} and {b:?} overlap"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Figure {
     fn draw<DB: DrawingBackend>(
         &self,
+        layout: &Layout,
         root: &DrawingArea<DB, Shift>,
-    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    ) -> Result<Drawn, DrawingAreaErrorKind<DB::ErrorType>> {
         root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(root)
-            .caption(&self.caption, (FONT, 22))
-            .margin(14)
-            .x_label_area_size(48)
-            .y_label_area_size(72)
+        let width = layout.size.0 as i32;
+        root.draw_text(
+            &self.caption,
+            &(FONT, TITLE_FONT)
+                .into_font()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Center, VPos::Center)),
+            (width / 2, MARGIN + TITLE_HEIGHT / 2),
+        )?;
+        self.draw_legend(layout, root)?;
+
+        let c = layout.chart;
+        let area = root
+            .clone()
+            .shrink((c.x0, c.y0), ((c.x1 - c.x0) as u32, (c.y1 - c.y0) as u32));
+        let mut chart = ChartBuilder::on(&area)
+            .margin_right(RIGHT_GAP)
+            .x_label_area_size(layout.x_label_area)
+            .y_label_area_size(Y_LABEL_AREA)
             .build_cartesian_2d(self.x_range.clone(), self.y_range.clone())?;
         let y_decimals = decimals_for(self.y_range.end - self.y_range.start);
         let x_decimals = decimals_for(self.x_range.end - self.x_range.start);
@@ -312,6 +758,29 @@ impl Figure {
             .light_line_style(RGBColor(238, 238, 238))
             .bold_line_style(RGBColor(205, 205, 205))
             .draw()?;
+        let (px, py) = chart.plotting_area().get_pixel_range();
+        let plot = PixelRect {
+            x0: px.start,
+            y0: py.start,
+            x1: px.end,
+            y1: py.end,
+        };
+        let mut points: Vec<(i32, i32)> = Vec::new();
+
+        // Under the data: the lines between set points, continued as ticks between the
+        // marks' rows (not through the time axis' own tick labels).
+        let separator_bottom = plot.y1 + TICK_LABEL_BAND + MARK_ROW * layout.mark_rows as i32;
+        for &t in &self.separators {
+            chart.draw_series(LineSeries::new(
+                [(t, self.y_range.start), (t, self.y_range.end)],
+                SEPARATOR_COLOUR.stroke_width(1),
+            ))?;
+            let x = time_pixel(t, &self.x_range, layout.plot_x);
+            root.draw(&PathElement::new(
+                [(x, plot.y1 + TICK_LABEL_BAND - 3), (x, separator_bottom)],
+                SEPARATOR_COLOUR.stroke_width(1),
+            ))?;
+        }
         if self.zero_line {
             chart.draw_series(LineSeries::new(
                 [(self.x_range.start, 0.0), (self.x_range.end, 0.0)],
@@ -323,53 +792,117 @@ impl Figure {
         } else {
             2
         };
-        for m in self.methods.iter().filter(|m| !m.dots.is_empty()) {
+        for m in &self.methods {
             let colour = m.colour.mix(0.45);
-            let series = chart.draw_series(
+            chart.draw_series(
                 m.dots
                     .iter()
                     .map(|&p| Circle::new(p, dot_radius, colour.filled())),
             )?;
-            series
-                .label(format!("{}: raw pose", m.name))
-                .legend(move |(x, y)| Circle::new((x + 10, y), 3, colour.filled()));
+            points.extend(m.dots.iter().map(|p| chart.backend_coord(p)));
         }
-        for (k, piece) in self.truth.iter().enumerate() {
-            let series = chart.draw_series(LineSeries::new(
+        for piece in &self.truth {
+            chart.draw_series(LineSeries::new(
                 piece.iter().copied(),
                 TRUTH_COLOUR.stroke_width(2),
             ))?;
-            if k == 0 {
-                series.label("truth").legend(|(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], TRUTH_COLOUR.stroke_width(2))
-                });
-            }
+            points.extend(piece.iter().map(|p| chart.backend_coord(p)));
         }
         for m in &self.methods {
             let style = m.colour.stroke_width(2);
-            for (k, piece) in m.lines.iter().enumerate() {
+            for piece in &m.lines {
                 // A lone estimate (the paper's filter between missed detections) has no
                 // line to draw: a short dash of the line's colour marks it.
-                let series = if let [p] = piece.as_slice() {
-                    chart.draw_series(std::iter::once(EmptyElement::at(*p) + lone_mark(style)))?
+                if let [p] = piece.as_slice() {
+                    chart.draw_series(std::iter::once(EmptyElement::at(*p) + lone_mark(style)))?;
                 } else {
-                    chart.draw_series(LineSeries::new(piece.iter().copied(), style))?
-                };
-                if k == 0 {
-                    series
-                        .label(format!("{}: filtered", m.name))
-                        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+                    chart.draw_series(LineSeries::new(piece.iter().copied(), style))?;
                 }
+                points.extend(piece.iter().map(|p| chart.backend_coord(p)));
             }
         }
-        chart
-            .configure_series_labels()
-            .label_font((FONT, 15))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
-        root.present()
+
+        // The marks: each text in its box, under the time axis' tick labels.
+        let mark_style = (FONT, MARK_FONT)
+            .into_font()
+            .color(&RGBColor(40, 40, 40))
+            .pos(Pos::new(HPos::Left, VPos::Top));
+        for (mark, rect) in self.marks.iter().zip(&layout.marks) {
+            if let Some(rect) = rect {
+                root.draw_text(&mark.text, &mark_style, (rect.x0, rect.y0 + 1))?;
+            }
+        }
+        if layout.mark_rows > 0 {
+            let heading = match self.mark_kind {
+                MarkKind::SetPoints => "set point",
+                MarkKind::Altitudes => "altitude",
+            };
+            root.draw_text(
+                heading,
+                &(FONT, MARK_FONT)
+                    .into_font()
+                    .color(&NOTE_COLOUR)
+                    .pos(Pos::new(HPos::Right, VPos::Top)),
+                (plot.x0 - 8, plot.y1 + TICK_LABEL_BAND + 1),
+            )?;
+        }
+        root.present()?;
+        Ok(Drawn {
+            plot,
+            legend: layout.legend,
+            marks: layout.marks.iter().flatten().copied().collect(),
+            points,
+        })
+    }
+
+    /// The legend band: each entry's sample and text where the layout put them.
+    fn draw_legend<DB: DrawingBackend>(
+        &self,
+        layout: &Layout,
+        root: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        let font = (FONT, LEGEND_FONT).into_font();
+        for entry in &layout.entries {
+            let r = entry.rect;
+            let y = (r.y0 + r.y1) / 2;
+            let sample_end = r.x0 + LEGEND_SAMPLE;
+            let text_x = match entry.sample {
+                Sample::Truth => {
+                    root.draw(&PathElement::new(
+                        [(r.x0, y), (sample_end, y)],
+                        TRUTH_COLOUR.stroke_width(2),
+                    ))?;
+                    sample_end + 6
+                }
+                Sample::Method(colour) => {
+                    root.draw(&PathElement::new(
+                        [(r.x0, y), (sample_end, y)],
+                        colour.stroke_width(2),
+                    ))?;
+                    root.draw(&Circle::new(
+                        ((r.x0 + sample_end) / 2, y),
+                        4,
+                        colour.mix(0.45).filled(),
+                    ))?;
+                    sample_end + 6
+                }
+                Sample::Note => r.x0,
+            };
+            let colour = if entry.sample == Sample::Note {
+                NOTE_COLOUR
+            } else {
+                BLACK
+            };
+            root.draw_text(
+                &entry.text,
+                &font
+                    .clone()
+                    .color(&colour)
+                    .pos(Pos::new(HPos::Left, VPos::Center)),
+                (text_x, y),
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -397,26 +930,84 @@ mod tests {
     use nalgebra::Vector3;
     use touchdown_eval::MethodOutcome;
 
-    #[test]
-    fn pieces_break_at_missing_values_and_sequences() {
-        let frame = |index: usize, sequence: usize, v: Option<f64>| TraceFrame {
+    /// One method's outcome of a frame (the only place the tests build one).
+    fn outcome(raw: Option<Vector3<f64>>, estimate: Option<Vector3<f64>>) -> MethodOutcome {
+        MethodOutcome {
+            pose_found: raw.is_some(),
+            raw,
+            estimate,
+        }
+    }
+
+    fn frame(index: usize, t_us: u64, sequence: usize, label: Option<&str>) -> TraceFrame {
+        TraceFrame {
             index,
-            t_us: index as u64 * 100_000,
+            t_us,
             sequence,
             truth: None,
-            label: None,
-            outcomes: vec![MethodOutcome {
-                pose_found: v.is_some(),
-                raw: None,
-                estimate: v.map(|x| Vector3::new(x, 0.0, 0.0)),
-            }],
+            label: label.map(str::to_string),
+            outcomes: Vec::new(),
+        }
+    }
+
+    /// Draws `figure` into a pixel buffer; returns what went where.
+    fn draw_png(figure: &Figure) -> (Layout, Drawn) {
+        register_font().unwrap();
+        let layout = Layout::new(figure).unwrap();
+        let (w, h) = layout.size;
+        let mut pixels = vec![0u8; (w * h * 3) as usize];
+        let drawn = {
+            let root = BitMapBackend::with_buffer(&mut pixels, layout.size).into_drawing_area();
+            figure.draw(&layout, &root).unwrap()
+        };
+        (layout, drawn)
+    }
+
+    /// The paper scenario's shape: 18 set points of 16 frames at 30 Hz, sequences 1 s apart,
+    /// `methods` methods whose estimates and raw poses spread over the whole range (every
+    /// corner of the plot has data).
+    fn paper_like(methods: usize) -> Trace {
+        let labels = [
+            "z=5", "z=10", "z=15", "z=20", "z=25", "z=30", "z=40", "z=50", "x=1.2", "x=2.4",
+            "x=3.6", "x=4.8", "x=6", "y=1.2", "y=2.4", "y=3.6", "y=4.8", "y=6",
+        ];
+        let mut trace = Trace::new((0..methods).map(|m| format!("method number {m}")).collect());
+        let mut t_us = 0u64;
+        for (s, label) in labels.iter().enumerate() {
+            for k in 0..16 {
+                let index = trace.frames.len();
+                let mut f = frame(index, t_us, s, Some(label));
+                // A saw-tooth truth from 0 to 10 m in every set point, and estimates off by
+                // up to a metre either way: data at the top and bottom of both ends.
+                let z = if k % 2 == 0 { 0.0 } else { 10.0 };
+                f.truth = Some(Vector3::new(z, z, z));
+                f.outcomes = (0..methods)
+                    .map(|m| {
+                        let off = (m as f64 - methods as f64 / 2.0) * 0.1;
+                        let v = Vector3::repeat(z + off);
+                        outcome(Some(v), Some(v))
+                    })
+                    .collect();
+                trace.frames.push(f);
+                t_us += 33_333;
+            }
+            t_us += 1_000_000;
+        }
+        trace
+    }
+
+    #[test]
+    fn pieces_break_at_missing_values_and_sequences() {
+        let at = |index: usize, sequence: usize, v: Option<f64>| TraceFrame {
+            outcomes: vec![outcome(None, v.map(|x| Vector3::new(x, 0.0, 0.0)))],
+            ..frame(index, index as u64 * 100_000, sequence, None)
         };
         let frames = [
-            frame(0, 0, Some(1.0)),
-            frame(1, 0, Some(2.0)),
-            frame(2, 0, None),
-            frame(3, 0, Some(3.0)),
-            frame(4, 1, Some(4.0)),
+            at(0, 0, Some(1.0)),
+            at(1, 0, Some(2.0)),
+            at(2, 0, None),
+            at(3, 0, Some(3.0)),
+            at(4, 1, Some(4.0)),
         ];
         let p = pieces(&frames, 0.0, |f| f.outcomes[0].estimate.map(|e| e.x));
         let lengths: Vec<usize> = p.iter().map(Vec::len).collect();
@@ -431,5 +1022,223 @@ mod tests {
         assert!(r.end - r.start >= 1.0);
         let r = padded_range([2.0].into_iter(), 0.2);
         assert!(r.start < 2.0 && r.end > 2.0);
+    }
+
+    #[test]
+    fn set_point_runs_split_at_label_gaps_and_sequences() {
+        let frames = [
+            frame(0, 0, 0, Some("z=5")),
+            frame(1, 250_000, 0, Some("z=5")),
+            frame(2, 500_000, 0, None),
+            frame(3, 750_000, 0, Some("z=5")),
+            frame(4, 1_000_000, 0, Some("z=10")),
+            frame(5, 2_000_000, 1, Some("z=10")),
+            frame(6, 2_250_000, 1, Some("z=10")),
+        ];
+        let runs = set_point_runs(&frames, 0.0);
+        let got: Vec<(f64, f64, &str)> = runs
+            .iter()
+            .map(|r| (r.start, r.end, r.label.as_str()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (0.0, 0.25, "z=5"),
+                (0.75, 0.75, "z=5"),
+                (1.0, 1.0, "z=10"),
+                (2.0, 2.25, "z=10")
+            ]
+        );
+    }
+
+    #[test]
+    fn marks_never_overlap_and_drop_only_without_room() {
+        // Five 40-pixel texts 20 pixels apart in two rows: the first two take one row each,
+        // the third finds no room in either and is left out rather than drawn over another,
+        // the fourth and fifth fit again.
+        let placed = place_marks(&[100, 120, 140, 160, 180], &[40; 5], (0, 1000), 2);
+        let rows: Vec<Option<usize>> = placed.iter().map(|p| p.map(|(r, _)| r)).collect();
+        assert_eq!(rows, [Some(0), Some(1), None, Some(0), Some(1)]);
+        // Clamped inside the axis.
+        let placed = place_marks(&[2, 998], &[40, 40], (0, 1000), 1);
+        assert_eq!(placed, [Some((0, 0)), Some((0, 960))]);
+    }
+
+    /// The paper scenario's 18 set points all get their name on the time axis, readable (in
+    /// rows, none over another or over the plot), each inside its own set point's span, and
+    /// a separator between each two; the time axis spans the sequences' real times.
+    #[test]
+    fn paper_set_points_are_all_named_at_their_middle() {
+        let trace = paper_like(2);
+        let figure = Figure::new(&trace, Kind::Position, 2, "test");
+        assert_eq!(figure.mark_kind, MarkKind::SetPoints);
+        assert_eq!(figure.marks.len(), 18);
+        assert_eq!(figure.separators.len(), 17);
+        // 18 sequences of 15 frame periods and 17 one-second gaps.
+        let span = 18.0 * 15.0 * 0.033_333 + 17.0 * (1.0 + 0.033_333);
+        assert!(
+            (figure.x_range.end - span).abs() < 1e-6,
+            "{:?}",
+            figure.x_range
+        );
+        let (layout, drawn) = draw_png(&figure);
+        assert_eq!(drawn.marks.len(), 18, "every set point named");
+        assert_eq!(drawn.check(), Ok(()));
+        for (i, a) in drawn.marks.iter().enumerate() {
+            assert!(!a.overlaps(&drawn.plot), "name {i} on the plot");
+            assert!(a.y0 >= drawn.plot.y1, "name {i} above the axis");
+            for b in &drawn.marks[i + 1..] {
+                assert!(!a.overlaps(b), "names overlap: {a:?} {b:?}");
+            }
+        }
+        // Each name's centre lies between the separators either side of its set point.
+        let runs = set_point_runs(&trace.frames, 0.0);
+        for (k, (run, rect)) in runs.iter().zip(layout.marks.iter()).enumerate() {
+            let rect = rect.expect("placed");
+            let centre = (rect.x0 + rect.x1) / 2;
+            let lo = time_pixel(run.start - 0.5, &figure.x_range, layout.plot_x);
+            let hi = time_pixel(run.end + 0.5, &figure.x_range, layout.plot_x);
+            assert!(
+                lo <= centre && centre <= hi,
+                "name {k} at {centre}, span {lo}..{hi}"
+            );
+        }
+    }
+
+    /// The legend is a band of its own: no plotted point falls inside it, for data that fill
+    /// every corner of the plotting area, with 2, 8 and 12 methods (more methods than
+    /// colours: the legend takes more rows, nothing breaks).
+    #[test]
+    fn legend_never_covers_data() {
+        for methods in [2, 8, 12] {
+            let trace = paper_like(methods);
+            for (kind, axis) in [(Kind::Position, 0), (Kind::Error, 2)] {
+                let figure = Figure::new(&trace, kind, axis, "test");
+                let (layout, drawn) = draw_png(&figure);
+                assert_eq!(
+                    layout.entries.len(),
+                    methods + 1 + usize::from(kind == Kind::Position)
+                );
+                assert!(
+                    !drawn.legend.overlaps(&drawn.plot),
+                    "{methods}: legend on the plot"
+                );
+                for e in &layout.entries {
+                    assert!(
+                        e.rect.x1 <= FIGURE_WIDTH as i32 - MARGIN,
+                        "entry off the figure"
+                    );
+                }
+                let corners = [
+                    (drawn.plot.x0, drawn.plot.y0),
+                    (drawn.plot.x1 - 1, drawn.plot.y0),
+                    (drawn.plot.x0, drawn.plot.y1 - 1),
+                    (drawn.plot.x1 - 1, drawn.plot.y1 - 1),
+                ];
+                let near = |(cx, cy): (i32, i32)| {
+                    drawn
+                        .points
+                        .iter()
+                        .any(|&(x, y)| (x - cx).abs() < 60 && (y - cy).abs() < 60)
+                };
+                if kind == Kind::Position {
+                    assert!(corners.iter().all(|&c| near(c)), "data in every corner");
+                }
+                assert!(drawn.points.len() > 18 * 16 * methods);
+                for &p in &drawn.points {
+                    assert!(drawn.plot.contains(p), "{p:?} outside the plot");
+                    assert!(!drawn.legend.contains(p), "{p:?} under the legend");
+                }
+                assert_eq!(drawn.check(), Ok(()));
+            }
+        }
+    }
+
+    #[test]
+    fn time_axis_mapping_is_the_charts() {
+        // The marks are placed with `time_pixel` before the chart exists: it must agree with
+        // the chart's own mapping, or the names would drift off their set points.
+        let trace = paper_like(1);
+        let figure = Figure::new(&trace, Kind::Position, 0, "test");
+        register_font().unwrap();
+        let layout = Layout::new(&figure).unwrap();
+        let mut pixels = vec![0u8; (layout.size.0 * layout.size.1 * 3) as usize];
+        let root = BitMapBackend::with_buffer(&mut pixels, layout.size).into_drawing_area();
+        let c = layout.chart;
+        let area = root.shrink((c.x0, c.y0), ((c.x1 - c.x0) as u32, (c.y1 - c.y0) as u32));
+        let chart = ChartBuilder::on(&area)
+            .margin_right(RIGHT_GAP)
+            .x_label_area_size(layout.x_label_area)
+            .y_label_area_size(Y_LABEL_AREA)
+            .build_cartesian_2d(figure.x_range.clone(), figure.y_range.clone())
+            .unwrap();
+        for k in 0..=20 {
+            let t = figure.x_range.end * f64::from(k) / 20.0;
+            let ours = time_pixel(t, &figure.x_range, layout.plot_x);
+            let theirs = chart.backend_coord(&(t, figure.y_range.start)).0;
+            assert!((ours - theirs).abs() <= 1, "t {t}: {ours} vs {theirs}");
+        }
+    }
+
+    #[test]
+    fn landing_without_labels_gets_altitude_marks() {
+        // 30 s of descent from 40 m, one sequence, no labels.
+        let mut trace = Trace::new(vec!["ours".into()]);
+        for k in 0..900 {
+            let mut f = frame(k, k as u64 * 33_333, 0, None);
+            let z = 40.0 - 39.5 * k as f64 / 899.0;
+            f.truth = Some(Vector3::new(0.0, 0.0, z));
+            f.outcomes = vec![outcome(None, Some(Vector3::new(0.0, 0.0, z)))];
+            trace.frames.push(f);
+        }
+        let figure = Figure::new(&trace, Kind::Position, 2, "landing");
+        assert_eq!(figure.mark_kind, MarkKind::Altitudes);
+        assert!(figure.separators.is_empty());
+        let texts: Vec<&str> = figure.marks.iter().map(|m| m.text.as_str()).collect();
+        // Every 5 s (30 s in at most 10 round steps): 40 m at 0 s, about 33 m at 5 s, ...
+        assert_eq!(texts.first(), Some(&"40 m"));
+        assert_eq!(texts.len(), 6, "{texts:?}");
+        assert_eq!(texts[1], "33 m");
+        let (_, drawn) = draw_png(&figure);
+        assert_eq!(drawn.marks.len(), 6);
+    }
+
+    /// The files: six figures, PNG and SVG of each at the same size (one drawing code).
+    /// `TOUCHDOWN_PLOT_TEST_DIR` keeps them somewhere to look at.
+    #[test]
+    fn writes_png_and_svg_of_the_same_size() {
+        let dir = std::env::var_os("TOUCHDOWN_PLOT_TEST_DIR")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| {
+                std::env::temp_dir().join(format!("touchdown-plot-test-{}", std::process::id()))
+            });
+        let trace = paper_like(3);
+        let files = write_figures(&trace, &dir, "synthetic, 3 methods").unwrap();
+        assert_eq!(files.len(), 12);
+        for png in files
+            .iter()
+            .filter(|f| f.extension().is_some_and(|e| e == "png"))
+        {
+            let (w, h) = image::image_dimensions(png).unwrap();
+            assert_eq!(w, FIGURE_WIDTH);
+            let svg = std::fs::read_to_string(png.with_extension("svg")).unwrap();
+            assert!(
+                svg.contains(&format!("width=\"{w}\" height=\"{h}\"")),
+                "{}: the SVG is not {w}x{h}",
+                png.display()
+            );
+            assert!(svg.contains("\nz=50\n") && svg.contains("\nset point\n"));
+        }
+        if std::env::var_os("TOUCHDOWN_PLOT_TEST_DIR").is_none() {
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
+    }
+
+    #[test]
+    fn round_steps() {
+        assert_eq!(round_step(30.0, 10), 5.0);
+        assert_eq!(round_step(44.0, 10), 5.0);
+        assert_eq!(round_step(9.0, 10), 1.0);
+        assert_eq!(round_step(0.0, 10), 1.0);
     }
 }
