@@ -20,7 +20,7 @@
 use touchdown_core::camera::CameraModel;
 use touchdown_core::geometry::Point;
 
-use super::math::{from_columns, mul, mul_vec, transpose, Mat3, Vec3};
+use super::math::{from_columns, from_euler, mul, mul_vec, transpose, Mat3, Vec3};
 
 /// Newton iterations in `f64` after the core's `f32` undistortion.
 const POLISH_ITERATIONS: usize = 3;
@@ -220,6 +220,23 @@ impl CameraMount {
     pub fn downward() -> Self {
         CameraMount {
             rotation: from_columns([0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        }
+    }
+}
+
+impl CameraMount {
+    /// The downward mount turned by `roll_deg` about body x and `pitch_deg` about body y:
+    /// camera-to-body = `R_y(pitch) R_x(roll) downward` (a misaligned mount; the flight
+    /// effects of [`crate::effects`]). Zero angles give [`CameraMount::downward`] exactly.
+    pub fn misaligned(roll_deg: f64, pitch_deg: f64) -> Self {
+        let nominal = Self::downward();
+        if roll_deg == 0.0 && pitch_deg == 0.0 {
+            return nominal;
+        }
+        let roll = from_euler(roll_deg.to_radians(), 0.0, 0.0);
+        let pitch = from_euler(0.0, pitch_deg.to_radians(), 0.0);
+        CameraMount {
+            rotation: mul(&pitch, &mul(&roll, &nominal.rotation)),
         }
     }
 }

@@ -31,11 +31,23 @@
 //! that instant. Motion blur averages poses spread evenly over the exposure; their number
 //! follows how far the image moves during it (one sub-frame per half pixel, at most
 //! [`MAX_SUBFRAMES`]), so a camera that does not move gets exactly one, the truth pose.
+//!
+//! Rolling shutter (the camera's `line_time_us` > 0, [`effects`]): row `v` is exposed
+//! `(v - (height - 1) / 2) * line_time` after the frame's time, so the frame's time and truth
+//! are the middle row's exposure middle. Every row is rendered over its own poses (its own
+//! exposure window, shifted by its row time, with the vehicle moving and turning during the
+//! readout and the camera vibrating), a homography per row and sub-frame; every row gets the
+//! sub-frame count of the fastest-moving row. [`Simulator::marker_corners_rolling_shutter`]
+//! gives where the marker corners land in such a frame. The camera pose is the vehicle's
+//! through the true mount and the camera's vibration on it (camera-to-body =
+//! `vibration(t) mount`); [`Simulator::vehicle_attitude`] is the body's attitude alone, what
+//! an autopilot would measure.
 //! An exposure never spans a jump of the trajectory ([`trajectory::Profile::Jump`]): the
 //! part of it on the far side of the jump is cut off, so the frame sees only the side its
 //! middle (its truth) is on, never a double exposure of two places.
 
 pub mod camera;
+pub mod effects;
 pub mod math;
 mod noise;
 pub mod pad;
@@ -47,8 +59,9 @@ pub mod texture;
 pub mod trajectory;
 pub mod world;
 
-use camera::{CameraPose, RayMap};
-use math::matrix_to_quat;
+use camera::{CameraMount, CameraPose, RayMap};
+use math::{matrix_to_quat, mul, Quat};
+use raster::RowPoses;
 use scenario::Scenario;
 use touchdown_formats::image_io::GrayFrame;
 use world::World;
@@ -57,6 +70,14 @@ use world::World;
 pub const MAX_SUBFRAMES: usize = 24;
 /// Image motion per sub-frame, pixels.
 pub const SUBFRAME_STEP_PX: f64 = 0.5;
+/// Length of the pieces of an exposure whose image motion is summed when the camera
+/// vibrates, seconds: ten per cycle of the fastest (200 Hz) vibration, eight per 4 ms.
+pub const VIBRATION_MOTION_STEP_S: f64 = 0.0005;
+/// Rows, top to bottom, whose exposure's motion sets the sub-frame count with a rolling
+/// shutter.
+pub const MOTION_ROWS: usize = 9;
+/// Fixed-point steps of [`Simulator::marker_corners_rolling_shutter`].
+pub const ROLLING_SHUTTER_ITERATIONS: usize = 6;
 
 pub use touchdown_formats::recording::CameraTruth;
 
@@ -85,8 +106,11 @@ pub struct SimFrame {
     pub t_us: u64,
     /// The image.
     pub image: GrayFrame,
-    /// The camera pose at `t_us`.
+    /// The camera pose at `t_us` (with a rolling shutter: the middle row's exposure middle).
     pub truth: CameraTruth,
+    /// The vehicle's true attitude at `t_us`, body FRD to NED, without the camera's
+    /// vibration ([`Simulator::vehicle_attitude`]).
+    pub vehicle_attitude: Quat,
     /// Set-point label, if any.
     pub label: Option<String>,
     /// Sub-frames averaged for motion blur (1 = none).
@@ -142,10 +166,50 @@ impl Simulator {
         self.scenario.frames.len()
     }
 
-    /// The camera pose at `t` seconds.
+    /// The camera pose at `t` seconds: the vehicle's, through the (true) mount, turned by
+    /// the camera's vibration on it at `t`.
     pub fn camera_pose(&self, t: f64) -> CameraPose {
         let state = self.scenario.trajectory.state(t);
-        CameraPose::of_vehicle(state.position, &state.attitude, &self.scenario.mount)
+        let vibration = &self.scenario.vibration;
+        if vibration.is_none() {
+            return CameraPose::of_vehicle(state.position, &state.attitude, &self.scenario.mount);
+        }
+        let mount = CameraMount {
+            rotation: mul(&vibration.rotation(t), &self.scenario.mount.rotation),
+        };
+        CameraPose::of_vehicle(state.position, &state.attitude, &mount)
+    }
+
+    /// The vehicle's true attitude at `t` seconds: body FRD to NED (the simulator's NED:
+    /// north = pad +y, east = pad +x, down = pad -z), without the camera's vibration, as a
+    /// unit quaternion `[w, x, y, z]` with `w >= 0`.
+    pub fn vehicle_attitude(&self, t: f64) -> Quat {
+        matrix_to_quat(&self.scenario.trajectory.state(t).attitude)
+    }
+
+    /// Rolling shutter: the time from one row's exposure to the next row's, seconds (0 for
+    /// a global shutter), from the camera's `line_time_us`.
+    pub fn line_time_s(&self) -> f64 {
+        let line_us = f64::from(self.scenario.camera.model.line_time_us);
+        if line_us.is_finite() && line_us > 0.0 {
+            line_us * 1e-6
+        } else {
+            0.0
+        }
+    }
+
+    /// When row `row` (pixels from the top, fractional rows allowed) of the frame at `t` is
+    /// exposed: `t + (row - (height - 1) / 2) * line_time`, the middle of its exposure, held
+    /// on this side of the trajectory's jumps (the crate docs: no frame spans one).
+    pub fn row_time(&self, t: f64, row: f64) -> f64 {
+        let line = self.line_time_s();
+        if line == 0.0 {
+            return t;
+        }
+        let middle = 0.5 * (self.scenario.camera.height() as f64 - 1.0);
+        let (start, end) = self.scenario.trajectory.continuous_span(t);
+        let last_before_end = (end - trajectory::JUMP_GUARD_S).max(t);
+        (t + (row - middle) * line).min(last_before_end).max(start)
     }
 
     /// How far (pixels) the image moves between two poses: the ground points seen at a 3x3
@@ -172,49 +236,152 @@ impl Simulator {
         worst
     }
 
+    /// How far the image moves during an exposure from `open` to `close`. A smooth flight
+    /// moves along a straight line over a few milliseconds, so the motion from the first
+    /// pose to the last is the motion; a vibrating camera swings back and forth within an
+    /// exposure (a 100 Hz jitter turns around in 5 ms), so its motion is the path through
+    /// poses [`VIBRATION_MOTION_STEP_S`] apart.
+    fn exposure_motion(&self, open: f64, close: f64) -> f64 {
+        if self.scenario.vibration.is_none() {
+            return self.image_motion(&self.camera_pose(open), &self.camera_pose(close));
+        }
+        let steps = ((close - open) / VIBRATION_MOTION_STEP_S)
+            .ceil()
+            .clamp(1.0, 256.0) as usize;
+        let poses: Vec<CameraPose> = (0..=steps)
+            .map(|k| self.camera_pose(open + (close - open) * k as f64 / steps as f64))
+            .collect();
+        self.image_path(&poses)
+    }
+
+    /// How far (pixels) the image travels through `poses`: the ground points seen at a 3x3
+    /// grid of image points from the first pose, followed through the others; the longest
+    /// of their paths.
+    fn image_path(&self, poses: &[CameraPose]) -> f64 {
+        let cam = &self.scenario.camera;
+        let (w, h) = (cam.width() as f64, cam.height() as f64);
+        let Some(first) = poses.first() else {
+            return 0.0;
+        };
+        let ha = first.ground_homography();
+        let mut worst = 0.0f64;
+        for fy in [0.0, 0.5, 1.0] {
+            for fx in [0.0, 0.5, 1.0] {
+                let (u, v) = (fx * (w - 1.0), fy * (h - 1.0));
+                let Some((x, y)) = cam.undistort(u, v) else {
+                    continue;
+                };
+                let Some((gx, gy)) = crate::math::apply_homography(&ha, x, y) else {
+                    continue;
+                };
+                let mut previous = [u, v];
+                let mut path = 0.0;
+                for pose in poses.iter().skip(1) {
+                    if let Some(p) = cam.project(pose.to_camera([gx, gy, 0.0])) {
+                        path +=
+                            ((p[0] - previous[0]).powi(2) + (p[1] - previous[1]).powi(2)).sqrt();
+                        previous = p;
+                    }
+                }
+                worst = worst.max(path);
+            }
+        }
+        worst
+    }
+
     /// The exposure of the frame at `t`, seconds: `exposure_time_s` centred on `t`, cut at
-    /// the trajectory's jumps on either side (see the crate docs).
+    /// the trajectory's jumps on either side (see the crate docs). With a rolling shutter
+    /// this is the middle row's; [`Simulator::row_exposure_window`] gives any row's.
     pub fn exposure_window(&self, t: f64) -> (f64, f64) {
+        self.exposure_window_at(t, t)
+    }
+
+    /// The exposure of row `row` of the frame at `t`: `exposure_time_s` centred on
+    /// [`Simulator::row_time`], cut at the jumps around the frame's time.
+    pub fn row_exposure_window(&self, t: f64, row: f64) -> (f64, f64) {
+        self.exposure_window_at(t, self.row_time(t, row))
+    }
+
+    fn exposure_window_at(&self, t: f64, middle: f64) -> (f64, f64) {
         let e = self.scenario.exposure_time_s.max(0.0);
         let (start, end) = self.scenario.trajectory.continuous_span(t);
         let last_before_end = end - trajectory::JUMP_GUARD_S;
         (
-            (t - 0.5 * e).max(start),
-            (t + 0.5 * e).min(last_before_end).max(t),
+            (middle - 0.5 * e).max(start),
+            (middle + 0.5 * e).min(last_before_end).max(middle),
         )
     }
 
-    /// The poses averaged for the frame at `t` (one when the image does not move).
-    pub fn exposure_poses(&self, t: f64) -> Vec<CameraPose> {
-        let (open, close) = self.exposure_window(t);
-        let e = close - open;
-        let middle = self.camera_pose(t);
-        if e <= 0.0 {
-            return vec![middle];
+    /// Sub-frames averaged for the frame at `t`: one per [`SUBFRAME_STEP_PX`] of image
+    /// motion during the exposure (at most [`MAX_SUBFRAMES`]), the worst of the rows
+    /// [`MOTION_ROWS`] evenly spread from top to bottom with a rolling shutter (every row
+    /// gets as many, so the blur is sampled alike over the frame).
+    pub fn subframe_count(&self, t: f64) -> usize {
+        let h = self.scenario.camera.height();
+        let middle = 0.5 * (h as f64 - 1.0);
+        let rows: Vec<f64> = if self.line_time_s() == 0.0 || h < 2 {
+            vec![middle]
+        } else {
+            (0..MOTION_ROWS)
+                .map(|k| k as f64 / (MOTION_ROWS - 1) as f64 * (h - 1) as f64)
+                .collect()
+        };
+        let mut motion = 0.0f64;
+        for row in rows {
+            let (open, close) = self.row_exposure_window(t, row);
+            if close - open > 0.0 {
+                motion = motion.max(self.exposure_motion(open, close));
+            }
         }
-        let start = self.camera_pose(open);
-        let end = self.camera_pose(close);
-        let motion = self.image_motion(&start, &end);
-        let n = ((motion / SUBFRAME_STEP_PX).ceil() as usize).clamp(1, MAX_SUBFRAMES);
-        if n == 1 {
-            return vec![middle];
+        ((motion / SUBFRAME_STEP_PX).ceil() as usize).clamp(1, MAX_SUBFRAMES)
+    }
+
+    /// The `n` poses averaged for row `row` of the frame at `t`: evenly spread over its
+    /// exposure, or the pose at its time alone for `n = 1`.
+    pub fn row_exposure_poses(&self, t: f64, row: f64, n: usize) -> Vec<CameraPose> {
+        let (open, close) = self.row_exposure_window(t, row);
+        let e = close - open;
+        if n <= 1 || e <= 0.0 {
+            return vec![self.camera_pose(self.row_time(t, row)); n.max(1)];
         }
         (0..n)
             .map(|k| self.camera_pose(open + (k as f64 + 0.5) / n as f64 * e))
             .collect()
     }
 
+    /// The poses averaged for the frame at `t` (one when the image does not move); with a
+    /// rolling shutter, the middle row's.
+    pub fn exposure_poses(&self, t: f64) -> Vec<CameraPose> {
+        let middle = 0.5 * (self.scenario.camera.height() as f64 - 1.0);
+        self.row_exposure_poses(t, middle, self.subframe_count(t))
+    }
+
+    /// The poses every row of the frame at `t` is averaged over.
+    pub fn row_poses(&self, t: f64) -> RowPoses {
+        let n = self.subframe_count(t);
+        if self.line_time_s() == 0.0 {
+            return RowPoses::global(self.exposure_poses(t));
+        }
+        let h = self.scenario.camera.height();
+        let mut poses = Vec::with_capacity(h * n);
+        for y in 0..h {
+            poses.extend(self.row_exposure_poses(t, y as f64, n));
+        }
+        RowPoses::per_row(n, poses)
+    }
+
     /// Renders frame `index`; `None` past the end.
     pub fn render(&self, index: usize) -> Option<SimFrame> {
         let plan = self.scenario.frames.get(index)?;
         let t = plan.t_us as f64 * 1e-6;
-        let poses = self.exposure_poses(t);
+        let poses = self.row_poses(t);
+        let subframes = poses.subframes();
         let middle = self.camera_pose(t);
         let s = &self.scenario;
         let (w, h) = (s.camera.width(), s.camera.height());
         // The sub-frames already average over the footprint's motion: fewer sub-samples each.
-        let supersampling = if poses.len() > 1 {
-            ((s.supersampling as f64 / (poses.len() as f64).sqrt()).round() as usize).max(2)
+        let supersampling = if subframes > 1 {
+            ((s.supersampling as f64 / (subframes as f64).sqrt()).round() as usize).max(2)
         } else {
             s.supersampling
         };
@@ -249,8 +416,9 @@ impl Simulator {
                 pixels,
             },
             truth: truth_of_pose(&middle),
+            vehicle_attitude: self.vehicle_attitude(t),
             label: plan.label.clone(),
-            subframes: poses.len(),
+            subframes,
         })
     }
 
@@ -269,6 +437,41 @@ impl Simulator {
                 let p2 = self.scenario.camera.project(pose.to_camera(c[2]))?;
                 let p3 = self.scenario.camera.project(pose.to_camera(c[3]))?;
                 Some([p0, p1, p2, p3])
+            })
+            .collect()
+    }
+}
+
+impl Simulator {
+    /// Where each pad marker's outer corners appear in the frame at `t` with the rolling
+    /// shutter: each corner at the camera pose of the row it lands on (the row's exposure
+    /// middle, [`Simulator::row_time`]), found by [`ROLLING_SHUTTER_ITERATIONS`] fixed-point
+    /// steps from the frame-time pose (the row moves by the image's row speed times the line
+    /// time per step, a few hundredths of a pixel per pixel: the steps converge to far below
+    /// a thousandth of a pixel). Equal to [`Simulator::marker_corners`] of
+    /// [`Simulator::camera_pose`]`(t)` for a global shutter. `None` for a marker with a
+    /// corner behind the camera.
+    pub fn marker_corners_rolling_shutter(&self, t: f64) -> Vec<Option<[[f64; 2]; 4]>> {
+        let frame_pose = self.camera_pose(t);
+        let rolling = self.line_time_s() > 0.0;
+        let camera = &self.scenario.camera;
+        let see = |corner: math::Vec3| -> Option<[f64; 2]> {
+            let mut p = camera.project(frame_pose.to_camera(corner))?;
+            if rolling {
+                for _ in 0..ROLLING_SHUTTER_ITERATIONS {
+                    let pose = self.camera_pose(self.row_time(t, p[1]));
+                    p = camera.project(pose.to_camera(corner))?;
+                }
+            }
+            Some(p)
+        };
+        self.world
+            .pad
+            .markers
+            .iter()
+            .map(|m| {
+                let c = m.corners();
+                Some([see(c[0])?, see(c[1])?, see(c[2])?, see(c[3])?])
             })
             .collect()
     }

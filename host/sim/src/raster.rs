@@ -10,50 +10,93 @@
 //! the texture has no detail finer than the footprint left.
 //!
 //! Motion blur averages the renders of several poses spread over the exposure; how many is
-//! decided by the caller from how far the image moves ([`super::Simulator`]). Rows are split
-//! between threads; every pixel is computed independently, so the result does not depend
-//! on the thread count.
+//! decided by the caller from how far the image moves ([`super::Simulator`]). With a rolling
+//! shutter every row has its own poses ([`RowPoses`]), each row's pixel corners mapped by
+//! its own homographies: a homography per row and sub-frame is cheap next to the pixels.
+//! Rows are split between threads; every pixel is computed independently, so the result
+//! does not depend on the thread count.
 
 use super::camera::{CameraPose, RayMap};
 use super::world::{Footprint, World, SKY_RADIANCE};
 use crate::math::apply_homography;
 
-/// Renders the mean radiance over `poses` into a `width x height` buffer.
+/// The sub-frame poses each row of a frame is averaged over.
+///
+/// A global shutter exposes every row over the same poses ([`RowPoses::global`]); a rolling
+/// shutter exposes each row at its own time, so each row has its own list, all of one length
+/// ([`RowPoses::per_row`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RowPoses {
+    poses: Vec<CameraPose>,
+    /// Poses per row when every row has its own; `None` when all rows share `poses`.
+    per_row: Option<usize>,
+}
+
+impl RowPoses {
+    /// Every row over the same `poses`.
+    pub fn global(poses: Vec<CameraPose>) -> Self {
+        RowPoses {
+            poses,
+            per_row: None,
+        }
+    }
+
+    /// Row `y` over `poses[y * per_row .. (y + 1) * per_row]`.
+    pub fn per_row(per_row: usize, poses: Vec<CameraPose>) -> Self {
+        RowPoses {
+            poses,
+            per_row: Some(per_row.max(1)),
+        }
+    }
+
+    /// The poses of row `y` (empty past the last row given).
+    pub fn row(&self, y: usize) -> &[CameraPose] {
+        match self.per_row {
+            None => &self.poses,
+            Some(n) => self.poses.get(y * n..(y + 1) * n).unwrap_or(&[]),
+        }
+    }
+
+    /// Sub-frames averaged per row (the first row's count; all rows have the same).
+    pub fn subframes(&self) -> usize {
+        self.row(0).len()
+    }
+}
+
+/// Renders the mean radiance of each row over its poses into a `width x height` buffer.
 pub fn render_radiance(
     world: &World,
     rays: &RayMap,
     width: usize,
     height: usize,
-    poses: &[CameraPose],
+    poses: &RowPoses,
     supersampling: usize,
     threads: usize,
 ) -> Vec<f32> {
     let mut out = vec![0.0f32; width * height];
-    if width == 0 || height == 0 || poses.is_empty() {
+    if width == 0 || height == 0 || poses.row(0).is_empty() {
         return out;
     }
     let threads = threads.clamp(1, height);
     let rows_per_band = height.div_ceil(threads);
-    let weight = 1.0 / poses.len() as f32;
     std::thread::scope(|scope| {
         for (band, chunk) in out.chunks_mut(rows_per_band * width).enumerate() {
             let y0 = band * rows_per_band;
             let mut job = move || {
                 let rows = chunk.len() / width;
-                let mut scratch = vec![0.0f32; chunk.len()];
-                for pose in poses {
-                    render_rows(
+                match poses.per_row {
+                    None => render_band_global(
                         world,
                         rays,
                         width,
                         y0,
                         rows,
-                        pose,
+                        &poses.poses,
                         supersampling,
-                        &mut scratch,
-                    );
-                    for (o, s) in chunk.iter_mut().zip(&scratch) {
-                        *o += weight * s;
+                        chunk,
+                    ),
+                    Some(_) => {
+                        render_band_rolling(world, rays, width, y0, poses, supersampling, chunk)
                     }
                 }
             };
@@ -67,6 +110,103 @@ pub fn render_radiance(
     out
 }
 
+/// A band of rows that all share `poses`: one pose at a time over the whole band, each
+/// mapped row of pixel corners used as the bottom of one row and the top of the next.
+#[allow(clippy::too_many_arguments)]
+fn render_band_global(
+    world: &World,
+    rays: &RayMap,
+    width: usize,
+    y0: usize,
+    rows: usize,
+    poses: &[CameraPose],
+    supersampling: usize,
+    chunk: &mut [f32],
+) {
+    let weight = 1.0 / poses.len() as f32;
+    let mut scratch = vec![0.0f32; chunk.len()];
+    let mut top: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
+    let mut bottom: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
+    for pose in poses {
+        let h = pose.ground_homography();
+        map_corner_row(&mut top, rays, &h, width, y0);
+        for r in 0..rows {
+            let y = y0 + r;
+            map_corner_row(&mut bottom, rays, &h, width, y + 1);
+            let row_out = scratch
+                .get_mut(r * width..(r + 1) * width)
+                .unwrap_or(&mut []);
+            shade_row(
+                world,
+                rays,
+                &h,
+                width,
+                y,
+                &top,
+                &bottom,
+                supersampling,
+                row_out,
+            );
+            std::mem::swap(&mut top, &mut bottom);
+        }
+        for (o, s) in chunk.iter_mut().zip(&scratch) {
+            *o += weight * s;
+        }
+    }
+}
+
+/// A band of rows each exposed over its own poses (a rolling shutter): row by row, each
+/// pose's homography mapping the row's top and bottom pixel corners.
+fn render_band_rolling(
+    world: &World,
+    rays: &RayMap,
+    width: usize,
+    y0: usize,
+    poses: &RowPoses,
+    supersampling: usize,
+    chunk: &mut [f32],
+) {
+    let mut scratch = vec![0.0f32; width];
+    let mut top: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
+    let mut bottom: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
+    for (r, row_out) in chunk.chunks_mut(width).enumerate() {
+        let y = y0 + r;
+        let row_poses = poses.row(y);
+        let weight = 1.0 / row_poses.len().max(1) as f32;
+        for pose in row_poses {
+            let h = pose.ground_homography();
+            map_corner_row(&mut top, rays, &h, width, y);
+            map_corner_row(&mut bottom, rays, &h, width, y + 1);
+            shade_row(
+                world,
+                rays,
+                &h,
+                width,
+                y,
+                &top,
+                &bottom,
+                supersampling,
+                &mut scratch,
+            );
+            for (o, s) in row_out.iter_mut().zip(&scratch) {
+                *o += weight * s;
+            }
+        }
+    }
+}
+
+/// The ground points of pixel-corner row `j` through `h`.
+fn map_corner_row(
+    out: &mut Vec<Option<(f64, f64)>>,
+    rays: &RayMap,
+    h: &[[f64; 3]; 3],
+    width: usize,
+    j: usize,
+) {
+    out.clear();
+    out.extend((0..=width).map(|i| ground(h, rays.corner(i, j))));
+}
+
 /// Ground point of a normalised ray, `None` for rays that miss the ground or failed to
 /// undistort.
 #[inline]
@@ -77,65 +217,58 @@ fn ground(h: &[[f64; 3]; 3], ray: [f64; 2]) -> Option<(f64, f64)> {
     apply_homography(h, ray[0], ray[1])
 }
 
+/// The radiance of pixel row `y` through `h`, from the ground points of its top and bottom
+/// pixel corners.
 #[allow(clippy::too_many_arguments)]
-fn render_rows(
+fn shade_row(
     world: &World,
     rays: &RayMap,
+    h: &[[f64; 3]; 3],
     width: usize,
-    y0: usize,
-    rows: usize,
-    pose: &CameraPose,
+    y: usize,
+    top: &[Option<(f64, f64)>],
+    bottom: &[Option<(f64, f64)>],
     supersampling: usize,
     out: &mut [f32],
 ) {
-    let h = pose.ground_homography();
     let s = supersampling.max(1);
     let fine = 1.0 / (s * s) as f64;
-    let mut top: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
-    let mut bottom: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
-    let map_row = |row: &mut Vec<Option<(f64, f64)>>, j: usize| {
-        row.clear();
-        row.extend((0..=width).map(|i| ground(&h, rays.corner(i, j))));
-    };
-    map_row(&mut top, y0);
-    for r in 0..rows {
-        let y = y0 + r;
-        map_row(&mut bottom, y + 1);
-        for x in 0..width {
-            let corners = [top[x], top[x + 1], bottom[x + 1], bottom[x]];
-            let value = match corners {
-                [Some(a), Some(b), Some(c), Some(d)] => {
-                    let quad = [a, b, c, d];
-                    let centre = (
-                        0.25 * (a.0 + b.0 + c.0 + d.0),
-                        0.25 * (a.1 + b.1 + c.1 + d.1),
-                    );
-                    let footprint_m = dist(a, b).max(dist(a, d)).max(dist(b, c));
-                    let ground_albedo = || world.ground.albedo(centre.0, centre.1, footprint_m);
-                    match (world.footprint(&quad), world.footprint_illumination(&quad)) {
-                        (Footprint::Uniform(albedo), Some(light)) => {
-                            let albedo = albedo.unwrap_or_else(ground_albedo);
-                            (f64::from(albedo) * light) as f32
-                        }
-                        _ => supersample(world, rays, &h, x, y, s, fine, ground_albedo()),
+    let corner = |row: &[Option<(f64, f64)>], i: usize| row.get(i).copied().flatten();
+    for (x, o) in out.iter_mut().enumerate().take(width) {
+        let corners = [
+            corner(top, x),
+            corner(top, x + 1),
+            corner(bottom, x + 1),
+            corner(bottom, x),
+        ];
+        *o = match corners {
+            [Some(a), Some(b), Some(c), Some(d)] => {
+                let quad = [a, b, c, d];
+                let centre = (
+                    0.25 * (a.0 + b.0 + c.0 + d.0),
+                    0.25 * (a.1 + b.1 + c.1 + d.1),
+                );
+                let footprint_m = dist(a, b).max(dist(a, d)).max(dist(b, c));
+                let ground_albedo = || world.ground.albedo(centre.0, centre.1, footprint_m);
+                match (world.footprint(&quad), world.footprint_illumination(&quad)) {
+                    (Footprint::Uniform(albedo), Some(light)) => {
+                        let albedo = albedo.unwrap_or_else(ground_albedo);
+                        (f64::from(albedo) * light) as f32
                     }
+                    _ => supersample(world, rays, h, x, y, s, fine, ground_albedo()),
                 }
-                // Part of the footprint sees the sky (or lies outside the lens model): per
-                // sample, with the texture taken where the pixel does see the ground.
-                _ => {
-                    let texture = corners
-                        .iter()
-                        .flatten()
-                        .next()
-                        .map_or(0.0, |p| world.ground.albedo(p.0, p.1, 1.0));
-                    supersample(world, rays, &h, x, y, s, fine, texture)
-                }
-            };
-            if let Some(o) = out.get_mut(r * width + x) {
-                *o = value;
             }
-        }
-        std::mem::swap(&mut top, &mut bottom);
+            // Part of the footprint sees the sky (or lies outside the lens model): per
+            // sample, with the texture taken where the pixel does see the ground.
+            _ => {
+                let texture = corners
+                    .iter()
+                    .flatten()
+                    .next()
+                    .map_or(0.0, |p| world.ground.albedo(p.0, p.1, 1.0));
+                supersample(world, rays, h, x, y, s, fine, texture)
+            }
+        };
     }
 }
 

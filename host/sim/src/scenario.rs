@@ -21,10 +21,15 @@
 //! where the paper's experiment hovers: the evaluation's in-memory paper geometry
 //! (`touchdown_eval::paper_geometry`) hovers at the same points.
 //!
+//! Every named scenario is rendered without the flight effects of [`crate::effects`] (a
+//! global shutter on a rigid, aligned mount), so tests built on them keep their meaning;
+//! [`Scenario::apply_effects`] adds the rolling shutter, vibration and mount misalignment.
+//!
 //! Frames carry set-point labels where the scenario has set points (`z=5`, `x=1.2`,
 //! `hover=3`); the paper's tables group frames by them.
 
 use crate::camera::{CameraMount, SimCamera};
+use crate::effects::Vibration;
 use crate::math::Vec3;
 use crate::pad::PrintedPad;
 use crate::sensor::{Exposure, Optics, Sensor};
@@ -65,8 +70,10 @@ pub struct Scenario {
     pub seed: u64,
     /// The camera.
     pub camera: SimCamera,
-    /// How it is mounted.
+    /// How it is mounted: the true mount (misaligned by [`Scenario::apply_effects`]).
     pub mount: CameraMount,
+    /// How the camera vibrates on its mount (none unless [`Scenario::apply_effects`]).
+    pub vibration: Vibration,
     /// The pad.
     pub pad: PrintedPad,
     /// The ground around the pad.
@@ -204,6 +211,7 @@ impl Scenario {
             seed,
             camera,
             mount: CameraMount::downward(),
+            vibration: Vibration::none(),
             pad,
             ground: GroundKind::Grass,
             lighting: Lighting::daylight(),

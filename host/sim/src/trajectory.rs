@@ -77,6 +77,14 @@ impl Wobble {
         Wobble { terms }
     }
 
+    /// A wobble of given sines: per channel (x, y, z position in metres; roll, pitch, yaw
+    /// in radians), three `(amplitude, frequency Hz, phase radians)` terms. A test's exact
+    /// motion: a slow sine through zero turns the vehicle at `amplitude * 2 pi frequency`
+    /// rad/s there.
+    pub fn from_terms(terms: [[(f64, f64, f64); 3]; 6]) -> Self {
+        Wobble { terms }
+    }
+
     fn channel(&self, channel: usize, t: f64) -> f64 {
         self.terms.get(channel).map_or(0.0, |row| {
             row.iter()

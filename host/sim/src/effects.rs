@@ -1,0 +1,237 @@
+//! The error sources of a real flight that sit between the vehicle and its camera: the
+//! rolling shutter's readout, the camera's vibration on its mount, and the mount's
+//! misalignment. One struct, [`FlightEffects`], sets all three on a [`Scenario`].
+//!
+//! - **Rolling shutter**: the sensor exposes its rows one after another; row `v` is exposed
+//!   `(v - (height - 1) / 2) * line_time_us` after the frame's time (the contract's
+//!   `camera.toml` `line_time_us`), so a camera that moves or turns during the readout sees
+//!   the pad skewed. The simulator renders every row at its own time ([`crate::Simulator`]).
+//! - **Vibration** ([`Vibration`]): the camera turning on its mount relative to the body
+//!   (mount flex driven by the motors), 50-200 Hz: the autopilot's attitude does not see it,
+//!   the image does (and, with a rolling shutter, as a wobble of the rows).
+//! - **Mount misalignment**: the camera is not screwed on exactly along the body axes. The
+//!   true mount is the nominal downward one turned by `mount_roll_deg` about body x and
+//!   `mount_pitch_deg` about body y: camera-to-body = `R_y(pitch) R_x(roll) nominal`
+//!   ([`CameraMount::misaligned`]). The board believes the nominal mount unless calibrated.
+//!
+//! [`Scenario::named`] builds scenarios without any of these (so the tests that use them
+//! keep their meaning); [`Scenario::apply_effects`] adds them, as `touchdown simulate` and
+//! the replay do.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::camera::CameraMount;
+use crate::math::{from_euler, Mat3, IDENTITY};
+use crate::scenario::Scenario;
+
+/// Lowest vibration frequency drawn, Hz.
+pub const VIBRATION_MIN_HZ: f64 = 50.0;
+/// Highest vibration frequency drawn, Hz.
+pub const VIBRATION_MAX_HZ: f64 = 200.0;
+/// Sinusoids per axis of the vibration.
+pub const VIBRATION_TERMS: usize = 3;
+
+/// The flight effects a scenario is rendered with; every term 0 turns it off.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlightEffects {
+    /// Time from the first row's exposure to the last one's, milliseconds (0 = global
+    /// shutter).
+    pub readout_ms: f64,
+    /// RMS of the camera's vibration on its mount, degrees, per body axis.
+    pub vibration_deg: f64,
+    /// Mount misalignment about body x (roll), degrees.
+    pub mount_roll_deg: f64,
+    /// Mount misalignment about body y (pitch), degrees.
+    pub mount_pitch_deg: f64,
+}
+
+impl FlightEffects {
+    /// A small multicopter with the board camera:
+    /// - readout 30.5 ms: the OV7725 at 30 fps clocks 525 lines of 63.5 us per frame (its
+    ///   datasheet's VGA timing), 480 of them active, so the active rows take 30.5 ms;
+    /// - vibration 0.15 degrees RMS per axis: a camera on soft (rubber or foam) dampers,
+    ///   whose residual jitter at the motors' frequencies is a few tenths of a degree peak;
+    /// - mount roll 1.2 and pitch -1.6 degrees (2.0 degrees in all): a mount printed and
+    ///   screwed on by hand, with nothing aligning it to the flight controller's axes.
+    pub fn typical() -> Self {
+        FlightEffects {
+            readout_ms: 30.5,
+            vibration_deg: 0.15,
+            mount_roll_deg: 1.2,
+            mount_pitch_deg: -1.6,
+        }
+    }
+
+    /// None of the effects: a global shutter on a rigid, exactly aligned mount.
+    pub fn none() -> Self {
+        FlightEffects {
+            readout_ms: 0.0,
+            vibration_deg: 0.0,
+            mount_roll_deg: 0.0,
+            mount_pitch_deg: 0.0,
+        }
+    }
+}
+
+impl Default for FlightEffects {
+    fn default() -> Self {
+        Self::typical()
+    }
+}
+
+impl Scenario {
+    /// Renders this scenario with `effects`: the camera's `line_time_us` is the readout over
+    /// its rows (`readout_ms * 1000 / height`), the vibration is seeded from the scenario's
+    /// seed, and the mount is the nominal downward one misaligned by the effects' angles.
+    /// Applying [`FlightEffects::none`] leaves a scenario of [`Scenario::named`] unchanged.
+    pub fn apply_effects(&mut self, effects: &FlightEffects) {
+        let height = self.camera.height().max(1) as f64;
+        let readout_us = effects.readout_ms.max(0.0) * 1000.0;
+        self.camera.model.line_time_us = (readout_us / height) as f32;
+        self.vibration = Vibration::new(
+            effects.vibration_deg,
+            self.seed ^ 0x7669_6272_6174_696f, // "vibratio"
+        );
+        self.mount = CameraMount::misaligned(effects.mount_roll_deg, effects.mount_pitch_deg);
+    }
+}
+
+/// The camera's rotation on its mount: per body axis (x, y, z) a sum of
+/// [`VIBRATION_TERMS`] sinusoids with seeded frequencies in
+/// [`VIBRATION_MIN_HZ`]..[`VIBRATION_MAX_HZ`], seeded phases and amplitudes scaled so that
+/// each axis's RMS (over a long time) is exactly the one asked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Vibration {
+    /// Per body axis: (amplitude radians, frequency Hz, phase radians).
+    terms: [[(f64, f64, f64); VIBRATION_TERMS]; 3],
+}
+
+impl Default for Vibration {
+    fn default() -> Self {
+        Self::none()
+    }
+}
+
+impl Vibration {
+    /// No vibration: the camera sits still on its mount.
+    pub fn none() -> Self {
+        Vibration {
+            terms: [[(0.0, 0.0, 0.0); VIBRATION_TERMS]; 3],
+        }
+    }
+
+    /// Vibration of `rms_deg` RMS per body axis (0 or less: none), drawn from `seed`.
+    pub fn new(rms_deg: f64, seed: u64) -> Self {
+        if !(rms_deg > 0.0 && rms_deg.is_finite()) {
+            return Self::none();
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut terms = [[(0.0, 0.0, 0.0); VIBRATION_TERMS]; 3];
+        for axis in terms.iter_mut() {
+            for term in axis.iter_mut() {
+                let weight = rng.random_range(0.5..1.5);
+                let f = rng.random_range(VIBRATION_MIN_HZ..VIBRATION_MAX_HZ);
+                let phase = rng.random_range(0.0..std::f64::consts::TAU);
+                *term = (weight, f, phase);
+            }
+            // A sum of sines of distinct frequencies has mean square sum(a^2) / 2.
+            let mean_square: f64 = axis.iter().map(|t| 0.5 * t.0 * t.0).sum();
+            let k = rms_deg.to_radians() / mean_square.sqrt();
+            for term in axis.iter_mut() {
+                term.0 *= k;
+            }
+        }
+        Vibration { terms }
+    }
+
+    /// Whether the camera moves on its mount at all.
+    pub fn is_none(&self) -> bool {
+        self.terms.iter().flatten().all(|t| t.0 == 0.0)
+    }
+
+    /// The frequencies of every term, Hz, per body axis.
+    pub fn frequencies(&self) -> [[f64; VIBRATION_TERMS]; 3] {
+        self.terms.map(|axis| axis.map(|t| t.1))
+    }
+
+    /// The rotation angles about body x, y, z at `t` seconds, radians.
+    pub fn angles(&self, t: f64) -> [f64; 3] {
+        self.terms.map(|axis| {
+            axis.iter()
+                .map(|&(a, f, p)| a * (std::f64::consts::TAU * f * t + p).sin())
+                .sum()
+        })
+    }
+
+    /// The camera's rotation on its mount at `t`, in body axes (applied before the mount:
+    /// camera-to-body = `rotation(t) mount`); the identity without vibration.
+    pub fn rotation(&self, t: f64) -> Mat3 {
+        if self.is_none() {
+            return IDENTITY;
+        }
+        let [x, y, z] = self.angles(t);
+        from_euler(x, y, z)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{max_difference, mul};
+
+    #[test]
+    fn none_changes_nothing() {
+        let mut scenario = Scenario::named("landing", 3).expect("landing");
+        let before = (scenario.camera, scenario.mount, scenario.vibration.clone());
+        scenario.apply_effects(&FlightEffects::none());
+        assert_eq!(
+            before,
+            (scenario.camera, scenario.mount, scenario.vibration.clone())
+        );
+    }
+
+    #[test]
+    fn typical_sets_the_readout_and_the_mount() {
+        let mut scenario = Scenario::named("landing", 3).expect("landing");
+        scenario.apply_effects(&FlightEffects::typical());
+        let readout = scenario.camera.model.line_time_us as f64 * 480.0;
+        assert!((readout - 30_500.0).abs() < 0.1, "{readout} us");
+        assert!(scenario.camera.model.validate().is_ok());
+        assert!(!scenario.vibration.is_none());
+        // R_y(pitch) R_x(roll) nominal.
+        let expected = mul(
+            &from_euler(0.0, (-1.6f64).to_radians(), 0.0),
+            &mul(
+                &from_euler(1.2f64.to_radians(), 0.0, 0.0),
+                &CameraMount::downward().rotation,
+            ),
+        );
+        assert!(max_difference(&scenario.mount.rotation, &expected) < 1e-15);
+    }
+
+    #[test]
+    fn vibration_has_the_asked_rms_and_band() {
+        let v = Vibration::new(0.15, 42);
+        for axis in v.frequencies() {
+            assert!(axis
+                .iter()
+                .all(|f| (VIBRATION_MIN_HZ..VIBRATION_MAX_HZ).contains(f)));
+        }
+        // 20 s at 10 kHz: the RMS of each axis.
+        let n = 200_000;
+        let mut sum = [0.0f64; 3];
+        for k in 0..n {
+            let a = v.angles(k as f64 * 1e-4);
+            for (s, x) in sum.iter_mut().zip(a) {
+                *s += x * x;
+            }
+        }
+        for s in sum {
+            let rms = (s / n as f64).sqrt().to_degrees();
+            assert!((rms - 0.15).abs() < 0.005, "RMS {rms} deg");
+        }
+        assert_ne!(v, Vibration::new(0.15, 43));
+        assert!(Vibration::new(0.0, 42).is_none());
+    }
+}
