@@ -42,6 +42,7 @@ fn sample(has_truth: bool) -> Recording {
                     position: [third, -1e-300 * k as f64, 0.1 + 0.2 + k as f64 * 1e17],
                     orientation: q.map(|v| v / n),
                 }),
+                vehicle_attitude: None,
                 label: (k % 2 == 0).then(|| format!("z={}", k * 5)),
                 image: GrayFrame {
                     width: 48,

@@ -5,8 +5,12 @@
 //!
 //! `frames.csv` has the header `index,t_us` or `index,t_us,cam_x,cam_y,cam_z,cam_qw,cam_qx,
 //! cam_qy,cam_qz` (the camera's true position in the pad frame, metres, and its camera-to-pad
-//! rotation as a unit quaternion). A row may leave all seven truth fields empty (truth lost
-//! for that frame). Indices count up from 0 without gaps (frame `k` is `frames/` + `k`
+//! rotation as a unit quaternion), optionally followed by `veh_qw,veh_qx,veh_qy,veh_qz`: the
+//! vehicle's true attitude at the frame's time, body FRD to NED, as a unit quaternion (NED
+//! is the simulator's: north = pad +y, east = pad +x, down = pad -z, so that camera-to-pad =
+//! NED-to-pad x body-to-NED x mount), without the camera's vibration on its mount: what an
+//! ideal autopilot would measure. A row may leave all seven truth fields empty (truth lost
+//! for that frame), and all four attitude fields; leaving some of a group empty is an error. Indices count up from 0 without gaps (frame `k` is `frames/` + `k`
 //! zero-padded to 6 digits + `.pgm`); a dropped camera frame shows as a larger step in `t_us`,
 //! which must increase strictly.
 //!
@@ -41,6 +45,8 @@ use crate::ConfigError;
 pub const TRUTH_COLUMNS: [&str; 7] = [
     "cam_x", "cam_y", "cam_z", "cam_qw", "cam_qx", "cam_qy", "cam_qz",
 ];
+/// The optional vehicle-attitude columns of `frames.csv`, in order, after the truth.
+pub const VEHICLE_ATTITUDE_COLUMNS: [&str; 4] = ["veh_qw", "veh_qx", "veh_qy", "veh_qz"];
 /// How far from 1 a truth quaternion's norm may be.
 pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
@@ -106,6 +112,9 @@ pub struct RecordedFrame {
     pub t_us: u64,
     /// The camera's true pose, when known.
     pub truth: Option<CameraTruth>,
+    /// The vehicle's true attitude (body FRD to NED, unit quaternion `[w, x, y, z]`), when
+    /// known (the `veh_` columns).
+    pub vehicle_attitude: Option<[f64; 4]>,
     /// Set-point label, when the recording has one for this frame.
     pub label: Option<String>,
     /// The image.
@@ -126,13 +135,22 @@ pub struct Recording {
 }
 
 impl Recording {
-    /// Writes the recording into `dir` (created if needed).
+    /// Writes the recording into `dir` (created if needed), with the vehicle-attitude
+    /// columns when some frame has an attitude.
     pub fn write(&self, dir: &Path) -> Result<(), RecordingError> {
-        let mut writer = RecordingWriter::create(dir, &self.camera, &self.pad, self.has_truth)?;
+        let has_vehicle_attitude = self.frames.iter().any(|f| f.vehicle_attitude.is_some());
+        let mut writer = RecordingWriter::create_with_vehicle_attitude(
+            dir,
+            &self.camera,
+            &self.pad,
+            self.has_truth,
+            has_vehicle_attitude,
+        )?;
         for frame in &self.frames {
-            writer.push(
+            writer.push_with_vehicle_attitude(
                 frame.t_us,
                 frame.truth.as_ref(),
+                frame.vehicle_attitude.as_ref(),
                 frame.label.as_deref(),
                 &frame.image,
             )?;
@@ -161,6 +179,7 @@ pub struct RecordingWriter {
     csv: BufWriter<File>,
     setpoints: Option<BufWriter<File>>,
     has_truth: bool,
+    has_vehicle_attitude: bool,
     size: (usize, usize),
     next_index: usize,
     last_t_us: Option<u64>,
@@ -183,6 +202,18 @@ impl RecordingWriter {
         camera: &CameraModel,
         pad: &PadConfig,
         has_truth: bool,
+    ) -> Result<Self, RecordingError> {
+        Self::create_with_vehicle_attitude(dir, camera, pad, has_truth, false)
+    }
+
+    /// [`RecordingWriter::create`], with the vehicle-attitude columns
+    /// ([`VEHICLE_ATTITUDE_COLUMNS`]) after the truth when `has_vehicle_attitude`.
+    pub fn create_with_vehicle_attitude(
+        dir: &Path,
+        camera: &CameraModel,
+        pad: &PadConfig,
+        has_truth: bool,
+        has_vehicle_attitude: bool,
     ) -> Result<Self, RecordingError> {
         camera.validate().map_err(|e| {
             error(
@@ -210,6 +241,12 @@ impl RecordingWriter {
                 header.push_str(column);
             }
         }
+        if has_vehicle_attitude {
+            for column in VEHICLE_ATTITUDE_COLUMNS {
+                header.push(',');
+                header.push_str(column);
+            }
+        }
         writeln!(csv, "{header}").map_err(|e| io_error(&csv_path, "write", e))?;
         // A previous recording's labels must not survive into this one.
         let setpoints_path = dir.join("setpoints.csv");
@@ -222,17 +259,32 @@ impl RecordingWriter {
             csv,
             setpoints: None,
             has_truth,
+            has_vehicle_attitude,
             size: (camera.width as usize, camera.height as usize),
             next_index: 0,
             last_t_us: None,
         })
     }
 
-    /// Appends a frame.
+    /// Appends a frame (without a vehicle attitude: empty `veh_` fields, when the recording
+    /// has them).
     pub fn push(
         &mut self,
         t_us: u64,
         truth: Option<&CameraTruth>,
+        label: Option<&str>,
+        image: &GrayFrame,
+    ) -> Result<(), RecordingError> {
+        self.push_with_vehicle_attitude(t_us, truth, None, label, image)
+    }
+
+    /// Appends a frame with the vehicle's attitude (body FRD to NED, `[w, x, y, z]`); the
+    /// recording must have been created with the attitude columns to be given one.
+    pub fn push_with_vehicle_attitude(
+        &mut self,
+        t_us: u64,
+        truth: Option<&CameraTruth>,
+        vehicle_attitude: Option<&[f64; 4]>,
         label: Option<&str>,
         image: &GrayFrame,
     ) -> Result<(), RecordingError> {
@@ -264,6 +316,24 @@ impl RecordingWriter {
                 "truth given for a recording created without truth columns",
             ));
         }
+        if vehicle_attitude.is_some() && !self.has_vehicle_attitude {
+            return Err(error(
+                &self.dir.join("frames.csv"),
+                None,
+                "vehicle attitude given for a recording created without veh_ columns",
+            ));
+        }
+        if let Some(v) = vehicle_attitude
+            .into_iter()
+            .flatten()
+            .find(|v| !v.is_finite())
+        {
+            return Err(error(
+                &self.dir.join("frames.csv"),
+                None,
+                format!("frame {index}: vehicle attitude value {v} is not finite"),
+            ));
+        }
         save_pgm(&path, image).map_err(|e| io_error(&path, "write", e))?;
         let mut row = format!("{index},{t_us}");
         if self.has_truth {
@@ -281,6 +351,16 @@ impl RecordingWriter {
                     }
                 }
                 None => row.push_str(",,,,,,,"),
+            }
+        }
+        if self.has_vehicle_attitude {
+            match vehicle_attitude {
+                Some(q) => {
+                    for v in q {
+                        row.push_str(&format!(",{v:?}"));
+                    }
+                }
+                None => row.push_str(",,,,"),
             }
         }
         let csv_path = self.dir.join("frames.csv");
@@ -332,6 +412,8 @@ pub struct FrameEntry {
     pub t_us: u64,
     /// Truth, when present.
     pub truth: Option<CameraTruth>,
+    /// The vehicle's attitude, when present.
+    pub vehicle_attitude: Option<[f64; 4]>,
     /// Line in `frames.csv`.
     pub line: usize,
 }
@@ -348,6 +430,8 @@ pub struct RecordingReader {
     pub pad: PadConfig,
     /// Whether `frames.csv` has the truth columns.
     pub has_truth: bool,
+    /// Whether `frames.csv` has the vehicle-attitude columns.
+    pub has_vehicle_attitude: bool,
     /// The rows of `frames.csv`.
     pub entries: Vec<FrameEntry>,
     /// Set-point label per frame (from `setpoints.csv`, when present).
@@ -370,7 +454,7 @@ impl RecordingReader {
         let csv_path = dir.join("frames.csv");
         let text =
             std::fs::read_to_string(&csv_path).map_err(|e| io_error(&csv_path, "read", e))?;
-        let (has_truth, entries) = parse_frames_csv(&text)
+        let (columns, entries) = parse_frames_csv_columns(&text)
             .map_err(|(line, reason)| error(&csv_path, Some(line), reason))?;
         for entry in &entries {
             let path = frame_path(dir, entry.index);
@@ -397,7 +481,8 @@ impl RecordingReader {
             dir: dir.to_path_buf(),
             camera,
             pad,
-            has_truth,
+            has_truth: columns.truth,
+            has_vehicle_attitude: columns.vehicle_attitude,
             entries,
             labels,
         })
@@ -431,6 +516,7 @@ impl RecordingReader {
             index: entry.index,
             t_us: entry.t_us,
             truth: entry.truth,
+            vehicle_attitude: entry.vehicle_attitude,
             label: self.labels.get(k).cloned().flatten(),
             image,
         })
@@ -451,31 +537,113 @@ fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
         .filter(|(_, l)| !l.trim().is_empty())
 }
 
+/// Which optional column groups a `frames.csv` has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FramesCsvColumns {
+    /// The truth ([`TRUTH_COLUMNS`]).
+    pub truth: bool,
+    /// The vehicle's attitude ([`VEHICLE_ATTITUDE_COLUMNS`]).
+    pub vehicle_attitude: bool,
+}
+
 /// Parses `frames.csv`: whether it has truth, and its rows. Errors are (line, reason).
 pub fn parse_frames_csv(text: &str) -> Result<(bool, Vec<FrameEntry>), (usize, String)> {
+    parse_frames_csv_columns(text).map(|(columns, entries)| (columns.truth, entries))
+}
+
+/// The numbers of a group of columns: `None` when all are empty, an error naming the first
+/// bad one, or naming the group when only some are empty.
+fn parse_group<const N: usize>(
+    line: usize,
+    values: &[&str],
+    names: [&str; N],
+) -> Result<Option<[f64; N]>, (usize, String)> {
+    if values.iter().all(|v| v.is_empty()) {
+        return Ok(None);
+    }
+    if values.iter().any(|v| v.is_empty()) {
+        let empty: Vec<&str> = values
+            .iter()
+            .zip(names)
+            .filter(|(v, _)| v.is_empty())
+            .map(|(_, name)| name)
+            .collect();
+        return Err((
+            line,
+            format!(
+                "{}..{}: {} empty; give all {N} or leave all empty",
+                names[0],
+                names[N - 1],
+                empty.join(", ")
+            ),
+        ));
+    }
+    let mut parsed = [0.0f64; N];
+    for ((slot, text), name) in parsed.iter_mut().zip(values).zip(names) {
+        *slot = text
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| (line, format!("{name}: `{text}` is not a finite number")))?;
+    }
+    Ok(Some(parsed))
+}
+
+/// Checks that `q` is a unit quaternion; the error names its columns.
+fn check_unit(line: usize, q: &[f64; 4], first: &str, last: &str) -> Result<(), (usize, String)> {
+    let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+        return Err((
+            line,
+            format!("{first}..{last} has norm {norm:.6}; it must be a unit quaternion"),
+        ));
+    }
+    Ok(())
+}
+
+/// Parses `frames.csv`: which optional columns it has, and its rows. Errors are (line,
+/// reason).
+pub fn parse_frames_csv_columns(
+    text: &str,
+) -> Result<(FramesCsvColumns, Vec<FrameEntry>), (usize, String)> {
     let mut lines = numbered_lines(text);
     let Some((header_line, header)) = lines.next() else {
         return Err((
             1,
-            "empty file: expected the header `index,t_us[,cam_x,...]`".into(),
+            "empty file: expected the header `index,t_us[,cam_x,...][,veh_qw,...]`".into(),
         ));
     };
     let columns: Vec<&str> = header.split(',').map(str::trim).collect();
     let basic = ["index", "t_us"];
-    let has_truth = if columns == basic {
-        false
-    } else if columns.len() == 9 && columns[..2] == basic && columns[2..] == TRUTH_COLUMNS {
-        true
-    } else {
+    let mut rest = columns.get(2..).unwrap_or(&[]);
+    let mut found = FramesCsvColumns::default();
+    if rest.starts_with(&TRUTH_COLUMNS) {
+        found.truth = true;
+        rest = &rest[TRUTH_COLUMNS.len()..];
+    }
+    if rest.starts_with(&VEHICLE_ATTITUDE_COLUMNS) {
+        found.vehicle_attitude = true;
+        rest = &rest[VEHICLE_ATTITUDE_COLUMNS.len()..];
+    }
+    if columns.get(..2) != Some(&basic[..]) || !rest.is_empty() {
         return Err((
             header_line,
             format!(
-                "header `{header}`: expected `index,t_us` or `index,t_us,{}`",
-                TRUTH_COLUMNS.join(",")
+                "header `{header}`: expected `index,t_us`, then optionally `{}`, then \
+                 optionally `{}`",
+                TRUTH_COLUMNS.join(","),
+                VEHICLE_ATTITUDE_COLUMNS.join(",")
             ),
         ));
-    };
-    let width = if has_truth { 9 } else { 2 };
+    }
+    let truth_width = if found.truth { TRUTH_COLUMNS.len() } else { 0 };
+    let width = 2
+        + truth_width
+        + if found.vehicle_attitude {
+            VEHICLE_ATTITUDE_COLUMNS.len()
+        } else {
+            0
+        };
     let mut entries = Vec::new();
     let mut previous_t: Option<u64> = None;
     for (line, row) in lines {
@@ -524,34 +692,26 @@ pub fn parse_frames_csv(text: &str) -> Result<(bool, Vec<FrameEntry>), (usize, S
                 ));
             }
         }
-        let truth = if has_truth {
-            let values = &fields[2..];
-            if values.iter().all(|v| v.is_empty()) {
-                None
-            } else {
-                let mut parsed = [0.0f64; 7];
-                for ((slot, text), name) in parsed.iter_mut().zip(values).zip(TRUTH_COLUMNS) {
-                    *slot = text
-                        .parse::<f64>()
-                        .ok()
-                        .filter(|v| v.is_finite())
-                        .ok_or_else(|| {
-                            (line, format!("{name}: `{text}` is not a finite number"))
-                        })?;
-                }
-                let q = [parsed[3], parsed[4], parsed[5], parsed[6]];
-                let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
-                if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
-                    return Err((
-                        line,
-                        format!("cam_qw..cam_qz has norm {norm:.6}; it must be a unit quaternion"),
-                    ));
-                }
-                Some(CameraTruth {
-                    position: [parsed[0], parsed[1], parsed[2]],
-                    orientation: q,
+        let truth = if found.truth {
+            parse_group(line, &fields[2..2 + truth_width], TRUTH_COLUMNS)?
+                .map(|parsed| {
+                    let q = [parsed[3], parsed[4], parsed[5], parsed[6]];
+                    check_unit(line, &q, "cam_qw", "cam_qz")?;
+                    Ok(CameraTruth {
+                        position: [parsed[0], parsed[1], parsed[2]],
+                        orientation: q,
+                    })
                 })
+                .transpose()?
+        } else {
+            None
+        };
+        let vehicle_attitude = if found.vehicle_attitude {
+            let q = parse_group(line, &fields[2 + truth_width..], VEHICLE_ATTITUDE_COLUMNS)?;
+            if let Some(q) = &q {
+                check_unit(line, q, "veh_qw", "veh_qz")?;
             }
+            q
         } else {
             None
         };
@@ -559,11 +719,12 @@ pub fn parse_frames_csv(text: &str) -> Result<(bool, Vec<FrameEntry>), (usize, S
             index,
             t_us,
             truth,
+            vehicle_attitude,
             line,
         });
         previous_t = Some(t_us);
     }
-    Ok((has_truth, entries))
+    Ok((found, entries))
 }
 
 /// Parses `setpoints.csv` into `labels` (one slot per frame). Errors are (line, reason).
@@ -642,5 +803,99 @@ mod tests {
         assert!(e.1.contains("unit quaternion"), "{e:?}");
         let e = parse_frames_csv(&format!("{truth}0,5,1,2,3,1,0,0\n")).unwrap_err();
         assert!(e.1.contains("columns"), "{e:?}");
+    }
+
+    #[test]
+    fn vehicle_attitude_columns_are_optional_and_whole() {
+        let truth = TRUTH_COLUMNS.join(",");
+        let veh = VEHICLE_ATTITUDE_COLUMNS.join(",");
+        let text =
+            format!("index,t_us,{truth},{veh}\n0,5,1,2,3,1,0,0,0,0.6,0,0,0.8\n1,6,,,,,,,,,,,\n");
+        let (columns, rows) = parse_frames_csv_columns(&text).unwrap();
+        assert!(columns.truth && columns.vehicle_attitude);
+        assert_eq!(rows[0].vehicle_attitude, Some([0.6, 0.0, 0.0, 0.8]));
+        assert!(rows[1].vehicle_attitude.is_none() && rows[1].truth.is_none());
+        // The attitude without the truth.
+        let (columns, rows) =
+            parse_frames_csv_columns(&format!("index,t_us,{veh}\n0,5,1,0,0,0\n")).unwrap();
+        assert!(!columns.truth && columns.vehicle_attitude);
+        assert_eq!(rows[0].vehicle_attitude, Some([1.0, 0.0, 0.0, 0.0]));
+        // Without them, as before.
+        let (columns, rows) =
+            parse_frames_csv_columns(&format!("index,t_us,{truth}\n0,5,1,2,3,1,0,0,0\n")).unwrap();
+        assert!(columns.truth && !columns.vehicle_attitude);
+        assert!(rows[0].vehicle_attitude.is_none());
+        // Some but not all: refused on its line, naming the empty columns.
+        let e = parse_frames_csv_columns(&format!(
+            "index,t_us,{truth},{veh}\n0,5,1,2,3,1,0,0,0,1,0,0,0\n1,6,1,2,3,1,0,0,0,1,0,,\n"
+        ))
+        .unwrap_err();
+        assert_eq!(e.0, 3, "{e:?}");
+        assert!(e.1.contains("veh_qy, veh_qz empty"), "{e:?}");
+        let e = parse_frames_csv_columns(&format!("index,t_us,{veh}\n0,5,2,0,0,0\n")).unwrap_err();
+        assert!(e.0 == 2 && e.1.contains("veh_qw..veh_qz"), "{e:?}");
+        // In the wrong order, or the truth after the attitude: a header error.
+        let e = parse_frames_csv_columns(&format!("index,t_us,{veh},{truth}\n")).unwrap_err();
+        assert_eq!(e.0, 1);
+        let e = parse_frames_csv_columns("index,t_us,veh_qw,veh_qx,veh_qz,veh_qy\n").unwrap_err();
+        assert_eq!(e.0, 1);
+    }
+
+    #[test]
+    fn vehicle_attitude_round_trips_through_a_written_recording() {
+        let dir = std::env::temp_dir().join(format!("touchdown-veh-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let camera = CameraModel::pinhole(4, 3, 10.0, 10.0, 1.5, 1.0);
+        let pad = crate::pad::PadConfig {
+            name: "one".into(),
+            markers: vec![crate::pad::MarkerConfig {
+                family: "tag36h11".into(),
+                id: 0,
+                size: 0.5,
+                x: 0.0,
+                y: 0.0,
+                yaw_deg: 0.0,
+            }],
+        };
+        let image = GrayFrame {
+            width: 4,
+            height: 3,
+            pixels: vec![7; 12],
+        };
+        let q = [0.9887710779360422, 0.1, -0.05, 0.1];
+        let frame = |index: usize, attitude| RecordedFrame {
+            index,
+            t_us: 1000 * index as u64 + 1,
+            truth: Some(CameraTruth {
+                position: [0.1, 0.2, 3.0],
+                orientation: [1.0, 0.0, 0.0, 0.0],
+            }),
+            vehicle_attitude: attitude,
+            label: None,
+            image: image.clone(),
+        };
+        let recording = Recording {
+            camera,
+            pad,
+            has_truth: true,
+            frames: vec![frame(0, Some(q)), frame(1, None)],
+        };
+        recording.write(&dir).unwrap();
+        let csv = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
+        assert!(csv.starts_with(&format!(
+            "index,t_us,{},{}\n",
+            TRUTH_COLUMNS.join(","),
+            VEHICLE_ATTITUDE_COLUMNS.join(",")
+        )));
+        let back = Recording::read(&dir).unwrap();
+        assert_eq!(back, recording, "bit for bit");
+        assert!(RecordingReader::open(&dir).unwrap().has_vehicle_attitude);
+        // A writer without the columns refuses an attitude.
+        let mut writer = RecordingWriter::create(&dir, &camera, &recording.pad, true).unwrap();
+        let e = writer
+            .push_with_vehicle_attitude(1, None, Some(&q), None, &image)
+            .unwrap_err();
+        assert!(e.reason.contains("veh_"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
