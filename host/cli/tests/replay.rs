@@ -443,3 +443,134 @@ fn help_explains_inputs_methods_tables_and_figures() {
     let top = text(&touchdown(&["--help"]).stdout);
     assert!(top.contains("replay"), "{top}");
 }
+
+/// `summary.methods[m].flight[kind]` of a `--json` run.
+fn flight_summary<'a>(doc: &'a serde_json::Value, m: usize, kind: &str) -> &'a serde_json::Value {
+    &doc["summary"]["methods"][m]["flight"][kind]
+}
+
+fn json_run(args: &[&str]) -> serde_json::Value {
+    let output = touchdown(&[&["replay", "--json"][..], args].concat());
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    serde_json::from_slice(&output.stdout).expect("valid JSON")
+}
+
+fn horizontal(doc: &serde_json::Value, m: usize, kind: &str) -> f64 {
+    flight_summary(doc, m, kind)["mean_horizontal_cm"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no {kind} of method {m}: {doc}"))
+}
+
+#[test]
+fn in_flight_the_three_errors_are_side_by_side() {
+    let frames = FRAMES.to_string();
+    let base = ["--scenario", "paper", "--frames", &frames];
+    let doc = json_run(&base);
+    // The error model: every term with its value and unit, the flight effects, the mount.
+    let model = &doc["error_model"];
+    assert_eq!(model["autopilot"], "ardupilot");
+    assert_eq!(model["terms"]["plnd_lag"]["value"], 0.02);
+    assert_eq!(model["terms"]["plnd_lag"]["unit"], "s");
+    assert_eq!(model["terms"]["baud"]["value"], 921600.0);
+    assert_eq!(model["terms"].as_object().map(|t| t.len()), Some(13));
+    assert_eq!(model["flight_effects"]["readout_ms"], 30.5);
+    // The paper scenario's mount is known to the board (as the paper's was).
+    assert_eq!(model["mount_known"], true);
+    for m in [0, 1] {
+        for kind in ["sent", "reconstructed", "ideal"] {
+            let frames = flight_summary(&doc, m, kind)["frames"]
+                .as_u64()
+                .unwrap_or(0);
+            assert!(frames >= 5, "method {m} {kind}: {frames} frames\n{doc}");
+        }
+    }
+    // At 5 m the autopilot's own errors (0.3 deg of tilt bias, 0.5 deg of heading over a
+    // small offset, the 20 ms of delay on a slow hover wobble) are a few centimetres; the
+    // ideal sensor's reconstruction has exactly those.
+    let (a, b, c) = (
+        horizontal(&doc, 1, "sent"),
+        horizontal(&doc, 1, "reconstructed"),
+        horizontal(&doc, 1, "ideal"),
+    );
+    assert!(a < 1.0, "(a) {a} cm");
+    assert!(c > 0.3 && c < 6.0, "(c) {c} cm");
+    assert!((b - c).abs() < 1.5, "(b) {b} cm, (c) {c} cm");
+
+    // The ideal autopilot: (b) is (a) and (c) is nothing.
+    let ideal = json_run(&[&base[..], &["--ideal"]].concat());
+    let (a, b, c) = (
+        horizontal(&ideal, 1, "sent"),
+        horizontal(&ideal, 1, "reconstructed"),
+        horizontal(&ideal, 1, "ideal"),
+    );
+    assert!(c < 0.1, "ideal (c) {c} cm");
+    assert!((b - a).abs() < 0.1, "ideal (a) {a} (b) {b} cm");
+    assert_eq!(ideal["error_model"]["terms"]["tilt_bias"]["value"], 0.0);
+
+    // One error source alone shows in (c): a 1 degree tilt bias at 5 m is about 9 cm.
+    let tilt = json_run(&[&base[..], &["--ideal", "--tilt-bias-deg", "1"]].concat());
+    let c = horizontal(&tilt, 1, "ideal");
+    assert!(c > 1.0 && c < 20.0, "tilt bias alone: (c) {c} cm");
+}
+
+#[test]
+fn px4_reconstructs_from_the_local_ned_point() {
+    let frames = FRAMES.to_string();
+    let doc = json_run(&[
+        "--scenario",
+        "paper",
+        "--frames",
+        &frames,
+        "--autopilot",
+        "px4",
+        "--ideal",
+    ]);
+    assert_eq!(doc["error_model"]["autopilot"], "px4");
+    let frames = flight_summary(&doc, 1, "reconstructed")["frames"]
+        .as_u64()
+        .unwrap_or(0);
+    assert!(frames >= 5, "{doc}");
+    let (a, b, c) = (
+        horizontal(&doc, 1, "sent"),
+        horizontal(&doc, 1, "reconstructed"),
+        horizontal(&doc, 1, "ideal"),
+    );
+    assert!(c < 0.2, "PX4 ideal (c) {c} cm");
+    assert!((b - a).abs() < 0.2, "PX4 (a) {a} (b) {b} cm");
+    // With the position drift alone, what PX4 reconstructs relative to itself hardly moves:
+    // the drift is in both its own position and the point we computed from it.
+    let drift = json_run(&[
+        "--scenario",
+        "paper",
+        "--frames",
+        "6",
+        "--autopilot",
+        "px4",
+        "--ideal",
+        "--position-drift-m",
+        "2",
+    ]);
+    let c = horizontal(&drift, 1, "ideal");
+    assert!(c < 0.5, "PX4 drift alone: (c) {c} cm");
+}
+
+#[test]
+fn flight_flags_are_checked() {
+    let out = touchdown(&["replay", "--scenario", "paper", "--autopilot", "inav"]);
+    assert_fails_with_one_line(&out, &["autopilot", "inav"]);
+    let out = touchdown(&["replay", "--scenario", "paper", "--tilt-bias-deg", "-1"]);
+    assert_fails_with_one_line(&out, &["--tilt-bias-deg", "negative"]);
+    let out = touchdown(&["replay", path_str(recording()), "--readout-ms", "10"]);
+    assert_fails_with_one_line(&out, &["--readout-ms", "--scenario"]);
+    let help = text(&touchdown(&["replay", "--help"]).stdout);
+    for needle in [
+        "--autopilot",
+        "PLND_LAG",
+        "--ideal",
+        "--mount-known",
+        "--no-calibration",
+        "(c) what it would reconstruct from an ideal sensor",
+    ] {
+        assert!(help.contains(needle), "replay --help lacks `{needle}`");
+    }
+}

@@ -3,13 +3,15 @@
 
 use super::ReplayArgs;
 use crate::CliError;
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 use touchdown_core::camera::CameraModel;
+use touchdown_eval::flight::{TrueState, TruthSource, TruthTable, NED_FROM_PAD};
 use touchdown_eval::{Axis, SetPoint};
 use touchdown_formats::image_io::GrayFrame;
 use touchdown_formats::pad::PadConfig;
 use touchdown_formats::recording::{CameraTruth, RecordingReader};
+use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
 use touchdown_sim::{math, Simulator};
 
@@ -40,7 +42,28 @@ pub(super) struct Input {
     pub(super) frames: usize,
     /// Every label, in order of first appearance.
     pub(super) labels: Vec<String>,
+    /// The flight effects rendered (a scenario only).
+    pub(super) effects: Option<FlightEffects>,
+    /// The true camera mount, camera to body FRD (a scenario only).
+    pub(super) true_mount: Option<Matrix3<f32>>,
+    /// A recording's truth between frames.
+    truth_table: Option<TruthTable>,
     pub(super) source: Source,
+}
+
+/// The simulator's truth between frames: the vehicle's path and attitude (without the
+/// camera's vibration).
+struct SimulatorTruth<'a>(&'a Simulator);
+
+impl TruthSource for SimulatorTruth<'_> {
+    fn at(&self, t_s: f64) -> Option<TrueState> {
+        let state = self.0.scenario.trajectory.state(t_s.max(0.0));
+        let a = state.attitude;
+        Some(TrueState {
+            position: Vector3::from(state.position),
+            body_to_ned: Matrix3::from_fn(|i, j| a[i][j]),
+        })
+    }
 }
 
 impl Input {
@@ -58,11 +81,18 @@ impl Input {
             (None, None) => Err(CliError(
                 "nothing to replay: give a RECORDING directory or --scenario NAME".into(),
             )),
-            (None, Some(name)) => Self::scenario(name, args),
+            (None, Some(name)) => Self::scenario(name, args, &super::flight_effects(args)?),
             (Some(dir), None) => {
                 if args.seed.is_some() || args.threads.is_some() {
                     return Err(CliError(
                         "--seed and --threads apply to --scenario only".into(),
+                    ));
+                }
+                if super::effect_flag_given(args) {
+                    return Err(CliError(
+                        "--readout-ms, --vibration-deg, --mount-roll-deg, --mount-pitch-deg and \
+                         --mount-known apply to --scenario only (a recording has its effects)"
+                            .into(),
                     ));
                 }
                 Self::recording(dir, args.frames)
@@ -70,7 +100,11 @@ impl Input {
         }
     }
 
-    pub(super) fn scenario(name: &str, args: &ReplayArgs) -> Result<Input, CliError> {
+    pub(super) fn scenario(
+        name: &str,
+        args: &ReplayArgs,
+        effects: &FlightEffects,
+    ) -> Result<Input, CliError> {
         let seed = args.seed.unwrap_or(1);
         let mut scenario = Scenario::named(name, seed).ok_or_else(|| {
             let names: Vec<&str> = SCENARIOS.iter().map(|s| s.0).collect();
@@ -82,6 +116,8 @@ impl Input {
         if let Some(n) = args.frames {
             scenario.truncate(n);
         }
+        scenario.apply_effects(effects);
+        let mount = scenario.mount.rotation;
         let labels = distinct(scenario.frames.iter().map(|f| f.label.as_deref()));
         let mut simulator = Simulator::new(scenario);
         if let Some(threads) = args.threads {
@@ -95,6 +131,9 @@ impl Input {
             has_truth: true,
             frames: simulator.frame_count(),
             labels,
+            effects: Some(*effects),
+            true_mount: Some(Matrix3::from_fn(|i, j| mount[i][j] as f32)),
+            truth_table: None,
             source: Source::Simulator(Box::new(simulator)),
         })
     }
@@ -109,6 +148,32 @@ impl Input {
             )));
         }
         let labels = distinct(reader.labels.iter().take(count).map(Option::as_deref));
+        // The truth between frames, interpolated; the vehicle's attitude from the veh_
+        // columns, else from the camera's through the nominal mount.
+        let nominal = touchdown_core::filter::CameraMount::downward()
+            .matrix()
+            .cast::<f64>();
+        let mut table = TruthTable::new();
+        for e in &reader.entries {
+            if let Some(t) = &e.truth {
+                let m = math::quat_to_matrix(t.orientation);
+                let camera_to_pad = Matrix3::from_fn(|i, j| m[i][j]);
+                let body_to_ned = match e.vehicle_attitude {
+                    Some(q) => {
+                        let v = math::quat_to_matrix(q);
+                        Matrix3::from_fn(|i, j| v[i][j])
+                    }
+                    None => NED_FROM_PAD * camera_to_pad * nominal.transpose(),
+                };
+                table.push(
+                    e.t_us as f64 * 1e-6,
+                    TrueState {
+                        position: Vector3::from(t.position),
+                        body_to_ned,
+                    },
+                );
+            }
+        }
         let short_name = dir
             .file_name()
             .map_or("recording".into(), |n| n.to_string_lossy().into_owned());
@@ -120,8 +185,22 @@ impl Input {
             has_truth: reader.has_truth,
             frames: count,
             labels,
+            effects: None,
+            true_mount: None,
+            truth_table: (!table.is_empty()).then_some(table),
             source: Source::Recording(reader),
         })
+    }
+
+    /// The truth between frames, for the simulated autopilot (`None`: no truth).
+    pub(super) fn truth_source(&self) -> Option<Box<dyn TruthSource + '_>> {
+        match &self.source {
+            Source::Simulator(simulator) => Some(Box::new(SimulatorTruth(simulator))),
+            Source::Recording(_) => self
+                .truth_table
+                .as_ref()
+                .map(|t| Box::new(t.clone()) as Box<dyn TruthSource>),
+        }
     }
 
     /// Frame `k`.

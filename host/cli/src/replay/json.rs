@@ -10,8 +10,10 @@ use serde_json::{json, Map, Value};
 
 use super::{ReplayArgs, ALTITUDE_CHECKPOINTS_M, ALTITUDE_TOLERANCE};
 use crate::replay::input::Input;
+use touchdown_eval::flight::{ErrorKind, ErrorStats, FlightSetup, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace};
 use touchdown_eval::{published, AxisStats, Method, MethodKind, Report, SetPointResult};
+use touchdown_sim::effects::FlightEffects;
 
 /// Metres as centimetres; `null` when absent or not finite.
 fn cm(v: Option<f64>) -> Value {
@@ -58,6 +60,63 @@ pub(super) struct Results<'a> {
     pub(super) summaries: &'a [MethodSummary],
     /// Wall-clock time of the replay, seconds.
     pub(super) elapsed_s: f64,
+    /// In flight: the setup and the three errors.
+    pub(super) flight: Option<FlightResults<'a>>,
+}
+
+/// What a replay in flight adds.
+pub(super) struct FlightResults<'a> {
+    pub(super) setup: &'a FlightSetup,
+    /// The flight effects a scenario was rendered with.
+    pub(super) effects: Option<&'a FlightEffects>,
+    /// The board was given the true mount.
+    pub(super) mount_known: bool,
+    pub(super) trace: &'a FlightTrace,
+}
+
+/// One error's statistics, centimetres.
+fn error_stats(e: &ErrorStats) -> Value {
+    json!({
+        "frames": e.frames,
+        "mean_horizontal_cm": cm(e.mean_horizontal),
+        "mean_abs_error_cm": xyz_of(e.mean_abs),
+        "mean_error_cm": xyz_of(e.mean),
+        "rms_error_cm": xyz_of(e.rms),
+    })
+}
+
+/// The three errors as `{"sent", "reconstructed", "ideal"}`.
+fn three(stats: impl Fn(ErrorKind) -> ErrorStats) -> Value {
+    let mut m = Map::new();
+    for k in ErrorKind::ALL {
+        m.insert(k.key().into(), error_stats(&stats(k)));
+    }
+    Value::Object(m)
+}
+
+/// The `error_model` key: the autopilot, every term with its value and unit, the flight
+/// effects, the mount and the calibration.
+fn error_model(f: &FlightResults<'_>) -> Value {
+    let terms: Map<String, Value> = f
+        .setup
+        .model
+        .terms()
+        .iter()
+        .map(|(name, value, unit)| ((*name).to_string(), json!({"value": value, "unit": unit})))
+        .collect();
+    json!({
+        "autopilot": f.setup.autopilot.name(),
+        "seed": f.setup.seed,
+        "terms": terms,
+        "flight_effects": f.effects.map(|e| json!({
+            "readout_ms": e.readout_ms,
+            "vibration_deg": e.vibration_deg,
+            "mount_roll_deg": e.mount_roll_deg,
+            "mount_pitch_deg": e.mount_pitch_deg,
+        })),
+        "mount_known": f.mount_known,
+        "board_params": f.setup.params.iter().map(|(n, v)| json!({"name": n, "value": v})).collect::<Vec<_>>(),
+    })
 }
 
 /// The whole replay as one JSON object (see the module docs); `figures` is the directory
@@ -69,12 +128,14 @@ pub(super) fn document(
     results: &Results<'_>,
     figures: Option<(&std::path::Path, usize)>,
 ) -> Value {
-    let &Results {
+    let Results {
         report,
         trace,
         summaries,
         elapsed_s,
+        flight,
     } = results;
+    let (report, trace, summaries, elapsed_s) = (*report, *trace, *summaries, *elapsed_s);
     let mut root = Map::new();
     root.insert(
         "setup".into(),
@@ -90,13 +151,38 @@ pub(super) fn document(
                 .collect(),
         ),
     );
-    root.insert("summary".into(), summary(trace, summaries, input.has_truth));
+    root.insert(
+        "error_model".into(),
+        flight.as_ref().map_or(Value::Null, error_model),
+    );
+    let mut summary = summary(trace, summaries, input.has_truth);
+    if let (Some(f), Some(methods)) = (flight, summary["methods"].as_array_mut()) {
+        for (m, entry) in methods.iter_mut().enumerate() {
+            entry["flight"] = three(|k| f.trace.summary(m, k));
+            entry["flight"]["latency_ms"] = match f.trace.latency_ms(m) {
+                Some((mean, max)) => json!({"mean": mean, "max": max}),
+                None => Value::Null,
+            };
+        }
+    }
+    root.insert("summary".into(), summary);
     // The text prints the altitude table only for a run with truth and without set points.
-    let altitudes = if report.rows.is_empty() && input.has_truth {
+    let mut altitudes = if report.rows.is_empty() && input.has_truth {
         altitudes(trace)
     } else {
         Vec::new()
     };
+    if let Some(f) = flight {
+        for entry in &mut altitudes {
+            let altitude = entry["altitude_m"].as_f64().unwrap_or(f64::NAN);
+            if let Some(methods) = entry["methods"].as_array_mut() {
+                for (m, method) in methods.iter_mut().enumerate() {
+                    method["flight"] =
+                        three(|k| f.trace.at_altitude(m, k, altitude, ALTITUDE_TOLERANCE));
+                }
+            }
+        }
+    }
     root.insert("altitudes".into(), Value::Array(altitudes));
     root.insert(
         "figures".into(),

@@ -41,10 +41,13 @@ use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Instant;
 use touchdown_core::family::Family;
+use touchdown_core::filter::CameraMount;
 use touchdown_core::pipeline::PipelineConfig;
+use touchdown_eval::flight::{AutopilotKind, ErrorModel, FlightSetup, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace, TraceFrame};
 use touchdown_eval::{Experiment, ExperimentError, Frame, Method, SetPoint};
 use touchdown_formats::families::{self, SelectedFamily};
+use touchdown_sim::effects::FlightEffects;
 
 mod input;
 mod json;
@@ -52,7 +55,10 @@ mod tables;
 
 pub use input::set_point_of_label;
 use input::{attitude_of, Input, InputFrame};
-use tables::{all_axes_table, altitude_table, set_point_table, summary_table, vision_only_table};
+use tables::{
+    all_axes_table, altitude_table, flight_altitude_table, flight_summary_table, set_point_table,
+    summary_table, vision_only_table,
+};
 
 /// Frames further apart than this (seconds) start a new sequence: the filters are reset.
 pub const SEQUENCE_GAP_S: f64 = 0.5;
@@ -82,14 +88,39 @@ Methods:
                      and its per-axis Kalman filter with Table 1's values (lag included)
   ours               the board's pipeline as it ships: touchdown's detector, IPPE +
                      Levenberg-Marquardt fix of the whole pad (flip choice by prediction,
-                     tilt from the attitude), the estimator; scored as the autopilot receives
-                     it: the LANDING_TARGET's body FRD vector turned with the autopilot's
-                     attitude
+                     tilt from the attitude, rolling-shutter correction), the estimator; its
+                     LANDING_TARGET scored as below
   --pose-steps       adds the board's pipeline without the level fix, without the flip
                      choice, without both, and without the detector's pattern fit of small
                      markers' corners on far frames (no pattern fit), in that order
-Both are given the camera's attitude from the truth (what the flight controller knows);
-a recording without truth runs vision only and prints no errors.
+A recording without truth runs vision only and prints no errors.
+
+In flight (any input with truth): every method runs with the board's MAVLink companion (the
+firmware's code) against a simulated autopilot that speaks MAVLink bytes over a serial link:
+HEARTBEAT, the ATTITUDE_QUATERNION and LOCAL_POSITION_NED streams the companion asks for,
+TIMESYNC, each sample its estimate (the truth plus the error model) stamped in its own
+drifting clock; it decodes the LANDING_TARGETs and reconstructs the pad as the autopilot does:
+  --autopilot ardupilot  (default) the body vector turned with its own attitude at receipt
+                         minus PLND_LAG (its inertial history), PLND_CAM_POS = 0
+  --autopilot px4        the LOCAL_NED point minus its own position at the time stamp it
+                         converts with its TIMESYNC estimate
+The paper's method gets the attitude the board received and goes through the same
+reconstruction. Three errors are reported side by side:
+  (a) what touchdown sends, turned with the true body attitude at the exposure (the set-point
+      table and the summary's RMS rows are of this one)
+  (b) what the autopilot reconstructs from it, against the truth at the time it assigns it to
+  (c) what it would reconstruct from an ideal sensor (the exact body vector, sent at the same
+      time by the same path): the autopilot's own share of (b)
+Flight effects (--scenario only; default typical): rolling-shutter readout 30.5 ms, camera
+vibration 0.15 deg RMS, mount misalignment roll 1.2 / pitch -1.6 deg, unknown to the board,
+which calibrates it in flight (TD_CAM_CAL 2; --no-calibration: never). --mount-known gives
+the board the true mount (TD_CAM_ROLL, TD_CAM_PITCH): on by default for --scenario paper only
+(the paper's mount was known). Error model (default typical, every term a flag, 0 = off):
+attitude noise 0.02 deg per sample, tilt bias 0.3 deg, heading bias 0.5 deg, sample latency
+5 +- 2 ms, link 1 ms + the bytes at 921600 baud, autopilot clock 12.3 s ahead and 30 ppm fast,
+board processing 20 +- 5 ms, PLND_LAG 0.02 s, PX4 position drift 0.3 m. --ideal: no flight
+effects and an ideal autopilot (knows the truth exactly and at once, assigns each target to
+its exposure).
 
 Tables (centimetres; error = truth - estimate, the paper's sign):
   set points         per set point (setpoints.csv label such as z=5, x=1.2, y=2.4): the
@@ -104,7 +135,11 @@ Tables (centimetres; error = truth - estimate, the paper's sign):
                      time shift that best aligns the estimate with the truth; not measurable
                      while hovering)
   altitudes          without set points: mean |error| per axis at 40, 20, 10, 5, 2, 1 and
-                     0.5 m (frames within 10 % of that altitude)
+                     0.5 m (frames within 10 % of that altitude); in flight instead the
+                     horizontal mean |e| (mean of sqrt(ex^2 + ey^2)) of (a), (b), (c), (b) -
+                     (c), and the mean |z| of each
+  in flight          over all frames: RMS per axis of (a), (b), (c), their horizontal mean |e|
+                     and mean |z|, and the targets' exposure-to-receipt time
 Frames more than 0.5 s apart (the paper scenario records only its hovers) start a new
 sequence: the filters are reset.
 
@@ -159,6 +194,186 @@ pub struct ReplayArgs {
     /// ships
     #[arg(long)]
     pub pose_steps: bool,
+
+    /// The autopilot the board talks to, whose reconstruction is scored: ardupilot or px4
+    /// [default: ardupilot]
+    #[arg(long, value_name = "NAME", help_heading = "Flight")]
+    pub autopilot: Option<String>,
+
+    /// No flight effects and an ideal autopilot (FlightEffects::none, ErrorModel::none); the
+    /// flags below still override single terms
+    #[arg(long, help_heading = "Flight")]
+    pub ideal: bool,
+
+    /// The board is configured with the true camera mount (TD_CAM_ROLL, TD_CAM_PITCH set to
+    /// the scenario's misalignment at start) [default: true for --scenario paper, else false]
+    #[arg(
+        long,
+        value_name = "BOOL",
+        num_args = 0..=1,
+        default_missing_value = "true",
+        help_heading = "Flight"
+    )]
+    pub mount_known: Option<bool>,
+
+    /// The board never adopts an in-flight mount calibration (TD_CAM_CAL = 0)
+    #[arg(long, help_heading = "Flight")]
+    pub no_calibration: bool,
+
+    /// Rolling-shutter readout, first row to last, ms (--scenario; 0 = global shutter)
+    /// [default: 30.5]
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        help_heading = "Flight effects"
+    )]
+    pub readout_ms: Option<f64>,
+
+    /// Camera vibration on its mount, RMS per axis, degrees (--scenario) [default: 0.15]
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        help_heading = "Flight effects"
+    )]
+    pub vibration_deg: Option<f64>,
+
+    /// Mount misalignment about body x, degrees (--scenario) [default: 1.2]
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        help_heading = "Flight effects"
+    )]
+    pub mount_roll_deg: Option<f64>,
+
+    /// Mount misalignment about body y, degrees (--scenario) [default: -1.6]
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        help_heading = "Flight effects"
+    )]
+    pub mount_pitch_deg: Option<f64>,
+
+    /// Attitude white noise per sample, degrees [default: 0.02]
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub attitude_noise_deg: Option<f64>,
+
+    /// Slowly varying roll/pitch bias, RMS, degrees [default: 0.3]
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub tilt_bias_deg: Option<f64>,
+
+    /// Heading bias, degrees [default: 0.5]
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub heading_bias_deg: Option<f64>,
+
+    /// An attitude sample's time stamp to its transmission, ms [default: 5]
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub sample_latency_ms: Option<f64>,
+
+    /// Jitter of that latency, +- ms [default: 2]
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub sample_jitter_ms: Option<f64>,
+
+    /// Fixed link delay per message, ms [default: 1]
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub link_delay_ms: Option<f64>,
+
+    /// Link speed, bit/s (0: bytes take no time) [default: 921600]
+    #[arg(
+        long,
+        value_name = "BAUD",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub baud: Option<f64>,
+
+    /// The autopilot booted this long before the board, s [default: 12.3]
+    #[arg(
+        long,
+        value_name = "S",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub clock_offset_s: Option<f64>,
+
+    /// The autopilot's clock rate error, ppm [default: 30]
+    #[arg(
+        long,
+        value_name = "PPM",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub clock_drift_ppm: Option<f64>,
+
+    /// The board's exposure-to-send time, ms [default: 20]
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub processing_ms: Option<f64>,
+
+    /// Its jitter, +- ms [default: 5]
+    #[arg(
+        long,
+        value_name = "MS",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub processing_jitter_ms: Option<f64>,
+
+    /// ArduPilot's PLND_LAG, s (0: the ideal autopilot, which assigns a target to its
+    /// exposure) [default: 0.02]
+    #[arg(
+        long,
+        value_name = "S",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub plnd_lag_s: Option<f64>,
+
+    /// PX4's local position drift, RMS per axis, m [default: 0.3]
+    #[arg(
+        long,
+        value_name = "M",
+        allow_negative_numbers = true,
+        help_heading = "Error model"
+    )]
+    pub position_drift_m: Option<f64>,
 
     /// Rendering threads for --scenario [default: all cores]
     #[arg(
@@ -215,6 +430,8 @@ pub fn run(
     err: &mut dyn Write,
 ) -> Result<Outcome, CliError> {
     let started = Instant::now();
+    let model = error_model(args)?;
+    let autopilot = autopilot_kind(args)?;
     let input = Input::open(args)?;
     let layout = input
         .pad
@@ -245,8 +462,19 @@ pub fn run(
     if !input.has_truth {
         methods = methods.into_iter().map(Method::without_attitude).collect();
     }
-    let mut experiment = Experiment::new(input.camera, &family_refs, layout, &methods)
-        .map_err(|e| CliError(format!("cannot set up the methods: {e:?}")))?;
+    let flight = flight_setup(args, &input, autopilot, model)?;
+    let truth_source = input.truth_source();
+    let mut experiment = match (&flight, input.has_truth) {
+        (Some(setup), true) => {
+            // Mount known: the board's mount is the true one (the paper's method is given it
+            // too) instead of the nominal one plus its calibration.
+            Experiment::in_flight(input.camera, &family_refs, layout, &methods, setup)
+        }
+        _ => Experiment::new(input.camera, &family_refs, layout, &methods),
+    }
+    .map_err(|e| CliError(format!("cannot set up the methods: {e:?}")))?;
+    let in_flight = flight.is_some() && input.has_truth;
+    let mut flight_trace = FlightTrace::new(methods.iter().map(|m| m.name.clone()).collect());
     let set_points: BTreeMap<String, SetPoint> = input
         .labels
         .iter()
@@ -293,13 +521,16 @@ pub fn run(
                 // Frames that lost their truth in a recording with truth are not scored.
                 .filter(|_| truth.is_some() || !input.has_truth);
             let outcomes = experiment
-                .process(&Frame {
-                    set_point,
-                    t_us: frame.t_us,
-                    truth: truth.unwrap_or_else(Vector3::zeros),
-                    attitude: frame.truth.as_ref().map(attitude_of),
-                    image: frame.image.view(),
-                })
+                .process_with(
+                    &Frame {
+                        set_point,
+                        t_us: frame.t_us,
+                        truth: truth.unwrap_or_else(Vector3::zeros),
+                        attitude: frame.truth.as_ref().map(attitude_of),
+                        image: frame.image.view(),
+                    },
+                    truth_source.as_deref().filter(|_| in_flight),
+                )
                 .map_err(|e| match e {
                     ExperimentError::Detect(d) => CliError(format!(
                         "frame {}: the detector refused it: {d:?}",
@@ -307,6 +538,11 @@ pub fn run(
                     )),
                     other => experiment_error(other),
                 })?;
+            if in_flight {
+                flight_trace
+                    .frames
+                    .push(experiment.flight_outcomes().to_vec());
+            }
             trace.frames.push(TraceFrame {
                 index: frame.index,
                 t_us: frame.t_us,
@@ -347,6 +583,15 @@ pub fn run(
                 trace: &trace,
                 summaries: &summaries,
                 elapsed_s: elapsed,
+                flight: flight
+                    .as_ref()
+                    .filter(|_| in_flight)
+                    .map(|setup| json::FlightResults {
+                        setup,
+                        effects: input.effects.as_ref(),
+                        mount_known: mount_known(args) && input.effects.is_some(),
+                        trace: &flight_trace,
+                    }),
             },
             figure_dir.as_deref().zip(figures.as_ref().map(Vec::len)),
         );
@@ -357,7 +602,10 @@ pub fn run(
             .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
         return Ok(Outcome::Success);
     }
-    let mut text = header(&input, &trace, elapsed);
+    let mut text = header(&input, &trace, elapsed, in_flight);
+    if let Some(setup) = flight.as_ref().filter(|_| in_flight) {
+        text.push_str(&flight_header(args, &input, setup));
+    }
     if !report.rows.is_empty() {
         if input.has_truth {
             text.push_str(&set_point_table(&report));
@@ -367,8 +615,15 @@ pub fn run(
         }
     }
     text.push_str(&summary_table(&trace, &summaries, input.has_truth));
+    if in_flight {
+        text.push_str(&flight_summary_table(&flight_trace, &trace));
+    }
     if report.rows.is_empty() && input.has_truth {
-        text.push_str(&altitude_table(&trace));
+        if in_flight {
+            text.push_str(&flight_altitude_table(&flight_trace, &trace));
+        } else {
+            text.push_str(&altitude_table(&trace));
+        }
     }
     if let Some((dir, written)) = figure_dir.as_ref().zip(figures.as_ref()) {
         let _ = writeln!(
@@ -397,8 +652,250 @@ fn experiment_error(e: ExperimentError) -> CliError {
     CliError(format!("the replay failed: {e:?}"))
 }
 
+/// The flight effects a scenario is rendered with: typical (none with --ideal), each term
+/// overridden by its flag.
+pub(super) fn flight_effects(args: &ReplayArgs) -> Result<FlightEffects, CliError> {
+    let mut e = if args.ideal {
+        FlightEffects::none()
+    } else {
+        FlightEffects::typical()
+    };
+    let set = |v: &mut f64, flag: Option<f64>| {
+        if let Some(x) = flag {
+            *v = x;
+        }
+    };
+    set(&mut e.readout_ms, args.readout_ms);
+    set(&mut e.vibration_deg, args.vibration_deg);
+    set(&mut e.mount_roll_deg, args.mount_roll_deg);
+    set(&mut e.mount_pitch_deg, args.mount_pitch_deg);
+    for (v, name) in [
+        (e.readout_ms, "--readout-ms"),
+        (e.vibration_deg, "--vibration-deg"),
+    ] {
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(CliError(format!("{name} must be a number, not negative")));
+        }
+    }
+    for (v, name) in [
+        (e.mount_roll_deg, "--mount-roll-deg"),
+        (e.mount_pitch_deg, "--mount-pitch-deg"),
+    ] {
+        if !(v.abs() <= 10.0) {
+            return Err(CliError(format!("{name} must be within +-10 degrees")));
+        }
+    }
+    Ok(e)
+}
+
+/// Whether a flag that only a scenario takes was given.
+pub(super) fn effect_flag_given(args: &ReplayArgs) -> bool {
+    args.readout_ms.is_some()
+        || args.vibration_deg.is_some()
+        || args.mount_roll_deg.is_some()
+        || args.mount_pitch_deg.is_some()
+        || args.mount_known.is_some()
+}
+
+/// The error model: typical (none with --ideal), each term overridden by its flag.
+pub(super) fn error_model(args: &ReplayArgs) -> Result<ErrorModel, CliError> {
+    let mut m = if args.ideal {
+        ErrorModel::none()
+    } else {
+        ErrorModel::typical()
+    };
+    let flags = [
+        (
+            &mut m.attitude_noise_deg,
+            args.attitude_noise_deg,
+            "--attitude-noise-deg",
+        ),
+        (&mut m.tilt_bias_deg, args.tilt_bias_deg, "--tilt-bias-deg"),
+        (
+            &mut m.heading_bias_deg,
+            args.heading_bias_deg,
+            "--heading-bias-deg",
+        ),
+        (
+            &mut m.sample_latency_ms,
+            args.sample_latency_ms,
+            "--sample-latency-ms",
+        ),
+        (
+            &mut m.sample_jitter_ms,
+            args.sample_jitter_ms,
+            "--sample-jitter-ms",
+        ),
+        (&mut m.link_delay_ms, args.link_delay_ms, "--link-delay-ms"),
+        (&mut m.baud, args.baud, "--baud"),
+        (
+            &mut m.clock_offset_s,
+            args.clock_offset_s,
+            "--clock-offset-s",
+        ),
+        (
+            &mut m.clock_drift_ppm,
+            args.clock_drift_ppm,
+            "--clock-drift-ppm",
+        ),
+        (&mut m.processing_ms, args.processing_ms, "--processing-ms"),
+        (
+            &mut m.processing_jitter_ms,
+            args.processing_jitter_ms,
+            "--processing-jitter-ms",
+        ),
+        (&mut m.plnd_lag_s, args.plnd_lag_s, "--plnd-lag-s"),
+        (
+            &mut m.position_drift_m,
+            args.position_drift_m,
+            "--position-drift-m",
+        ),
+    ];
+    for (slot, flag, name) in flags {
+        if let Some(v) = flag {
+            if !v.is_finite() {
+                return Err(CliError(format!("{name} must be a number")));
+            }
+            *slot = v;
+        }
+    }
+    // Only the clock drift and the heading bias have a meaningful sign.
+    let non_negative = [
+        (m.attitude_noise_deg, "--attitude-noise-deg"),
+        (m.tilt_bias_deg, "--tilt-bias-deg"),
+        (m.sample_latency_ms, "--sample-latency-ms"),
+        (m.sample_jitter_ms, "--sample-jitter-ms"),
+        (m.link_delay_ms, "--link-delay-ms"),
+        (m.baud, "--baud"),
+        (m.clock_offset_s, "--clock-offset-s"),
+        (m.processing_ms, "--processing-ms"),
+        (m.processing_jitter_ms, "--processing-jitter-ms"),
+        (m.plnd_lag_s, "--plnd-lag-s"),
+        (m.position_drift_m, "--position-drift-m"),
+    ];
+    if let Some((_, name)) = non_negative.iter().find(|(v, _)| *v < 0.0) {
+        return Err(CliError(format!("{name} must not be negative")));
+    }
+    if m.clock_drift_ppm.abs() >= 1e5 {
+        return Err(CliError("--clock-drift-ppm must be within +-100000".into()));
+    }
+    Ok(m)
+}
+
+/// The autopilot of --autopilot.
+pub(super) fn autopilot_kind(args: &ReplayArgs) -> Result<AutopilotKind, CliError> {
+    match args
+        .autopilot
+        .as_deref()
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        None | Some("ardupilot") => Ok(AutopilotKind::ArduPilot),
+        Some("px4") => Ok(AutopilotKind::Px4),
+        Some(other) => Err(CliError(format!(
+            "unknown autopilot `{other}` (autopilots: ardupilot, px4)"
+        ))),
+    }
+}
+
+/// Whether the board starts with the true mount: --mount-known, by default for the paper
+/// scenario only.
+pub(super) fn mount_known(args: &ReplayArgs) -> bool {
+    args.mount_known
+        .unwrap_or_else(|| args.scenario.as_deref() == Some("paper"))
+}
+
+/// The flight every method runs in (`None`: no truth, vision only).
+fn flight_setup(
+    args: &ReplayArgs,
+    input: &Input,
+    autopilot: AutopilotKind,
+    model: ErrorModel,
+) -> Result<Option<FlightSetup>, CliError> {
+    if !input.has_truth {
+        return Ok(None);
+    }
+    let mut setup = FlightSetup::new(autopilot, model);
+    setup.seed = args.seed.unwrap_or(1);
+    if args.no_calibration {
+        setup.params.push(("TD_CAM_CAL".into(), 0.0));
+    }
+    if let (true, Some(effects), Some(mount)) =
+        (mount_known(args), &input.effects, &input.true_mount)
+    {
+        setup
+            .params
+            .push(("TD_CAM_ROLL".into(), effects.mount_roll_deg as f32));
+        setup
+            .params
+            .push(("TD_CAM_PITCH".into(), effects.mount_pitch_deg as f32));
+        setup.paper_mount = CameraMount::from_matrix(mount)
+            .map_err(|e| CliError(format!("the scenario's mount is not a rotation: {e:?}")))?;
+    }
+    for (name, _) in &setup.params {
+        if touchdown_core::params::ParamId::from_name(name).is_none() {
+            return Err(CliError(format!(
+                "this build of the board has no parameter {name}"
+            )));
+        }
+    }
+    Ok(Some(setup))
+}
+
+/// The flight the methods ran in: the autopilot, the effects and the error model.
+fn flight_header(args: &ReplayArgs, input: &Input, setup: &FlightSetup) -> String {
+    let m = &setup.model;
+    let mut s = format!(
+        "In flight: the board's companion against a simulated {} over MAVLink; scored as \
+         (a) what touchdown sends,\n(b) what the autopilot reconstructs from it, (c) what it \
+         would reconstruct from an ideal sensor.\n",
+        match setup.autopilot {
+            AutopilotKind::ArduPilot =>
+                "ArduPilot (body vector, its attitude at receipt - PLND_LAG)",
+            AutopilotKind::Px4 => "PX4 (LOCAL_NED point, minus its own position)",
+        }
+    );
+    if let Some(e) = &input.effects {
+        let _ = writeln!(
+            s,
+            "Flight effects: readout {} ms, vibration {} deg, mount roll {} pitch {} deg ({}).",
+            e.readout_ms,
+            e.vibration_deg,
+            e.mount_roll_deg,
+            e.mount_pitch_deg,
+            if mount_known(args) {
+                "known to the board"
+            } else if args.no_calibration {
+                "not calibrated"
+            } else {
+                "calibrated in flight"
+            }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "Error model: attitude noise {} deg, tilt bias {} deg, heading bias {} deg, sample \
+         latency {} +- {} ms,\nlink {} ms + bytes at {} baud, clock +{} s at {} ppm, \
+         processing {} +- {} ms, PLND_LAG {} s, position drift {} m.",
+        m.attitude_noise_deg,
+        m.tilt_bias_deg,
+        m.heading_bias_deg,
+        m.sample_latency_ms,
+        m.sample_jitter_ms,
+        m.link_delay_ms,
+        m.baud,
+        m.clock_offset_s,
+        m.clock_drift_ppm,
+        m.processing_ms,
+        m.processing_jitter_ms,
+        m.plnd_lag_s,
+        m.position_drift_m
+    );
+    s
+}
+
 /// What was replayed, with what.
-fn header(input: &Input, trace: &Trace, elapsed_s: f64) -> String {
+fn header(input: &Input, trace: &Trace, elapsed_s: f64, in_flight: bool) -> String {
     let mut s = String::new();
     let c = &input.camera;
     let markers = input.pad.markers.len();
@@ -431,7 +928,10 @@ fn header(input: &Input, trace: &Trace, elapsed_s: f64) -> String {
         input.pad.name,
         markers,
         if markers == 1 { "" } else { "s" },
-        if input.has_truth {
+        if in_flight {
+            "The methods get the attitude the board\nreceives from the autopilot; positions are \
+             the camera centre in the pad frame (x, y on the pad, z = altitude)."
+        } else if input.has_truth {
             "Both methods get the camera's attitude\nfrom the truth; positions are the camera \
              centre in the pad frame (x, y on the pad, z = altitude)."
         } else {

@@ -4,6 +4,7 @@
 use std::fmt::Write as _;
 
 use super::{ALTITUDE_CHECKPOINTS_M, ALTITUDE_TOLERANCE};
+use touchdown_eval::flight::{ErrorKind, ErrorStats, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace};
 use touchdown_eval::{published, Report, SetPoint};
 
@@ -295,6 +296,138 @@ pub(super) fn altitude_table(trace: &Trace) -> String {
         s.push('\n');
     }
     // A flight that never comes near a checkpoint (a hover at 12 m) gets no table.
+    if rows == 0 {
+        s.clear();
+    }
+    s
+}
+
+/// In flight, over all frames: the three errors per method (RMS per axis, mean horizontal
+/// and vertical |error|) and the targets' latency.
+pub(super) fn flight_summary_table(flight: &FlightTrace, trace: &Trace) -> String {
+    const LEFT: usize = 38;
+    const COLUMN: usize = 30;
+    let mut s = String::from(
+        "\nIn flight, over all frames: (a) what touchdown sends, in the true body axes at the \
+         exposure; (b) what the\nautopilot reconstructs from it, against the truth at the time \
+         it assigns it to; (c) the same from an ideal sensor\n\n",
+    );
+    let _ = write!(s, "{:<LEFT$}", "");
+    for name in &trace.methods {
+        let _ = write!(s, "| {:<w$}", name, w = COLUMN - 2);
+    }
+    s.push('\n');
+    let methods = trace.methods.len();
+    let mut row = |name: &str, cell: &dyn Fn(usize) -> String| {
+        let _ = write!(s, "{name:<LEFT$}");
+        for m in 0..methods {
+            let _ = write!(s, "| {:<w$}", cell(m), w = COLUMN - 2);
+        }
+        s.push('\n');
+    };
+    let xyz = |v: Option<[f64; 3]>| match v {
+        Some(v) => format!(
+            "{:.2} / {:.2} / {:.2}",
+            100.0 * v[0],
+            100.0 * v[1],
+            100.0 * v[2]
+        ),
+        None => "-".into(),
+    };
+    for kind in ErrorKind::ALL {
+        let name = match kind {
+            ErrorKind::Sent => "(a) sent: RMS x / y / z, cm",
+            ErrorKind::Reconstructed => "(b) autopilot: RMS x / y / z, cm",
+            ErrorKind::Ideal => "(c) ideal sensor: RMS x / y / z, cm",
+        };
+        row(name, &|m| xyz(flight.summary(m, kind).rms));
+    }
+    let three = |f: &dyn Fn(&ErrorStats) -> Option<f64>, m: usize| {
+        let v: Vec<String> = ErrorKind::ALL
+            .iter()
+            .map(|&k| match f(&flight.summary(m, k)) {
+                Some(v) => format!("{:.2}", 100.0 * v),
+                None => "-".into(),
+            })
+            .collect();
+        v.join(" / ")
+    };
+    row("(a) / (b) / (c) horizontal mean |e|, cm", &|m| {
+        three(&|e| e.mean_horizontal, m)
+    });
+    row("(a) / (b) / (c) mean |z|, cm", &|m| {
+        three(&|e| e.mean_abs.map(|v| v[2]), m)
+    });
+    row("targets received by the autopilot", &|m| {
+        flight
+            .summary(m, ErrorKind::Reconstructed)
+            .frames
+            .to_string()
+    });
+    row(
+        "exposure to receipt, ms: mean / max",
+        &|m| match flight.latency_ms(m) {
+            Some((mean, max)) => format!("{mean:.1} / {max:.1}"),
+            None => "-".into(),
+        },
+    );
+    s
+}
+
+/// In flight: the three errors near each altitude checkpoint (runs without set points).
+pub(super) fn flight_altitude_table(flight: &FlightTrace, trace: &Trace) -> String {
+    const BLOCK: usize = 50;
+    let mut s = format!(
+        "\nError at altitude in flight (each error's frames whose true altitude is within {:.0} % \
+         of the checkpoint): horizontal\nmean |e| (mean of sqrt(ex^2 + ey^2)) of (a) sent, \
+         (b) autopilot, (c) ideal sensor, (b) - (c), and mean |z| of each, cm\n\n",
+        100.0 * ALTITUDE_TOLERANCE
+    );
+    let _ = write!(s, "{:<16} ", "");
+    for name in &trace.methods {
+        let _ = write!(s, "|{} ", centred(name, BLOCK));
+    }
+    s.push('\n');
+    let _ = write!(s, "{:>8} {:>7} ", "altitude", "frames");
+    for _ in &trace.methods {
+        let _ = write!(
+            s,
+            "| {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} {:>6} ",
+            "a h", "b h", "c h", "b-c", "a z", "b z", "c z"
+        );
+    }
+    s.push('\n');
+    let mut rows = 0;
+    for altitude in ALTITUDE_CHECKPOINTS_M {
+        let frames = trace.at_altitude(0, altitude, ALTITUDE_TOLERANCE).frames;
+        if frames == 0 {
+            continue;
+        }
+        rows += 1;
+        let _ = write!(s, "{:>6} m {:>7} ", format!("{altitude}"), frames);
+        for m in 0..trace.methods.len() {
+            let at = |k: ErrorKind| flight.at_altitude(m, k, altitude, ALTITUDE_TOLERANCE);
+            let (a, b, c) = (
+                at(ErrorKind::Sent),
+                at(ErrorKind::Reconstructed),
+                at(ErrorKind::Ideal),
+            );
+            let difference = b.mean_horizontal.zip(c.mean_horizontal).map(|(b, c)| b - c);
+            let z = |e: &ErrorStats| cm(e.mean_abs.map(|v| v[2]), 6, 2);
+            let _ = write!(
+                s,
+                "| {} {} {} {} {} {} {} ",
+                cm(a.mean_horizontal, 6, 2),
+                cm(b.mean_horizontal, 6, 2),
+                cm(c.mean_horizontal, 6, 2),
+                cm(difference, 6, 2),
+                z(&a),
+                z(&b),
+                z(&c)
+            );
+        }
+        s.push('\n');
+    }
     if rows == 0 {
         s.clear();
     }
