@@ -114,6 +114,10 @@ pub struct FrameReport {
     pub detect_error: Option<DetectError>,
 }
 
+/// Oldest last fix whose translation places the pad's plane for the rolling-shutter
+/// correction, µs (a hover's drift over it is centimetres).
+const MAX_PLANE_AGE_US: u64 = 500_000;
+
 /// `R_ned_from_level`: the level frame of [`level_pad_fix`] (x north, y west, z up) in NED.
 const NED_FROM_LEVEL: Matrix3<f32> = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
 
@@ -131,6 +135,10 @@ pub struct FramePipeline<'a> {
     /// The rotation of the last fix (pad to camera), to turn the estimator's prediction of the
     /// pad's position into one of the camera's position in the pad frame.
     last_rotation: Option<Matrix3<f32>>,
+    /// The exposure time of the last fix and its translation (the pad in the camera frame):
+    /// the pad's plane for the rolling-shutter correction while the estimator has no
+    /// prediction (its tracks are confirmed only after a few fixes).
+    last_translation: Option<(u64, Vector3<f32>)>,
 }
 
 impl<'a> FramePipeline<'a> {
@@ -174,6 +182,7 @@ impl<'a> FramePipeline<'a> {
             settings,
             estimator,
             last_rotation: None,
+            last_translation: None,
         };
         // The error is kept in the pad (as built); `apply` reports it to callers that ask.
         let _ = pipeline.apply(settings);
@@ -213,6 +222,7 @@ impl<'a> FramePipeline<'a> {
     pub fn reset(&mut self) {
         self.estimator.reset();
         self.last_rotation = None;
+        self.last_translation = None;
     }
 
     /// Finds the pad in `image`, exposed at `exposure_us` (our clock, µs), and estimates it
@@ -234,7 +244,6 @@ impl<'a> FramePipeline<'a> {
             .then(|| self.estimator.predicted_in_camera(&at_exposure))
             .flatten();
         let predicted = self.predicted_camera_position(pad_in_camera.as_ref());
-        let readout_motion = self.readout_motion(&at_exposure, pad_in_camera.as_ref());
         let camera_from_level = at_exposure
             .attitude
             .as_ref()
@@ -242,6 +251,11 @@ impl<'a> FramePipeline<'a> {
             .map(|att| {
                 camera_to_ned_matrix(att, self.estimator.mount()).transpose() * NED_FROM_LEVEL
             });
+        let readout_motion = self.readout_motion(
+            &at_exposure,
+            pad_in_camera.as_ref(),
+            camera_from_level.as_ref(),
+        );
         // The image's own fix is kept beside the levelled one for the mount calibration, which
         // needs the tilt the image measured (the levelled fix's is the attitude's).
         let mut image_fix = None;
@@ -282,6 +296,7 @@ impl<'a> FramePipeline<'a> {
         };
         if let Some(f) = &fix {
             self.last_rotation = Some(f.pose.rotation);
+            self.last_translation = Some((exposure_us, f.pose.translation));
         }
         FrameReport {
             estimate: self.estimator.update_with_image_fix(
@@ -312,14 +327,17 @@ impl<'a> FramePipeline<'a> {
     /// How the camera moves over this frame's readout, for the rolling-shutter correction:
     /// the body rates through the mount and, with the attitude at the exposure, the NED
     /// velocity in the camera's axes, over the pad's plane as predicted (the estimator's pad
-    /// position in the camera frame, `pad_in_camera`, and the normal of the last fix).
-    /// `None` when the correction is off, the camera has a global shutter or the body rates
-    /// are unknown; without the attitude, the velocity or a prediction only the rotation is
-    /// corrected.
+    /// position in the camera frame, `pad_in_camera`, and the plane's normal: up in the
+    /// camera frame when the level fix runs, `camera_from_level`, as it assumes a level pad;
+    /// else the last fix's; without a prediction, the last fix's translation if at most
+    /// [`MAX_PLANE_AGE_US`] old). `None` when the correction is off, the camera has a global
+    /// shutter or the body rates are unknown; without the attitude, the velocity or a plane
+    /// only the rotation is corrected.
     fn readout_motion(
         &self,
         vehicle: &VehicleAtExposure,
         pad_in_camera: Option<&Vector3<f32>>,
+        camera_from_level: Option<&Matrix3<f32>>,
     ) -> Option<shutter::ReadoutMotion> {
         if !(self.config.correct_rolling_shutter && self.camera.line_time_us > 0.0) {
             return None;
@@ -331,9 +349,19 @@ impl<'a> FramePipeline<'a> {
             .as_ref()
             .zip(vehicle.position.as_ref())
             .map(|(att, p)| camera_to_ned_matrix(att, mount).transpose() * p.velocity);
+        let normal = camera_from_level
+            .or(self.last_rotation.as_ref())
+            .map(|r| r.column(2).into_owned());
+        // Without a prediction, the last fix, if recent: the camera has moved a few
+        // centimetres since, a fraction of a percent of the depth.
+        let recent_fix = self
+            .last_translation
+            .as_ref()
+            .and_then(|(t_us, p)| (vehicle.t_us.abs_diff(*t_us) <= MAX_PLANE_AGE_US).then_some(p));
         let plane = pad_in_camera
-            .zip(self.last_rotation.as_ref())
-            .and_then(|(p, r)| shutter::PadPlane::through(p, &r.column(2).into_owned()));
+            .or(recent_fix)
+            .zip(normal)
+            .and_then(|(p, n)| shutter::PadPlane::through(p, &n));
         shutter::ReadoutMotion::new(&self.camera, rate, velocity, plane)
     }
 

@@ -20,11 +20,13 @@
 //! (the body rates of [`crate::filter::VehicleState::body_rate_at`] turned through the mount;
 //! the NED velocity through the attitude at exposure and the mount). The rotation needs no
 //! depth. The shift does: `X(t0 + dt)` is the ray scaled to where it meets the pad's plane,
-//! which comes from the estimator's prediction of the pad at `t0` (its position, and the
-//! plane's normal from the last fix's rotation). The first frames of a track, with no
-//! prediction, are corrected for the rotation only: a depth from a first fix of this frame
-//! would cost a second pad fit (tens of thousands of instructions) to correct a shift that
-//! is a few pixels at most; the next frame has a prediction. Distortion is handled by
+//! which comes from the estimator's prediction of the pad at `t0` (its position; the
+//! plane's normal is up as the attitude gives it when the level fix runs, else the last
+//! fix's), or, while the estimator's tracks are not yet confirmed, from the last fix's
+//! translation. The first frame of a sequence, with neither, is corrected for the rotation
+//! only: a depth from a first fix of this frame would cost a second pad fit (tens of
+//! thousands of instructions) to correct a shift of a few pixels once; the next frame has the
+//! last fix. Distortion is handled by
 //! correcting the ray, not the pixel: undistort, correct, distort ([`CameraModel::undistort`],
 //! [`CameraModel::project`]).
 //!
