@@ -13,6 +13,7 @@ use clap::Args;
 
 use super::{CliError, Outcome};
 use touchdown_formats::recording::RecordingWriter;
+use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
 use touchdown_sim::Simulator;
 
@@ -26,11 +27,28 @@ attitude follows its motion; area sampling, motion blur over the exposure, lens 
 defocus, vignetting, exposure and gain, shot and read noise, clipping and blooming. Every
 frame carries the camera's true pose. The same --seed gives the same bytes.
 
+Flight effects (on by default, each set to a typical small multicopter; 0 turns one off,
+--ideal turns all off):
+  rolling shutter  --readout-ms (30.5: the OV7725 at 30 fps, 480 active rows of 63.5 us):
+                   every row is exposed at its own time, (row - (height-1)/2) * line time
+                   after the frame's time, while the vehicle moves and turns; camera.toml
+                   gets line_time_us = readout / height
+  vibration        --vibration-deg (0.15 RMS per axis: a soft-mounted camera): the camera
+                   turns on its mount at 50-200 Hz (seeded sinusoids); the vehicle's
+                   attitude does not see it
+  mount            --mount-roll-deg (1.2), --mount-pitch-deg (-1.6): the true mount is the
+                   nominal downward one turned by roll about body x, then pitch about body y
+                   (camera-to-body = R_y(pitch) R_x(roll) nominal); camera.toml and the board
+                   know only the nominal one
+
 The recording (DIR) is the contract's format, the one `replay` reads and the camera board
 dumps: camera.toml, pad.toml, frames/000000.pgm ..., frames.csv (index,t_us and the truth
 cam_x,cam_y,cam_z,cam_qw,cam_qx,cam_qy,cam_qz: the camera's position in the pad frame,
-metres, and its camera-to-pad rotation), plus setpoints.csv (index,label) for scenarios
-with set points, and simulation.toml describing the run.
+metres, and its camera-to-pad rotation, at the frame's time, the middle row's exposure
+middle; then veh_qw,veh_qx,veh_qy,veh_qz: the vehicle's true body FRD to NED attitude,
+without the vibration, NED being north = pad +y, east = pad +x, down = pad -z), plus
+setpoints.csv (index,label) for scenarios with set points, and simulation.toml describing
+the run and its effects.
 
 Exit status: 0 on success; 2 with one line on stderr for a bad option or a write error.";
 
@@ -62,6 +80,39 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub force: bool,
 
+    /// Rolling-shutter readout, first row to last, ms (0 = global shutter) [default: 30.5]
+    #[arg(long, value_name = "MS", value_parser = non_negative, help_heading = "Flight effects")]
+    pub readout_ms: Option<f64>,
+
+    /// Camera vibration on its mount, degrees RMS per axis, 50-200 Hz [default: 0.15]
+    #[arg(long, value_name = "DEG", value_parser = non_negative, help_heading = "Flight effects")]
+    pub vibration_deg: Option<f64>,
+
+    /// Mount misalignment about body x, degrees [default: 1.2]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "DEG",
+        value_parser = angle,
+        help_heading = "Flight effects"
+    )]
+    pub mount_roll_deg: Option<f64>,
+
+    /// Mount misalignment about body y, degrees [default: -1.6]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "DEG",
+        value_parser = angle,
+        help_heading = "Flight effects"
+    )]
+    pub mount_pitch_deg: Option<f64>,
+
+    /// No flight effects: global shutter, no vibration, the nominal mount (the other effect
+    /// flags then set only what they name)
+    #[arg(long, help_heading = "Flight effects")]
+    pub ideal: bool,
+
     /// Rendering threads [default: all cores]
     #[arg(
         long,
@@ -70,6 +121,42 @@ pub struct SimulateArgs {
         help_heading = "Advanced"
     )]
     pub threads: Option<usize>,
+}
+
+/// A finite number >= 0 (a readout, an RMS).
+fn non_negative(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{text}` is not a number >= 0")),
+    }
+}
+
+/// A mount angle: finite, within +-45 degrees (beyond that it is not a misalignment).
+fn angle(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v.abs() <= 45.0 => Ok(v),
+        _ => Err(format!(
+            "`{text}` is not an angle in degrees within -45..45"
+        )),
+    }
+}
+
+impl SimulateArgs {
+    /// The flight effects asked for: typical (or none with `--ideal`), each flag overriding
+    /// its term.
+    pub fn effects(&self) -> FlightEffects {
+        let base = if self.ideal {
+            FlightEffects::none()
+        } else {
+            FlightEffects::typical()
+        };
+        FlightEffects {
+            readout_ms: self.readout_ms.unwrap_or(base.readout_ms),
+            vibration_deg: self.vibration_deg.unwrap_or(base.vibration_deg),
+            mount_roll_deg: self.mount_roll_deg.unwrap_or(base.mount_roll_deg),
+            mount_pitch_deg: self.mount_pitch_deg.unwrap_or(base.mount_pitch_deg),
+        }
+    }
 }
 
 fn scenario_parser() -> PossibleValuesParser {
@@ -116,6 +203,14 @@ pub fn run(
         }
         scenario.truncate(n);
     }
+    let effects = args.effects();
+    scenario.apply_effects(&effects);
+    scenario.camera.model.validate().map_err(|e| {
+        CliError(format!(
+            "--readout-ms {}: the camera refuses it ({e:?})",
+            effects.readout_ms
+        ))
+    })?;
     let dir = args
         .out
         .clone()
@@ -128,10 +223,11 @@ pub fn run(
     }
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
-    let mut writer = RecordingWriter::create(&dir, &camera, &pad, true).map_err(CliError::new)?;
+    let mut writer = RecordingWriter::create_with_vehicle_attitude(&dir, &camera, &pad, true, true)
+        .map_err(CliError::new)?;
     std::fs::write(
         dir.join("simulation.toml"),
-        simulation_toml(&simulator.scenario),
+        simulation_toml(&simulator.scenario, &effects),
     )
     .map_err(|e| {
         CliError(format!(
@@ -146,9 +242,10 @@ pub fn run(
             break;
         };
         writer
-            .push(
+            .push_with_vehicle_attitude(
                 frame.t_us,
                 Some(&frame.truth),
+                Some(&frame.vehicle_attitude),
                 frame.label.as_deref(),
                 &frame.image,
             )
@@ -184,12 +281,13 @@ pub fn run(
 }
 
 /// `simulation.toml`: what produced the recording (informational; readers ignore it).
-fn simulation_toml(s: &Scenario) -> String {
+fn simulation_toml(s: &Scenario, effects: &FlightEffects) -> String {
     let lens = s.camera.model.distortion;
     format!(
         "# How this recording was simulated (touchdown simulate); informational.\n\
          scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\
-         supersampling = {}\nground = {}\ndistortion = {:?}\n",
+         supersampling = {}\nground = {}\ndistortion = {:?}\n\
+         readout_ms = {:?}\nvibration_deg = {:?}\nmount_roll_deg = {:?}\nmount_pitch_deg = {:?}\n",
         touchdown_formats::toml_string(&s.name),
         touchdown_formats::toml_string(&s.description),
         s.seed,
@@ -197,6 +295,10 @@ fn simulation_toml(s: &Scenario) -> String {
         s.exposure_time_s,
         s.supersampling,
         touchdown_formats::toml_string(&format!("{:?}", s.ground)),
-        lens
+        lens,
+        effects.readout_ms,
+        effects.vibration_deg,
+        effects.mount_roll_deg,
+        effects.mount_pitch_deg
     )
 }

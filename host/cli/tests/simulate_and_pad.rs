@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::Scenario;
 use touchdown_sim::Simulator;
 
@@ -46,11 +47,31 @@ fn simulate_writes_a_readable_recording() {
     assert_eq!(recording.frames[0].label.as_deref(), Some("hover=20"));
     let truth = recording.frames[1].truth.unwrap();
     assert!((truth.position[2] - 20.0).abs() < 0.2);
-    // Rendering again from the same seed gives the same bytes.
+    // Rendering again from the same seed, with the typical flight effects (the default),
+    // gives the same bytes, and the vehicle's attitude of the frame.
     let mut scenario = Scenario::named("sun", 3).unwrap();
     scenario.truncate(2);
+    scenario.apply_effects(&FlightEffects::typical());
     let again = Simulator::new(scenario).render(1).unwrap();
     assert_eq!(again.image, recording.frames[1].image);
+    assert_eq!(again.truth, truth);
+    assert_eq!(
+        recording.frames[1].vehicle_attitude,
+        Some(again.vehicle_attitude)
+    );
+    // The rolling shutter's line time is in camera.toml: 30.5 ms over 480 rows.
+    let line = f64::from(recording.camera.line_time_us);
+    assert!((line * 480.0 - 30_500.0).abs() < 0.1, "{line} us");
+    let csv = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
+    assert!(
+        csv.lines()
+            .next()
+            .unwrap()
+            .ends_with(",cam_qz,veh_qw,veh_qx,veh_qy,veh_qz"),
+        "{csv}"
+    );
+    let toml = std::fs::read_to_string(dir.join("simulation.toml")).unwrap();
+    assert!(toml.contains("readout_ms = 30.5\n"), "{toml}");
     // A non-empty directory is refused with one line and status 2.
     let out = touchdown()
         .args(["simulate", "--scenario", "sun", "--frames", "1", "--out"])
@@ -65,10 +86,72 @@ fn simulate_writes_a_readable_recording() {
 }
 
 #[test]
+fn simulate_effect_flags_override_the_typical_ones() {
+    let run = |name: &str, flags: &[&str]| {
+        let dir = scratch(name);
+        let out = touchdown()
+            .args(["simulate", "--scenario", "occlusion", "--frames", "1"])
+            .args(flags)
+            .arg("--out")
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{flags:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let recording = touchdown_formats::recording::Recording::read(&dir).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        recording
+    };
+    // --ideal: the frames of the scenario without effects, a global shutter.
+    let ideal = run("ideal", &["--ideal"]);
+    let mut scenario = Scenario::named("occlusion", 1).unwrap();
+    scenario.truncate(1);
+    let plain = Simulator::new(scenario.clone()).render(0).unwrap();
+    assert_eq!(ideal.frames[0].image, plain.image);
+    assert_eq!(ideal.camera.line_time_us, 0.0);
+    // Each flag sets its own term: a readout of 10 ms, the rest as --ideal.
+    let readout = run("readout", &["--ideal", "--readout-ms", "10"]);
+    let mut effects = FlightEffects::none();
+    effects.readout_ms = 10.0;
+    scenario.apply_effects(&effects);
+    let expected = Simulator::new(scenario.clone()).render(0).unwrap();
+    assert_eq!(readout.frames[0].image, expected.image);
+    assert!((f64::from(readout.camera.line_time_us) * 480.0 - 10_000.0).abs() < 0.1);
+    // Typical but a global shutter and an aligned mount: only the vibration left.
+    let shaken = run(
+        "shaken",
+        &[
+            "--readout-ms",
+            "0",
+            "--mount-roll-deg",
+            "0",
+            "--mount-pitch-deg",
+            "-0",
+        ],
+    );
+    let mut scenario = Scenario::named("occlusion", 1).unwrap();
+    scenario.truncate(1);
+    scenario.apply_effects(&FlightEffects {
+        vibration_deg: FlightEffects::typical().vibration_deg,
+        ..FlightEffects::none()
+    });
+    let expected = Simulator::new(scenario).render(0).unwrap();
+    assert_eq!(shaken.frames[0].image, expected.image);
+    assert_eq!(shaken.camera.line_time_us, 0.0);
+    assert_ne!(shaken.frames[0].image, plain.image);
+}
+
+#[test]
 fn bad_options_are_one_line_and_status_2() {
     for args in [
         vec!["simulate", "--scenario", "moon"],
         vec!["simulate", "--scenario", "paper", "--frames", "0"],
+        vec!["simulate", "--scenario", "paper", "--vibration-deg", "x"],
+        vec!["simulate", "--scenario", "paper", "--readout-ms", "-1"],
+        vec!["simulate", "--scenario", "paper", "--mount-roll-deg", "90"],
         vec!["pad", "--design", "nested"],
         vec!["pad", "--layout", "/nonexistent/pad.toml", "--out", "/tmp"],
     ] {
