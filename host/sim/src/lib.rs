@@ -11,6 +11,9 @@
 //! - [`sensor`]: vignetting, lens blur and defocus, exposure (fixed or auto), flare,
 //!   blooming, shot and read noise, 8-bit quantisation with clipping.
 //! - [`trajectory`]: smooth seeded flights whose attitude follows their acceleration.
+//! - [`effects`]: the error sources between the vehicle and its camera
+//!   ([`effects::FlightEffects`]): rolling-shutter readout, vibration on the mount, mount
+//!   misalignment.
 //! - [`scenario`]: the named scenarios (`paper`, `lateral`, `descent`, `landing`, `sun`,
 //!   `shadow`, `occlusion`).
 //! - [`render`]: the test renderer, single frames of printed markers on a plane through an
