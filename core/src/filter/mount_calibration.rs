@@ -32,8 +32,8 @@
 //! - its tilt was not measured by the image at all (the tilt block of its covariance is
 //!   degenerate, as in a fix levelled with the attitude, [`crate::pose::level_pad_fix`], whose
 //!   tilt *is* the attitude through the mount: it would confirm whatever mount is in force);
-//! - its mirror solution fits almost as well (the flip ambiguity of a marker seen nearly
-//!   head-on: the two solutions differ by their tilt);
+//! - it rests on a single marker whose mirror solution fits almost as well (the flip
+//!   ambiguity of a marker seen nearly head-on: the two solutions differ by their tilt);
 //! - the misalignment it implies exceeds [`MountCalibrationConfig::max_misalignment_deg`] (a
 //!   pad that is not level, a wrong fix);
 //! - once there is an estimate, it lies more than 3 sigma from it (outliers).
@@ -90,8 +90,11 @@ pub const MIN_REREPORT_DEG: f32 = 0.2;
 /// levelled fix), degrees. Real fixes are above 0.01 degrees (a 1.25 m marker at 2 m on a
 /// QVGA sensor measures its tilt to about 0.04 degrees).
 const MIN_TILT_SIGMA_DEG: f32 = 0.001;
-/// A fix whose mirror solution reprojects within this factor of its own is ambiguous.
+/// A single-marker fix whose mirror solution reprojects within this factor of its own (or of
+/// [`AMBIGUITY_FLOOR_PX`]) is ambiguous.
 const AMBIGUITY_RATIO: f32 = 2.0;
+/// Reprojection errors below this are noise, pixels.
+const AMBIGUITY_FLOOR_PX: f32 = 0.1;
 /// Accepted frames before the outlier gate closes (the first estimate needs some frames).
 const GATE_AFTER_FRAMES: u32 = 30;
 /// The outlier gate, sigma.
@@ -153,7 +156,7 @@ pub struct MountCalibrationConfig {
 }
 
 impl Default for MountCalibrationConfig {
-    /// The board's: 150 frames (5 s at 30 Hz) over at least 10 s, noise sigma 0.1 degrees,
+    /// The board's: 100 frames (7 s at 15 Hz) over at least 10 s, noise sigma 0.1 degrees,
     /// total at most 0.5 degrees; a 0.25 degree attitude bias with a 20 s correlation time
     /// (a multicopter EKF's roll and pitch in a hover: a few tenths of a degree, drifting over
     /// tens of seconds).
@@ -162,7 +165,7 @@ impl Default for MountCalibrationConfig {
             max_tilt_sigma_deg: 1.0,
             frame_noise_deg: 0.05,
             max_misalignment_deg: 12.0,
-            min_frames: 150,
+            min_frames: 100,
             min_span_us: 10_000_000,
             max_noise_sigma_deg: 0.1,
             max_sigma_deg: 0.5,
@@ -495,8 +498,12 @@ impl MountCalibrator {
         attitude: &Attitude,
         base: &CameraMount,
     ) -> Result<(f32, f32, f32, f32), MountRefusal> {
-        if fix.alternative_rms_px.is_finite()
-            && !(fix.alternative_rms_px > AMBIGUITY_RATIO * fix.reprojection_rms_px)
+        // Only a single marker has two genuinely different solutions: with several, both
+        // starts of the fit converge on the same pose (and the same error).
+        let floor = AMBIGUITY_FLOOR_PX.max(fix.reprojection_rms_px);
+        if fix.markers_used <= 1
+            && fix.alternative_rms_px.is_finite()
+            && !(fix.alternative_rms_px > AMBIGUITY_RATIO * floor)
         {
             return Err(MountRefusal::Ambiguous);
         }
@@ -784,12 +791,19 @@ mod tests {
             cal.observe(&levelled, &att, &base, 0, (0.0, 0.0)),
             Err(MountRefusal::TiltNotMeasured)
         );
-        // A flip-ambiguous one.
+        // A flip-ambiguous single marker (with three markers the same errors are one pose).
         let mut ambiguous = fix_seen(&truth, &att, 0.1, Vector3::zeros());
         ambiguous.alternative_rms_px = 0.15;
+        ambiguous.markers_used = 1;
         assert_eq!(
             cal.observe(&ambiguous, &att, &base, 0, (0.0, 0.0)),
             Err(MountRefusal::Ambiguous)
+        );
+        ambiguous.markers_used = 3;
+        let mut probe = cal.clone();
+        assert_eq!(
+            probe.observe(&ambiguous, &att, &base, 0, (0.0, 0.0)),
+            Ok(None)
         );
         // A pad tilted by 20 degrees.
         let tilted = fix_seen(&truth, &att, 0.1, Vector3::new(0.35, 0.0, 0.0));
