@@ -351,7 +351,9 @@ impl<'a> FramePipeline<'a> {
             .map(|(att, p)| camera_to_ned_matrix(att, mount).transpose() * p.velocity);
         let normal = camera_from_level
             .or(self.last_rotation.as_ref())
-            .map(|r| r.column(2).into_owned());
+            // The third column, as a product: a column view's `into_owned` keeps a panic
+            // path (nopanic/).
+            .map(|r| r * Vector3::z());
         // Without a prediction, the last fix, if recent: the camera has moved a few
         // centimetres since, a fraction of a percent of the depth.
         let recent_fix = self
