@@ -13,6 +13,7 @@
 //! embedded font, rustix for the serial port) stay here, out of the libraries the fuzz
 //! harness, the tests and the examples build on.
 
+pub mod calibrate;
 pub mod companion;
 pub mod detect;
 pub mod pad;
@@ -64,6 +65,10 @@ pub enum Command {
     /// Run the board's MAVLink companion logic on a recording against a UDP endpoint (SITL)
     /// or a serial port.
     Companion(companion::CompanionArgs),
+    /// Estimate the camera mount's roll and pitch (TD_CAM_ROLL, TD_CAM_PITCH) from a
+    /// recording of a hover over the pad.
+    #[command(long_about = calibrate::LONG_HELP)]
+    Calibrate(calibrate::CalibrateArgs),
 }
 
 /// A failure reported as one line on stderr with exit status 2.
@@ -104,6 +109,7 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
         Command::Replay(args) => replay::run(&args, out, err),
         Command::Pad(args) => pad::run(&args, out, err),
         Command::Companion(args) => companion::run(&args, out, err),
+        Command::Calibrate(args) => calibrate::run(&args, out, err),
     }
 }
 
