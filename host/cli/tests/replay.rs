@@ -371,7 +371,8 @@ fn json_has_every_table_and_the_numbers_of_the_text() {
             "no level fix",
             "no flip choice",
             "neither step",
-            "no pattern fit"
+            "no pattern fit",
+            "no shutter correction"
         ]
     );
     assert!(methods.iter().all(|m| m["attitude_given"] == true));
@@ -379,7 +380,12 @@ fn json_has_every_table_and_the_numbers_of_the_text() {
         .iter()
         .map(|m| m["settings"]["detector"]["fit_small_markers"] == true)
         .collect();
-    assert_eq!(fits, [true, true, true, true, false]);
+    assert_eq!(fits, [true, true, true, true, false, true]);
+    let shutter: Vec<bool> = methods[1..]
+        .iter()
+        .map(|m| m["settings"]["correct_rolling_shutter"] == true)
+        .collect();
+    assert_eq!(shutter, [true, true, true, true, true, false]);
 
     // The summary: the same numbers as the text's, per method, in the same order.
     let summary = doc["summary"]["methods"].as_array().expect("summary");

@@ -273,6 +273,7 @@ fn method(m: &Method) -> Value {
                 "level_fix": config.level_fix,
                 "flip_by_prediction": config.flip_by_prediction,
                 "detector": {"fit_small_markers": config.detector.fit_small_markers},
+                "correct_rolling_shutter": config.correct_rolling_shutter,
             }),
         ),
     };

@@ -91,8 +91,9 @@ Methods:
                      tilt from the attitude, rolling-shutter correction), the estimator; its
                      LANDING_TARGET scored as below
   --pose-steps       adds the board's pipeline without the level fix, without the flip
-                     choice, without both, and without the detector's pattern fit of small
-                     markers' corners on far frames (no pattern fit), in that order
+                     choice, without both, without the detector's pattern fit of small
+                     markers' corners on far frames (no pattern fit), and without the
+                     rolling-shutter correction (no shutter correction), in that order
 A recording without truth runs vision only and prints no errors.
 
 In flight (any input with truth): every method runs with the board's MAVLink companion (the
@@ -452,11 +453,16 @@ pub fn run(
         };
         let mut no_pattern_fit = PipelineConfig::default();
         no_pattern_fit.detector.fit_small_markers = false;
+        let no_shutter_correction = PipelineConfig {
+            correct_rolling_shutter: false,
+            ..PipelineConfig::default()
+        };
         methods.extend([
             Method::board("no level fix", steps(true, false)),
             Method::board("no flip choice", steps(false, true)),
             Method::board("neither step", steps(false, false)),
             Method::board("no pattern fit", no_pattern_fit),
+            Method::board("no shutter correction", no_shutter_correction),
         ]);
     }
     if !input.has_truth {
