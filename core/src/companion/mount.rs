@@ -52,11 +52,69 @@ impl State {
         self.stats.mount_corrections = self.stats.mount_corrections.saturating_add(1);
         let mut text = heapless::String::<64>::new();
         // At most 50 bytes (two-digit angles and "too big"); the queue would cut a longer one.
+        // Integers only, unpadded (as the lag report): core's float formatting keeps panic
+        // paths (see nopanic/).
+        let (roll, pitch, sigma) = (
+            Hundredths::of(c.mount_roll_deg),
+            Hundredths::of(c.mount_pitch_deg),
+            Hundredths::of(c.sigma_deg),
+        );
         let _ = write!(
             text,
-            "touchdown: mount r{:+.2} p{:+.2} deg +-{:.2} {}",
-            c.mount_roll_deg, c.mount_pitch_deg, c.sigma_deg, verdict
+            "touchdown: mount r{}{}.{}{} p{}{}.{}{} deg +-{}.{}{} {}",
+            roll.sign,
+            roll.units,
+            roll.cents / 10,
+            roll.cents % 10,
+            pitch.sign,
+            pitch.units,
+            pitch.cents / 10,
+            pitch.cents % 10,
+            sigma.units,
+            sigma.cents / 10,
+            sigma.cents % 10,
+            verdict
         );
         self.queue_status_text(MavSeverity::MAV_SEVERITY_NOTICE, &text);
+    }
+}
+
+/// A value rounded to hundredths, as a sign and two integers (`-1.58`: '-', 1, 58).
+struct Hundredths {
+    sign: char,
+    units: u32,
+    cents: u32,
+}
+
+impl Hundredths {
+    /// `v` rounded to hundredths (NaN and values beyond 10^7 saturate: never in a text).
+    fn of(v: f32) -> Self {
+        let scaled = libm::roundf(v.abs() * 100.0);
+        // `as` saturates (NaN gives 0).
+        let n = scaled as u32;
+        Hundredths {
+            sign: if v < 0.0 && n > 0 { '-' } else { '+' },
+            units: n / 100,
+            cents: n % 100,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Hundredths;
+
+    #[test]
+    fn hundredths_round_and_sign() {
+        let f = |v: f32| {
+            let h = Hundredths::of(v);
+            (h.sign, h.units, h.cents)
+        };
+        assert_eq!(f(1.214), ('+', 1, 21));
+        assert_eq!(f(-1.587), ('-', 1, 59));
+        assert_eq!(f(-0.004), ('+', 0, 0));
+        assert_eq!(f(9.996), ('+', 10, 0));
+        assert_eq!(f(-11.5), ('-', 11, 50));
+        assert_eq!(f(f32::NAN), ('+', 0, 0));
     }
 }
