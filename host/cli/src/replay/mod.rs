@@ -229,7 +229,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Flight effects"
     )]
-    pub readout_ms: Option<f64>,
+    pub readout_ms: Option<f32>,
 
     /// Camera vibration on its mount, RMS per axis, degrees (--scenario) [default: 0.15]
     #[arg(
@@ -238,7 +238,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Flight effects"
     )]
-    pub vibration_deg: Option<f64>,
+    pub vibration_deg: Option<f32>,
 
     /// Mount misalignment about body x, degrees (--scenario) [default: 1.2]
     #[arg(
@@ -247,7 +247,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Flight effects"
     )]
-    pub mount_roll_deg: Option<f64>,
+    pub mount_roll_deg: Option<f32>,
 
     /// Mount misalignment about body y, degrees (--scenario) [default: -1.6]
     #[arg(
@@ -256,7 +256,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Flight effects"
     )]
-    pub mount_pitch_deg: Option<f64>,
+    pub mount_pitch_deg: Option<f32>,
 
     /// Attitude white noise per sample, degrees [default: 0.02]
     #[arg(
@@ -265,7 +265,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub attitude_noise_deg: Option<f64>,
+    pub attitude_noise_deg: Option<f32>,
 
     /// Slowly varying roll/pitch bias, RMS, degrees [default: 0.3]
     #[arg(
@@ -274,7 +274,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub tilt_bias_deg: Option<f64>,
+    pub tilt_bias_deg: Option<f32>,
 
     /// Heading bias, degrees [default: 0.5]
     #[arg(
@@ -283,7 +283,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub heading_bias_deg: Option<f64>,
+    pub heading_bias_deg: Option<f32>,
 
     /// An attitude sample's time stamp to its transmission, ms [default: 5]
     #[arg(
@@ -292,7 +292,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub sample_latency_ms: Option<f64>,
+    pub sample_latency_ms: Option<f32>,
 
     /// Jitter of that latency, +- ms [default: 2]
     #[arg(
@@ -301,7 +301,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub sample_jitter_ms: Option<f64>,
+    pub sample_jitter_ms: Option<f32>,
 
     /// Fixed link delay per message, ms [default: 1]
     #[arg(
@@ -310,7 +310,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub link_delay_ms: Option<f64>,
+    pub link_delay_ms: Option<f32>,
 
     /// Link speed, bit/s (0: bytes take no time) [default: 921600]
     #[arg(
@@ -319,7 +319,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub baud: Option<f64>,
+    pub baud: Option<f32>,
 
     /// The autopilot booted this long before the board, s [default: 12.3]
     #[arg(
@@ -328,7 +328,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub clock_offset_s: Option<f64>,
+    pub clock_offset_s: Option<f32>,
 
     /// The autopilot's clock rate error, ppm [default: 30]
     #[arg(
@@ -337,7 +337,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub clock_drift_ppm: Option<f64>,
+    pub clock_drift_ppm: Option<f32>,
 
     /// The board's exposure-to-send time, ms [default: 20]
     #[arg(
@@ -346,7 +346,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub processing_ms: Option<f64>,
+    pub processing_ms: Option<f32>,
 
     /// Its jitter, +- ms [default: 5]
     #[arg(
@@ -355,7 +355,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub processing_jitter_ms: Option<f64>,
+    pub processing_jitter_ms: Option<f32>,
 
     /// ArduPilot's PLND_LAG, s (0: the ideal autopilot, which assigns a target to its
     /// exposure) [default: 0.02]
@@ -365,7 +365,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub plnd_lag_s: Option<f64>,
+    pub plnd_lag_s: Option<f32>,
 
     /// PX4's local position drift, RMS per axis, m [default: 0.3]
     #[arg(
@@ -374,7 +374,7 @@ pub struct ReplayArgs {
         allow_negative_numbers = true,
         help_heading = "Error model"
     )]
-    pub position_drift_m: Option<f64>,
+    pub position_drift_m: Option<f32>,
 
     /// Rendering threads for --scenario [default: all cores]
     #[arg(
@@ -666,9 +666,10 @@ pub(super) fn flight_effects(args: &ReplayArgs) -> Result<FlightEffects, CliErro
     } else {
         FlightEffects::typical()
     };
-    let set = |v: &mut f64, flag: Option<f64>| {
+    // The flags are f32 (a smaller argument struct), exact for the values they take.
+    let set = |v: &mut f64, flag: Option<f32>| {
         if let Some(x) = flag {
-            *v = x;
+            *v = widen(x);
         }
     };
     set(&mut e.readout_ms, args.readout_ms);
@@ -679,7 +680,7 @@ pub(super) fn flight_effects(args: &ReplayArgs) -> Result<FlightEffects, CliErro
         (e.readout_ms, "--readout-ms"),
         (e.vibration_deg, "--vibration-deg"),
     ] {
-        if !(v >= 0.0 && v.is_finite()) {
+        if !v.is_finite() || v < 0.0 {
             return Err(CliError(format!("{name} must be a number, not negative")));
         }
     }
@@ -687,11 +688,16 @@ pub(super) fn flight_effects(args: &ReplayArgs) -> Result<FlightEffects, CliErro
         (e.mount_roll_deg, "--mount-roll-deg"),
         (e.mount_pitch_deg, "--mount-pitch-deg"),
     ] {
-        if !(v.abs() <= 10.0) {
+        if !v.is_finite() || v.abs() > 10.0 {
             return Err(CliError(format!("{name} must be within +-10 degrees")));
         }
     }
     Ok(e)
+}
+
+/// A flag's value as the decimal it was written as (`0.02`, not `0.0199999995`).
+fn widen(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(f64::from(x))
 }
 
 /// Whether a flag that only a scenario takes was given.
@@ -758,7 +764,7 @@ pub(super) fn error_model(args: &ReplayArgs) -> Result<ErrorModel, CliError> {
         ),
     ];
     for (slot, flag, name) in flags {
-        if let Some(v) = flag {
+        if let Some(v) = flag.map(widen) {
             if !v.is_finite() {
                 return Err(CliError(format!("{name} must be a number")));
             }

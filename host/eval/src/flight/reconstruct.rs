@@ -37,7 +37,8 @@ pub fn ardupilot_relative_ned(
     body_to_ned: &Matrix3<f64>,
     cam_pos_body: &Vector3<f64>,
 ) -> Option<Vector3<f64>> {
-    if !(distance > 0.0) || !distance.is_finite() || !body.iter().all(|v| v.is_finite()) {
+    // NaN fails `is_finite`, so `distance <= 0.0` sees only numbers.
+    if !distance.is_finite() || distance <= 0.0 || !body.iter().all(|v| v.is_finite()) {
         return None;
     }
     let unit = body / distance;
