@@ -35,7 +35,10 @@
 //! Jitters are uniform in `[-jitter, +jitter]` around their mean (never negative): a
 //! scheduler's slot, not a heavy tail. [`ErrorModel::none`] is an autopilot that knows the
 //! truth exactly and instantly (the replay before this model) over a link without delay; the
-//! board still takes 20 ms to process a frame.
+//! board still takes 20 ms to process a frame. With it (and no flight effects,
+//! `touchdown replay --scenario paper --ideal`) the replay gives what it gave before it ran in
+//! flight to within the interpolation of the 50 Hz attitude stream: ours 0.20 / 0.14 / 2.33 cm
+//! RMS against 0.18 / 0.08 / 2.35, the set points' mean errors within 0.03 cm.
 //!
 //! A [`Realisation`] turns the model into functions of time, deterministic in its seed: the
 //! same seed gives the same errors for every method of a replay, so their columns differ only
