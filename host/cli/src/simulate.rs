@@ -33,7 +33,7 @@ Flight effects (on by default, each set to a typical small multicopter; 0 turns 
                    every row is exposed at its own time, (row - (height-1)/2) * line time
                    after the frame's time, while the vehicle moves and turns; camera.toml
                    gets line_time_us = readout / height
-  vibration        --vibration-deg (0.15 RMS per axis: a soft-mounted camera): the camera
+  vibration        --vibration-deg (0.03 RMS per axis: ~25 deg/s of jitter): the camera
                    turns on its mount at 50-200 Hz (seeded sinusoids); the vehicle's
                    attitude does not see it
   mount            --mount-roll-deg (1.2), --mount-pitch-deg (-1.6): the true mount is the
@@ -84,7 +84,7 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "MS", value_parser = non_negative, help_heading = "Flight effects")]
     pub readout_ms: Option<f64>,
 
-    /// Camera vibration on its mount, degrees RMS per axis, 50-200 Hz [default: 0.15]
+    /// Camera vibration on its mount, degrees RMS per axis, 50-200 Hz [default: 0.03]
     #[arg(long, value_name = "DEG", value_parser = non_negative, help_heading = "Flight effects")]
     pub vibration_deg: Option<f64>,
 

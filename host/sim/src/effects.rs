@@ -50,14 +50,17 @@ impl FlightEffects {
     /// A small multicopter with the board camera:
     /// - readout 30.5 ms: the OV7725 at 30 fps clocks 525 lines of 63.5 us per frame (its
     ///   datasheet's VGA timing), 480 of them active, so the active rows take 30.5 ms;
-    /// - vibration 0.15 degrees RMS per axis: a camera on soft (rubber or foam) dampers,
-    ///   whose residual jitter at the motors' frequencies is a few tenths of a degree peak;
+    /// - vibration 0.03 degrees RMS per axis: at 50-200 Hz that is an angular rate of about
+    ///   25 deg/s RMS, the order of the gyro noise a balanced small multicopter logs in
+    ///   flight, so about 1 px of jitter blur in a 4 ms exposure at VGA. (0.15 degrees would
+    ///   be 120 deg/s: badly balanced props, images no user would fly with; the flag can
+    ///   still ask for it.)
     /// - mount roll 1.2 and pitch -1.6 degrees (2.0 degrees in all): a mount printed and
     ///   screwed on by hand, with nothing aligning it to the flight controller's axes.
     pub fn typical() -> Self {
         FlightEffects {
             readout_ms: 30.5,
-            vibration_deg: 0.15,
+            vibration_deg: 0.03,
             mount_roll_deg: 1.2,
             mount_pitch_deg: -1.6,
         }
