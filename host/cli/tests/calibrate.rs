@@ -44,7 +44,7 @@ fn render(dir: &Path, roll: f64, pitch: f64, step: usize, frames: usize, attitud
         .collect();
     scenario.apply_effects(&FlightEffects {
         readout_ms: 0.0,
-        vibration_deg: 0.15,
+        vibration_deg: 0.03,
         mount_roll_deg: roll,
         mount_pitch_deg: pitch,
     });
