@@ -216,15 +216,7 @@ pub fn run(
         .pad
         .layout()
         .map_err(|e| CliError(format!("{}: pad.toml: {e:?}", args.recording.display())))?;
-    let mut names: Vec<String> = reader
-        .pad
-        .markers
-        .iter()
-        .map(|m| m.family.clone())
-        .collect();
-    names.sort();
-    names.dedup();
-    let selected = families::resolve_all(&names).map_err(CliError::new)?;
+    let selected = families::resolve_pad(&reader.pad).map_err(CliError::new)?;
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
 

@@ -214,6 +214,19 @@ pub fn resolve(argument: &str) -> Result<SelectedFamily, FamilyResolveError> {
     })
 }
 
+/// The families a pad's markers name, each resolved once, in name order (a pad names the
+/// families it uses, usually on several markers; unlike [`resolve_all`], a pad that names
+/// none gets none, not the defaults).
+pub fn resolve_pad(pad: &crate::pad::PadConfig) -> Result<Vec<SelectedFamily>, FamilyResolveError> {
+    let mut names: Vec<String> = pad.markers.iter().map(|m| m.family.clone()).collect();
+    names.sort();
+    names.dedup();
+    if names.is_empty() {
+        return Ok(Vec::new());
+    }
+    resolve_all(&names)
+}
+
 /// Resolves every `--family` argument, or gives the default families
 /// ([`tables::DEFAULT`]: tag36h11 and aruco_6x6_250) when there is none. The same shipped
 /// family named twice is searched once.

@@ -123,10 +123,7 @@ pub fn run(
         .pad
         .layout()
         .map_err(|e| CliError(format!("pad `{}`: invalid layout: {e:?}", input.pad.name)))?;
-    let mut names: Vec<String> = input.pad.markers.iter().map(|m| m.family.clone()).collect();
-    names.sort();
-    names.dedup();
-    let selected = families::resolve_all(&names).map_err(CliError::new)?;
+    let selected = families::resolve_pad(&input.pad).map_err(CliError::new)?;
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
     let mut methods: Vec<Method> = vec![Method::paper().named("paper's method"), Method::ours()];
