@@ -161,6 +161,12 @@ pub struct ReplayArgs {
     #[arg(long, help_heading = "Flight")]
     pub no_calibration: bool,
 
+    /// Board parameters set before the flight, NAME=VALUE[,NAME=VALUE...] (e.g. the mount a
+    /// hover's `touchdown calibrate` gave: TD_CAM_ROLL=1.59,TD_CAM_PITCH=-0.86); applied after
+    /// --no-calibration and --mount-known, so they win
+    #[arg(long, value_name = "LIST", help_heading = "Flight")]
+    pub board_params: Option<String>,
+
     /// Rolling-shutter readout, first row to last, ms (--scenario; 0 = global shutter)
     /// [default: 30.5]
     #[arg(
@@ -483,4 +489,24 @@ pub(super) fn autopilot_kind(args: &ReplayArgs) -> Result<AutopilotKind, CliErro
 pub(super) fn mount_known(args: &ReplayArgs) -> bool {
     args.mount_known
         .unwrap_or_else(|| args.scenario.as_deref() == Some("paper"))
+}
+
+/// `--board-params`: `NAME=VALUE` pairs, comma-separated, in order.
+pub(super) fn board_params(args: &ReplayArgs) -> Result<Vec<(String, f32)>, CliError> {
+    let Some(list) = &args.board_params else {
+        return Ok(Vec::new());
+    };
+    list.split(',')
+        .map(|pair| {
+            let (name, value) = pair
+                .split_once('=')
+                .ok_or_else(|| CliError(format!("--board-params: `{pair}` is not NAME=VALUE")))?;
+            let value: f32 = value.trim().parse().map_err(|_| {
+                CliError(format!(
+                    "--board-params: `{pair}`: the value is not a number"
+                ))
+            })?;
+            Ok((name.trim().to_string(), value))
+        })
+        .collect()
 }

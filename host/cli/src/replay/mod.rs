@@ -52,7 +52,9 @@ mod input;
 mod json;
 mod tables;
 
-use args::{autopilot_kind, effect_flag_given, error_model, flight_effects, mount_known};
+use args::{
+    autopilot_kind, board_params, effect_flag_given, error_model, flight_effects, mount_known,
+};
 pub use args::{ReplayArgs, LONG_HELP};
 
 pub use input::set_point_of_label;
@@ -367,6 +369,7 @@ fn flight_setup(
         setup.paper_mount = CameraMount::from_matrix(mount)
             .map_err(|e| CliError(format!("the scenario's mount is not a rotation: {e:?}")))?;
     }
+    setup.params.extend(board_params(args)?);
     for (name, _) in &setup.params {
         if touchdown_core::params::ParamId::from_name(name).is_none() {
             return Err(CliError(format!(
