@@ -58,8 +58,11 @@ fn autopilot_heartbeat(seq: &mut u8) -> Vec<u8> {
 fn descent_recording(name: &str, frames: u32) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("touchdown-serial-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
+    // --ideal: these tests are about the serial link and the parameters, and the descent
+    // starts with the pad near the edge of the view, where the default 2 degree mount
+    // misalignment takes it out of some of these few frames.
     let status = touchdown()
-        .args(["simulate", "--scenario", "descent", "--frames"])
+        .args(["simulate", "--ideal", "--scenario", "descent", "--frames"])
         .arg(frames.to_string())
         .arg("--out")
         .arg(&dir)
