@@ -513,11 +513,7 @@ impl<'a> Pipeline<'a> {
                     outcome.reconstructed =
                         flight.reconstruct(&body, exposure, receipt, &vehicle, truth);
                     outcome.ideal =
-                        flight
-                            .ideal_body(exposure, &frame.truth, truth)
-                            .and_then(|ideal| {
-                                flight.reconstruct(&ideal, exposure, receipt, &vehicle, truth)
-                            });
+                        flight.reconstruct_ideal(exposure, receipt, &vehicle, &frame.truth, truth);
                     outcome.latency_us = Some(receipt - exposure);
                 }
                 // Keep the link running while the next frame is processed.
@@ -596,26 +592,14 @@ impl<'a> Pipeline<'a> {
                     outcome.sent = flight.sent(&body, exposure, &frame.truth, truth);
                 }
                 if let Some(r) = &received {
-                    let d = &r.data;
-                    let xyz = Vector3::new(d.x, d.y, d.z).cast::<f64>();
-                    outcome.reconstructed = match flight.autopilot.kind {
-                        flight::AutopilotKind::ArduPilot => flight.reconstruct_body(
-                            &xyz,
-                            f64::from(d.distance),
-                            exposure,
-                            r.receipt_us,
-                            truth,
-                        ),
-                        flight::AutopilotKind::Px4 => {
-                            flight.reconstruct_local_ned(&xyz, d.time_usec, r.receipt_us, truth)
-                        }
-                    };
-                    outcome.ideal =
-                        flight
-                            .ideal_body(exposure, &frame.truth, truth)
-                            .and_then(|ideal| {
-                                flight.reconstruct(&ideal, exposure, r.receipt_us, &vehicle, truth)
-                            });
+                    outcome.reconstructed = flight.reconstruct_received(r, exposure, truth);
+                    outcome.ideal = flight.reconstruct_ideal(
+                        exposure,
+                        r.receipt_us,
+                        &vehicle,
+                        &frame.truth,
+                        truth,
+                    );
                     outcome.latency_us = Some(r.receipt_us.saturating_sub(exposure));
                 }
                 Ok((

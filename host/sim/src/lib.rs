@@ -215,30 +215,6 @@ impl Simulator {
         (t + (row - middle) * line).min(last_before_end).max(start)
     }
 
-    /// How far (pixels) the image moves between two poses: the ground points seen at a 3x3
-    /// grid of image points from `a`, projected through `b`.
-    fn image_motion(&self, a: &CameraPose, b: &CameraPose) -> f64 {
-        let cam = &self.scenario.camera;
-        let (w, h) = (cam.width() as f64, cam.height() as f64);
-        let ha = a.ground_homography();
-        let mut worst = 0.0f64;
-        for fy in [0.0, 0.5, 1.0] {
-            for fx in [0.0, 0.5, 1.0] {
-                let (u, v) = (fx * (w - 1.0), fy * (h - 1.0));
-                let Some((x, y)) = cam.undistort(u, v) else {
-                    continue;
-                };
-                let Some((gx, gy)) = crate::math::apply_homography(&ha, x, y) else {
-                    continue;
-                };
-                if let Some(p) = cam.project(b.to_camera([gx, gy, 0.0])) {
-                    worst = worst.max(((p[0] - u).powi(2) + (p[1] - v).powi(2)).sqrt());
-                }
-            }
-        }
-        worst
-    }
-
     /// How far the image moves during an exposure from `open` to `close`. A smooth flight
     /// moves along a straight line over a few milliseconds, so the motion from the first
     /// pose to the last is the motion; a vibrating camera swings back and forth within an
@@ -246,7 +222,7 @@ impl Simulator {
     /// poses [`VIBRATION_MOTION_STEP_S`] apart.
     fn exposure_motion(&self, open: f64, close: f64) -> f64 {
         if self.scenario.vibration.is_none() {
-            return self.image_motion(&self.camera_pose(open), &self.camera_pose(close));
+            return self.image_path(&[self.camera_pose(open), self.camera_pose(close)]);
         }
         let steps = ((close - open) / VIBRATION_MOTION_STEP_S)
             .ceil()

@@ -192,15 +192,6 @@ pub(super) fn summary_table(trace: &Trace, summaries: &[MethodSummary], has_trut
         }
         s.push('\n');
     };
-    let xyz = |v: Option<[f64; 3]>| match v {
-        Some(v) => format!(
-            "{:.2} / {:.2} / {:.2}",
-            100.0 * v[0],
-            100.0 * v[1],
-            100.0 * v[2]
-        ),
-        None => "-".into(),
-    };
     row("frames with a pose (detection)", &|m| {
         format!("{} ({:.1} %)", m.detected, 100.0 * m.detection_rate())
     });
@@ -325,15 +316,6 @@ pub(super) fn flight_summary_table(flight: &FlightTrace, trace: &Trace) -> Strin
         }
         s.push('\n');
     };
-    let xyz = |v: Option<[f64; 3]>| match v {
-        Some(v) => format!(
-            "{:.2} / {:.2} / {:.2}",
-            100.0 * v[0],
-            100.0 * v[1],
-            100.0 * v[2]
-        ),
-        None => "-".into(),
-    };
     for kind in ErrorKind::ALL {
         let name = match kind {
             ErrorKind::Sent => "(a) sent: RMS x / y / z, cm",
@@ -432,6 +414,19 @@ pub(super) fn flight_altitude_table(flight: &FlightTrace, trace: &Trace) -> Stri
         s.clear();
     }
     s
+}
+
+/// x / y / z in centimetres with two decimals (metres in), `-` when unknown: one summary cell.
+fn xyz(v: Option<[f64; 3]>) -> String {
+    match v {
+        Some(v) => format!(
+            "{:.2} / {:.2} / {:.2}",
+            100.0 * v[0],
+            100.0 * v[1],
+            100.0 * v[2]
+        ),
+        None => "-".into(),
+    }
 }
 
 #[cfg(test)]

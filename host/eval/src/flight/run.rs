@@ -282,6 +282,46 @@ impl FlightRun {
         Some(pos.position.cast::<f64>() + r * body)
     }
 
+    /// (b): what this flight's autopilot reconstructs from the LANDING_TARGET it received,
+    /// for the exposure at `exposure_us`: ArduPilot from its BODY_FRD vector and distance,
+    /// PX4 from its LOCAL_NED point and time stamp.
+    pub fn reconstruct_received(
+        &self,
+        target: &ReceivedTarget,
+        exposure_us: u64,
+        truth: &dyn TruthSource,
+    ) -> Option<Scored> {
+        let d = &target.data;
+        let xyz = Vector3::new(d.x, d.y, d.z).cast::<f64>();
+        match self.autopilot.kind {
+            AutopilotKind::ArduPilot => self.reconstruct_body(
+                &xyz,
+                f64::from(d.distance),
+                exposure_us,
+                target.receipt_us,
+                truth,
+            ),
+            AutopilotKind::Px4 => {
+                self.reconstruct_local_ned(&xyz, d.time_usec, target.receipt_us, truth)
+            }
+        }
+    }
+
+    /// (c): what this flight's autopilot reconstructs from an ideal sensor's message for the
+    /// exposure at `exposure_us` (the exact body vector, [`FlightRun::ideal_body`]), received at
+    /// `receipt_us`.
+    pub fn reconstruct_ideal(
+        &self,
+        exposure_us: u64,
+        receipt_us: u64,
+        vehicle: &VehicleAtExposure,
+        truth_position: &Vector3<f64>,
+        truth: &dyn TruthSource,
+    ) -> Option<Scored> {
+        let ideal = self.ideal_body(exposure_us, truth_position, truth)?;
+        self.reconstruct(&ideal, exposure_us, receipt_us, vehicle, truth)
+    }
+
     /// The reconstruction of `body` for this flight's autopilot, received at `receipt_us`,
     /// exposed at `exposure_us`, with the companion's vehicle state at the exposure for PX4.
     pub fn reconstruct(
