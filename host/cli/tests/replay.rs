@@ -599,3 +599,53 @@ fn flight_flags_are_checked() {
         assert!(help.contains(needle), "replay --help lacks `{needle}`");
     }
 }
+
+/// `--calibration-hover` flies the set-up guide's hover through the board's companion first:
+/// the mount it sets is what the next flight starts with, close to the scenario's true
+/// misalignment (roll 1.2, pitch -1.6 deg) but measured, not copied (the hover's own attitude
+/// bias is in it). A board that may not calibrate (`--no-calibration`) cannot be asked to.
+#[test]
+fn calibration_hover_hands_the_mount_the_board_set_to_the_flight() {
+    let out = touchdown(&[
+        "replay",
+        "--scenario",
+        "landing",
+        "--calibration-hover",
+        "--frames",
+        "2",
+        "--json",
+        "--no-plots",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let model = &doc["error_model"];
+    let hover = &model["calibration_hover"];
+    assert_eq!(hover["applied"], true, "{hover}");
+    assert_eq!(hover["frames"], 300, "{hover}");
+    let roll = hover["TD_CAM_ROLL"].as_f64().expect("roll");
+    let pitch = hover["TD_CAM_PITCH"].as_f64().expect("pitch");
+    assert!((roll - 1.2).abs() < 0.3, "roll {roll}");
+    assert!((pitch + 1.6).abs() < 0.3, "pitch {pitch}");
+    assert!(
+        roll != 1.2 && pitch != -1.6,
+        "copied from the truth: {roll} {pitch}"
+    );
+    let params = model["board_params"].as_array().expect("board_params");
+    let value = |name: &str| {
+        params
+            .iter()
+            .find(|p| p["name"] == name)
+            .and_then(|p| p["value"].as_f64())
+    };
+    assert_eq!(value("TD_CAM_ROLL"), Some(roll));
+    assert_eq!(value("TD_CAM_PITCH"), Some(pitch));
+
+    let refused = touchdown(&[
+        "replay",
+        "--scenario",
+        "landing",
+        "--calibration-hover",
+        "--no-calibration",
+    ]);
+    assert_fails_with_one_line(&refused, &["--calibration-hover", "--no-calibration"]);
+}

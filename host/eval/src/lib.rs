@@ -738,6 +738,14 @@ impl<'a> Experiment<'a> {
         &self.flight
     }
 
+    /// Method `method`'s flight: its companion (the board's parameters as it left them, e.g.
+    /// the mount it calibrated) and the simulated autopilot. `None` unless in flight.
+    pub fn flight_run(&self, method: usize) -> Option<&FlightRun> {
+        match &self.pipelines.get(method)?.runner {
+            Runner::Paper { flight, .. } | Runner::Board { flight, .. } => flight.as_deref(),
+        }
+    }
+
     /// Resets every method's filter: the next frame starts a new, independent sequence.
     pub fn start_sequence(&mut self) -> Result<(), ExperimentError> {
         self.pipelines.iter_mut().for_each(Pipeline::reset);

@@ -6,6 +6,7 @@
 //! | `lateral` | paper-single | fast 4 m dashes at 12 m (tilting up to ~30 degrees, motion blur) |
 //! | `descent` | nested | 1 m/s down from 20 m to 1 m while drifting 0.5 m/s onto the pad |
 //! | `landing` | nested | approach and landing from 40 m to 0.3 m |
+//! | `hover` | nested | the set-up guide's mount-calibration hover: 3 m over the pad, holding still, 20 s |
 //! | `sun` | nested | hover at 20 ... 1 m in strong sun, auto-exposure metering on grass: the pad clips |
 //! | `shadow` | nested | hover at 20 ... 1 m with a hard shadow edge across the pad on concrete |
 //! | `occlusion` | nested | hover at 20 ... 1 m with a dark object lying across part of the pad |
@@ -113,6 +114,10 @@ pub const SCENARIOS: &[(&str, &str)] = &[
     (
         "landing",
         "approach and landing from 40 m to 0.3 m over the nested pad, 15 Hz (630 frames)",
+    ),
+    (
+        "hover",
+        "the set-up guide's mount-calibration hover: 3 m over the nested pad, holding still, 20 s at 15 Hz (300 frames)",
     ),
     (
         "sun",
@@ -378,6 +383,29 @@ impl Scenario {
                     tilt_with_acceleration: true,
                     trim: (0.0, 0.0),
                 };
+                base(name, nested, board_camera, trajectory, frames)
+            }
+            "hover" => {
+                // What docs/setup-ardupilot.md asks of a user calibrating the mount: hover at
+                // 2-5 m over the pad, holding still, for at least 20 s. A hovering multicopter
+                // still sways: the landing's wobble, at the landing's frame rate.
+                let h = 3.0;
+                let duration = 20.0;
+                let segments = vec![Segment {
+                    t0: 0.0,
+                    t1: duration,
+                    from: [0.0, 0.0, h],
+                    to: [0.0, 0.0, h],
+                    profile: Profile::Hold,
+                }];
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: Wobble::new(0.015, 1.0, 0.3, seed),
+                    tilt_with_acceleration: true,
+                    trim: (0.0, 0.0),
+                };
+                let frames = uniform_frames(duration - 0.5 / 15.0, 15.0);
                 base(name, nested, board_camera, trajectory, frames)
             }
             "sun" => {

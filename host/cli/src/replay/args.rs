@@ -20,7 +20,7 @@ Input, one of:
                      frames.csv and optionally setpoints.csv), written by `touchdown simulate`
                      or dumped by the camera board
   --scenario NAME    render the scenario in memory (nothing is written to disk); NAME is one
-                     of paper, lateral, descent, landing, sun, shadow, occlusion (see
+                     of paper, lateral, descent, landing, hover, sun, shadow, occlusion (see
                      `touchdown simulate --help`); --seed picks the randomness
 
 Methods:
@@ -104,8 +104,8 @@ pub struct ReplayArgs {
     #[arg(value_name = "RECORDING")]
     pub recording: Option<PathBuf>,
 
-    /// Render this scenario in memory instead (paper, lateral, descent, landing, sun, shadow,
-    /// occlusion)
+    /// Render this scenario in memory instead (paper, lateral, descent, landing, hover, sun,
+    /// shadow, occlusion)
     #[arg(long, value_name = "NAME")]
     pub scenario: Option<String>,
 
@@ -160,6 +160,18 @@ pub struct ReplayArgs {
     /// The board never adopts an in-flight mount calibration (TD_CAM_CAL = 0)
     #[arg(long, help_heading = "Flight")]
     pub no_calibration: bool,
+
+    /// Fly the set-up guide's mount-calibration hover first (scenario `hover`: 3 m over this
+    /// scenario's pad for 20 s, same flight effects and error model, the next seed) through
+    /// the board's companion, and start this flight with the TD_CAM_ROLL / TD_CAM_PITCH the
+    /// board set in it, as its flash keeps them
+    #[arg(
+        long,
+        requires = "scenario",
+        conflicts_with_all = ["no_calibration", "mount_known"],
+        help_heading = "Flight"
+    )]
+    pub calibration_hover: bool,
 
     /// Board parameters set before the flight, NAME=VALUE[,NAME=VALUE...] (e.g. the mount a
     /// hover's `touchdown calibrate` gave: TD_CAM_ROLL=1.59,TD_CAM_PITCH=-0.86); applied after
@@ -488,7 +500,7 @@ pub(super) fn autopilot_kind(args: &ReplayArgs) -> Result<AutopilotKind, CliErro
 /// scenario only.
 pub(super) fn mount_known(args: &ReplayArgs) -> bool {
     args.mount_known
-        .unwrap_or_else(|| args.scenario.as_deref() == Some("paper"))
+        .unwrap_or_else(|| args.scenario.as_deref() == Some("paper") && !args.calibration_hover)
 }
 
 /// `--board-params`: `NAME=VALUE` pairs, comma-separated, in order.

@@ -116,6 +116,34 @@ impl Input {
         if let Some(n) = args.frames {
             scenario.truncate(n);
         }
+        Ok(Self::rendered(scenario, args, effects))
+    }
+
+    /// The set-up guide's mount-calibration hover (scenario `hover`) over scenario `main`'s
+    /// pad, seen by its camera, with the same flight effects: the flight a user makes before
+    /// the one replayed (`--calibration-hover`). Its seed is the next one: another flight,
+    /// with its own wobble, noise and attitude errors.
+    pub(super) fn calibration_hover(
+        main: &str,
+        args: &ReplayArgs,
+        effects: &FlightEffects,
+    ) -> Result<Input, CliError> {
+        let seed = args.seed.unwrap_or(1).wrapping_add(1);
+        let (Some(main), Some(mut hover)) =
+            (Scenario::named(main, seed), Scenario::named("hover", seed))
+        else {
+            return Err(CliError(format!("unknown scenario `{main}`")));
+        };
+        hover.pad = main.pad;
+        hover.camera = main.camera;
+        hover.optics = main.optics;
+        hover.sensor = main.sensor;
+        Ok(Self::rendered(hover, args, effects))
+    }
+
+    /// `scenario` rendered in memory with `effects`.
+    fn rendered(mut scenario: Scenario, args: &ReplayArgs, effects: &FlightEffects) -> Input {
+        let (name, seed) = (scenario.name.clone(), scenario.seed);
         scenario.apply_effects(effects);
         let mount = scenario.mount.rotation;
         let labels = distinct(scenario.frames.iter().map(|f| f.label.as_deref()));
@@ -123,7 +151,7 @@ impl Input {
         if let Some(threads) = args.threads {
             simulator = simulator.with_threads(threads);
         }
-        Ok(Input {
+        Input {
             title: format!("scenario {name}, seed {seed}"),
             short_name: name.to_string(),
             camera: simulator.scenario.camera.model,
@@ -135,7 +163,7 @@ impl Input {
             true_mount: Some(Matrix3::from_fn(|i, j| mount[i][j] as f32)),
             truth_table: None,
             source: Source::Simulator(Box::new(simulator)),
-        })
+        }
     }
 
     pub(super) fn recording(dir: &Path, frames: Option<usize>) -> Result<Input, CliError> {

@@ -9,6 +9,7 @@
 use serde_json::{json, Map, Value};
 
 use super::{ReplayArgs, ALTITUDE_CHECKPOINTS_M, ALTITUDE_TOLERANCE};
+use crate::replay::calibration::HoverCalibration;
 use crate::replay::input::Input;
 use touchdown_eval::flight::{ErrorKind, ErrorStats, FlightSetup, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace};
@@ -71,6 +72,8 @@ pub(super) struct FlightResults<'a> {
     pub(super) effects: Option<&'a FlightEffects>,
     /// The board was given the true mount.
     pub(super) mount_known: bool,
+    /// What `--calibration-hover` left on the board.
+    pub(super) hover: Option<&'a HoverCalibration>,
     pub(super) trace: &'a FlightTrace,
 }
 
@@ -115,6 +118,13 @@ fn error_model(f: &FlightResults<'_>) -> Value {
             "mount_pitch_deg": e.mount_pitch_deg,
         })),
         "mount_known": f.mount_known,
+        "calibration_hover": f.hover.map(|h| json!({
+            "frames": h.frames,
+            "fixes": h.fixes,
+            "applied": h.applied,
+            "TD_CAM_ROLL": h.roll_deg,
+            "TD_CAM_PITCH": h.pitch_deg,
+        })),
         "board_params": f.setup.params.iter().map(|(n, v)| json!({"name": n, "value": v})).collect::<Vec<_>>(),
     })
 }

@@ -48,6 +48,7 @@ use touchdown_eval::{Experiment, ExperimentError, Frame, Method, SetPoint};
 use touchdown_formats::families::{self, SelectedFamily};
 
 mod args;
+mod calibration;
 mod input;
 mod json;
 mod tables;
@@ -56,6 +57,7 @@ use args::{
     autopilot_kind, board_params, effect_flag_given, error_model, flight_effects, mount_known,
 };
 pub use args::{ReplayArgs, LONG_HELP};
+use calibration::calibration_hover;
 
 pub use input::set_point_of_label;
 use input::{attitude_of, Input, InputFrame};
@@ -152,8 +154,15 @@ pub fn run(
     if !input.has_truth {
         methods = methods.into_iter().map(Method::without_attitude).collect();
     }
-    let flight = flight_setup(args, &input, autopilot, model)?;
-    let truth_source = input.truth_source();
+    let mut flight = flight_setup(args, &input, autopilot, model)?;
+    let hover = match (&mut flight, &args.scenario, args.calibration_hover) {
+        (Some(setup), Some(name), true) => {
+            let hover = calibration_hover(args, name, setup, err)?;
+            setup.params.extend(hover.params());
+            Some(hover)
+        }
+        _ => None,
+    };
     let mut experiment = match (&flight, input.has_truth) {
         (Some(setup), true) => {
             // Mount known: the board's mount is the true one (the paper's method is given it
@@ -164,13 +173,6 @@ pub fn run(
     }
     .map_err(|e| CliError(format!("cannot set up the methods: {e:?}")))?;
     let in_flight = flight.is_some() && input.has_truth;
-    let mut flight_trace = FlightTrace::new(methods.iter().map(|m| m.name.clone()).collect());
-    let set_points: BTreeMap<String, SetPoint> = input
-        .labels
-        .iter()
-        .map(|l| (l.clone(), set_point_of_label(l)))
-        .collect();
-    let mut trace = Trace::new(methods.iter().map(|m| m.name.clone()).collect());
     let mut progress = Progress {
         err,
         enabled: std::io::stderr().is_terminal(),
@@ -178,10 +180,124 @@ pub fn run(
         total: input.frames,
         started,
     };
+    let (trace, flight_trace) = fly(&input, &mut experiment, &methods, in_flight, &mut progress)?;
+    let elapsed = started.elapsed().as_secs_f64();
 
+    let report = experiment.report();
+    let summaries: Vec<MethodSummary> =
+        (0..trace.methods.len()).map(|m| trace.summary(m)).collect();
+    let figure_dir = match (&args.plots, args.no_plots) {
+        (_, true) => None,
+        (Some(dir), false) => Some(dir.clone()),
+        // A script asking for JSON gets no directory it did not ask for.
+        (None, false) if args.json => None,
+        (None, false) => Some(PathBuf::from(format!("replay-{}", input.short_name))),
+    };
+    let figures = match &figure_dir {
+        Some(dir) => Some(plot::write_figures(&trace, dir, &input.title).map_err(CliError::new)?),
+        None => None,
+    };
+    if args.json {
+        let document = json::document(
+            args,
+            &input,
+            &methods,
+            &json::Results {
+                report: &report,
+                trace: &trace,
+                summaries: &summaries,
+                elapsed_s: elapsed,
+                flight: flight
+                    .as_ref()
+                    .filter(|_| in_flight)
+                    .map(|setup| json::FlightResults {
+                        setup,
+                        effects: input.effects.as_ref(),
+                        mount_known: mount_known(args) && input.effects.is_some(),
+                        hover: hover.as_ref(),
+                        trace: &flight_trace,
+                    }),
+            },
+            figure_dir.as_deref().zip(figures.as_ref().map(Vec::len)),
+        );
+        let mut line = serde_json::to_string(&document)
+            .map_err(|e| CliError(format!("cannot write the JSON: {e}")))?;
+        line.push('\n');
+        out.write_all(line.as_bytes())
+            .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+        return Ok(Outcome::Success);
+    }
+    let mut text = header(&input, &trace, elapsed, in_flight);
+    if let Some(setup) = flight.as_ref().filter(|_| in_flight) {
+        text.push_str(&flight_header(args, &input, setup));
+        if let Some(hover) = &hover {
+            text.push_str(&hover.describe());
+        }
+    }
+    if !report.rows.is_empty() {
+        if input.has_truth {
+            text.push_str(&set_point_table(&report));
+            text.push_str(&all_axes_table(&report));
+        } else {
+            text.push_str(&vision_only_table(&report));
+        }
+    }
+    text.push_str(&summary_table(&trace, &summaries, input.has_truth));
+    if in_flight {
+        text.push_str(&flight_summary_table(&flight_trace, &trace));
+    }
+    if report.rows.is_empty() && input.has_truth {
+        if in_flight {
+            text.push_str(&flight_altitude_table(&flight_trace, &trace));
+        } else {
+            text.push_str(&altitude_table(&trace));
+        }
+    }
+    if let Some((dir, written)) = figure_dir.as_ref().zip(figures.as_ref()) {
+        let _ = writeln!(
+            text,
+            "\nFigures: {} files in {} (position-x/y/z{}, .png and .svg)",
+            written.len(),
+            dir.display(),
+            if trace.has_truth() {
+                ", error-x/y/z"
+            } else {
+                ""
+            }
+        );
+    }
+    // Columns are padded to line up; the padding at the end of a line is noise.
+    let text: String = text
+        .lines()
+        .map(|l| format!("{}\n", l.trim_end()))
+        .collect();
+    out.write_all(text.as_bytes())
+        .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+    Ok(Outcome::Success)
+}
+
+/// Runs every frame of `input` through `experiment`, in flight (with the truth between
+/// frames) when `in_flight`: the frames are rendered or decoded on a second thread, a couple
+/// ahead of the one processed. Returns the per-frame trace and, in flight, the three errors
+/// per frame.
+fn fly(
+    input: &Input,
+    experiment: &mut Experiment<'_>,
+    methods: &[Method],
+    in_flight: bool,
+    progress: &mut Progress<'_>,
+) -> Result<(Trace, FlightTrace), CliError> {
+    let mut flight_trace = FlightTrace::new(methods.iter().map(|m| m.name.clone()).collect());
+    let set_points: BTreeMap<String, SetPoint> = input
+        .labels
+        .iter()
+        .map(|l| (l.clone(), set_point_of_label(l)))
+        .collect();
+    let mut trace = Trace::new(methods.iter().map(|m| m.name.clone()).collect());
+
+    let truth_source = input.truth_source();
     let (sender, receiver) = mpsc::sync_channel::<Result<InputFrame, CliError>>(FRAMES_AHEAD);
     let processed: Result<(), CliError> = std::thread::scope(|scope| {
-        let input = &input;
         scope.spawn(move || {
             for k in 0..input.frames {
                 let frame = input.frame(k);
@@ -247,95 +363,7 @@ pub fn run(
     });
     progress.finish();
     processed?;
-    let elapsed = started.elapsed().as_secs_f64();
-
-    let report = experiment.report();
-    let summaries: Vec<MethodSummary> =
-        (0..trace.methods.len()).map(|m| trace.summary(m)).collect();
-    let figure_dir = match (&args.plots, args.no_plots) {
-        (_, true) => None,
-        (Some(dir), false) => Some(dir.clone()),
-        // A script asking for JSON gets no directory it did not ask for.
-        (None, false) if args.json => None,
-        (None, false) => Some(PathBuf::from(format!("replay-{}", input.short_name))),
-    };
-    let figures = match &figure_dir {
-        Some(dir) => Some(plot::write_figures(&trace, dir, &input.title).map_err(CliError::new)?),
-        None => None,
-    };
-    if args.json {
-        let document = json::document(
-            args,
-            &input,
-            &methods,
-            &json::Results {
-                report: &report,
-                trace: &trace,
-                summaries: &summaries,
-                elapsed_s: elapsed,
-                flight: flight
-                    .as_ref()
-                    .filter(|_| in_flight)
-                    .map(|setup| json::FlightResults {
-                        setup,
-                        effects: input.effects.as_ref(),
-                        mount_known: mount_known(args) && input.effects.is_some(),
-                        trace: &flight_trace,
-                    }),
-            },
-            figure_dir.as_deref().zip(figures.as_ref().map(Vec::len)),
-        );
-        let mut line = serde_json::to_string(&document)
-            .map_err(|e| CliError(format!("cannot write the JSON: {e}")))?;
-        line.push('\n');
-        out.write_all(line.as_bytes())
-            .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
-        return Ok(Outcome::Success);
-    }
-    let mut text = header(&input, &trace, elapsed, in_flight);
-    if let Some(setup) = flight.as_ref().filter(|_| in_flight) {
-        text.push_str(&flight_header(args, &input, setup));
-    }
-    if !report.rows.is_empty() {
-        if input.has_truth {
-            text.push_str(&set_point_table(&report));
-            text.push_str(&all_axes_table(&report));
-        } else {
-            text.push_str(&vision_only_table(&report));
-        }
-    }
-    text.push_str(&summary_table(&trace, &summaries, input.has_truth));
-    if in_flight {
-        text.push_str(&flight_summary_table(&flight_trace, &trace));
-    }
-    if report.rows.is_empty() && input.has_truth {
-        if in_flight {
-            text.push_str(&flight_altitude_table(&flight_trace, &trace));
-        } else {
-            text.push_str(&altitude_table(&trace));
-        }
-    }
-    if let Some((dir, written)) = figure_dir.as_ref().zip(figures.as_ref()) {
-        let _ = writeln!(
-            text,
-            "\nFigures: {} files in {} (position-x/y/z{}, .png and .svg)",
-            written.len(),
-            dir.display(),
-            if trace.has_truth() {
-                ", error-x/y/z"
-            } else {
-                ""
-            }
-        );
-    }
-    // Columns are padded to line up; the padding at the end of a line is noise.
-    let text: String = text
-        .lines()
-        .map(|l| format!("{}\n", l.trim_end()))
-        .collect();
-    out.write_all(text.as_bytes())
-        .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
-    Ok(Outcome::Success)
+    Ok((trace, flight_trace))
 }
 
 fn experiment_error(e: ExperimentError) -> CliError {
@@ -405,6 +433,8 @@ fn flight_header(args: &ReplayArgs, input: &Input, setup: &FlightSetup) -> Strin
                 "known to the board"
             } else if args.no_calibration {
                 "not calibrated"
+            } else if args.calibration_hover {
+                "calibrated in the hover before, and on in flight"
             } else {
                 "calibrated in flight"
             }
