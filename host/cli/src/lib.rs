@@ -16,6 +16,7 @@
 pub mod calibrate;
 pub mod companion;
 pub mod detect;
+pub mod effects;
 pub mod pad;
 pub mod plot;
 pub mod replay;

@@ -12,6 +12,7 @@ use clap::builder::{PossibleValue, PossibleValuesParser};
 use clap::Args;
 
 use super::{CliError, Outcome};
+use crate::effects::EffectArgs;
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
@@ -80,33 +81,9 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub force: bool,
 
-    /// Rolling-shutter readout, first row to last, ms (0 = global shutter) [default: 30.5]
-    #[arg(long, value_name = "MS", value_parser = non_negative, help_heading = "Flight effects")]
-    pub readout_ms: Option<f64>,
-
-    /// Camera vibration on its mount, degrees RMS per axis, 50-200 Hz [default: 0.03]
-    #[arg(long, value_name = "DEG", value_parser = non_negative, help_heading = "Flight effects")]
-    pub vibration_deg: Option<f64>,
-
-    /// Mount misalignment about body x, degrees [default: 1.2]
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "DEG",
-        value_parser = angle,
-        help_heading = "Flight effects"
-    )]
-    pub mount_roll_deg: Option<f64>,
-
-    /// Mount misalignment about body y, degrees [default: -1.6]
-    #[arg(
-        long,
-        allow_negative_numbers = true,
-        value_name = "DEG",
-        value_parser = angle,
-        help_heading = "Flight effects"
-    )]
-    pub mount_pitch_deg: Option<f64>,
+    /// The flight effects' terms.
+    #[command(flatten)]
+    pub effect_terms: EffectArgs,
 
     /// No flight effects: global shutter, no vibration, the nominal mount (the other effect
     /// flags then set only what they name)
@@ -123,39 +100,11 @@ pub struct SimulateArgs {
     pub threads: Option<usize>,
 }
 
-/// A finite number >= 0 (a readout, an RMS).
-fn non_negative(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err(format!("`{text}` is not a number >= 0")),
-    }
-}
-
-/// A mount angle: finite, within +-45 degrees (beyond that it is not a misalignment).
-fn angle(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v.abs() <= 45.0 => Ok(v),
-        _ => Err(format!(
-            "`{text}` is not an angle in degrees within -45..45"
-        )),
-    }
-}
-
 impl SimulateArgs {
     /// The flight effects asked for: typical (or none with `--ideal`), each flag overriding
     /// its term.
     pub fn effects(&self) -> FlightEffects {
-        let base = if self.ideal {
-            FlightEffects::none()
-        } else {
-            FlightEffects::typical()
-        };
-        FlightEffects {
-            readout_ms: self.readout_ms.unwrap_or(base.readout_ms),
-            vibration_deg: self.vibration_deg.unwrap_or(base.vibration_deg),
-            mount_roll_deg: self.mount_roll_deg.unwrap_or(base.mount_roll_deg),
-            mount_pitch_deg: self.mount_pitch_deg.unwrap_or(base.mount_pitch_deg),
-        }
+        self.effect_terms.effects(self.ideal)
     }
 }
 

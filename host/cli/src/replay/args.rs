@@ -4,6 +4,7 @@
 //! (the parent module), which only reads the values these give.
 
 use super::CliError;
+use crate::effects::EffectArgs;
 use clap::Args;
 use std::path::PathBuf;
 use touchdown_eval::flight::{AutopilotKind, ErrorModel};
@@ -179,42 +180,9 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "LIST", help_heading = "Flight")]
     pub board_params: Option<String>,
 
-    /// Rolling-shutter readout, first row to last, ms (--scenario; 0 = global shutter)
-    /// [default: 30.5]
-    #[arg(
-        long,
-        value_name = "MS",
-        allow_negative_numbers = true,
-        help_heading = "Flight effects"
-    )]
-    pub readout_ms: Option<f32>,
-
-    /// Camera vibration on its mount, RMS per axis, degrees (--scenario) [default: 0.03]
-    #[arg(
-        long,
-        value_name = "DEG",
-        allow_negative_numbers = true,
-        help_heading = "Flight effects"
-    )]
-    pub vibration_deg: Option<f32>,
-
-    /// Mount misalignment about body x, degrees (--scenario) [default: 1.2]
-    #[arg(
-        long,
-        value_name = "DEG",
-        allow_negative_numbers = true,
-        help_heading = "Flight effects"
-    )]
-    pub mount_roll_deg: Option<f32>,
-
-    /// Mount misalignment about body y, degrees (--scenario) [default: -1.6]
-    #[arg(
-        long,
-        value_name = "DEG",
-        allow_negative_numbers = true,
-        help_heading = "Flight effects"
-    )]
-    pub mount_pitch_deg: Option<f32>,
+    /// The flight effects' terms (--scenario only).
+    #[command(flatten)]
+    pub effect_terms: EffectArgs,
 
     /// Attitude white noise per sample, degrees [default: 0.02]
     #[arg(
@@ -346,39 +314,8 @@ pub struct ReplayArgs {
 
 /// The flight effects a scenario is rendered with: typical (none with --ideal), each term
 /// overridden by its flag.
-pub(super) fn flight_effects(args: &ReplayArgs) -> Result<FlightEffects, CliError> {
-    let mut e = if args.ideal {
-        FlightEffects::none()
-    } else {
-        FlightEffects::typical()
-    };
-    // The flags are f32 (a smaller argument struct), exact for the values they take.
-    let set = |v: &mut f64, flag: Option<f32>| {
-        if let Some(x) = flag {
-            *v = widen(x);
-        }
-    };
-    set(&mut e.readout_ms, args.readout_ms);
-    set(&mut e.vibration_deg, args.vibration_deg);
-    set(&mut e.mount_roll_deg, args.mount_roll_deg);
-    set(&mut e.mount_pitch_deg, args.mount_pitch_deg);
-    for (v, name) in [
-        (e.readout_ms, "--readout-ms"),
-        (e.vibration_deg, "--vibration-deg"),
-    ] {
-        if !v.is_finite() || v < 0.0 {
-            return Err(CliError(format!("{name} must be a number, not negative")));
-        }
-    }
-    for (v, name) in [
-        (e.mount_roll_deg, "--mount-roll-deg"),
-        (e.mount_pitch_deg, "--mount-pitch-deg"),
-    ] {
-        if !v.is_finite() || v.abs() > 10.0 {
-            return Err(CliError(format!("{name} must be within +-10 degrees")));
-        }
-    }
-    Ok(e)
+pub(super) fn flight_effects(args: &ReplayArgs) -> FlightEffects {
+    args.effect_terms.effects(args.ideal)
 }
 
 /// A flag's value as the decimal it was written as (`0.02`, not `0.0199999995`).
@@ -388,11 +325,7 @@ fn widen(x: f32) -> f64 {
 
 /// Whether a flag that only a scenario takes was given.
 pub(super) fn effect_flag_given(args: &ReplayArgs) -> bool {
-    args.readout_ms.is_some()
-        || args.vibration_deg.is_some()
-        || args.mount_roll_deg.is_some()
-        || args.mount_pitch_deg.is_some()
-        || args.mount_known.is_some()
+    args.effect_terms.any_given() || args.mount_known.is_some()
 }
 
 /// The error model: typical (none with --ideal), each term overridden by its flag.

@@ -86,7 +86,7 @@ pub(super) fn calibration_hover(
     setup: &FlightSetup,
     err: &mut dyn Write,
 ) -> Result<HoverCalibration, CliError> {
-    let effects = flight_effects(args)?;
+    let effects = flight_effects(args);
     let input = Input::calibration_hover(main, args, &effects)?;
     let layout = input
         .pad

@@ -81,7 +81,7 @@ impl Input {
             (None, None) => Err(CliError(
                 "nothing to replay: give a RECORDING directory or --scenario NAME".into(),
             )),
-            (None, Some(name)) => Self::scenario(name, args, &super::flight_effects(args)?),
+            (None, Some(name)) => Self::scenario(name, args, &super::flight_effects(args)),
             (Some(dir), None) => {
                 if args.seed.is_some() || args.threads.is_some() {
                     return Err(CliError(
