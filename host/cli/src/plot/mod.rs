@@ -37,6 +37,12 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use touchdown_eval::trace::{Trace, TraceFrame};
 
+mod layout;
+mod marks;
+
+use layout::*;
+use marks::*;
+
 /// Figure width, pixels (PNG) and user units (SVG).
 pub const FIGURE_WIDTH: u32 = 1200;
 /// Height of the plotting area, pixels; the figure adds the title, the legend and the axes.
@@ -196,22 +202,6 @@ struct MethodSeries {
     dots: Vec<(f64, f64)>,
 }
 
-/// What the time axis names under its tick labels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum MarkKind {
-    /// Each set point (a run of frames with one label), at its middle.
-    SetPoints,
-    /// The true altitude at a few round times.
-    Altitudes,
-}
-
-/// A text on the time axis at time `t` (seconds from the first frame).
-#[derive(Debug, Clone, PartialEq)]
-struct Mark {
-    t: f64,
-    text: String,
-}
-
 /// Everything one figure draws, in plot units (seconds; metres or centimetres).
 struct Figure {
     caption: String,
@@ -254,86 +244,6 @@ fn pieces(
         out.push(current);
     }
     out
-}
-
-/// A run of consecutive frames of one sequence with the same label: first and last frame's
-/// time (seconds from `t0`) and the label.
-#[derive(Debug, Clone, PartialEq)]
-struct SetPointRun {
-    start: f64,
-    end: f64,
-    label: String,
-}
-
-/// The set points of `frames` in time order. An unlabelled frame or a new sequence ends a
-/// run, so a label that comes back later is a run (and a name on the axis) of its own.
-fn set_point_runs(frames: &[TraceFrame], t0: f64) -> Vec<SetPointRun> {
-    let mut runs: Vec<SetPointRun> = Vec::new();
-    let mut previous: Option<(usize, &str)> = None;
-    for f in frames {
-        let t = f.t_s() - t0;
-        let Some(label) = f.label.as_deref() else {
-            previous = None;
-            continue;
-        };
-        match runs.last_mut() {
-            Some(run) if previous == Some((f.sequence, label)) => run.end = t,
-            _ => runs.push(SetPointRun {
-                start: t,
-                end: t,
-                label: label.to_string(),
-            }),
-        }
-        previous = Some((f.sequence, label));
-    }
-    runs
-}
-
-/// A round step (1, 2 or 5 times a power of ten) that cuts `span` into at most `count`
-/// pieces.
-fn round_step(span: f64, count: usize) -> f64 {
-    let raw = span / count.max(1) as f64;
-    if !(raw.is_finite() && raw > 0.0) {
-        return 1.0;
-    }
-    let power = 10f64.powf(raw.log10().floor());
-    [1.0, 2.0, 5.0, 10.0]
-        .iter()
-        .map(|m| m * power)
-        .find(|&s| s >= raw)
-        .unwrap_or(10.0 * power)
-}
-
-/// The true altitude at round times: at each multiple of a round step, the altitude of the
-/// nearest frame with a truth if one lies within half a step (none in a gap between
-/// sequences).
-fn altitude_marks(frames: &[TraceFrame], t0: f64, span: f64) -> Vec<Mark> {
-    let step = round_step(span, ALTITUDE_MARKS);
-    let with_truth: Vec<(f64, f64)> = frames
-        .iter()
-        .filter_map(|f| f.truth.map(|t| (f.t_s() - t0, t.z)))
-        .filter(|(_, z)| z.is_finite())
-        .collect();
-    let mut marks = Vec::new();
-    let mut k = 0u32;
-    loop {
-        let t = f64::from(k) * step;
-        if t > span + 1e-9 || marks.len() > ALTITUDE_MARKS {
-            break;
-        }
-        k += 1;
-        let nearest = with_truth
-            .iter()
-            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()));
-        if let Some(&(_, z)) = nearest.filter(|(tf, _)| (tf - t).abs() <= 0.5 * step) {
-            let decimals = if z.abs() >= 10.0 { 0 } else { 1 };
-            marks.push(Mark {
-                t,
-                text: format!("{z:.decimals$} m"),
-            });
-        }
-    }
-    marks
 }
 
 /// A padded range around `values` (at least `min_span` wide).
@@ -472,208 +382,6 @@ impl Figure {
             marks,
             separators,
         }
-    }
-}
-
-/// A rectangle in figure pixels: `x0 <= x < x1`, `y0 <= y < y1`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct PixelRect {
-    x0: i32,
-    y0: i32,
-    x1: i32,
-    y1: i32,
-}
-
-impl PixelRect {
-    fn contains(&self, (x, y): (i32, i32)) -> bool {
-        x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
-    }
-
-    fn overlaps(&self, other: &PixelRect) -> bool {
-        self.x0 < other.x1 && other.x0 < self.x1 && self.y0 < other.y1 && other.y0 < self.y1
-    }
-}
-
-/// What a legend entry shows beside its text.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Sample {
-    /// The truth's black line.
-    Truth,
-    /// A method's line with a dot on it.
-    Method(RGBColor),
-    /// No sample: a note on how to read the figure.
-    Note,
-}
-
-/// One legend entry: its sample, text and where it goes.
-struct LegendEntry {
-    sample: Sample,
-    text: String,
-    rect: PixelRect,
-}
-
-/// Where everything of a figure goes, computed before drawing (the figure's height follows
-/// from the legend's and the time axis' rows).
-struct Layout {
-    size: (u32, u32),
-    /// The legend band (all its entries).
-    legend: PixelRect,
-    entries: Vec<LegendEntry>,
-    /// The area given to the chart (plotting area, axes' labels).
-    chart: PixelRect,
-    /// The plotting area's left and right pixels (the time axis' ends).
-    plot_x: (i32, i32),
-    /// Height of the chart's time-axis band.
-    x_label_area: i32,
-    /// Each mark's text box, or `None` when it fits in no row (in `figure.marks` order).
-    marks: Vec<Option<PixelRect>>,
-    /// Rows of marks in use.
-    mark_rows: usize,
-}
-
-/// Where each text goes on the time axis: boxes of `widths` centred on `centres` (clamped
-/// inside `bounds`), each in the first of `rows` rows where it keeps [`MARK_GAP`] from the
-/// previous text of that row; `None` when no row has room. Returns `(row, left)`.
-fn place_marks(
-    centres: &[i32],
-    widths: &[i32],
-    bounds: (i32, i32),
-    rows: usize,
-) -> Vec<Option<(usize, i32)>> {
-    let mut row_end = vec![i32::MIN / 2; rows];
-    centres
-        .iter()
-        .zip(widths)
-        .map(|(&c, &w)| {
-            let left = (c - w / 2).min(bounds.1 - w).max(bounds.0);
-            let row = row_end.iter().position(|&end| left >= end + MARK_GAP)?;
-            row_end[row] = left + w;
-            Some((row, left))
-        })
-        .collect()
-}
-
-/// The pixel column of time `t` on an axis from `range.start` at `plot_x.0` to `range.end`
-/// at `plot_x.1` (as plotters maps it: its last pixel is one short of the area's end).
-fn time_pixel(t: f64, range: &Range<f64>, plot_x: (i32, i32)) -> i32 {
-    let span = range.end - range.start;
-    let f = if span > 0.0 {
-        (t - range.start) / span
-    } else {
-        0.5
-    };
-    plot_x.0 + (f * f64::from(plot_x.1 - 1 - plot_x.0)).round() as i32
-}
-
-impl Layout {
-    fn new(figure: &Figure) -> Result<Layout, PlotError> {
-        let width = FIGURE_WIDTH as i32;
-        let plot_x = (MARGIN + Y_LABEL_AREA, width - MARGIN - RIGHT_GAP);
-
-        // The legend: entries flow left to right over the plotting area's width.
-        let mut items: Vec<(Sample, String)> = Vec::new();
-        if !figure.truth.is_empty() {
-            items.push((Sample::Truth, "truth".into()));
-        }
-        for m in &figure.methods {
-            items.push((Sample::Method(m.colour), m.name.clone()));
-        }
-        if !figure.methods.is_empty() {
-            items.push((
-                Sample::Note,
-                "line: filtered estimate, dots: raw pose of each frame".into(),
-            ));
-        }
-        let legend_top = MARGIN + TITLE_HEIGHT;
-        let mut entries = Vec::new();
-        let (mut x, mut row) = (plot_x.0, 0);
-        for (sample, text) in items {
-            let sample_w = if sample == Sample::Note {
-                0
-            } else {
-                LEGEND_SAMPLE + 6
-            };
-            let w = sample_w + text_size(&text, LEGEND_FONT)?.0;
-            if x > plot_x.0 && x + w > plot_x.1 {
-                x = plot_x.0;
-                row += 1;
-            }
-            let y0 = legend_top + row * LEGEND_ROW;
-            entries.push(LegendEntry {
-                sample,
-                text,
-                rect: PixelRect {
-                    x0: x,
-                    y0,
-                    x1: x + w,
-                    y1: y0 + LEGEND_ROW,
-                },
-            });
-            x += w + LEGEND_ENTRY_GAP;
-        }
-        let legend = PixelRect {
-            x0: plot_x.0,
-            y0: legend_top,
-            x1: entries.iter().map(|e| e.rect.x1).max().unwrap_or(plot_x.0),
-            y1: entries
-                .iter()
-                .map(|e| e.rect.y1)
-                .max()
-                .unwrap_or(legend_top),
-        };
-
-        // The time axis' marks, in rows under the tick labels.
-        let rows = match figure.mark_kind {
-            MarkKind::SetPoints => MARK_ROWS,
-            MarkKind::Altitudes => 1,
-        };
-        let mut centres = Vec::with_capacity(figure.marks.len());
-        let mut widths = Vec::with_capacity(figure.marks.len());
-        for mark in &figure.marks {
-            centres.push(time_pixel(mark.t, &figure.x_range, plot_x));
-            widths.push(text_size(&mark.text, MARK_FONT)?.0);
-        }
-        let placed = place_marks(&centres, &widths, plot_x, rows);
-        let mark_rows = placed
-            .iter()
-            .flatten()
-            .map(|(r, _)| r + 1)
-            .max()
-            .unwrap_or(0);
-        let x_label_area = TICK_LABEL_BAND + MARK_ROW * mark_rows as i32 + X_DESC_BAND;
-        let chart_top = legend.y1 + LEGEND_GAP;
-        let chart = PixelRect {
-            x0: MARGIN,
-            y0: chart_top,
-            x1: width - MARGIN,
-            y1: chart_top + PLOT_HEIGHT + x_label_area,
-        };
-        let plot_bottom = chart.y0 + PLOT_HEIGHT;
-        let marks = placed
-            .iter()
-            .zip(&widths)
-            .map(|(p, &w)| {
-                p.map(|(row, left)| {
-                    let y0 = plot_bottom + TICK_LABEL_BAND + MARK_ROW * row as i32;
-                    PixelRect {
-                        x0: left,
-                        y0,
-                        x1: left + w,
-                        y1: y0 + MARK_ROW,
-                    }
-                })
-            })
-            .collect();
-        Ok(Layout {
-            size: (FIGURE_WIDTH, (chart.y1 + MARGIN) as u32),
-            legend,
-            entries,
-            chart,
-            plot_x,
-            x_label_area,
-            marks,
-            mark_rows,
-        })
     }
 }
 
