@@ -77,6 +77,7 @@ use touchdown_core::pad::PadLayout;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PaperPipeline, PipelineConfig};
 
+pub mod closed_loop;
 pub mod flight;
 pub mod paper_geometry;
 pub mod scoring;

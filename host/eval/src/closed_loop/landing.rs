@@ -1,0 +1,430 @@
+//! The loop itself: render, run the board and the simulated autopilot, steer, step the
+//! vehicle (see [`super`]).
+
+use nalgebra::{Rotation3, Vector3};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use touchdown_core::image::GrayImage;
+use touchdown_formats::families::{self, SelectedFamily};
+use touchdown_sim::camera::SimCamera;
+use touchdown_sim::effects::FlightEffects;
+use touchdown_sim::scenario::{FramePlan, Scenario};
+use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
+use touchdown_sim::{SimFrame, Simulator};
+
+use super::land::{LandController, LandParams};
+use super::vehicle::{Vehicle, VehicleParams};
+use super::wind::Wind;
+use crate::flight::{
+    belief, relative_ned, AutopilotKind, ErrorModel, FlightSetup, TruthSource, TruthTable, PAD_NED,
+};
+use crate::{Experiment, Frame, Method};
+
+/// The vehicle's time step, seconds (ArduPilot's 400 Hz loop).
+pub const STEP_S: f64 = 0.0025;
+/// How far ahead of a frame's time the vehicle is flown before the frame is rendered and
+/// processed, seconds: past the last row's exposure (15 ms at the default readout) and the
+/// frame's delivery plus the settling of the link (up to 40 ms).
+pub const LOOKAHEAD_S: f64 = 0.045;
+/// Sub-samples per pixel side at 320x240: a quarter of the landing scenario's 4 x 4 (a
+/// QVGA pixel is four VGA ones), so a frame costs about a sixteenth of a VGA frame's.
+pub const QVGA_SUPERSAMPLING: usize = 2;
+/// Half the span of the differences that give the velocity and attitude rates a frame is
+/// rendered with, seconds.
+const RATE_SPAN_S: f64 = 0.01;
+/// The landing scenario's lens: its horizontal field of view, degrees.
+const LANDING_HFOV_DEG: f64 = 60.0;
+
+/// What is flown.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LandingConfig {
+    /// Seed of everything random: the scene, the wind, the error realisation, the start.
+    pub seed: u64,
+    /// Height of the camera over the pad when LAND begins, metres.
+    pub start_height_m: f64,
+    /// Horizontal distance from the pad when LAND begins, metres (bearing seeded).
+    pub offset_m: f64,
+    /// Mean wind, m/s (direction seeded).
+    pub wind_mps: f64,
+    /// Peak of the gusts, m/s ([`super::wind`]).
+    pub gust_mps: f64,
+    /// The flight effects the camera is rendered with.
+    pub effects: FlightEffects,
+    /// The autopilot's error model.
+    pub model: ErrorModel,
+    /// Board parameters set before the flight, by name.
+    pub params: Vec<(String, f32)>,
+    /// Camera frames per second.
+    pub fps: f64,
+    /// Render at 320x240 instead of the landing scenario's 640x480 (same lens), with
+    /// [`QVGA_SUPERSAMPLING`].
+    pub qvga: bool,
+    /// Rendering threads per frame.
+    pub threads: usize,
+    /// Give up after this long without a touchdown, seconds.
+    pub max_flight_s: f64,
+    /// The vehicle.
+    pub vehicle: VehicleParams,
+    /// The LAND mode.
+    pub land: LandParams,
+}
+
+impl LandingConfig {
+    /// Issue 15's landing: from 20 m, 2 m off the pad, 2 m/s of mean wind and 3 m/s gusts,
+    /// the typical flight effects and error model, 15 frames per second (the landing
+    /// scenario's), VGA.
+    pub fn issue_15(seed: u64) -> Self {
+        LandingConfig {
+            seed,
+            start_height_m: 20.0,
+            offset_m: 2.0,
+            wind_mps: 2.0,
+            gust_mps: 3.0,
+            effects: FlightEffects::typical(),
+            model: ErrorModel::typical(),
+            params: Vec::new(),
+            fps: 15.0,
+            qvga: false,
+            threads: 1,
+            max_flight_s: 90.0,
+            vehicle: VehicleParams::typical(),
+            land: LandParams::ardupilot(),
+        }
+    }
+}
+
+/// Where and when the vehicle touched down.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Touchdown {
+    /// When, seconds from the start of LAND.
+    pub t_s: f64,
+    /// North of the pad's origin, metres.
+    pub north_m: f64,
+    /// East of it, metres.
+    pub east_m: f64,
+    /// Horizontal speed then, m/s.
+    pub speed_mps: f64,
+}
+
+impl Touchdown {
+    /// Horizontal distance from the pad's origin, metres.
+    pub fn horizontal_m(&self) -> f64 {
+        self.north_m.hypot(self.east_m)
+    }
+}
+
+/// What a landing gave.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LandingOutcome {
+    /// Its seed.
+    pub seed: u64,
+    /// Where LAND began, north and east of the pad, metres.
+    pub start_ne: (f64, f64),
+    /// The touchdown (`None`: none within the time limit).
+    pub touchdown: Option<Touchdown>,
+    /// When the autopilot received its first LANDING_TARGET, seconds.
+    pub first_target_s: Option<f64>,
+    /// When the LAND mode first steered on a target (its pad estimate), seconds.
+    pub acquired_s: Option<f64>,
+    /// When the slow descent (below LAND_ALT_LOW) began, seconds.
+    pub low_s: Option<f64>,
+    /// When the last target was received, seconds.
+    pub last_target_s: Option<f64>,
+    /// The height of the camera then, metres.
+    pub last_target_height_m: Option<f64>,
+    /// Longest time between two targets the mode used, seconds.
+    pub longest_gap_s: f64,
+    /// Frames rendered and processed.
+    pub frames: usize,
+    /// Frames with a pad fix.
+    pub frames_with_fix: usize,
+    /// LANDING_TARGETs the companion sent.
+    pub targets_sent: u32,
+    /// LANDING_TARGETs the autopilot received and reconstructed.
+    pub targets_received: usize,
+    /// How long the flight ran, seconds.
+    pub flight_s: f64,
+}
+
+/// The flight's moving parts.
+struct Air {
+    vehicle: Vehicle,
+    land: LandController,
+    wind: Wind,
+    truth: TruthTable,
+    t_s: f64,
+    touchdown: Option<Touchdown>,
+}
+
+impl Air {
+    /// Flies to `until_s` (or the touchdown); the autopilot steers on its estimates.
+    fn fly_to(&mut self, until_s: f64, errors: &crate::flight::Realisation) {
+        while self.t_s < until_s - 1e-9 && self.touchdown.is_none() {
+            let own = PAD_NED + self.vehicle.position_ned + errors.position_error(self.t_s);
+            let command = self.land.command(
+                self.t_s,
+                STEP_S,
+                &own,
+                &self.vehicle.velocity_ned,
+                self.vehicle.height_m(),
+            );
+            let before = self.vehicle;
+            self.vehicle.step(STEP_S, &command, &self.wind.at(self.t_s));
+            self.t_s += STEP_S;
+            let after = self.vehicle;
+            if after.height_m() <= 0.0 {
+                // Where the height crossed zero within the step.
+                let w = before.height_m() / (before.height_m() - after.height_m()).max(1e-12);
+                let p = before.position_ned + (after.position_ned - before.position_ned) * w;
+                self.touchdown = Some(Touchdown {
+                    t_s: self.t_s - STEP_S * (1.0 - w),
+                    north_m: p.x,
+                    east_m: p.y,
+                    speed_mps: after.velocity_ned.xy().norm(),
+                });
+            }
+            self.truth.push(self.t_s, self.vehicle.truth());
+        }
+    }
+}
+
+/// The simulator's trajectory for the frame at `t_s`: the vehicle's motion linearised about
+/// that time (position and velocity; roll, pitch, yaw and their rates, as slow sines through
+/// their value at `t_s`), exact at `t_s` (see [`super`]).
+fn local_trajectory(truth: &TruthTable, t_s: f64) -> Option<Trajectory> {
+    let at = |t: f64| truth.at(t);
+    let (now, before, after) = (at(t_s)?, at(t_s - RATE_SPAN_S)?, at(t_s + RATE_SPAN_S)?);
+    let euler = |m| Rotation3::from_matrix_unchecked(m).euler_angles();
+    let (roll, pitch, yaw) = euler(now.body_to_ned);
+    let (r0, p0, y0) = euler(before.body_to_ned);
+    let (r1, p1, y1) = euler(after.body_to_ned);
+    let wrap = |a: f64| {
+        (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+    };
+    let span = 2.0 * RATE_SPAN_S;
+    let rates = [
+        wrap(r1 - r0) / span,
+        wrap(p1 - p0) / span,
+        wrap(y1 - y0) / span,
+    ];
+    let velocity = (after.position - before.position) / span;
+    // A sine of frequency f and amplitude rate / (2 pi f) through zero at t_s turns at
+    // `rate` there; at 0.01 Hz it stays within 1e-9 of that line over a frame.
+    let f = 0.01;
+    let omega = std::f64::consts::TAU * f;
+    let mut terms = [[(0.0, 0.0, 0.0); 3]; 6];
+    for (k, rate) in rates.iter().enumerate() {
+        terms[3 + k][0] = (rate / omega, f, -omega * t_s);
+    }
+    let hold = 1.0;
+    let p = now.position;
+    let from = p - velocity * hold;
+    let to = p + velocity * hold;
+    Some(Trajectory {
+        segments: vec![Segment {
+            t0: t_s - hold,
+            t1: t_s + hold,
+            from: [from.x, from.y, from.z],
+            to: [to.x, to.y, to.z],
+            profile: Profile::Linear,
+        }],
+        yaw,
+        wobble: Wobble::from_terms(terms),
+        tilt_with_acceleration: false,
+        trim: (roll, pitch),
+    })
+}
+
+/// The landing scenario's scene, camera and pad for `config` (no frames: the loop adds them).
+pub fn scene(config: &LandingConfig) -> Result<Scenario, String> {
+    let mut scenario =
+        Scenario::named("landing", config.seed).ok_or("the landing scenario is missing")?;
+    if config.qvga {
+        let lens = scenario.camera.model.distortion;
+        scenario.camera = SimCamera::with_fov(320, 240, LANDING_HFOV_DEG, lens);
+        scenario.supersampling = QVGA_SUPERSAMPLING;
+    }
+    scenario.frames.clear();
+    scenario.apply_effects(&config.effects);
+    scenario
+        .camera
+        .model
+        .validate()
+        .map_err(|e| format!("the camera refuses the readout: {e:?}"))?;
+    Ok(scenario)
+}
+
+/// Flies one landing of `config`; `on_frame` sees every rendered frame (to record it).
+pub fn fly(
+    config: &LandingConfig,
+    on_frame: &mut dyn FnMut(&SimFrame) -> Result<(), String>,
+) -> Result<LandingOutcome, String> {
+    if !(config.fps.is_finite() && config.fps > 0.0) {
+        return Err(format!("frame rate {} is not positive", config.fps));
+    }
+    let mut simulator = Simulator::new(scene(config)?).with_threads(config.threads);
+    let camera = simulator.scenario.camera.model;
+    let pad = simulator.scenario.pad.config.clone();
+    let layout = pad
+        .layout()
+        .map_err(|e| format!("pad `{}`: invalid layout: {e:?}", pad.name))?;
+    let selected = families::resolve_pad(&pad).map_err(|e| e.to_string())?;
+    let views: Vec<_> = selected.iter().map(SelectedFamily::family).collect();
+    let family_refs: Vec<_> = views.iter().collect();
+    let mut setup = FlightSetup::new(AutopilotKind::ArduPilot, config.model);
+    setup.seed = config.seed;
+    setup.params = config.params.clone();
+    let mut experiment =
+        Experiment::in_flight(camera, &family_refs, layout, &[Method::ours()], &setup)
+            .map_err(|e| format!("cannot set up the board: {e:?}"))?;
+
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x0073_7461_7274); // "start"
+    let bearing: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+    let start = Vector3::new(
+        config.offset_m * bearing.cos(),
+        config.offset_m * bearing.sin(),
+        -config.start_height_m,
+    );
+    let vehicle = Vehicle::hovering(config.vehicle, start);
+    let errors = experiment
+        .flight_run(0)
+        .ok_or("no flight")?
+        .errors()
+        .clone();
+    let mut air = Air {
+        vehicle,
+        land: LandController::new(config.land, &(PAD_NED + start + errors.position_error(0.0))),
+        wind: Wind::new(
+            config.wind_mps,
+            config.gust_mps,
+            config.max_flight_s,
+            config.seed,
+        ),
+        truth: TruthTable::new(),
+        t_s: 0.0,
+        touchdown: None,
+    };
+    air.truth.push(0.0, vehicle.truth());
+
+    let mut outcome = LandingOutcome {
+        seed: config.seed,
+        start_ne: (start.x, start.y),
+        touchdown: None,
+        first_target_s: None,
+        acquired_s: None,
+        low_s: None,
+        last_target_s: None,
+        last_target_height_m: None,
+        longest_gap_s: 0.0,
+        frames: 0,
+        frames_with_fix: 0,
+        targets_sent: 0,
+        targets_received: 0,
+        flight_s: 0.0,
+    };
+    for k in 0.. {
+        let t_s = k as f64 / config.fps;
+        if t_s > config.max_flight_s {
+            break;
+        }
+        air.fly_to(t_s + LOOKAHEAD_S, &errors);
+        if air.touchdown.is_some_and(|td| td.t_s <= t_s) {
+            break;
+        }
+        let t_us = (t_s * 1e6).round() as u64;
+        simulator.scenario.trajectory =
+            local_trajectory(&air.truth, t_s).ok_or("no vehicle state")?;
+        simulator
+            .scenario
+            .frames
+            .push(FramePlan { t_us, label: None });
+        let frame = simulator
+            .render(k)
+            .ok_or("the simulator rendered nothing")?;
+        on_frame(&frame)?;
+        let image = GrayImage::new(&frame.image.pixels, frame.image.width, frame.image.height)
+            .map_err(|e| format!("frame {k}: {e:?}"))?;
+        let board_frame = Frame {
+            set_point: None,
+            t_us,
+            truth: Vector3::from(frame.truth.position),
+            attitude: None,
+            image,
+        };
+        let methods = experiment
+            .process_with(&board_frame, Some(&air.truth as &dyn TruthSource))
+            .map_err(|e| format!("frame {k}: {e:?}"))?;
+        outcome.frames += 1;
+        outcome.frames_with_fix += usize::from(methods.first().is_some_and(|m| m.pose_found));
+        let flight = experiment.flight_run(0).ok_or("no flight")?;
+        let Some(result) = experiment.flight_outcomes().first().copied() else {
+            continue;
+        };
+        if let Some(latency) = result.latency_us {
+            let receipt_s = t_s + latency as f64 * 1e-6;
+            outcome.first_target_s.get_or_insert(receipt_s);
+            outcome.last_target_s = Some(receipt_s);
+            outcome.last_target_height_m = Some(frame.truth.position[2]);
+        }
+        if let Some(reconstructed) = result.reconstructed {
+            // The pad in its local frame: its position estimate at the measurement's time
+            // plus the reconstructed vector to the pad.
+            let clock = flight.clock();
+            let board_us = clock.board_us(reconstructed.t_us);
+            let own = belief(&air.truth, clock, flight.errors(), &PAD_NED, board_us)
+                .ok_or("no vehicle state")?;
+            let pad_ned = own.position_ned + relative_ned(&reconstructed.value);
+            outcome.targets_received += 1;
+            air.land
+                .measure(air.t_s, reconstructed.t_us as f64 * 1e-6, &pad_ned);
+        }
+    }
+    // Past the last frame (the pad too close to see, or the time limit) it flies on.
+    if air.touchdown.is_none() {
+        air.fly_to(config.max_flight_s, &errors);
+    }
+    let flight = experiment.flight_run(0).ok_or("no flight")?;
+    outcome.targets_sent = flight.companion.stats().landing_targets;
+    outcome.touchdown = air.touchdown;
+    outcome.acquired_s = air.land.acquired_s;
+    outcome.low_s = air.land.low_s;
+    outcome.longest_gap_s = air.land.longest_gap_s;
+    outcome.flight_s = air.touchdown.map_or(air.t_s, |t| t.t_s);
+    Ok(outcome)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rendered_motion_is_the_vehicle_s_at_the_frame_time() {
+        let mut truth = TruthTable::new();
+        let mut v = Vehicle::hovering(VehicleParams::typical(), Vector3::new(1.0, 2.0, -10.0));
+        let cmd = super::super::vehicle::Command {
+            accel_ne: nalgebra::Vector2::new(1.0, -2.0),
+            down_mps: 1.0,
+        };
+        let mut t = 0.0;
+        truth.push(t, v.truth());
+        while t < 1.0 {
+            v.step(STEP_S, &cmd, &Vector3::new(2.0, 0.0, 0.0));
+            t += STEP_S;
+            truth.push(t, v.truth());
+        }
+        let at = 0.5;
+        let traj = local_trajectory(&truth, at).unwrap();
+        let state = traj.state(at);
+        let want = truth.at(at).unwrap();
+        let p = Vector3::from(state.position);
+        assert!((p - want.position).norm() < 1e-9, "{p} {}", want.position);
+        let m = nalgebra::Matrix3::from_fn(|i, j| state.attitude[i][j]);
+        assert!((m - want.body_to_ned).norm() < 1e-9);
+        // 5 ms later, within the readout: the motion followed to well under a millimetre.
+        let later = truth.at(at + 0.005).unwrap();
+        let p5 = Vector3::from(traj.state(at + 0.005).position);
+        assert!((p5 - later.position).norm() < 1e-4);
+        let m5 = nalgebra::Matrix3::from_fn(|i, j| traj.state(at + 0.005).attitude[i][j]);
+        assert!((m5 - later.body_to_ned).norm() < 1e-4);
+    }
+}
