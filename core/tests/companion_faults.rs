@@ -58,6 +58,7 @@ fn autopilot_silent_for_ten_seconds() {
         let name = match profile {
             Profile::ArduPilot => "silent-ardupilot",
             Profile::Px4 => "silent-px4",
+            Profile::ArduPilotLocalFrd => unreachable!("not run in LOCAL_FRD"),
         };
         let mut s = Scenario::new(name, profile);
         s.duration_us = 18_000_000;
@@ -82,7 +83,7 @@ fn autopilot_silent_for_ten_seconds() {
         );
         match profile {
             // No vehicle state needed: the camera-frame tracker carries on.
-            Profile::ArduPilot => assert!(during > 280, "{during}"),
+            Profile::ArduPilot | Profile::ArduPilotLocalFrd => assert!(during > 280, "{during}"),
             // Vehicle state stale: nothing (the last one within 60 ms + latency of the silence).
             Profile::Px4 => {
                 assert_eq!(during, 0);
@@ -101,6 +102,7 @@ fn autopilot_reboot_resets_the_clock() {
         let name = match profile {
             Profile::ArduPilot => "reboot-ardupilot",
             Profile::Px4 => "reboot-px4",
+            Profile::ArduPilotLocalFrd => unreachable!("not run in LOCAL_FRD"),
         };
         let mut s = Scenario::new(name, profile);
         s.duration_us = 10_000_000;
@@ -120,7 +122,9 @@ fn autopilot_reboot_resets_the_clock() {
             .find(|t| {
                 t.tx_us >= back
                     && match profile {
-                        Profile::ArduPilot => (t.clock_us - new_offset).abs() <= 1_000,
+                        Profile::ArduPilot | Profile::ArduPilotLocalFrd => {
+                            (t.clock_us - new_offset).abs() <= 1_000
+                        }
                         Profile::Px4 => true,
                     }
             })

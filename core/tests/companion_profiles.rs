@@ -33,6 +33,7 @@ fn fly_and_check_targets(
     let frame = match s.profile {
         Profile::ArduPilot => "BODY_FRD",
         Profile::Px4 => "LOCAL_NED",
+        Profile::ArduPilotLocalFrd => "LOCAL_FRD",
     };
     println!(
         "[{}] {} LANDING_TARGET ({frame}): RMS error x {:.3} y {:.3} z {:.3} m; worst {:.2} of the allowed 4 sigma",
@@ -218,6 +219,7 @@ fn auto_profile_follows_the_autopilot_heartbeat_not_a_gimbal() {
                 "touchdown: profile auto: ArduPilot (BODY_FRD)",
             ),
             Profile::Px4 => ("auto-px4", "touchdown: profile auto: PX4 (LOCAL_NED)"),
+            Profile::ArduPilotLocalFrd => unreachable!("auto never chooses LOCAL_FRD"),
         };
         let mut s = Scenario::new(name, profile);
         s.auto = true;

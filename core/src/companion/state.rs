@@ -35,6 +35,8 @@ impl State {
                 let text = match p {
                     Profile::ArduPilot => "touchdown: profile auto: ArduPilot (BODY_FRD)",
                     Profile::Px4 => "touchdown: profile auto: PX4 (LOCAL_NED)",
+                    // Never detected (auto does not choose it).
+                    Profile::ArduPilotLocalFrd => "touchdown: profile auto: ArduPilot (LOCAL_FRD)",
                 };
                 self.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, text);
             }
@@ -76,7 +78,7 @@ impl State {
         match TimeBase::from_param(self.params.get_int(ParamId::TimeBase)) {
             TimeBase::ByProfile => match self.profile() {
                 // No profile: no target either; the autopilot clock is the contract's default.
-                Some(Profile::ArduPilot) | None => TimeBase::Autopilot,
+                Some(Profile::ArduPilot | Profile::ArduPilotLocalFrd) | None => TimeBase::Autopilot,
                 Some(Profile::Px4) => TimeBase::Companion,
             },
             other => other,

@@ -4,8 +4,11 @@
 //! - ArduPilot: body FRD, from [`PadEstimate::body_frd`] (the level estimate rotated with the
 //!   attitude at exposure, or the camera-frame estimate through the mount). ArduPilot needs
 //!   none of our vehicle state, so targets keep flowing when its messages stop.
-//! - PX4: LOCAL_NED, the vehicle's position at the exposure plus the level estimate; nothing
-//!   without both the attitude and LOCAL_POSITION_NED at the exposure.
+//! - ArduPilot 4.7+ LOCAL_FRD: the level estimate turned back by the heading at the exposure;
+//!   without the attitude at the exposure (no level estimate), BODY_FRD as above, which the
+//!   same autopilot also takes, so targets keep flowing when its messages stop.
+//! - PX4: LOCAL_NED, the vehicle's position at the exposure plus TD_CAM_POS and the level
+//!   estimate; nothing without both the attitude and LOCAL_POSITION_NED at the exposure.
 //!
 //! Then TD_RATE_HZ's pacing (by exposure time), the time base of `time_usec`, and the newest
 //! target replacing an unsent older one.
@@ -18,7 +21,7 @@ use crate::params::ParamId;
 use mavlink::dialects::common::{
     LandingTargetType, MavBool, MavFrame, LANDING_TARGET_DATA, VISION_POSITION_ESTIMATE_DATA,
 };
-use nalgebra::UnitQuaternion;
+use nalgebra::{UnitQuaternion, Vector3};
 
 impl State {
     pub(super) fn on_estimate(&mut self, frame: &FrameEstimate, now_us: u64) -> TargetOutcome {
@@ -35,8 +38,15 @@ impl State {
             self.stats.no_profile = self.stats.no_profile.saturating_add(1);
             return TargetOutcome::NoProfile;
         };
-        let fields = match profile {
-            Profile::ArduPilot => {
+        let level = frame.estimate.as_ref().and_then(|e| Some((e, e.level?)));
+        let fields = match (profile, level) {
+            (Profile::ArduPilotLocalFrd, Some((e, l))) => profile::local_frd_fields(
+                &l.estimate.position,
+                &l.attitude,
+                e.orientation_ned.unwrap_or(UNKNOWN_Q),
+            ),
+            // LOCAL_FRD without the attitude at the exposure: BODY_FRD.
+            (Profile::ArduPilot | Profile::ArduPilotLocalFrd, _) => {
                 let Some(e) = &frame.estimate else {
                     self.stats.no_estimate = self.stats.no_estimate.saturating_add(1);
                     return TargetOutcome::NoEstimate;
@@ -44,13 +54,14 @@ impl State {
                 // Body FRD needs no attitude: the camera is fixed to the body.
                 profile::ardupilot_fields(&e.body_frd, e.orientation_body.unwrap_or(UNKNOWN_Q))
             }
-            Profile::Px4 => {
+            (Profile::Px4, _) => {
                 let estimate = frame.estimate.as_ref();
                 match estimate.and_then(|e| Some((e, e.level?, e.vehicle_position?))) {
                     Some((e, l, pos)) => profile::px4_fields(
                         &pos.position,
                         &l.estimate.position,
                         &l.attitude,
+                        &self.camera_position(),
                         e.orientation_ned.unwrap_or(UNKNOWN_Q),
                     ),
                     None => {
@@ -95,6 +106,7 @@ impl State {
             frame: match fields.frame {
                 TargetFrame::BodyFrd => MavFrame::MAV_FRAME_BODY_FRD,
                 TargetFrame::LocalNed => MavFrame::MAV_FRAME_LOCAL_NED,
+                TargetFrame::LocalFrd => MavFrame::MAV_FRAME_LOCAL_FRD,
             },
             x: fields.position.x,
             y: fields.position.y,
@@ -120,6 +132,15 @@ impl State {
             }
         }
         TargetOutcome::TargetQueued
+    }
+
+    /// TD_CAM_POS_X/Y/Z: the camera's position on the vehicle, body FRD, metres.
+    fn camera_position(&self) -> Vector3<f32> {
+        Vector3::new(
+            self.params.get(ParamId::CamPosX),
+            self.params.get(ParamId::CamPosY),
+            self.params.get(ParamId::CamPosZ),
+        )
     }
 }
 

@@ -303,3 +303,140 @@ fn footprint_is_small() {
     let size = core::mem::size_of::<Companion>();
     assert!(size < 8192, "{size} bytes");
 }
+
+/// A frame with a fix: the pad at `rel_ned` from the camera, the vehicle at `attitude` and
+/// (when given) `position`, so every profile has what it needs.
+fn frame_at(
+    exposure_us: u64,
+    rel_ned: Vector3<f32>,
+    attitude: crate::filter::Attitude,
+    position: Option<Vector3<f32>>,
+) -> FrameEstimate {
+    use crate::filter::{Estimate, LevelEstimate, PositionSample};
+    let estimate = Estimate {
+        t_us: exposure_us,
+        position: rel_ned,
+        velocity: Vector3::zeros(),
+        position_covariance: nalgebra::Matrix3::identity() * 0.01,
+        velocity_covariance: nalgebra::Matrix3::identity() * 0.01,
+        since_update_us: 0,
+    };
+    FrameEstimate {
+        exposure_us,
+        fix_found: true,
+        estimate: Some(PadEstimate {
+            body_frd: attitude.ned_to_body(&rel_ned),
+            level: Some(LevelEstimate { estimate, attitude }),
+            vehicle_position: position.map(|position| PositionSample {
+                position,
+                velocity: Vector3::zeros(),
+            }),
+            orientation_body: None,
+            orientation_ned: Some([1.0, 0.0, 0.0, 0.0]),
+        }),
+        mount_correction: None,
+    }
+}
+
+/// The LANDING_TARGET (and VISION_POSITION_ESTIMATE) frames the companion sends for `frame`,
+/// with TD_PROFILE `profile` and the parameters `params`: the decoded target and each
+/// message's length on the wire.
+fn sent_for(
+    profile: f32,
+    params: &[(ParamId, f32)],
+    frame: &FrameEstimate,
+) -> (LANDING_TARGET_DATA, Option<usize>, Option<usize>) {
+    let mut c = Companion::new(CompanionConfig::default());
+    c.set_param(ParamId::Profile, profile).unwrap();
+    for (id, v) in params {
+        c.set_param(*id, *v).unwrap();
+    }
+    let mut out = [0u8; MAX_FRAME_LEN];
+    while c.poll_transmit(0, &mut out).is_some() {}
+    assert_eq!(c.on_estimate(frame, 1000), TargetOutcome::TargetQueued);
+    let (mut target, mut target_len, mut vpe_len) = (None, None, None);
+    let mut parser = FrameParser::new();
+    while let Some(n) = c.poll_transmit(1000, &mut out) {
+        parser.push(&out[..n], |f| match f.decode() {
+            Ok(MavMessage::LANDING_TARGET(t)) => {
+                target = Some(t);
+                target_len = Some(n);
+            }
+            Ok(MavMessage::VISION_POSITION_ESTIMATE(_)) => vpe_len = Some(n),
+            _ => {}
+        });
+    }
+    (target.expect("a LANDING_TARGET"), target_len, vpe_len)
+}
+
+#[test]
+fn td_cam_pos_moves_the_px4_target_by_the_turned_offset_and_not_the_ardupilot_one() {
+    use crate::filter::Attitude;
+    use mavlink::dialects::common::MavFrame;
+    // Nose east, rolled 10 deg right; the pad 6 m below the camera, the vehicle at (3, -2, -6).
+    let att = Attitude::from_euler(0.17, 0.0, core::f32::consts::FRAC_PI_2).unwrap();
+    let rel = Vector3::new(0.5, -0.3, 6.0);
+    let frame = frame_at(2_000_000, rel, att, Some(Vector3::new(3.0, -2.0, -6.0)));
+    let cam_pos = Vector3::new(0.25, -0.1, 0.05);
+    let offset = [
+        (ParamId::CamPosX, cam_pos.x),
+        (ParamId::CamPosY, cam_pos.y),
+        (ParamId::CamPosZ, cam_pos.z),
+    ];
+    let xyz = |t: &LANDING_TARGET_DATA| Vector3::new(t.x, t.y, t.z);
+    // PX4: the absolute point moves by R * cam_pos (ArduPilot-style distance unchanged).
+    let (px4_0, _, _) = sent_for(1.0, &[], &frame);
+    let (px4, _, _) = sent_for(1.0, &offset, &frame);
+    assert_eq!(px4.frame, MavFrame::MAV_FRAME_LOCAL_NED);
+    let moved = xyz(&px4) - xyz(&px4_0);
+    assert!((moved - att.body_to_ned(&cam_pos)).amax() < 1e-5, "{moved}");
+    assert!(moved.amax() > 0.1);
+    assert_eq!(px4.distance, px4_0.distance);
+    // ArduPilot (BODY_FRD and LOCAL_FRD): unchanged, PLND_CAM_POS is ArduPilot's own.
+    for profile in [0.0, 3.0] {
+        let (ap_0, _, _) = sent_for(profile, &[], &frame);
+        let (ap, _, _) = sent_for(profile, &offset, &frame);
+        assert_eq!(xyz(&ap), xyz(&ap_0), "TD_PROFILE {profile}");
+    }
+}
+
+#[test]
+fn local_frd_removes_roll_and_pitch_and_falls_back_to_body_frd_without_attitude() {
+    use crate::filter::Attitude;
+    use mavlink::dialects::common::MavFrame;
+    let att = Attitude::from_euler(-0.12, 0.2, 2.5).unwrap();
+    let rel = Vector3::new(1.0, 2.0, 7.0);
+    let (t, _, _) = sent_for(3.0, &[], &frame_at(1_000_000, rel, att, None));
+    assert_eq!(t.frame, MavFrame::MAV_FRAME_LOCAL_FRD);
+    let v = Vector3::new(t.x, t.y, t.z);
+    // Level: down stays down; turned by the heading back to NED it is the NED vector.
+    assert!((att.local_frd_to_ned(&v) - rel).amax() < 1e-5, "{v}");
+    // No level estimate (no attitude at the exposure): BODY_FRD from the camera's vector.
+    let mut no_att = frame_at(1_000_000, rel, att, None);
+    if let Some(e) = no_att.estimate.as_mut() {
+        e.level = None;
+        e.body_frd = Vector3::new(0.3, 0.1, 5.0);
+    }
+    let (b, _, _) = sent_for(3.0, &[], &no_att);
+    assert_eq!(b.frame, MavFrame::MAV_FRAME_BODY_FRD);
+    assert_eq!((b.x, b.y, b.z), (0.3, 0.1, 5.0));
+}
+
+/// What the broadcast load in the docs is worked out from: a LANDING_TARGET is 72 bytes on
+/// the wire and a VISION_POSITION_ESTIMATE 128 (MAVLink 2 drops the zero reset_counter).
+#[test]
+fn target_and_vision_estimate_sizes_on_the_wire() {
+    use crate::filter::Attitude;
+    let frame = frame_at(
+        1_000_000,
+        Vector3::new(1.0, 2.0, 7.0),
+        Attitude::from_euler(0.05, -0.02, 0.3).unwrap(),
+        Some(Vector3::new(1.0, 1.0, -7.0)),
+    );
+    for profile in [0.0, 1.0, 3.0] {
+        let (_, target, vpe) = sent_for(profile, &[(ParamId::VpeEnable, 1.0)], &frame);
+        assert_eq!((target, vpe), (Some(72), Some(128)), "TD_PROFILE {profile}");
+    }
+    let (_, _, vpe) = sent_for(0.0, &[], &frame);
+    assert_eq!(vpe, None);
+}

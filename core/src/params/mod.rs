@@ -85,7 +85,7 @@ pub struct ParamDef {
 #[repr(u8)]
 pub enum ParamId {
     /// Output profile: 0 ArduPilot (BODY_FRD), 1 PX4 (LOCAL_NED), 2 auto (from the
-    /// autopilot's HEARTBEAT).
+    /// autopilot's HEARTBEAT), 3 ArduPilot 4.7+ (LOCAL_FRD).
     Profile = 0,
     /// Most LANDING_TARGETs per second.
     RateHz,
@@ -119,10 +119,17 @@ pub enum ParamId {
     /// In-flight mount calibration: 0 off, 1 estimate and report, 2 estimate, report and
     /// set TD_CAM_ROLL/TD_CAM_PITCH.
     CamCal,
+    /// Camera position relative to the vehicle's origin, body x (forward), metres (PX4
+    /// profile only: ArduPilot applies its own PLND_CAM_POS).
+    CamPosX,
+    /// The same, body y (right), metres.
+    CamPosY,
+    /// The same, body z (down), metres.
+    CamPosZ,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 16;
+pub const PARAM_COUNT: usize = 19;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -131,11 +138,13 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         kind: ParamKind::Int,
         // Auto by default: a forced profile the autopilot refuses (PX4 drops BODY_FRD) loses
         // every target; the autopilot's HEARTBEAT says which one it takes.
+        // 3 (LOCAL_FRD) was added after 0-2 and keeps their meaning: never chosen by auto, as
+        // the autopilot's HEARTBEAT does not say whether it takes LOCAL_FRD.
         default: 2.0,
         min: 0.0,
-        max: 2.0,
+        max: 3.0,
         zero_is_unset: false,
-        help: "0 ArduPilot (LANDING_TARGET in BODY_FRD), 1 PX4 (LOCAL_NED), 2 auto (HEARTBEAT)",
+        help: "0 ArduPilot (BODY_FRD), 1 PX4 (LOCAL_NED), 2 auto (HEARTBEAT), 3 ArduPilot 4.7+ (LOCAL_FRD)",
     },
     ParamDef {
         name: "TD_RATE_HZ",
@@ -279,6 +288,37 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "in-flight mount calibration: 0 off, 1 report, 2 report and set TD_CAM_ROLL/PITCH",
     },
+    // The camera's position on the vehicle (appended, like the mount's tilt). PX4's LOCAL_NED
+    // target is the pad's absolute position and PX4 adds no camera offset to it, so the PX4
+    // profile adds it; ArduPilot adds its own PLND_CAM_POS to BODY_FRD and LOCAL_FRD targets,
+    // so its profiles do not (both would count it twice). 5 m covers any multicopter's arms.
+    ParamDef {
+        name: "TD_CAM_POS_X",
+        kind: ParamKind::Real,
+        default: 0.0,
+        min: -5.0,
+        max: 5.0,
+        zero_is_unset: false,
+        help: "camera position forward of the vehicle origin, m (PX4 profile; ArduPilot: PLND_CAM_POS_X)",
+    },
+    ParamDef {
+        name: "TD_CAM_POS_Y",
+        kind: ParamKind::Real,
+        default: 0.0,
+        min: -5.0,
+        max: 5.0,
+        zero_is_unset: false,
+        help: "camera position right of the vehicle origin, m (PX4 profile; ArduPilot: PLND_CAM_POS_Y)",
+    },
+    ParamDef {
+        name: "TD_CAM_POS_Z",
+        kind: ParamKind::Real,
+        default: 0.0,
+        min: -5.0,
+        max: 5.0,
+        zero_is_unset: false,
+        help: "camera position below the vehicle origin, m (PX4 profile; ArduPilot: PLND_CAM_POS_Z)",
+    },
 ];
 
 impl ParamId {
@@ -300,6 +340,9 @@ impl ParamId {
         ParamId::CamRoll,
         ParamId::CamPitch,
         ParamId::CamCal,
+        ParamId::CamPosX,
+        ParamId::CamPosY,
+        ParamId::CamPosZ,
     ];
 
     /// The id at table `index`.
@@ -664,6 +707,50 @@ mod tests {
         assert_eq!(q, p);
         assert_eq!(ParamId::from_name("TD_CAM_PITCH"), Some(ParamId::CamPitch));
         assert_eq!(ParamId::from_index(15), Some(ParamId::CamCal));
+    }
+
+    #[test]
+    fn the_camera_position_validates_and_round_trips() {
+        let mut p = ParamSet::default();
+        for id in [ParamId::CamPosX, ParamId::CamPosY, ParamId::CamPosZ] {
+            assert_eq!(p.get(id), 0.0);
+            assert_eq!(p.set(id, 5.5), Err(ParamError::OutOfRange));
+            assert_eq!(p.set(id, -5.5), Err(ParamError::OutOfRange));
+            assert_eq!(p.set(id, f32::NAN), Err(ParamError::NotFinite));
+        }
+        p.set(ParamId::CamPosX, 0.12).unwrap();
+        p.set(ParamId::CamPosY, -0.05).unwrap();
+        p.set(ParamId::CamPosZ, 0.08).unwrap();
+        let mut blob = [0u8; EXPORT_LEN];
+        assert_eq!(p.export(&mut blob), EXPORT_LEN);
+        let mut q = ParamSet::default();
+        assert_eq!(q.import(&blob).unwrap().applied as usize, PARAM_COUNT);
+        assert_eq!(q, p);
+        assert_eq!(ParamId::from_name("TD_CAM_POS_Z"), Some(ParamId::CamPosZ));
+        assert_eq!(ParamId::from_index(18), Some(ParamId::CamPosZ));
+    }
+
+    #[test]
+    fn a_blob_of_the_sixteen_parameter_firmware_keeps_the_camera_at_the_origin() {
+        // The table before TD_CAM_POS_X/Y/Z was appended.
+        let mut saved = ParamSet::default();
+        saved.set(ParamId::CamCal, 1.0).unwrap();
+        saved.set(ParamId::CamPosX, 0.3).unwrap();
+        let blob = older_blob(&saved, 16);
+        assert_eq!(ParamId::CamPosX.index(), 16);
+        let mut now = ParamSet::default();
+        let r = now.import(&blob).unwrap();
+        assert_eq!((r.applied, r.rejected, r.unknown), (16, 0, 0));
+        assert_eq!(now.get(ParamId::CamCal), 1.0);
+        assert_eq!(now.get(ParamId::CamPosX), 0.0);
+    }
+
+    #[test]
+    fn td_profile_takes_local_frd_and_nothing_beyond() {
+        let mut p = ParamSet::default();
+        assert_eq!(p.set(ParamId::Profile, 3.0), Ok(()));
+        assert_eq!(p.set(ParamId::Profile, 4.0), Err(ParamError::OutOfRange));
+        assert_eq!(p.get(ParamId::Profile), 3.0);
     }
 
     #[test]

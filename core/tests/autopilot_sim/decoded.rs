@@ -93,8 +93,9 @@ pub fn landing_targets(run: &Run, msgs: &[Value], profile: Profile) -> Vec<Targe
             continue;
         }
         let frame = match profile {
-            Profile::ArduPilot => 12, // MAV_FRAME_BODY_FRD
-            Profile::Px4 => 1,        // MAV_FRAME_LOCAL_NED
+            Profile::ArduPilot => 12,         // MAV_FRAME_BODY_FRD
+            Profile::Px4 => 1,                // MAV_FRAME_LOCAL_NED
+            Profile::ArduPilotLocalFrd => 20, // MAV_FRAME_LOCAL_FRD
         };
         assert_eq!(m["frame"], frame, "{m}");
         assert_eq!(m["_mlen"], 60, "extension fields missing: {m}");
@@ -143,6 +144,7 @@ pub fn accuracy(run: &Run, targets: &[Target], profile: Profile) -> (Vector3<f32
         let expected = match profile {
             Profile::ArduPilot => truth.rel_body,
             Profile::Px4 => pad_ned(),
+            Profile::ArduPilotLocalFrd => unreachable!("no LOCAL_FRD scenario here"),
         };
         let err = t.xyz - expected;
         // "Within the pose's accuracy": 4 sigma of one fix's range noise (the filtered value
@@ -159,6 +161,7 @@ pub fn accuracy(run: &Run, targets: &[Target], profile: Profile) -> (Vector3<f32
         let want_q = match profile {
             Profile::ArduPilot => truth.pad_body,
             Profile::Px4 => truth.pad_ned,
+            Profile::ArduPilotLocalFrd => unreachable!("no LOCAL_FRD scenario here"),
         };
         let yaw_err = (t.q.euler_angles().2 - want_q.euler_angles().2).to_degrees();
         let yaw_err = (yaw_err + 540.0).rem_euclid(360.0) - 180.0;

@@ -190,7 +190,9 @@ pub fn simulate(s: &Scenario) -> Run {
     let mount = CameraMount::downward_rotated(s.cam_yaw_deg.to_radians()).unwrap();
     // The estimator's mount is the downward one; TD_CAM_YAW turns it (as the pipeline does).
     let kind = match s.profile {
-        Profile::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        Profile::ArduPilot | Profile::ArduPilotLocalFrd => {
+            MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA
+        }
         Profile::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
     };
     let mut ap = Autopilot::new(

@@ -142,26 +142,55 @@ mod tests {
         assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 16 parameters (the mount's
-        // TD_CAM_ROLL, TD_CAM_PITCH, TD_CAM_CAL appended to the 13 of the first format-2
-        // firmware, whose 320-byte slots still read back) take 12 words: 341 slots per
-        // sector after the first boot's free word.
-        assert_eq!(SLOT_LEN, 384);
-        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 341);
+        // Format 2: a header word and the sequence number more; 19 parameters (TD_CAM_POS_X/Y/Z
+        // appended to the 16 of the mount's firmware, whose 384-byte slots, like the 13
+        // parameters' 320-byte ones, still read back) take 14 words: 292 slots per sector
+        // after the first boot's free word.
+        assert_eq!(SLOT_LEN, 448);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 292);
     }
 
-    /// A format-2 slot of the 13-parameter firmware (10 words), as it wrote it.
-    fn thirteen_parameter_slot(params: &ParamSet, seq: u32) -> [u8; 320] {
-        let mut out = [0u8; 320];
+    /// A format-2 slot of an older firmware whose table ended after `records` parameters, in
+    /// `words` flash words, as it wrote it (the first `words * FLASH_WORD` bytes).
+    fn older_slot(params: &ParamSet, seq: u32, records: usize, words: u8) -> [u8; MAX_SLOT_LEN] {
+        let len = usize::from(words) * FLASH_WORD;
+        let mut out = [0u8; MAX_SLOT_LEN];
         out[..4].copy_from_slice(&SLOT_MAGIC);
         out[4] = SLOT_VERSION;
-        out[5] = 10;
+        out[5] = words;
         out[FLASH_WORD..SLOT_HEADER_LEN].copy_from_slice(&seq.to_le_bytes());
-        params.export_records(13, &mut out[SLOT_HEADER_LEN..]);
-        out[320 - 8..320 - 4].copy_from_slice(&TRAILER_MAGIC);
-        let crc = crc32(&out[..320 - 4]);
-        out[320 - 4..].copy_from_slice(&crc.to_le_bytes());
+        params.export_records(records, &mut out[SLOT_HEADER_LEN..len - SLOT_TRAILER_LEN]);
+        out[len - 8..len - 4].copy_from_slice(&TRAILER_MAGIC);
+        let crc = crc32(&out[..len - 4]);
+        out[len - 4..len].copy_from_slice(&crc.to_le_bytes());
         out
+    }
+
+    /// A format-2 slot of the 13-parameter firmware (10 words).
+    fn thirteen_parameter_slot(params: &ParamSet, seq: u32) -> [u8; 320] {
+        let mut out = [0u8; 320];
+        out.copy_from_slice(&older_slot(params, seq, 13, 10)[..320]);
+        out
+    }
+
+    #[test]
+    fn a_slot_of_the_sixteen_parameter_firmware_imports_with_the_camera_at_the_origin() {
+        use crate::params::ParamId;
+        let mut saved = values(6);
+        saved.set(ParamId::CamCal, 1.0).unwrap();
+        saved.set(ParamId::CamPosZ, 0.2).unwrap();
+        // 16 records (328 bytes) took 12 words (384 bytes).
+        let slot = older_slot(&saved, 11, 16, 12);
+        let slot = &slot[..384];
+        assert_eq!(
+            slot_header(slot[..FLASH_WORD].try_into().unwrap()),
+            Some(12)
+        );
+        let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied), (11, 16));
+        let mut want = saved;
+        want.set(ParamId::CamPosZ, 0.0).unwrap();
+        assert_eq!(p, want);
     }
 
     #[test]
@@ -185,14 +214,14 @@ mod tests {
 
     #[test]
     fn slot_layout() {
-        assert_eq!(SLOT_LEN, 384);
+        assert_eq!(SLOT_LEN, 448);
         let mut slot = [0u8; SLOT_LEN];
         encode_v2(&values(3), 0x0102_0304, &mut slot);
         let mut other = [0u8; SLOT_LEN];
         encode_v2(&values(4), 7, &mut other);
         // The first word is the same in every slot (see the module documentation).
         assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
-        assert_eq!(&slot[..6], b"TDSL\x02\x0c");
+        assert_eq!(&slot[..6], b"TDSL\x02\x0e");
         assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
         assert_eq!(slot[32..36], [4, 3, 2, 1]);
         // The export blob starts mid-word, so it can never pass for a format-1 slot.
