@@ -1,13 +1,15 @@
-//! Steps 3 to 6 for one closed boundary: quad fit, quick look, refinement, decoding and
-//! de-duplication, charged to the frame's work budget.
+//! Steps 3 to 6 for one closed boundary: quad fit (through the lens when the camera is known,
+//! `lens`), quick look, refinement, decoding and de-duplication, charged to the frame's work
+//! budget.
 //!
 //! Separate from the scan in the parent module, which only finds the boundaries and hands
 //! each one to [`Candidates::process`]; the method's choices come from the [`Strategy`].
 
 use super::{
-    contour, decode, quad, DetectStats, Detection, DetectorConfig, Look, Strategy, MAX_DETECTIONS,
-    WORK_CANDIDATE, WORK_FIT, WORK_PER_SAMPLE_X2,
+    contour, decode, lens, quad, DetectStats, Detection, DetectorConfig, Look, Strategy,
+    MAX_DETECTIONS, WORK_CANDIDATE, WORK_FIT, WORK_PER_SAMPLE_X2,
 };
+use crate::camera::CameraModel;
 use crate::family::Family;
 use crate::geometry::cyclic;
 use crate::image::GrayImage;
@@ -30,6 +32,9 @@ pub(super) struct Candidates<'f, 'i, 'a> {
     /// [`decode::precheck`] can take that ring as the white reference. tagStandard41h12 has
     /// data cells there instead.
     pub(super) quiet_margins: bool,
+    /// The lens, when the detector was given a distorting one: boundaries are fitted
+    /// undistorted (`lens`).
+    pub(super) camera: Option<&'f CameraModel>,
 }
 
 impl Candidates<'_, '_, '_> {
@@ -38,19 +43,43 @@ impl Candidates<'_, '_, '_> {
     /// candidate budget ran out.
     pub(super) fn process(
         &self,
-        boundary: &[contour::Pixel],
+        boundary: contour::Boundary<'_>,
         detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
         stats: &mut DetectStats,
         tracer: &mut contour::Tracer<'_>,
     ) -> bool {
         let config = self.config;
-        let Some(screened) = quad::screen(boundary, config.min_edge_px, self.quiet_margins) else {
+        let contour::Boundary {
+            points: boundary,
+            length,
+        } = boundary;
+        let Some(screened) = quad::screen(boundary, length, config.min_edge_px, self.quiet_margins)
+        else {
             return true;
         };
-        if !tracer.charge(WORK_FIT + boundary.len() as u32) {
-            return false;
+        // Through the lens first, for boundaries long enough to be bent (see `lens`): the fit
+        // on the boundary as an ideal lens draws it, its corners taken back into the frame.
+        let mut quad = None;
+        if let Some(camera) = self.camera.filter(|_| length >= lens::MIN_LENS_LENGTH) {
+            let count = boundary.len().min(lens::MAX_LENS_POINTS) as u32;
+            if !tracer.charge(WORK_FIT + count * (1 + lens::WORK_UNDISTORT)) {
+                return false;
+            }
+            let mut straight = [contour::Pixel::default(); lens::MAX_LENS_POINTS];
+            quad = lens::straighten(camera, boundary, &mut straight).and_then(|s| {
+                let points = straight.get(..s.points)?;
+                let screened = quad::screen(points, length, config.min_edge_px, false)?;
+                let fitted = quad::fit(points, &screened, config.min_edge_px)?;
+                lens::bend_back(camera, &s, &fitted)
+            });
         }
-        let Some(quad) = quad::fit(boundary, &screened, config.min_edge_px) else {
+        if quad.is_none() {
+            if !tracer.charge(WORK_FIT + boundary.len() as u32) {
+                return false;
+            }
+            quad = quad::fit(boundary, &screened, config.min_edge_px);
+        }
+        let Some(quad) = quad else {
             return true;
         };
         let strategy = self.strategy;

@@ -69,12 +69,21 @@ const fn pack_xy(dx: i32, dy: i32) -> u32 {
     dx.wrapping_add(dy << 16) as u32
 }
 
+/// A closed boundary as stored by [`Tracer::trace`]: its pixels (all of them, or evenly
+/// spaced ones of a boundary longer than the buffer) and its length in steps.
+#[derive(Debug)]
+pub(crate) struct Boundary<'c> {
+    pub points: &'c [Pixel],
+    pub length: usize,
+}
+
 /// How a trace ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Trace {
-    /// The boundary closed; this many pixels were stored.
-    Closed(usize),
-    /// The boundary closed but was longer than the output buffer (not a candidate).
+    /// The boundary closed: `points` of its pixels were stored, evenly spaced along its
+    /// `length` steps (every pixel when it fitted the output buffer; see [`Tracer::trace`]).
+    Closed { points: usize, length: usize },
+    /// The boundary closed but the output buffer holds fewer than two pixels.
     TooLong,
     /// The frame's work budget ran out in the middle of the boundary.
     OutOfBudget,
@@ -196,6 +205,14 @@ impl<'b> Tracer<'b> {
     /// Follows the boundary through the dark pixel (x0, y0) whose west neighbour is light,
     /// storing its pixels in `out`.
     ///
+    /// A boundary longer than `out` is not dropped: each time `out` fills, every second
+    /// stored pixel is dropped and from then on only every second step is stored, so a
+    /// boundary of any length ends as between half and all of `out`, evenly spaced along it
+    /// (a marker of 2,000 pixels across, 8,000 boundary steps, is stored as every second
+    /// pixel). The points stay on the boundary, which is all the quad fit needs: its
+    /// tolerance is a fraction of the length, tens of pixels on such a boundary. The cost is
+    /// one test per step and, in all, at most one move per step for the thinning.
+    ///
     /// Not inlined: inside the detector's scan loop the walk's dozen live values compete
     /// with the scan's for registers, and the spills cost more than the call (measured on
     /// the Cortex-M7 benchmark).
@@ -215,7 +232,10 @@ impl<'b> Tracer<'b> {
             return match out.first_mut() {
                 Some(slot) => {
                     *slot = start_pixel;
-                    Trace::Closed(1)
+                    Trace::Closed {
+                        points: 1,
+                        length: 1,
+                    }
                 }
                 None => Trace::TooLong,
             };
@@ -223,16 +243,30 @@ impl<'b> Tracer<'b> {
         let (mut bit, mut xy, mut d) = (start, start_xy, first);
         let mut len = 0usize;
         let capacity = out.len();
-        // Steps allowed in this walk. One pixel is stored per step, so the count of stored
-        // pixels doubles as the step count and no separate counter is kept.
+        // Pixels stored, and steps per stored pixel minus one (a power of two minus one).
+        let (mut stored, mut spacing_mask) = (0usize, 0usize);
+        // Steps allowed in this walk.
         let limit = self.budget as usize;
         let result = loop {
             self.mark(bit);
-            if let Some(slot) = out.get_mut(len) {
-                *slot = Pixel {
-                    x: xy as u16,
-                    y: (xy >> 16) as u16,
-                };
+            if len & spacing_mask == 0 {
+                if stored == capacity && capacity >= 2 {
+                    thin_out(out);
+                    stored = capacity / 2;
+                    spacing_mask = 2 * spacing_mask + 1;
+                }
+                // After thinning, `len` is a multiple of the new spacing too: the buffer
+                // fills exactly at a multiple of twice the old spacing (for an even
+                // `capacity`, as the detector's is).
+                if len & spacing_mask == 0 {
+                    if let Some(slot) = out.get_mut(stored) {
+                        *slot = Pixel {
+                            x: xy as u16,
+                            y: (xy >> 16) as u16,
+                        };
+                        stored += 1;
+                    }
+                }
             }
             len += 1;
             if len > limit {
@@ -244,12 +278,16 @@ impl<'b> Tracer<'b> {
             // The light pixel passed last, seen from the new pixel.
             let from = (d + 6 - (d & 1)) & 7;
             // There is always a dark neighbour: the pixel just left.
+            let closed = Trace::Closed {
+                points: stored,
+                length: len,
+            };
             let Some(next) = self.next(bit, from) else {
-                break Trace::Closed(len);
+                break closed;
             };
             // Jacob's criterion: back at the start and about to leave it the same way.
             if bit == start && next == first {
-                break Trace::Closed(len);
+                break closed;
             }
             d = next;
         };
@@ -260,7 +298,7 @@ impl<'b> Tracer<'b> {
         self.steps += steps;
         self.budget = self.budget.saturating_sub(steps);
         match result {
-            Trace::Closed(_) if len > capacity => Trace::TooLong,
+            Trace::Closed { .. } if len > capacity && capacity < 2 => Trace::TooLong,
             other => other,
         }
     }
@@ -270,6 +308,17 @@ impl<'b> Tracer<'b> {
     fn mark(&mut self, bit: usize) {
         if let Some(word) = self.visited.get_mut(bit / 32) {
             *word |= 1 << (bit % 32);
+        }
+    }
+}
+
+/// Keeps every second pixel of a full output buffer, in order, in its first half.
+fn thin_out(out: &mut [Pixel]) {
+    for i in 0..out.len() / 2 {
+        if let Some(&kept) = out.get(2 * i) {
+            if let Some(slot) = out.get_mut(i) {
+                *slot = kept;
+            }
         }
     }
 }
@@ -350,6 +399,14 @@ mod tests {
         (w, h, bm)
     }
 
+    /// A boundary of `n` steps, stored whole.
+    fn closed(n: usize) -> Trace {
+        Trace::Closed {
+            points: n,
+            length: n,
+        }
+    }
+
     fn trace_at(rows: &[&str], x: usize, y: usize) -> (Trace, [Pixel; 64]) {
         let (w, _, bm) = bitmap_of(rows);
         let mut visited = [0u32; 64];
@@ -398,7 +455,7 @@ mod tests {
     fn square_outer_boundary() {
         let rows = ["......", ".####.", ".####.", ".####.", "......"];
         let (r, out) = trace_at(&rows, 1, 1);
-        assert_eq!(r, Trace::Closed(10));
+        assert_eq!(r, closed(10));
         // Clockwise on screen: along the top row first.
         assert_eq!((out[1].x, out[1].y), (2, 1));
         assert_eq!((out[3].x, out[3].y), (4, 1));
@@ -412,15 +469,15 @@ mod tests {
         ];
         // (5, 2) is dark with a hole pixel to its west: the hole boundary.
         let (r, _) = trace_at(&rows, 5, 2);
-        assert!(matches!(r, Trace::Closed(n) if n >= 8));
+        assert!(matches!(r, Trace::Closed { points, .. } if points >= 8));
     }
 
     #[test]
     fn single_pixel_and_thin_line() {
         let (r, _) = trace_at(&["...", ".#.", "..."], 1, 1);
-        assert_eq!(r, Trace::Closed(1));
+        assert_eq!(r, closed(1));
         let (r, _) = trace_at(&[".....", ".###.", "....."], 1, 1);
-        assert_eq!(r, Trace::Closed(4)); // there and back
+        assert_eq!(r, closed(4)); // there and back
     }
 
     #[test]
@@ -435,15 +492,30 @@ mod tests {
     }
 
     #[test]
-    fn long_boundary_is_followed_but_not_stored() {
+    fn long_boundary_is_stored_thinned_out() {
         let rows = ["......", ".####.", ".####.", ".####.", "......"];
+        let (r, whole) = trace_at(&rows, 1, 1);
+        assert_eq!(r, closed(10));
         let (_, _, bm) = bitmap_of(&rows);
         let mut visited = [0u32; 64];
         let mut t = Tracer::new(&bm, &mut visited, 1, 1000);
+        // Four slots for ten steps: thinned twice, every fourth pixel is kept.
         let mut out = [Pixel::default(); 4];
-        assert_eq!(t.trace(1, 1, &mut out), Trace::TooLong);
-        // Still marked, so the scan does not start it again.
+        assert_eq!(
+            t.trace(1, 1, &mut out),
+            Trace::Closed {
+                points: 3,
+                length: 10
+            }
+        );
+        assert_eq!(out[..3], [whole[0], whole[4], whole[8]]);
+        // Every step is still marked and paid for.
         assert_eq!(t.visited_word(3) & 0b11110, 0b11110);
+        assert_eq!(t.steps(), 10);
+        // A buffer of one cannot be thinned.
+        let mut visited = [0u32; 64];
+        let mut t = Tracer::new(&bm, &mut visited, 1, 1000);
+        assert_eq!(t.trace(1, 1, &mut [Pixel::default(); 1]), Trace::TooLong);
     }
 
     #[test]
@@ -462,12 +534,12 @@ mod tests {
         ];
         let traces = scan(&rows, StartRule::AllBoundaries);
         assert_eq!(traces.len(), 2, "{traces:?}");
-        assert_eq!(traces[0], ((1, 1), Trace::Closed(22)));
+        assert_eq!(traces[0], ((1, 1), closed(22)));
         assert_eq!(traces[1].0, (6, 3));
         // Outer-only: the ring's outer boundary alone.
         let traces = scan(&rows, StartRule::OuterOnly);
         assert_eq!(traces.len(), 1, "{traces:?}");
-        assert_eq!(traces[0], ((1, 1), Trace::Closed(22)));
+        assert_eq!(traces[0], ((1, 1), closed(22)));
     }
 
     #[test]

@@ -67,6 +67,7 @@
 mod candidates;
 mod contour;
 mod decode;
+mod lens;
 mod paper;
 mod pattern_fit;
 mod quad;
@@ -74,6 +75,7 @@ mod refine;
 mod strategy;
 mod threshold;
 
+use crate::camera::CameraModel;
 use crate::family::Family;
 use crate::geometry::Point;
 use crate::image::GrayImage;
@@ -85,8 +87,10 @@ use strategy::{Look, Robust, Strategy};
 pub const MAX_DETECTIONS: usize = 64;
 /// Most families searched at once.
 pub const MAX_FAMILIES: usize = 8;
-/// Longest boundary (in pixels) that is kept as a candidate; longer ones are followed (so they
-/// are not traced again) but not stored. 4096 covers a marker filling a VGA frame.
+/// Boundary points stored for the quad fit. A longer boundary is stored as evenly spaced
+/// points (every second, fourth, ... pixel: see `contour`), so markers of any size are
+/// candidates (a 2,000-pixel one, 8,000 boundary steps, is fitted on every second pixel);
+/// 4096 holds every pixel of a marker filling a VGA frame.
 pub const MAX_CONTOUR_POINTS: usize = 4096;
 /// Side of the square tiles of the local threshold, in pixels.
 pub const TILE: usize = 4;
@@ -373,6 +377,8 @@ pub struct Detector {
     contour: [contour::Pixel; MAX_CONTOUR_POINTS],
     detections: heapless::Vec<Detection, MAX_DETECTIONS>,
     stats: DetectStats,
+    /// The lens the frames come through, if known ([`Detector::set_camera`]).
+    camera: Option<CameraModel>,
 }
 
 impl Detector {
@@ -383,7 +389,22 @@ impl Detector {
             contour: [contour::Pixel::default(); MAX_CONTOUR_POINTS],
             detections: heapless::Vec::new(),
             stats: DetectStats::default(),
+            camera: None,
         }
+    }
+
+    /// The camera the frames come from, or `None` (the default). With a camera whose lens
+    /// distorts, each boundary is undistorted before the quad fit, so markers whose edges the
+    /// lens bends are found (see `lens`); the corners reported stay in the frame's own
+    /// (distorted) pixels either way. A model that does not validate counts as none.
+    pub fn set_camera(&mut self, camera: Option<CameraModel>) {
+        self.camera = camera.filter(|c| c.validate().is_ok() && c.has_distortion());
+    }
+
+    /// The camera set with [`Detector::set_camera`] (`None` also for a distortion-free one,
+    /// which changes nothing).
+    pub fn camera(&self) -> Option<&CameraModel> {
+        self.camera.as_ref()
     }
 
     /// The settings.
@@ -438,6 +459,7 @@ impl Detector {
             contour,
             detections,
             stats,
+            camera,
         } = self;
         // The one place the method is looked at: everything after asks the strategy.
         let strategy: &dyn Strategy = match config.method {
@@ -460,6 +482,7 @@ impl Detector {
                 .max(1),
             uniform_decodes: families.iter().any(|f| decode::uniform_grid_decodes(f)),
             quiet_margins: families.iter().all(|f| f.quiet_rings >= f.border_ring),
+            camera: camera.as_ref(),
         };
         let rule = strategy.start_rule(families);
         let bitmap: &[u32] = bitmap;
@@ -509,10 +532,14 @@ impl Detector {
                         break 'scan;
                     }
                     match tracer.trace(x, y, contour) {
-                        contour::Trace::Closed(len) => {
-                            let fit_work = len as u32 / WORK_SCREEN_PIXELS;
+                        contour::Trace::Closed { points, length } => {
+                            let fit_work = points as u32 / WORK_SCREEN_PIXELS;
                             let go_on = tracer.charge(fit_work)
-                                && contour.get(..len).is_none_or(|boundary| {
+                                && contour.get(..points).is_none_or(|boundary| {
+                                    let boundary = contour::Boundary {
+                                        points: boundary,
+                                        length,
+                                    };
                                     candidates.process(boundary, detections, stats, &mut tracer)
                                 });
                             if !go_on {

@@ -63,8 +63,8 @@ fn cross(o: Point, a: Point, b: Point) -> f32 {
 /// screen (an outer boundary), negative for a hole.
 pub(crate) fn signed_area2(contour: &[Pixel]) -> i64 {
     // Relative to the first pixel, which makes the first and the closing term zero and keeps
-    // every partial sum (twice the area of a fan from that pixel) within i32: the boundary is
-    // a connected path of at most MAX_CONTOUR_POINTS pixels. 32-bit products are half the
+    // every partial sum (twice the area of a fan from that pixel) within i32: the boundary
+    // lies in a frame of at most `image::MAX_DIMENSION` pixels a side, 2 * 8192^2 < 2^31. 32-bit products are half the
     // instructions of 64-bit ones on the Cortex-M7, and this runs on every long boundary.
     let Some(origin) = contour.first() else {
         return 0;
@@ -102,8 +102,8 @@ fn wrapped_span(contour: &[Pixel], from: usize, to: usize) -> (&[Pixel], &[Pixel
 /// Integer arithmetic on the pixel coordinates (this loop is most of the fit's time on a
 /// noisy frame): the distance is compared as the cross product against `tolerance` times the
 /// chord length, so there is no division per point. The products fit in `i32` because the
-/// boundary is a connected path of at most [`super::MAX_CONTOUR_POINTS`] pixels, so no two of
-/// its points are further apart than that on either axis.
+/// boundary lies in a frame of at most [`crate::image::MAX_DIMENSION`] pixels a side: each
+/// is below 8192^2 and their difference below 2^31.
 fn farthest_from_chord(
     contour: &[Pixel],
     origin: usize,
@@ -259,6 +259,8 @@ const COMPACTNESS: f32 = 0.04;
 pub(crate) struct Screened {
     /// The boundary encloses a light region.
     hole: bool,
+    /// The boundary's length, pixels (steps): its points may be a thinned-out sample.
+    length: usize,
     /// Index of one end of the boundary's diameter, where the fit starts.
     origin: usize,
     /// Position of the other end, counted from `origin`.
@@ -268,7 +270,11 @@ pub(crate) struct Screened {
 /// Fits a candidate quad to a closed boundary ([`screen`], then [`fit`]).
 #[cfg(test)]
 pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
-    fit(contour, &screen(contour, min_edge, true)?, min_edge)
+    fit(
+        contour,
+        &screen(contour, contour.len(), min_edge, true)?,
+        min_edge,
+    )
 }
 
 /// The cheap tests a boundary must pass before the fit, about 15 Cortex-M7 instructions per
@@ -276,10 +282,18 @@ pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
 /// a quiet margin have a straight outline; tagStandard41h12's data cells outside its border
 /// make a bumpy one), wide enough for four sides of `min_edge`. Most boundaries of a
 /// cluttered or noisy frame stop here.
-pub(crate) fn screen(contour: &[Pixel], min_edge: f32, convex: bool) -> Option<Screened> {
-    let n = contour.len();
+///
+/// `contour` is the boundary's pixels in order, every one of them or (a boundary longer
+/// than the detector's buffer) evenly spaced ones; `length` is its length in steps.
+pub(crate) fn screen(
+    contour: &[Pixel],
+    length: usize,
+    min_edge: f32,
+    convex: bool,
+) -> Option<Screened> {
+    let n = length.max(contour.len());
     // An edge of `min_edge` pixels at 45 degrees is min_edge / sqrt(2) steps.
-    if (n as f32) < 2.8 * min_edge || n < 8 {
+    if (n as f32) < 2.8 * min_edge || contour.len() < 8 {
         return None;
     }
     let area2 = signed_area2(contour);
@@ -317,7 +331,8 @@ pub(crate) fn screen(contour: &[Pixel], min_edge: f32, convex: bool) -> Option<S
     };
     let origin = farthest(0);
     let split_abs = farthest(origin);
-    let split = (split_abs + n - origin) % n;
+    let points = contour.len();
+    let split = (split_abs + points - origin) % points;
     if split == 0 {
         return None;
     }
@@ -341,6 +356,7 @@ pub(crate) fn screen(contour: &[Pixel], min_edge: f32, convex: bool) -> Option<S
     }
     Some(Screened {
         hole,
+        length: n,
         origin,
         split,
     })
@@ -349,13 +365,13 @@ pub(crate) fn screen(contour: &[Pixel], min_edge: f32, convex: bool) -> Option<S
 /// The Douglas-Peucker fit of a screened boundary: a convex quad with sides of at least
 /// `min_edge`, or nothing.
 pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Option<Quad> {
-    let n = contour.len();
     let Screened {
         hole,
+        length,
         origin,
         split,
     } = *screened;
-    let tolerance = (TOLERANCE_PER_PIXEL * n as f32).max(MIN_TOLERANCE);
+    let tolerance = (TOLERANCE_PER_PIXEL * length as f32).max(MIN_TOLERANCE);
     let vertices = simplify(contour, origin, split, tolerance)?;
     // Drop the vertex that bends the outline least while more than four remain. Each
     // vertex's bend (its distance from the line through its neighbours) is kept, and only
