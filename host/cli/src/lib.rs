@@ -189,3 +189,9 @@ mod tests {
         assert_eq!(CliError::new("a\nb").to_string(), "a b");
     }
 }
+pub mod sitl;
+    /// Closed-loop landings: the vehicle flies on the targets touchdown sends (against the
+    /// autopilot model).
+    #[command(long_about = sitl::LONG_HELP)]
+    Sitl(sitl::SitlArgs),
+        Command::Sitl(args) => sitl::run(&args, out, err),

@@ -1,0 +1,503 @@
+//! `touchdown sitl`: closed-loop landings, the vehicle flying on the targets touchdown sends.
+//!
+//! Against the autopilot model ([`touchdown_eval::closed_loop`]): per camera frame the
+//! simulator renders the pad from the vehicle's true pose, the board's per-frame path and
+//! companion run on it against the simulated autopilot over MAVLink bytes, and the
+//! ArduPilot-like LAND it flies steers a point-mass multicopter in wind and gusts on what it
+//! reconstructs. It prints where the vehicle touched down against the pad's centre and the
+//! timeline, or one JSON object (`--json`); `--seeds N` flies N seeds (on threads) and
+//! prints the distribution; `--record DIR` writes the flight as a recording that
+//! `touchdown replay DIR` replays.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Args;
+use serde::Serialize;
+
+use super::{CliError, Outcome};
+use crate::effects::EffectArgs;
+use touchdown_eval::closed_loop::{self, LandingConfig, LandingOutcome};
+use touchdown_formats::recording::RecordingWriter;
+
+/// `--help`'s long text.
+pub const LONG_HELP: &str = "\
+Closed-loop landings: the vehicle flies on the targets touchdown sends.
+
+Per camera frame: the simulator renders the camera's view of the landing scenario's nested \
+pad from the vehicle's TRUE pose (with the flight effects, as `touchdown simulate`: rolling \
+shutter, vibration on the mount, mount misalignment; --ideal for none), the camera board's \
+per-frame path (detector, pad fix, estimator) and MAVLink companion run on it, and talk \
+MAVLink bytes with the autopilot model over a simulated UART (TIMESYNC, \
+SET_MESSAGE_INTERVAL, the attitude stream, LANDING_TARGET), under the replay's error model \
+(attitude noise and bias, latencies, clocks, PLND_LAG, position drift).
+
+The autopilot model: ArduPilot's precision LAND as its source does it. The LANDING_TARGET's \
+body FRD vector turned with its attitude estimate at receipt - PLND_LAG, plus its position \
+estimate, is the pad's position; the position controller (AC_PosControl's defaults: P 1.0 on \
+position, PID 2.0 / 1.0 / 0.5 on velocity) flies to the newest one (after 1 s without a \
+target it keeps the last); it descends at LAND_SPEED_HIGH 1.5 m/s above LAND_ALT_LOW 10 m and \
+LAND_SPEED 0.5 m/s below. The vehicle: a point mass whose tilt follows the commanded \
+acceleration (0.15 s), 30 degrees at most, rotor drag 0.2 /s on the airspeed, in a mean wind \
+(--wind-mps, seeded direction) and 1-cos gusts of peak --gust-mps (2-6 s long, every 6 s on \
+average, seeded directions). Touchdown: the camera's true height reaching the pad; the error \
+is the true horizontal position then against the pad's centre (its origin, the landing point).
+
+Output: the start, the timeline (first LANDING_TARGET received, target acquired by LAND, the \
+slow descent, the last target, touchdown, seconds from LAND), the touchdown error (north, \
+east, horizontal, cm), frames and targets sent / received. With --seeds N (seeds --seed .. \
+--seed + N - 1, flown on threads) one line per seed and the distribution (min, median, max) \
+of the horizontal error. --json: one object, {\"landings\": [...], \"horizontal_cm\": {min, \
+median, max}} (keys in docs/interfaces.md).
+
+--record DIR (one seed): the flight as a recording (camera.toml, pad.toml, frames/, \
+frames.csv with the truth and veh_ attitude columns) that `touchdown replay DIR` replays.
+
+Exit status: 0 when every landing touched down; 2 with one line on stderr for a bad option, \
+or when a landing did not touch down within --max-time.";
+
+/// Arguments of `touchdown sitl`.
+#[derive(Debug, Clone, Args)]
+pub struct SitlArgs {
+    /// Seed of everything random (scene, wind, errors, start bearing); the first with --seeds
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
+
+    /// Fly N seeds, --seed to --seed + N - 1, and print the distribution
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seeds: u64,
+
+    /// Height of the camera over the pad when LAND begins, metres
+    #[arg(long, value_name = "M", default_value_t = 20.0)]
+    pub height: f64,
+
+    /// Horizontal distance from the pad when LAND begins, metres (seeded bearing)
+    #[arg(long, value_name = "M", default_value_t = 2.0)]
+    pub offset: f64,
+
+    /// Mean wind, m/s (seeded direction)
+    #[arg(long, value_name = "MPS", default_value_t = 2.0)]
+    pub wind_mps: f64,
+
+    /// Peak of the 1-cos gusts, m/s
+    #[arg(long, value_name = "MPS", default_value_t = 3.0)]
+    pub gust_mps: f64,
+
+    /// Camera frames per second [default: 15, the landing scenario's]
+    #[arg(long, value_name = "HZ", default_value_t = 15.0)]
+    pub fps: f64,
+
+    /// Render at 320x240 (the same lens) instead of 640x480
+    #[arg(long)]
+    pub qvga: bool,
+
+    /// Give up on a landing after this long, seconds
+    #[arg(long, value_name = "S", default_value_t = 90.0)]
+    pub max_time: f64,
+
+    /// Board parameters at start, NAME=VALUE,... (e.g. TD_CAM_ROLL=1.2,TD_CAM_PITCH=-1.6)
+    #[arg(long, value_name = "LIST")]
+    pub board_params: Option<String>,
+
+    /// Write the flight as a recording into DIR (one seed; DIR must be empty or new)
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
+
+    /// One JSON object on stdout instead of the text
+    #[arg(long)]
+    pub json: bool,
+
+    /// The flight effects' terms.
+    #[command(flatten)]
+    pub effect_terms: EffectArgs,
+
+    /// No flight effects: global shutter, no vibration, the nominal mount
+    #[arg(long, help_heading = "Flight effects")]
+    pub ideal: bool,
+
+    /// Threads [default: all cores]: seeds in parallel, or one seed's rendering
+    #[arg(long, value_name = "N", help_heading = "Advanced")]
+    pub threads: Option<usize>,
+}
+
+/// `--board-params`: `NAME=VALUE` pairs, comma-separated, in order.
+fn board_params(list: Option<&str>) -> Result<Vec<(String, f32)>, CliError> {
+    let Some(list) = list else {
+        return Ok(Vec::new());
+    };
+    list.split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(|pair| {
+            let (name, value) = pair
+                .split_once('=')
+                .ok_or_else(|| CliError(format!("--board-params: `{pair}` is not NAME=VALUE")))?;
+            let value: f32 = value.trim().parse().map_err(|_| {
+                CliError(format!(
+                    "--board-params: `{pair}`: the value is not a number"
+                ))
+            })?;
+            Ok((name.trim().to_ascii_uppercase(), value))
+        })
+        .collect()
+}
+
+fn check(args: &SitlArgs) -> Result<(), CliError> {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    if !positive(args.height) {
+        return Err(CliError("--height must be a number > 0".into()));
+    }
+    for (flag, v) in [
+        ("--offset", args.offset),
+        ("--wind-mps", args.wind_mps),
+        ("--gust-mps", args.gust_mps),
+    ] {
+        if !non_negative(v) {
+            return Err(CliError(format!("{flag} must be a number >= 0")));
+        }
+    }
+    if !positive(args.fps) || args.fps > 120.0 {
+        return Err(CliError("--fps must be in 0..120".into()));
+    }
+    if !positive(args.max_time) {
+        return Err(CliError("--max-time must be a number > 0".into()));
+    }
+    if args.seeds == 0 {
+        return Err(CliError("--seeds must be at least 1".into()));
+    }
+    if args.threads == Some(0) {
+        return Err(CliError("--threads must be at least 1".into()));
+    }
+    if args.record.is_some() && args.seeds > 1 {
+        return Err(CliError("--record takes one seed, not --seeds".into()));
+    }
+    if let Some(dir) = &args.record {
+        if dir
+            .read_dir()
+            .is_ok_and(|mut entries| entries.next().is_some())
+        {
+            return Err(CliError(format!(
+                "{}: directory is not empty",
+                dir.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// A landing's JSON record.
+#[derive(Debug, Serialize)]
+struct LandingJson {
+    seed: u64,
+    start_north_m: f64,
+    start_east_m: f64,
+    touched_down: bool,
+    touchdown_s: Option<f64>,
+    north_cm: Option<f64>,
+    east_cm: Option<f64>,
+    horizontal_cm: Option<f64>,
+    touchdown_speed_mps: Option<f64>,
+    first_target_s: Option<f64>,
+    target_acquired_s: Option<f64>,
+    low_descent_s: Option<f64>,
+    last_target_s: Option<f64>,
+    last_target_height_m: Option<f64>,
+    longest_target_gap_s: f64,
+    frames: usize,
+    frames_with_fix: usize,
+    targets_sent: u32,
+    targets_received: usize,
+}
+
+impl From<&LandingOutcome> for LandingJson {
+    fn from(o: &LandingOutcome) -> Self {
+        let td = o.touchdown;
+        LandingJson {
+            seed: o.seed,
+            start_north_m: o.start_ne.0,
+            start_east_m: o.start_ne.1,
+            touched_down: td.is_some(),
+            touchdown_s: td.map(|t| t.t_s),
+            north_cm: td.map(|t| 100.0 * t.north_m),
+            east_cm: td.map(|t| 100.0 * t.east_m),
+            horizontal_cm: td.map(|t| 100.0 * t.horizontal_m()),
+            touchdown_speed_mps: td.map(|t| t.speed_mps),
+            first_target_s: o.first_target_s,
+            target_acquired_s: o.acquired_s,
+            low_descent_s: o.low_s,
+            last_target_s: o.last_target_s,
+            last_target_height_m: o.last_target_height_m,
+            longest_target_gap_s: o.longest_gap_s,
+            frames: o.frames,
+            frames_with_fix: o.frames_with_fix,
+            targets_sent: o.targets_sent,
+            targets_received: o.targets_received,
+        }
+    }
+}
+
+/// Min, median and max, cm.
+#[derive(Debug, Serialize)]
+struct Distribution {
+    min: f64,
+    median: f64,
+    max: f64,
+}
+
+fn distribution(values: &[f64]) -> Option<Distribution> {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let median = match n {
+        0 => return None,
+        _ if n % 2 == 1 => v[n / 2],
+        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    };
+    Some(Distribution {
+        min: v[0],
+        median,
+        max: v[n - 1],
+    })
+}
+
+#[derive(Debug, Serialize)]
+struct Report {
+    autopilot: &'static str,
+    landings: Vec<LandingJson>,
+    horizontal_cm: Option<Distribution>,
+    elapsed_s: f64,
+}
+
+/// Flies the seeds, `workers` at a time, each seed's rendering on `render_threads`.
+fn fly_all(
+    configs: Vec<LandingConfig>,
+    workers: usize,
+    record: Option<&PathBuf>,
+) -> Result<Vec<LandingOutcome>, CliError> {
+    if let (Some(dir), [config]) = (record, configs.as_slice()) {
+        let scene = closed_loop::scene(config).map_err(CliError)?;
+        let mut writer = RecordingWriter::create_with_vehicle_attitude(
+            dir,
+            &scene.camera.model,
+            &scene.pad.config,
+            true,
+            true,
+        )
+        .map_err(CliError::new)?;
+        let mut write = |f: &touchdown_sim::SimFrame| {
+            writer
+                .push_with_vehicle_attitude(
+                    f.t_us,
+                    Some(&f.truth),
+                    Some(&f.vehicle_attitude),
+                    None,
+                    &f.image,
+                )
+                .map_err(|e| e.to_string())
+        };
+        let outcome = closed_loop::fly(config, &mut write).map_err(CliError)?;
+        writer.finish().map_err(CliError::new)?;
+        return Ok(vec![outcome]);
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: std::sync::Mutex<Vec<Option<Result<LandingOutcome, String>>>> =
+        std::sync::Mutex::new((0..configs.len()).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..workers.clamp(1, configs.len()) {
+            s.spawn(|| loop {
+                let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(config) = configs.get(k) else {
+                    break;
+                };
+                let r = closed_loop::fly(config, &mut |_| Ok(()));
+                if let Ok(mut all) = results.lock() {
+                    all[k] = Some(r);
+                }
+            });
+        }
+    });
+    let all = results
+        .into_inner()
+        .map_err(|_| CliError("a landing's thread failed".into()))?;
+    all.into_iter()
+        .map(|r| match r {
+            Some(Ok(o)) => Ok(o),
+            Some(Err(e)) => Err(CliError(e)),
+            None => Err(CliError("a landing's thread failed".into())),
+        })
+        .collect()
+}
+
+fn seconds(v: Option<f64>) -> String {
+    v.map_or("-".into(), |s| format!("{s:.2}"))
+}
+
+/// The text of one landing.
+fn landing_text(o: &LandingOutcome, config: &LandingConfig) -> String {
+    let mut t = String::new();
+    let (n, e) = o.start_ne;
+    t.push_str(&format!(
+        "seed {}: LAND from {:.1} m, {:.2} m off the pad (north {n:+.2}, east {e:+.2} m)\n",
+        o.seed, config.start_height_m, config.offset_m
+    ));
+    t.push_str("timeline, s from LAND:\n");
+    t.push_str(&format!(
+        "  {:>7}  first LANDING_TARGET received\n",
+        seconds(o.first_target_s)
+    ));
+    t.push_str(&format!(
+        "  {:>7}  target acquired (LAND steers on the pad estimate)\n",
+        seconds(o.acquired_s)
+    ));
+    t.push_str(&format!(
+        "  {:>7}  below LAND_ALT_LOW {:.0} m: {:.1} m/s (above: {:.1} m/s)\n",
+        seconds(o.low_s),
+        config.land.land_alt_low_m,
+        config.land.land_speed_mps,
+        config.land.land_speed_high_mps
+    ));
+    t.push_str(&format!(
+        "  {:>7}  last LANDING_TARGET received{}\n",
+        seconds(o.last_target_s),
+        o.last_target_height_m
+            .map_or(String::new(), |h| format!(" (camera at {h:.2} m)"))
+    ));
+    match o.touchdown {
+        Some(td) => {
+            t.push_str(&format!("  {:>7}  touchdown\n", seconds(Some(td.t_s))));
+            t.push_str(&format!(
+                "touchdown: {:.1} cm from the pad centre (north {:+.1}, east {:+.1} cm), {:.2} m/s horizontal\n",
+                100.0 * td.horizontal_m(),
+                100.0 * td.north_m,
+                100.0 * td.east_m,
+                td.speed_mps
+            ));
+        }
+        None => t.push_str(&format!(
+            "no touchdown within {:.0} s\n",
+            config.max_flight_s
+        )),
+    }
+    t.push_str(&format!(
+        "frames {} ({} with a pad fix), LANDING_TARGETs sent {}, received {}; longest gap between targets {:.2} s\n",
+        o.frames, o.frames_with_fix, o.targets_sent, o.targets_received, o.longest_gap_s
+    ));
+    t
+}
+
+/// Runs `touchdown sitl`.
+pub fn run(
+    args: &SitlArgs,
+    out: &mut dyn Write,
+    _err: &mut dyn Write,
+) -> Result<Outcome, CliError> {
+    check(args)?;
+    let started = Instant::now();
+    let params = board_params(args.board_params.as_deref())?;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = args.threads.unwrap_or(cores);
+    let (workers, render_threads) = if args.seeds > 1 {
+        (threads, 1)
+    } else {
+        (1, threads)
+    };
+    let configs: Vec<LandingConfig> = (0..args.seeds)
+        .map(|k| LandingConfig {
+            start_height_m: args.height,
+            offset_m: args.offset,
+            wind_mps: args.wind_mps,
+            gust_mps: args.gust_mps,
+            effects: args.effect_terms.effects(args.ideal),
+            params: params.clone(),
+            fps: args.fps,
+            qvga: args.qvga,
+            threads: render_threads,
+            max_flight_s: args.max_time,
+            ..LandingConfig::issue_15(args.seed.wrapping_add(k))
+        })
+        .collect();
+    let Some(first) = configs.first().cloned() else {
+        return Err(CliError("--seeds must be at least 1".into()));
+    };
+    let outcomes = fly_all(configs, workers, args.record.as_ref())?;
+    let horizontal: Vec<f64> = outcomes
+        .iter()
+        .filter_map(|o| o.touchdown.map(|t| 100.0 * t.horizontal_m()))
+        .collect();
+    let all_down = horizontal.len() == outcomes.len();
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let write = |out: &mut dyn Write, text: &str| {
+        out.write_all(text.as_bytes())
+            .map_err(|e| CliError(format!("cannot write to stdout: {e}")))
+    };
+    if args.json {
+        let report = Report {
+            autopilot: "model",
+            landings: outcomes.iter().map(LandingJson::from).collect(),
+            horizontal_cm: distribution(&horizontal),
+            elapsed_s,
+        };
+        let text = serde_json::to_string_pretty(&report).map_err(CliError::new)?;
+        write(out, &format!("{text}\n"))?;
+    } else {
+        let e = &first.effects;
+        let mut text = format!(
+            "touchdown sitl: {} closed-loop landing{} against the autopilot model (ArduPilot-like precision LAND), flown in {elapsed_s:.1} s\n\
+             wind {:.1} m/s, gusts {:.1} m/s peak; {} at {:.0} fps; flight effects: readout {} ms, vibration {} deg, mount roll {} pitch {} deg\n",
+            outcomes.len(),
+            if outcomes.len() == 1 { "" } else { "s" },
+            first.wind_mps,
+            first.gust_mps,
+            if first.qvga { "320x240" } else { "640x480" },
+            first.fps,
+            e.readout_ms,
+            e.vibration_deg,
+            e.mount_roll_deg,
+            e.mount_pitch_deg
+        );
+        if let [o] = outcomes.as_slice() {
+            text.push_str(&landing_text(o, &first));
+        } else {
+            text.push_str(
+                "seed  touchdown s  north cm  east cm  horizontal cm  targets received\n",
+            );
+            for o in &outcomes {
+                match o.touchdown {
+                    Some(td) => text.push_str(&format!(
+                        "{:>4}  {:>11.2}  {:>8.1}  {:>7.1}  {:>13.1}  {:>16}\n",
+                        o.seed,
+                        td.t_s,
+                        100.0 * td.north_m,
+                        100.0 * td.east_m,
+                        100.0 * td.horizontal_m(),
+                        o.targets_received
+                    )),
+                    None => text.push_str(&format!(
+                        "{:>4}  no touchdown{:>43}\n",
+                        o.seed, o.targets_received
+                    )),
+                }
+            }
+            if let Some(d) = distribution(&horizontal) {
+                text.push_str(&format!(
+                    "horizontal touchdown error over {} landings, cm: min {:.1}, median {:.1}, max {:.1}\n",
+                    horizontal.len(),
+                    d.min,
+                    d.median,
+                    d.max
+                ));
+            }
+        }
+        write(out, &text)?;
+    }
+    if !all_down {
+        return Err(CliError(format!(
+            "{} of {} landings did not touch down within --max-time {} s",
+            outcomes.len() - horizontal.len(),
+            outcomes.len(),
+            args.max_time
+        )));
+    }
+    Ok(Outcome::Success)
+}
