@@ -21,6 +21,7 @@ pub mod pad;
 pub mod plot;
 pub mod replay;
 pub mod simulate;
+pub mod sitl;
 
 use std::fmt;
 use std::io::{self, Write};
@@ -70,6 +71,10 @@ pub enum Command {
     /// recording of a hover over the pad.
     #[command(long_about = calibrate::LONG_HELP)]
     Calibrate(calibrate::CalibrateArgs),
+    /// Closed-loop landings: the vehicle flies on the targets touchdown sends (against the
+    /// autopilot model).
+    #[command(long_about = sitl::LONG_HELP)]
+    Sitl(sitl::SitlArgs),
 }
 
 /// A failure reported as one line on stderr with exit status 2.
@@ -111,6 +116,7 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
         Command::Pad(args) => pad::run(&args, out, err),
         Command::Companion(args) => companion::run(&args, out, err),
         Command::Calibrate(args) => calibrate::run(&args, out, err),
+        Command::Sitl(args) => sitl::run(&args, out, err),
     }
 }
 
@@ -189,9 +195,3 @@ mod tests {
         assert_eq!(CliError::new("a\nb").to_string(), "a b");
     }
 }
-pub mod sitl;
-    /// Closed-loop landings: the vehicle flies on the targets touchdown sends (against the
-    /// autopilot model).
-    #[command(long_about = sitl::LONG_HELP)]
-    Sitl(sitl::SitlArgs),
-        Command::Sitl(args) => sitl::run(&args, out, err),
