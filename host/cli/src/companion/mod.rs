@@ -3,46 +3,99 @@
 //! Runs the same per-frame path as the camera board (`touchdown_core::pipeline::FramePipeline`,
 //! with the TD_* parameters applied between frames as the board applies them, then
 //! `touchdown_core::companion::Companion`) on a recording, in real time at the recording's
-//! frame times, and exchanges MAVLink with a flight controller or SITL over UDP or a serial
-//! port: with `--udp HOST:PORT` a datagram socket sends there (for example MAVProxy's
-//! `--out udpin:0.0.0.0:14550` or PX4 SITL's onboard port 14540) and reads whatever comes back
-//! on the same socket; with `--serial PATH --baud N` it talks to a real flight controller's
-//! TELEM port through a USB-serial adapter, exactly as the board would (8N1, raw, no flow
-//! control; Linux/Unix termios). The companion state machine is sans-IO, so this file is only
-//! the loop: read bytes, feed frames when due, drain `poll_transmit` into the endpoint.
+//! frame times, and exchanges MAVLink with a flight controller or SITL over the link the user
+//! names ([`endpoint`]: UDP or TCP, as client or server, or a serial port, exactly as the board
+//! would talk on its UART: 8N1, raw, no flow control). The companion state machine is sans-IO,
+//! so this file is only the loop: read bytes, feed frames when due, drain `poll_transmit` into
+//! the endpoint; and at the end, or on SIGINT/SIGTERM ([`interrupt`]), the [`summary`].
 
-use std::fs::File;
-use std::io::{ErrorKind, Read, Write};
-use std::net::UdpSocket;
+pub mod endpoint;
+pub mod interrupt;
+pub mod summary;
+
+use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use clap::{Args, ValueEnum};
+use clap::{ArgGroup, Args, ValueEnum};
 use touchdown_core::companion::{
-    Companion, CompanionConfig, Profile, TargetLatency, TargetOutcome, TimeSource, MAX_FRAME_LEN,
+    Companion, CompanionConfig, Profile, TargetOutcome, MAX_FRAME_LEN,
 };
 use touchdown_core::family::Family;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 
 use super::{CliError, Outcome};
+use endpoint::{Endpoint, EndpointSpec, Received, Sent};
+use summary::{RunCounts, Stop};
 use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_formats::recording::RecordingReader;
 
+/// `touchdown companion --help`'s examples: each is a command that works as written against
+/// the set-up it names (DIR is a recording, e.g. from `touchdown simulate --out DIR`).
+pub const EXAMPLES: &str = "\
+Examples (DIR: a recording, e.g. from `touchdown simulate --out DIR`):
+
+  ArduPilot SITL (sim_vehicle.py or the arducopter binary): its SERIAL1 is a TCP server on
+  port 5762 (SERIAL0, 5760, is the ground station's):
+    touchdown companion --recording DIR --tcp 127.0.0.1:5762
+
+  ArduPilot SITL started with --serial1 udpclient:127.0.0.1:14560 (it sends, we answer):
+    touchdown companion --recording DIR --udp-listen 127.0.0.1:14560
+
+  PX4 SITL's onboard link (PX4 listens on 14580 and sends to 14540); the fixed local port
+  makes a second run reach PX4 again (it answers only the first address it heard):
+    touchdown companion --recording DIR --udp 127.0.0.1:14580 --udp-local-port 14540
+
+  Through MAVProxy (`--out tcpin:0.0.0.0:5770`) or anything that connects to us:
+    touchdown companion --recording DIR --tcp 127.0.0.1:5770
+    touchdown companion --recording DIR --tcp-listen 127.0.0.1:5770
+
+  A flight controller's TELEM port through a USB-serial adapter (SERIALn_BAUD 921):
+    touchdown companion --recording DIR --serial /dev/ttyUSB0 --baud 921600
+
+The servers (--udp-listen, --tcp-listen) wait for their first peer before the recording
+starts. --tcp ends the run when the autopilot closes the connection (exit status 2);
+--tcp-listen waits for the next client. The summary is printed at the end and on SIGINT
+(Ctrl-C) or SIGTERM, which exit with status 130 or 143.";
+
 /// Arguments of `touchdown companion`.
 #[derive(Debug, Clone, Args)]
+#[command(
+    after_long_help = EXAMPLES,
+    group(
+        ArgGroup::new("endpoint")
+            .required(true)
+            .args(["udp", "udp_listen", "tcp", "tcp_listen", "serial"])
+    )
+)]
 pub struct CompanionArgs {
-    /// MAVLink endpoint to send to (UDP), e.g. 127.0.0.1:14550
-    #[arg(
-        long,
-        value_name = "HOST:PORT",
-        conflicts_with = "serial",
-        required_unless_present = "serial"
-    )]
+    /// UDP client: send to HOST:PORT and read the answers on the same socket (PX4 SITL's
+    /// onboard port 14580, MAVProxy's `--out udpin:...`)
+    #[arg(long, value_name = "HOST:PORT")]
     pub udp: Option<String>,
 
-    /// Serial port to the flight controller instead of UDP, e.g. /dev/ttyUSB0
+    /// Our source port for --udp (default: any free one). PX4 answers only the first address
+    /// that reaches its UDP link: a fixed port lets the next run reach it again
+    #[arg(long, value_name = "N", requires = "udp")]
+    pub udp_local_port: Option<u16>,
+
+    /// UDP server: bind ADDR:PORT, wait for a datagram and answer whoever sent the last one
+    /// (ArduPilot SITL `--serial1 udpclient:127.0.0.1:14560`)
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub udp_listen: Option<String>,
+
+    /// TCP client: connect to HOST:PORT (ArduPilot SITL's 5762, MAVProxy's
+    /// `--out tcpin:...`); the run ends if the peer closes
+    #[arg(long, value_name = "HOST:PORT")]
+    pub tcp: Option<String>,
+
+    /// TCP server: listen on ADDR:PORT for one client at a time (a ground station or bridge)
+    #[arg(long, value_name = "ADDR:PORT")]
+    pub tcp_listen: Option<String>,
+
+    /// Serial port to the flight controller, e.g. /dev/ttyUSB0
     #[arg(long, value_name = "PATH")]
     pub serial: Option<PathBuf>,
 
@@ -96,110 +149,38 @@ pub enum ProfileArg {
     Px4,
 }
 
-/// The exposure-to-send delay of the targets sent, for the summary line (empty when none).
-fn latency_summary(latency: &TargetLatency) -> String {
-    match latency.mean_us() {
-        Some(mean) => format!(
-            " (exposure to send: mean {:.1} ms, max {:.1} ms)",
-            f64::from(mean) / 1000.0,
-            f64::from(latency.max_us) / 1000.0
-        ),
-        None => String::new(),
-    }
-}
-
-/// The autopilot as the summary names it.
-fn autopilot_summary(autopilot: Option<(u8, u8)>) -> String {
-    match autopilot {
-        Some((system, component)) => format!("autopilot {system}/{component}"),
-        None => "no autopilot heard".to_string(),
-    }
-}
-
-/// The clock offset as the summary gives it: autopilot minus our clock, and where it is from.
-fn clock_summary(offset_us: Option<i64>, source: Option<TimeSource>) -> String {
-    match (offset_us, source) {
-        (Some(offset), Some(TimeSource::Timesync)) => {
-            format!("autopilot clock {offset:+} us from ours (TIMESYNC)")
-        }
-        (Some(offset), Some(TimeSource::SystemTime)) => {
-            format!("autopilot clock {offset:+} us from ours (SYSTEM_TIME, coarse)")
-        }
-        _ => "autopilot clock unknown (no TIMESYNC or SYSTEM_TIME answer)".to_string(),
-    }
-}
-
-/// Where MAVLink goes: a UDP socket or a serial port, both non-blocking.
-enum Endpoint {
-    Udp(UdpSocket),
-    Serial(File),
-}
-
-impl Endpoint {
-    /// Opens `--udp` or `--serial`.
-    fn open(args: &CompanionArgs) -> Result<(Endpoint, String), CliError> {
-        if let Some(path) = &args.serial {
-            let name = path.display().to_string();
-            let file = open_serial(path, args.baud)
-                .map_err(|e| CliError(format!("--serial {name}: {e}")))?;
-            return Ok((Endpoint::Serial(file), format!("--serial {name}")));
-        }
-        let addr = args.udp.as_deref().unwrap_or_default();
-        let name = format!("--udp {addr}");
-        let socket = UdpSocket::bind("0.0.0.0:0").map_err(CliError::new)?;
-        socket
-            .connect(addr)
-            .map_err(|e| CliError(format!("{name}: {e}")))?;
-        socket.set_nonblocking(true).map_err(CliError::new)?;
-        Ok((Endpoint::Udp(socket), name))
-    }
-
-    /// Bytes received, 0 when nothing is waiting.
-    fn recv(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let r = match self {
-            Endpoint::Udp(s) => s.recv(buf),
-            Endpoint::Serial(f) => f.read(buf),
-        };
-        match r {
-            Ok(n) => Ok(n),
-            Err(e) if e.kind() == ErrorKind::WouldBlock => Ok(0),
-            // ICMP "port unreachable" until the UDP endpoint is up: keep going.
-            Err(e) if e.kind() == ErrorKind::ConnectionRefused => Ok(0),
-            Err(e) => Err(e),
-        }
-    }
-
-    /// Sends one MAVLink frame.
-    fn send(&mut self, frame: &[u8]) -> std::io::Result<()> {
-        match self {
-            Endpoint::Udp(s) => s.send(frame).map(|_| ()),
-            Endpoint::Serial(f) => f.write_all(frame),
+impl CompanionArgs {
+    /// The link the options name (clap lets exactly one through).
+    fn endpoint(&self) -> EndpointSpec {
+        if let Some(path) = &self.serial {
+            EndpointSpec::Serial {
+                path: path.clone(),
+                baud: self.baud,
+            }
+        } else if let Some(addr) = &self.tcp {
+            EndpointSpec::TcpClient(addr.clone())
+        } else if let Some(addr) = &self.tcp_listen {
+            EndpointSpec::TcpListen(addr.clone())
+        } else if let Some(addr) = &self.udp_listen {
+            EndpointSpec::UdpListen(addr.clone())
+        } else {
+            EndpointSpec::UdpClient {
+                remote: self.udp.clone().unwrap_or_default(),
+                local_port: self.udp_local_port,
+            }
         }
     }
 }
 
-/// Opens a serial port raw (8N1, no echo, no flow control, non-blocking) at `baud`.
-fn open_serial(path: &std::path::Path, baud: u32) -> std::io::Result<File> {
-    use rustix::fs::{Mode, OFlags};
-    use rustix::termios::{self, ControlModes, OptionalActions};
-    // NOCTTY: the port must not become our controlling terminal.
-    let fd = rustix::fs::open(
-        path,
-        OFlags::RDWR | OFlags::NOCTTY | OFlags::NONBLOCK | OFlags::CLOEXEC,
-        Mode::empty(),
-    )?;
-    let mut t = termios::tcgetattr(&fd)?;
-    t.make_raw();
-    // Ignore modem lines (CLOCAL), enable the receiver (CREAD), no hardware flow control.
-    t.control_modes |= ControlModes::CLOCAL | ControlModes::CREAD;
-    t.control_modes -= ControlModes::CRTSCTS;
-    t.set_speed(baud)?;
-    termios::tcsetattr(&fd, OptionalActions::Now, &t)?;
-    termios::tcflush(&fd, termios::QueueSelector::IFlush)?;
-    Ok(File::from(fd))
-}
+/// How often the loop looks at the link, the clock and the signals.
+const TICK: Duration = Duration::from_millis(1);
 
 /// Runs `touchdown companion`.
+///
+/// Ends with the summary on stdout in every case the run got going: the recording's end
+/// (`Success`), a lost link (the summary, then the error: exit status 2), or SIGINT/SIGTERM
+/// (the summary, then the process exits with 130/143 here: the contract's [`Outcome`] has
+/// no status for a signal).
 pub fn run(
     args: &CompanionArgs,
     out: &mut dyn Write,
@@ -220,7 +201,11 @@ pub fn run(
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
 
-    let (mut endpoint, endpoint_name) = Endpoint::open(args)?;
+    let spec = args.endpoint();
+    let endpoint_name = spec.describe();
+    interrupt::install().map_err(|e| CliError(format!("signal handlers: {e}")))?;
+    let mut endpoint =
+        Endpoint::open(&spec).map_err(|e| CliError(format!("{endpoint_name}: {e}")))?;
 
     let config = match args.profile {
         ProfileArg::Auto => CompanionConfig::default(),
@@ -243,26 +228,77 @@ pub fn run(
     )
     .map_err(|e| CliError(format!("pipeline configuration: {e:?}")))?;
     let mut workspace = HostWorkspace::new();
+    let mut counts = RunCounts {
+        recording_frames: reader.entries.len(),
+        ..RunCounts::default()
+    };
+    let mut rx = [0u8; 2048];
+    let mut tx = [0u8; MAX_FRAME_LEN];
+
+    // A server has nobody to talk to until its first peer comes: the recording's clock
+    // starts then, so that the lead time is spent with the autopilot.
+    let mut first = 0usize;
+    if endpoint.waits_for_peer() {
+        let _ = writeln!(
+            err,
+            "{endpoint_name}: waiting for the autopilot or a bridge"
+        );
+        let waited = Instant::now();
+        while endpoint.peer().is_none() {
+            if let Some(signal) = interrupt::received() {
+                let stop = Stop::Signal(signal, waited.elapsed());
+                return finish(out, &counts, &companion, stop);
+            }
+            match endpoint.recv(&mut rx) {
+                Ok(Received::Bytes(n)) => first = n,
+                Ok(Received::Closed) => {}
+                Err(e) => {
+                    let stop = Stop::LinkLost(format!("{endpoint_name}: {e}"), waited.elapsed());
+                    return finish(out, &counts, &companion, stop);
+                }
+            }
+            std::thread::sleep(TICK);
+        }
+    }
 
     let start = Instant::now();
     let now_us = || start.elapsed().as_micros() as u64;
+    companion.receive(rx.get(..first).unwrap_or(&[]), now_us());
+    let mut peer = endpoint.peer();
+    if let Some(addr) = peer {
+        let _ = writeln!(err, "{endpoint_name}: peer {addr}");
+    }
     let lead_us = (args.lead * 1e6) as u64;
     let t0 = reader.entries.first().map_or(0, |e| e.t_us);
     let last = reader.entries.last().map_or(0, |e| e.t_us - t0);
     let end_us = lead_us + last + (args.linger * 1e6) as u64;
-    let mut next = 0usize;
-    let mut rx = [0u8; 2048];
-    let mut tx = [0u8; MAX_FRAME_LEN];
-    let mut targets = 0usize;
-    let mut send_errors = 0usize;
 
-    while now_us() < end_us {
+    let stop = 'run: loop {
+        if now_us() >= end_us {
+            break Stop::Finished;
+        }
+        if let Some(signal) = interrupt::received() {
+            break Stop::Signal(signal, start.elapsed());
+        }
         loop {
             match endpoint.recv(&mut rx) {
-                Ok(0) => break,
-                Ok(n) => companion.receive(rx.get(..n).unwrap_or(&[]), now_us()),
-                Err(e) => return Err(CliError(format!("{endpoint_name}: {e}"))),
+                Ok(Received::Bytes(0)) => break,
+                Ok(Received::Bytes(n)) => companion.receive(rx.get(..n).unwrap_or(&[]), now_us()),
+                Ok(Received::Closed) => {
+                    let reason = format!("{endpoint_name}: the peer closed the connection");
+                    break 'run Stop::LinkLost(reason, start.elapsed());
+                }
+                Err(e) => {
+                    break 'run Stop::LinkLost(format!("{endpoint_name}: {e}"), start.elapsed())
+                }
             }
+        }
+        if endpoint.peer() != peer {
+            peer = endpoint.peer();
+            let _ = match peer {
+                Some(addr) => writeln!(err, "{endpoint_name}: peer {addr}"),
+                None => writeln!(err, "{endpoint_name}: the peer left; waiting for the next"),
+            };
         }
         let settings = PipelineSettings::from_params(companion.params());
         if settings != pipeline_settings {
@@ -274,11 +310,11 @@ pub fn run(
             }
             pipeline_settings = settings;
         }
-        if let Some(entry) = reader.entries.get(next) {
+        if let Some(entry) = reader.entries.get(counts.frames) {
             let exposure_us = lead_us + (entry.t_us - t0);
             if now_us() >= exposure_us {
-                next += 1;
-                let frame = reader.frame(next - 1).map_err(CliError::new)?;
+                let frame = reader.frame(counts.frames).map_err(CliError::new)?;
+                counts.frames += 1;
                 let view = frame.image.view();
                 let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
                 let report =
@@ -288,33 +324,37 @@ pub fn run(
                 }
                 let outcome = companion.on_estimate(&report.estimate, now_us());
                 if outcome == TargetOutcome::TargetQueued {
-                    targets += 1;
+                    counts.targets_queued += 1;
                 }
             }
         }
         while let Some(n) = companion.poll_transmit(now_us(), &mut tx) {
-            if endpoint.send(tx.get(..n).unwrap_or(&[])).is_err() {
-                send_errors += 1;
+            match endpoint.send(tx.get(..n).unwrap_or(&[])) {
+                Ok(Sent::Sent) => {}
+                Ok(Sent::NoPeer) => counts.not_sent_no_peer += 1,
+                Err(_) => counts.send_errors += 1,
             }
         }
-        std::thread::sleep(Duration::from_millis(1));
+        std::thread::sleep(TICK);
+    };
+    finish(out, &counts, &companion, stop)
+}
+
+/// Prints the summary and ends the run as `stop` says (see [`run`]).
+fn finish(
+    out: &mut dyn Write,
+    counts: &RunCounts,
+    companion: &Companion,
+    stop: Stop,
+) -> Result<Outcome, CliError> {
+    summary::write(out, counts, &companion.stats(), &stop).map_err(CliError::new)?;
+    match stop {
+        Stop::Finished => Ok(Outcome::Success),
+        Stop::LinkLost(reason, _) => Err(CliError(reason)),
+        Stop::Signal(signal, _) => {
+            // Nothing more to say if stdout is gone: the status still tells the signal.
+            let _ = out.flush();
+            std::process::exit(signal.exit_status())
+        }
     }
-    let s = companion.stats();
-    writeln!(
-        out,
-        "{next} frames, {targets} LANDING_TARGET queued, {} sent{}; tx {} frames ({send_errors} \
-         send errors); rx {} frames ({} with a bad CRC, {} of messages outside the \
-         common dialect, skipped; {} garbage bytes); {}; {}",
-        s.landing_targets,
-        latency_summary(&s.target_latency),
-        s.tx_frames,
-        s.link.frames,
-        s.link.bad_crc,
-        s.link.unknown,
-        s.link.garbage_bytes,
-        autopilot_summary(s.autopilot),
-        clock_summary(s.clock_offset_us, s.time_source)
-    )
-    .map_err(CliError::new)?;
-    Ok(Outcome::Success)
 }

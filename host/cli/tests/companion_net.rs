@@ -1,0 +1,421 @@
+//! `touchdown companion` over the network links and its summary: each test runs the binary
+//! on a few simulated frames and plays the other end itself (a minimal autopilot that sends
+//! a HEARTBEAT every 100 ms, as ArduPilot's and PX4's are heard by the companion), then
+//! decodes what arrived with the core's own frame parser and the common dialect.
+//!
+//! - `--tcp`: the test is the TCP server (ArduPilot SITL's SERIAL1 port).
+//! - `--tcp-listen`: the test is the client (a ground station or bridge).
+//! - `--udp-listen`: the test sends from its socket and must be answered there.
+//! - `--udp --udp-local-port`: the datagrams come from the port asked for (PX4's link).
+//! - SIGINT and SIGTERM mid-run: the summary, then exit status 130 / 143.
+//! - The summary counts a frame of a message id outside the dialect as such, apart from a
+//!   frame with a bad CRC.
+
+#![cfg(unix)]
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use touchdown_core::companion::mavlink::dialects::common::{
+    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
+};
+use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::FrameParser;
+
+fn touchdown() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_touchdown"))
+}
+
+/// An ArduPilot copter's HEARTBEAT (system 1, component 1) as MAVLink 2 bytes.
+fn heartbeat(seq: u8) -> Vec<u8> {
+    let header = MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence: seq,
+    };
+    let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    });
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(header, &msg);
+    raw.raw_bytes().to_vec()
+}
+
+/// 20 frames of the simulated descent (pad in view, --ideal), rendered once for all tests.
+fn recording() -> &'static PathBuf {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir =
+            std::env::temp_dir().join(format!("touchdown-net-descent-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let status = touchdown()
+            .args([
+                "simulate",
+                "--ideal",
+                "--scenario",
+                "descent",
+                "--frames",
+                "20",
+            ])
+            .arg("--out")
+            .arg(&dir)
+            .status()
+            .expect("run touchdown simulate");
+        assert!(status.success(), "simulate failed");
+        dir
+    })
+}
+
+/// `touchdown companion` on the recording with `link` options, stdout and stderr piped.
+fn companion(link: &[&str], lead: &str, linger: &str) -> Child {
+    touchdown()
+        .args(["companion", "--recording"])
+        .arg(recording())
+        .args(link)
+        .args(["--lead", lead, "--linger", linger])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn touchdown companion")
+}
+
+/// A port that was free a moment ago on 127.0.0.1 (for the command's servers).
+fn free_tcp_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free TCP port")
+        .port()
+}
+
+fn free_udp_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .expect("a free UDP port")
+        .port()
+}
+
+/// The message ids of every valid frame in `bytes`, in order.
+fn message_ids(bytes: &[u8]) -> Vec<u32> {
+    let mut parser = FrameParser::new();
+    let mut ids = Vec::new();
+    parser.push(bytes, |frame| ids.push(frame.message_id));
+    assert_eq!(parser.stats().bad_crc, 0, "corrupt frames from touchdown");
+    ids
+}
+
+/// LANDING_TARGET's id.
+const LANDING_TARGET: u32 = 149;
+const HEARTBEAT: u32 = 0;
+
+fn count(ids: &[u32], id: u32) -> usize {
+    ids.iter().filter(|&&i| i == id).count()
+}
+
+/// Waits for the command and returns its output, with its stderr in the message on failure.
+fn finish(child: Child) -> Output {
+    let output = child
+        .wait_with_output()
+        .expect("wait for touchdown companion");
+    println!("{}", String::from_utf8_lossy(&output.stdout));
+    output
+}
+
+fn assert_success(output: &Output) {
+    assert!(
+        output.status.success(),
+        "touchdown companion failed ({:?}): {}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Plays the autopilot on a stream: a heartbeat every 100 ms (and `extra` once, after the
+/// second), collecting what the command writes until it closes the connection.
+fn play_autopilot_on_stream(mut stream: TcpStream, extra: &[u8]) -> Vec<u8> {
+    stream.set_nonblocking(true).expect("nonblocking");
+    let mut bytes = Vec::new();
+    let mut buf = [0u8; 4096];
+    let mut seq = 0u8;
+    let mut next_heartbeat = Instant::now();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while Instant::now() < deadline {
+        if Instant::now() >= next_heartbeat {
+            let _ = stream.write_all(&heartbeat(seq));
+            seq = seq.wrapping_add(1);
+            if seq == 2 {
+                let _ = stream.write_all(extra);
+            }
+            next_heartbeat += Duration::from_millis(100);
+        }
+        match stream.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => bytes.extend_from_slice(&buf[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(2))
+            }
+            Err(_) => break,
+        }
+    }
+    bytes
+}
+
+/// The same over UDP: heartbeats to `to` (or, with `None`, to whoever sent the first
+/// datagram), until `child` exits; returns the bytes and the senders' addresses.
+fn play_autopilot_on_udp(
+    socket: &UdpSocket,
+    mut to: Option<SocketAddr>,
+    child: &mut Child,
+) -> (Vec<u8>, Vec<SocketAddr>) {
+    socket.set_nonblocking(true).expect("nonblocking");
+    let mut bytes = Vec::new();
+    let mut senders = Vec::new();
+    let mut buf = [0u8; 4096];
+    let mut seq = 0u8;
+    let mut next_heartbeat = Instant::now();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while Instant::now() < deadline && child.try_wait().expect("wait").is_none() {
+        if let (Some(addr), true) = (to, Instant::now() >= next_heartbeat) {
+            let _ = socket.send_to(&heartbeat(seq), addr);
+            seq = seq.wrapping_add(1);
+            next_heartbeat += Duration::from_millis(100);
+        }
+        match socket.recv_from(&mut buf) {
+            Ok((n, from)) => {
+                bytes.extend_from_slice(&buf[..n]);
+                if !senders.contains(&from) {
+                    senders.push(from);
+                }
+                to.get_or_insert(from);
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(2)),
+        }
+    }
+    (bytes, senders)
+}
+
+/// The summary line starting with `label: `.
+fn summary_line<'a>(output: &'a Output, label: &str) -> &'a str {
+    let stdout = std::str::from_utf8(&output.stdout).expect("utf-8");
+    stdout
+        .lines()
+        .find(|l| l.starts_with(&format!("{label}: ")))
+        .unwrap_or_else(|| panic!("no `{label}:` line in the summary:\n{stdout}"))
+}
+
+fn assert_targets_arrived(bytes: &[u8]) {
+    let ids = message_ids(bytes);
+    println!(
+        "{} bytes: {} HEARTBEAT, {} LANDING_TARGET",
+        bytes.len(),
+        count(&ids, HEARTBEAT),
+        count(&ids, LANDING_TARGET)
+    );
+    assert!(count(&ids, HEARTBEAT) >= 1);
+    // 20 frames (0.67 s) of a descent with the pad in view: 8 targets when measured (the
+    // tracker's confirmation and TD_RATE_HZ take the rest); some margin for a busy machine.
+    assert!(count(&ids, LANDING_TARGET) >= 5, "{ids:?}");
+}
+
+#[test]
+fn tcp_client_talks_to_an_autopilot_server() {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().unwrap().to_string();
+    let child = companion(&["--tcp", &addr], "0.5", "0.3");
+    let (stream, _) = listener.accept().expect("touchdown connects");
+    let bytes = play_autopilot_on_stream(stream, &[]);
+    let output = finish(child);
+    assert_success(&output);
+    assert_targets_arrived(&bytes);
+    assert!(summary_line(&output, "autopilot").contains("system 1, component 1"));
+}
+
+/// The autopilot going away ends a --tcp run: the summary, then one error line, status 2.
+#[test]
+fn tcp_client_reports_a_closed_connection() {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().unwrap().to_string();
+    let child = companion(&["--tcp", &addr], "30", "0");
+    let (stream, _) = listener.accept().expect("touchdown connects");
+    std::thread::sleep(Duration::from_millis(300));
+    drop(stream);
+    let output = finish(child);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(summary_line(&output, "stopped").contains("the peer closed the connection"));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(errors[0].contains(&format!("--tcp {addr}")), "{stderr}");
+}
+
+#[test]
+fn tcp_server_takes_a_client() {
+    let addr = format!("127.0.0.1:{}", free_tcp_port());
+    let child = companion(&["--tcp-listen", &addr], "0.5", "0.3");
+    // The command binds in a moment: retry until it listens.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let stream = loop {
+        match TcpStream::connect(&addr) {
+            Ok(s) => break s,
+            Err(e) if Instant::now() < deadline => {
+                let _ = e;
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(e) => panic!("cannot connect to --tcp-listen {addr}: {e}"),
+        }
+    };
+    let bytes = play_autopilot_on_stream(stream, &[]);
+    let output = finish(child);
+    assert_success(&output);
+    assert_targets_arrived(&bytes);
+}
+
+#[test]
+fn udp_server_answers_the_sender() {
+    let port = free_udp_port();
+    let mut child = companion(
+        &["--udp-listen", &format!("127.0.0.1:{port}")],
+        "0.5",
+        "0.3",
+    );
+    let socket = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let server: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    // Heartbeats are sent until the command exits; the first ones may arrive before it has
+    // bound its socket and are lost, as they would be with a real autopilot.
+    let (bytes, senders) = play_autopilot_on_udp(&socket, Some(server), &mut child);
+    let output = finish(child);
+    assert_success(&output);
+    assert_eq!(senders, vec![server], "answered from its listening address");
+    assert_targets_arrived(&bytes);
+}
+
+#[test]
+fn udp_client_sends_from_the_fixed_local_port() {
+    let autopilot = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let remote = autopilot.local_addr().unwrap().to_string();
+    let local = free_udp_port();
+    let mut child = companion(
+        &["--udp", &remote, "--udp-local-port", &local.to_string()],
+        "0.5",
+        "0.3",
+    );
+    // PX4's way: answer the address that first reached us.
+    let (bytes, senders) = play_autopilot_on_udp(&autopilot, None, &mut child);
+    let output = finish(child);
+    assert_success(&output);
+    assert_eq!(senders.len(), 1, "{senders:?}");
+    assert_eq!(senders[0].port(), local);
+    assert_targets_arrived(&bytes);
+}
+
+/// Runs a long --udp run, sends `signal` once the command has started talking, and returns
+/// its output.
+fn signalled_run(signal: &str) -> Output {
+    let autopilot = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    autopilot
+        .set_read_timeout(Some(Duration::from_secs(20)))
+        .unwrap();
+    let remote = autopilot.local_addr().unwrap().to_string();
+    let child = companion(&["--udp", &remote], "0.2", "60");
+    // Its first datagram (a HEARTBEAT) comes after the handlers are installed.
+    let mut buf = [0u8; 512];
+    let (_, from) = autopilot.recv_from(&mut buf).expect("touchdown talks");
+    autopilot.send_to(&heartbeat(0), from).expect("send");
+    std::thread::sleep(Duration::from_millis(500));
+    let status = Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(status.success());
+    finish(child)
+}
+
+#[test]
+fn sigint_and_sigterm_print_the_summary() {
+    for (signal, name, code) in [("-INT", "SIGINT", 130), ("-TERM", "SIGTERM", 143)] {
+        let output = signalled_run(signal);
+        assert_eq!(output.status.code(), Some(code), "{name}");
+        assert!(summary_line(&output, "stopped").starts_with(&format!("stopped: by {name} after")));
+        summary_line(&output, "frames");
+        summary_line(&output, "sent");
+        assert!(summary_line(&output, "autopilot").contains("system 1, component 1"));
+    }
+}
+
+/// X.25, MAVLink's checksum, to build a frame of a dialect the core does not compile.
+fn x25(mut crc: u16, bytes: &[u8]) -> u16 {
+    for &b in bytes {
+        let mut t = b ^ (crc & 0xFF) as u8;
+        t ^= t << 4;
+        let t = u16::from(t);
+        crc = (crc >> 8) ^ (t << 8) ^ (t << 3) ^ (t >> 4);
+    }
+    crc
+}
+
+/// A valid MAVLink 2 frame of ArduPilot's AHRS (id 163, CRC_EXTRA 127: ardupilotmega, not
+/// common), with no start marker after its first byte (so that the parser, which skips only
+/// the start byte of a frame it cannot check, finds nothing more in it).
+fn ardupilot_ahrs_frame() -> Vec<u8> {
+    let payload: Vec<u8> = (1..=28).collect();
+    for seq in 0..=255u8 {
+        let mut frame = vec![0xFD, 28, 0, 0, seq, 1, 1, 163, 0, 0];
+        frame.extend_from_slice(&payload);
+        let crc = x25(x25(0xFFFF, &frame[1..]), &[127]);
+        frame.extend_from_slice(&crc.to_le_bytes());
+        if !frame[1..].iter().any(|&b| b == 0xFD || b == 0xFE) {
+            return frame;
+        }
+    }
+    unreachable!("some sequence number gives a checksum without a start marker")
+}
+
+/// A HEARTBEAT with a flipped checksum bit, with no start marker after its first byte.
+fn corrupted_heartbeat() -> Vec<u8> {
+    for seq in 100..=255u8 {
+        let mut frame = heartbeat(seq);
+        let last = frame.len() - 1;
+        frame[last] ^= 0x01;
+        if !frame[1..].iter().any(|&b| b == 0xFD || b == 0xFE) {
+            return frame;
+        }
+    }
+    unreachable!("some sequence number gives a checksum without a start marker")
+}
+
+#[test]
+fn summary_counts_unknown_messages_apart_from_bad_crcs() {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().unwrap().to_string();
+    let child = companion(&["--tcp", &addr], "0.5", "0.3");
+    let (stream, _) = listener.accept().expect("touchdown connects");
+    let mut extra = ardupilot_ahrs_frame();
+    extra.extend_from_slice(&corrupted_heartbeat());
+    let bytes = play_autopilot_on_stream(stream, &extra);
+    let output = finish(child);
+    assert_success(&output);
+    assert_targets_arrived(&bytes);
+    assert!(
+        summary_line(&output, "not in the dialect").starts_with("not in the dialect: 1 "),
+        "{}",
+        summary_line(&output, "not in the dialect")
+    );
+    assert!(
+        summary_line(&output, "bad CRC").starts_with("bad CRC: 1 "),
+        "{}",
+        summary_line(&output, "bad CRC")
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        !stdout.contains("Some(") && !stdout.contains("None"),
+        "{stdout}"
+    );
+}
