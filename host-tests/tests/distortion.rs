@@ -89,6 +89,8 @@ struct Case {
 struct Outcome {
     found: bool,
     wrong: usize,
+    /// Largest distance of a found marker's corner from the truth, pixels.
+    corner_error: Option<f64>,
 }
 
 fn lens(k1: f32) -> [f32; 5] {
@@ -267,6 +269,13 @@ fn score(detections: &[Detection], searched: &[&Family<'_>], case: &Case) -> Out
         let near = d.center.distance(centre) <= (0.3 * case.edge_px).max(3.0) as f32;
         if name == case.family && d.id == case.id && near && !outcome.found {
             outcome.found = true;
+            let error = d
+                .corners
+                .iter()
+                .zip(&case.corners)
+                .map(|(c, t)| (f64::from(c.x) - t[0]).hypot(f64::from(c.y) - t[1]))
+                .fold(0.0, f64::max);
+            outcome.corner_error = Some(error);
         } else {
             outcome.wrong += 1;
         }
@@ -390,6 +399,17 @@ fn print_table(
                 .join(" | ")
         );
     }
+    let large: Vec<f64> = results
+        .iter()
+        .filter(|r| r.0.edge_px >= 60.0 && r.0.place != "centre")
+        .filter_map(|r| pick(r).corner_error)
+        .collect();
+    let mean = large.iter().sum::<f64>() / large.len().max(1) as f64;
+    let worst = large.iter().copied().fold(0.0, f64::max);
+    println!(
+        "  corner error of markers >= 60 px at the border: mean {mean:.2} px, max {worst:.2} px ({} markers)",
+        large.len()
+    );
     for place in PLACES.iter().map(|p| p.0) {
         let of: Vec<_> = results.iter().filter(|r| r.0.place == place).collect();
         let found = of.iter().filter(|r| pick(r).found).count();
