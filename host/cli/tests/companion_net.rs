@@ -419,3 +419,19 @@ fn summary_counts_unknown_messages_apart_from_bad_crcs() {
         "{stdout}"
     );
 }
+
+/// Without a link the command says which options give one, in one line, with status 2.
+#[test]
+fn a_missing_link_is_one_clear_line() {
+    let output = touchdown()
+        .args(["companion", "--recording", "no-such-dir"])
+        .output()
+        .expect("run touchdown companion");
+    assert_eq!(output.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("error: no link to the autopilot: give one of --udp, --udp-listen"),
+        "{stderr}"
+    );
+}
