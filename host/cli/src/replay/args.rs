@@ -43,7 +43,10 @@ HEARTBEAT, the ATTITUDE_QUATERNION and LOCAL_POSITION_NED streams the companion 
 TIMESYNC, each sample its estimate (the truth plus the error model) stamped in its own
 drifting clock; it decodes the LANDING_TARGETs and reconstructs the pad as the autopilot does:
   --autopilot ardupilot  (default) the body vector turned with its own attitude at receipt
-                         minus PLND_LAG (its inertial history), PLND_CAM_POS = 0
+                         minus PLND_LAG (its inertial history), PLND_CAM_POS = 0; with
+                         --board-params TD_PROFILE=3 the board sends LOCAL_FRD (levelled
+                         with the attitude at the exposure), which it turns with the yaw
+                         alone of that attitude (ArduPilot 4.7+)
   --autopilot px4        the LOCAL_NED point minus its own position at the time stamp it
                          converts with its TIMESYNC estimate
 The paper's method gets the attitude the board received and goes through the same

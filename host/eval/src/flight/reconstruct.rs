@@ -45,6 +45,38 @@ pub fn ardupilot_relative_ned(
     Some(body_to_ned * unit * distance + body_to_ned * cam_pos_body)
 }
 
+/// ArduPilot 4.7+'s measurement from a MAV_FRAME_LOCAL_FRD target (`AC_PrecLand`, PR #30446
+/// with the yaw sign of PR #31659): `x, y, z` (`level`, the level frame turned with the
+/// heading) divided by `distance`, turned into NED about down by the **yaw alone** of the
+/// delayed attitude `body_to_ned` (its roll and pitch are not used), scaled back, plus
+/// PLND_CAM_POS turned with the whole delayed attitude, as in BODY_FRD. The pad relative to
+/// the vehicle, NED, metres.
+pub fn ardupilot_local_frd_relative_ned(
+    level: &Vector3<f64>,
+    distance: f64,
+    body_to_ned: &Matrix3<f64>,
+    cam_pos_body: &Vector3<f64>,
+) -> Option<Vector3<f64>> {
+    if !distance.is_finite() || distance <= 0.0 || !level.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    // The yaw of the attitude's Euler angles: the nose's heading.
+    let yaw = body_to_ned[(1, 0)].atan2(body_to_ned[(0, 0)]);
+    let heading = Matrix3::new(
+        yaw.cos(),
+        -yaw.sin(),
+        0.0,
+        yaw.sin(),
+        yaw.cos(),
+        0.0,
+        0.0,
+        0.0,
+        1.0,
+    );
+    let unit = level / distance;
+    Some(heading * unit * distance + body_to_ned * cam_pos_body)
+}
+
 /// PX4's measurement: LANDING_TARGET in MAV_FRAME_LOCAL_NED is the pad's absolute position
 /// in the local frame (`landing_target_pose.x_abs..z_abs`); relative to the vehicle it is that
 /// minus the vehicle's own local position estimate at the message's (converted) time.
@@ -79,6 +111,23 @@ mod tests {
         let cam = ardupilot_relative_ned(&body, d, &att, &Vector3::new(0.1, 0.0, 0.0)).unwrap();
         assert!((cam - ned - Vector3::new(0.0, 0.1, 0.0)).norm() < 1e-12);
         assert!(ardupilot_relative_ned(&body, 0.0, &att, &Vector3::zeros()).is_none());
+    }
+
+    #[test]
+    fn a_local_frd_vector_is_turned_by_the_yaw_alone() {
+        // Rolled 20 deg, nose east: the level vector 2 m forward (east), 1 m right (south).
+        let att = Rotation3::from_euler_angles(0.35, 0.0, std::f64::consts::FRAC_PI_2).into_inner();
+        let level = Vector3::new(2.0, 1.0, 10.0);
+        let d = level.norm();
+        let ned = ardupilot_local_frd_relative_ned(&level, d, &att, &Vector3::zeros()).unwrap();
+        assert!(
+            (ned - Vector3::new(-1.0, 2.0, 10.0)).norm() < 1e-12,
+            "{ned}"
+        );
+        // The roll does not enter; the BODY_FRD reconstruction of the same numbers tilts.
+        let body = ardupilot_relative_ned(&level, d, &att, &Vector3::zeros()).unwrap();
+        assert!((body - ned).norm() > 1.0);
+        assert!(ardupilot_local_frd_relative_ned(&level, 0.0, &att, &Vector3::zeros()).is_none());
     }
 
     #[test]

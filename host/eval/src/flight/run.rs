@@ -14,8 +14,13 @@ use touchdown_core::params::ParamId;
 
 use super::autopilot::{belief, AutopilotKind, BoardClock, Link, ReceivedTarget, SimAutopilot};
 use super::error_model::{ErrorModel, Realisation};
-use super::reconstruct::{ardupilot_attitude_time_us, ardupilot_relative_ned, px4_relative_ned};
+use super::reconstruct::{
+    ardupilot_attitude_time_us, ardupilot_local_frd_relative_ned, ardupilot_relative_ned,
+    px4_relative_ned,
+};
 use super::{camera_in_pad, relative_ned, Scored, TruthSource, WARMUP_US};
+use touchdown_core::companion::mavlink::dialects::common::MavFrame;
+use touchdown_core::companion::Profile;
 
 /// The simulation's time step, µs.
 pub const STEP_US: u64 = 250;
@@ -223,6 +228,34 @@ impl FlightRun {
         receipt_us: u64,
         truth: &dyn TruthSource,
     ) -> Option<Scored> {
+        self.reconstruct_ardupilot(body, distance, exposure_us, receipt_us, truth, false)
+    }
+
+    /// ArduPilot 4.7+'s reconstruction of a LOCAL_FRD target (`level`: the level,
+    /// heading-turned vector) received at `receipt_us`: as [`FlightRun::reconstruct_body`],
+    /// with the yaw alone of the delayed attitude.
+    pub fn reconstruct_local_frd(
+        &self,
+        level: &Vector3<f64>,
+        distance: f64,
+        exposure_us: u64,
+        receipt_us: u64,
+        truth: &dyn TruthSource,
+    ) -> Option<Scored> {
+        self.reconstruct_ardupilot(level, distance, exposure_us, receipt_us, truth, true)
+    }
+
+    /// ArduPilot's reconstruction, BODY_FRD or (`local_frd`) LOCAL_FRD: the attitude at
+    /// receipt minus PLND_LAG (the exposure with PLND_LAG 0), scored against the truth then.
+    fn reconstruct_ardupilot(
+        &self,
+        xyz: &Vector3<f64>,
+        distance: f64,
+        exposure_us: u64,
+        receipt_us: u64,
+        truth: &dyn TruthSource,
+        local_frd: bool,
+    ) -> Option<Scored> {
         let lag = self.errors.model.plnd_lag_s;
         let at = if lag > 0.0 {
             ardupilot_attitude_time_us(receipt_us, lag)
@@ -231,7 +264,12 @@ impl FlightRun {
         };
         let state = self.truth_at(truth, at)?;
         let b = belief(truth, &self.clock, &self.errors, &PAD_NED, at)?;
-        let rel = ardupilot_relative_ned(body, distance, &b.body_to_ned, &Vector3::zeros())?;
+        let reconstruct = if local_frd {
+            ardupilot_local_frd_relative_ned
+        } else {
+            ardupilot_relative_ned
+        };
+        let rel = reconstruct(xyz, distance, &b.body_to_ned, &Vector3::zeros())?;
         Some(Scored {
             t_us: self.clock.frame_us(at),
             truth: state.position,
@@ -282,9 +320,18 @@ impl FlightRun {
         Some(pos.position.cast::<f64>() + r * body)
     }
 
+    /// A body FRD vector in LOCAL_FRD (the tilt of `body_to_ned` removed, its heading kept).
+    fn level_of(body_to_ned: &nalgebra::Matrix3<f64>, body: &Vector3<f64>) -> Vector3<f64> {
+        let ned = body_to_ned * body;
+        let yaw = body_to_ned[(1, 0)].atan2(body_to_ned[(0, 0)]);
+        let (s, c) = yaw.sin_cos();
+        Vector3::new(c * ned.x + s * ned.y, -s * ned.x + c * ned.y, ned.z)
+    }
+
     /// (b): what this flight's autopilot reconstructs from the LANDING_TARGET it received,
-    /// for the exposure at `exposure_us`: ArduPilot from its BODY_FRD vector and distance,
-    /// PX4 from its LOCAL_NED point and time stamp.
+    /// for the exposure at `exposure_us`: ArduPilot from its BODY_FRD or LOCAL_FRD vector
+    /// and distance (the simulated ArduPilot is 4.7+, which takes both; any other frame it
+    /// refuses), PX4 from its LOCAL_NED point and time stamp.
     pub fn reconstruct_received(
         &self,
         target: &ReceivedTarget,
@@ -294,13 +341,16 @@ impl FlightRun {
         let d = &target.data;
         let xyz = Vector3::new(d.x, d.y, d.z).cast::<f64>();
         match self.autopilot.kind {
-            AutopilotKind::ArduPilot => self.reconstruct_body(
-                &xyz,
-                f64::from(d.distance),
-                exposure_us,
-                target.receipt_us,
-                truth,
-            ),
+            AutopilotKind::ArduPilot => {
+                let local_frd = match d.frame {
+                    MavFrame::MAV_FRAME_BODY_FRD => false,
+                    MavFrame::MAV_FRAME_LOCAL_FRD => true,
+                    _ => return None,
+                };
+                let distance = f64::from(d.distance);
+                let receipt = target.receipt_us;
+                self.reconstruct_ardupilot(&xyz, distance, exposure_us, receipt, truth, local_frd)
+            }
             AutopilotKind::Px4 => {
                 self.reconstruct_local_ned(&xyz, d.time_usec, target.receipt_us, truth)
             }
@@ -323,7 +373,9 @@ impl FlightRun {
     }
 
     /// The reconstruction of `body` for this flight's autopilot, received at `receipt_us`,
-    /// exposed at `exposure_us`, with the companion's vehicle state at the exposure for PX4.
+    /// exposed at `exposure_us`, with the companion's vehicle state at the exposure for PX4
+    /// and for ArduPilot in LOCAL_FRD (TD_PROFILE 3: the body vector levelled with that
+    /// attitude, as the companion sends it; BODY_FRD without one, as the companion does).
     pub fn reconstruct(
         &self,
         body: &Vector3<f64>,
@@ -334,7 +386,23 @@ impl FlightRun {
     ) -> Option<Scored> {
         match self.autopilot.kind {
             AutopilotKind::ArduPilot => {
-                self.reconstruct_body(body, body.norm(), exposure_us, receipt_us, truth)
+                let local_frd = self.companion.profile() == Some(Profile::ArduPilotLocalFrd);
+                match vehicle.attitude.filter(|_| local_frd) {
+                    Some(att) => {
+                        let r = att.matrix().cast::<f64>();
+                        let level = Self::level_of(&r, body);
+                        self.reconstruct_local_frd(
+                            &level,
+                            body.norm(),
+                            exposure_us,
+                            receipt_us,
+                            truth,
+                        )
+                    }
+                    None => {
+                        self.reconstruct_body(body, body.norm(), exposure_us, receipt_us, truth)
+                    }
+                }
             }
             AutopilotKind::Px4 => {
                 let abs = Self::local_ned_of(vehicle, body)?;
@@ -418,6 +486,26 @@ mod tests {
             let a = run.sent(&body, exposure, &c, &truth).unwrap();
             assert!((a.value - c).norm() < 1e-9);
         }
+    }
+
+    #[test]
+    fn an_ideal_autopilot_reconstructs_local_frd_too() {
+        // TD_PROFILE 3: the companion sends LOCAL_FRD; ArduPilot 4.7 turns it by its yaw.
+        let truth = Hover { yaw_rate: 0.3 };
+        let mut setup = FlightSetup::new(AutopilotKind::ArduPilot, ErrorModel::none());
+        setup.params.push(("TD_PROFILE".into(), 3.0));
+        let mut run = FlightRun::new(&setup).unwrap();
+        let exposure = run.clock().board_us(2_000_000);
+        run.advance_to(exposure + 20_000, &truth);
+        assert_eq!(run.companion.profile(), Some(Profile::ArduPilotLocalFrd));
+        let c = Vector3::new(1.0, 0.0, 10.0);
+        let body = run.ideal_body(exposure, &c, &truth).unwrap();
+        let vehicle = run.companion.vehicle().at(exposure);
+        assert!(vehicle.attitude.is_some());
+        let b = run
+            .reconstruct(&body, exposure, exposure, &vehicle, &truth)
+            .expect("reconstructed");
+        assert!((b.value - c).norm() < 2e-3, "{b:?}");
     }
 
     #[test]
