@@ -77,6 +77,27 @@ pub enum Command {
     Sitl(sitl::SitlArgs),
 }
 
+/// `--board-params` of `replay` and `sitl`: `NAME=VALUE` pairs, comma-separated, in order
+/// (names exactly as the parameter table has them; the caller checks them against it).
+pub fn parse_board_params(list: Option<&str>) -> Result<Vec<(String, f32)>, CliError> {
+    let Some(list) = list else {
+        return Ok(Vec::new());
+    };
+    list.split(',')
+        .map(|pair| {
+            let (name, value) = pair
+                .split_once('=')
+                .ok_or_else(|| CliError(format!("--board-params: `{pair}` is not NAME=VALUE")))?;
+            let value: f32 = value.trim().parse().map_err(|_| {
+                CliError(format!(
+                    "--board-params: `{pair}`: the value is not a number"
+                ))
+            })?;
+            Ok((name.trim().to_string(), value))
+        })
+        .collect()
+}
+
 /// A failure reported as one line on stderr with exit status 2.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CliError(pub String);

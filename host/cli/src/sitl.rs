@@ -121,27 +121,6 @@ pub struct SitlArgs {
     pub threads: Option<usize>,
 }
 
-/// `--board-params`: `NAME=VALUE` pairs, comma-separated, in order.
-fn board_params(list: Option<&str>) -> Result<Vec<(String, f32)>, CliError> {
-    let Some(list) = list else {
-        return Ok(Vec::new());
-    };
-    list.split(',')
-        .filter(|p| !p.trim().is_empty())
-        .map(|pair| {
-            let (name, value) = pair
-                .split_once('=')
-                .ok_or_else(|| CliError(format!("--board-params: `{pair}` is not NAME=VALUE")))?;
-            let value: f32 = value.trim().parse().map_err(|_| {
-                CliError(format!(
-                    "--board-params: `{pair}`: the value is not a number"
-                ))
-            })?;
-            Ok((name.trim().to_ascii_uppercase(), value))
-        })
-        .collect()
-}
-
 fn check(args: &SitlArgs) -> Result<(), CliError> {
     let positive = |v: f64| v.is_finite() && v > 0.0;
     let non_negative = |v: f64| v.is_finite() && v >= 0.0;
@@ -394,7 +373,7 @@ pub fn run(
 ) -> Result<Outcome, CliError> {
     check(args)?;
     let started = Instant::now();
-    let params = board_params(args.board_params.as_deref())?;
+    let params = crate::parse_board_params(args.board_params.as_deref())?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = args.threads.unwrap_or(cores);
     let (workers, render_threads) = if args.seeds > 1 {

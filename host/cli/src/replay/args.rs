@@ -441,20 +441,5 @@ pub(super) fn mount_known(args: &ReplayArgs) -> bool {
 
 /// `--board-params`: `NAME=VALUE` pairs, comma-separated, in order.
 pub(super) fn board_params(args: &ReplayArgs) -> Result<Vec<(String, f32)>, CliError> {
-    let Some(list) = &args.board_params else {
-        return Ok(Vec::new());
-    };
-    list.split(',')
-        .map(|pair| {
-            let (name, value) = pair
-                .split_once('=')
-                .ok_or_else(|| CliError(format!("--board-params: `{pair}` is not NAME=VALUE")))?;
-            let value: f32 = value.trim().parse().map_err(|_| {
-                CliError(format!(
-                    "--board-params: `{pair}`: the value is not a number"
-                ))
-            })?;
-            Ok((name.trim().to_string(), value))
-        })
-        .collect()
+    crate::parse_board_params(args.board_params.as_deref())
 }
