@@ -8,6 +8,8 @@
 //! - `--udp-listen`: the test sends from its socket and must be answered there.
 //! - `--udp --udp-local-port`: the datagrams come from the port asked for (PX4's link).
 //! - SIGINT and SIGTERM mid-run: the summary, then exit status 130 / 143.
+//! - `--profile ardupilot-local-frd` (TD_PROFILE 3): LANDING_TARGET in MAV_FRAME_LOCAL_FRD
+//!   once the autopilot streams its attitude.
 //! - The summary counts a frame of a message id outside the dialect as such, apart from a
 //!   frame with a bad CRC.
 
@@ -21,7 +23,8 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use touchdown_core::companion::mavlink::dialects::common::{
-    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
+    MavAutopilot, MavFrame, MavMessage, MavModeFlag, MavState, MavType, ATTITUDE_QUATERNION_DATA,
+    HEARTBEAT_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::FrameParser;
@@ -44,6 +47,25 @@ fn heartbeat(seq: u8) -> Vec<u8> {
         base_mode: MavModeFlag::empty(),
         system_status: MavState::MAV_STATE_ACTIVE,
         mavlink_version: 3,
+    });
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(header, &msg);
+    raw.raw_bytes().to_vec()
+}
+
+/// A level ATTITUDE_QUATERNION, nose 30 degrees east of north, from the same autopilot.
+fn attitude(seq: u8, time_boot_ms: u32) -> Vec<u8> {
+    let header = MavHeader {
+        system_id: 1,
+        component_id: 1,
+        sequence: seq,
+    };
+    let half_yaw = 15f32.to_radians();
+    let msg = MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+        time_boot_ms,
+        q1: half_yaw.cos(),
+        q4: half_yaw.sin(),
+        ..ATTITUDE_QUATERNION_DATA::DEFAULT
     });
     let mut raw = MAVLinkV2MessageRaw::new();
     raw.serialize_message(header, &msg);
@@ -140,14 +162,28 @@ fn assert_success(output: &Output) {
 
 /// Plays the autopilot on a stream: a heartbeat every 100 ms (and `extra` once, after the
 /// second), collecting what the command writes until it closes the connection.
-fn play_autopilot_on_stream(mut stream: TcpStream, extra: &[u8]) -> Vec<u8> {
+fn play_autopilot_on_stream(stream: TcpStream, extra: &[u8]) -> Vec<u8> {
+    play_autopilot_with_attitude(stream, extra, false)
+}
+
+/// [`play_autopilot_on_stream`], with (`attitude`) the attitude stream at 50 Hz besides.
+fn play_autopilot_with_attitude(mut stream: TcpStream, extra: &[u8], attitude: bool) -> Vec<u8> {
     stream.set_nonblocking(true).expect("nonblocking");
     let mut bytes = Vec::new();
     let mut buf = [0u8; 4096];
     let mut seq = 0u8;
-    let mut next_heartbeat = Instant::now();
+    let start = Instant::now();
+    let mut next_heartbeat = start;
+    let mut next_attitude = start;
+    let mut attitude_seq = 0u8;
     let deadline = Instant::now() + Duration::from_secs(60);
     while Instant::now() < deadline {
+        if attitude && Instant::now() >= next_attitude {
+            let boot_ms = start.elapsed().as_millis() as u32;
+            let _ = stream.write_all(&self::attitude(attitude_seq, boot_ms));
+            attitude_seq = attitude_seq.wrapping_add(1);
+            next_attitude += Duration::from_millis(20);
+        }
         if Instant::now() >= next_heartbeat {
             let _ = stream.write_all(&heartbeat(seq));
             seq = seq.wrapping_add(1);
@@ -314,6 +350,46 @@ fn udp_client_sends_from_the_fixed_local_port() {
     assert_eq!(senders.len(), 1, "{senders:?}");
     assert_eq!(senders[0].port(), local);
     assert_targets_arrived(&bytes);
+}
+
+/// The frame of every LANDING_TARGET in `bytes`.
+fn landing_target_frames(bytes: &[u8]) -> Vec<MavFrame> {
+    let mut parser = FrameParser::new();
+    let mut frames = Vec::new();
+    parser.push(bytes, |frame| {
+        if let Ok(MavMessage::LANDING_TARGET(t)) = frame.decode() {
+            frames.push(t.frame);
+        }
+    });
+    frames
+}
+
+/// TD_PROFILE 3 from the command line: with the attitude streamed, every target is in
+/// LOCAL_FRD (a frame exposed before the first attitude sample would be in BODY_FRD; the
+/// stream starts with the link, well before the first frame).
+#[test]
+fn profile_ardupilot_local_frd_sends_local_frd() {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().unwrap().to_string();
+    let child = touchdown()
+        .args(["companion", "--recording"])
+        .arg(recording())
+        .args(["--tcp", &addr, "--profile", "ardupilot-local-frd"])
+        .args(["--lead", "0.5", "--linger", "0.3"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn touchdown companion");
+    let (stream, _) = listener.accept().expect("touchdown connects");
+    let bytes = play_autopilot_with_attitude(stream, &[], true);
+    let output = finish(child);
+    assert_success(&output);
+    assert_targets_arrived(&bytes);
+    let frames = landing_target_frames(&bytes);
+    assert!(
+        frames.iter().all(|&f| f == MavFrame::MAV_FRAME_LOCAL_FRD),
+        "{frames:?}"
+    );
 }
 
 /// Runs a long --udp run, sends `signal` once the command has started talking, and returns

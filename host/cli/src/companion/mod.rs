@@ -115,7 +115,8 @@ pub struct CompanionArgs {
     pub recording: PathBuf,
 
     /// LANDING_TARGET format: from the autopilot's HEARTBEAT (auto, as the board does by
-    /// default: TD_PROFILE 2), or forced
+    /// default: TD_PROFILE 2), or forced (ardupilot TD_PROFILE 0, px4 1,
+    /// ardupilot-local-frd 3)
     #[arg(long, value_enum, default_value_t = ProfileArg::Auto)]
     pub profile: ProfileArg,
 
@@ -148,6 +149,9 @@ pub enum ProfileArg {
     Ardupilot,
     /// LANDING_TARGET in MAV_FRAME_LOCAL_NED (PX4; needs its attitude and local position).
     Px4,
+    /// LANDING_TARGET in MAV_FRAME_LOCAL_FRD (ArduPilot 4.7+ with the yaw sign fix; needs its
+    /// attitude, else BODY_FRD). Never chosen by auto: HEARTBEAT does not tell the version.
+    ArdupilotLocalFrd,
 }
 
 impl CompanionArgs {
@@ -217,6 +221,7 @@ pub fn run(
         ProfileArg::Auto => CompanionConfig::default(),
         ProfileArg::Ardupilot => CompanionConfig::with_profile(Profile::ArduPilot),
         ProfileArg::Px4 => CompanionConfig::with_profile(Profile::Px4),
+        ProfileArg::ArdupilotLocalFrd => CompanionConfig::with_profile(Profile::ArduPilotLocalFrd),
     };
     let mut companion = Companion::new(config);
     // The camera board's per-frame path, with the parameters applied between frames exactly
