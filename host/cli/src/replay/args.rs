@@ -42,11 +42,12 @@ firmware's code) against a simulated autopilot that speaks MAVLink bytes over a 
 HEARTBEAT, the ATTITUDE_QUATERNION and LOCAL_POSITION_NED streams the companion asks for,
 TIMESYNC, each sample its estimate (the truth plus the error model) stamped in its own
 drifting clock; it decodes the LANDING_TARGETs and reconstructs the pad as the autopilot does:
-  --autopilot ardupilot  (default) the body vector turned with its own attitude at receipt
-                         minus PLND_LAG (its inertial history), PLND_CAM_POS = 0; with
-                         --board-params TD_PROFILE=3 the board sends LOCAL_FRD (levelled
-                         with the attitude at the exposure), which it turns with the yaw
-                         alone of that attitude (ArduPilot 4.7+)
+  --autopilot ardupilot  (default) the body vector (BODY_FRD) turned with its own attitude
+                         at receipt minus PLND_LAG (its inertial history), PLND_CAM_POS = 0;
+                         with --board-params TD_PROFILE=3 the board sends LOCAL_FRD instead
+                         (levelled with the board's attitude at the exposure), which it turns
+                         with the yaw alone of its attitude at receipt minus PLND_LAG
+                         (ArduPilot 4.7+); the header says which
   --autopilot px4        the LOCAL_NED point minus its own position at the time stamp it
                          converts with its TIMESYNC estimate
 The paper's method gets the attitude the board received and goes through the same
@@ -55,7 +56,7 @@ reconstruction. Three errors are reported side by side:
       table and the summary's RMS rows are of this one)
   (b) what the autopilot reconstructs from it, against the truth at the time it assigns it to
   (c) what it would reconstruct from an ideal sensor (the exact body vector, sent at the same
-      time by the same path): the autopilot's own share of (b)
+      time by the same path, in the same frame): the autopilot's own share of (b)
 Flight effects (--scenario only; default typical): rolling-shutter readout 30.5 ms, camera
 vibration 0.03 deg RMS, mount misalignment roll 1.2 / pitch -1.6 deg, unknown to the board,
 which calibrates it in flight (TD_CAM_CAL 2; --no-calibration: never). --mount-known gives

@@ -39,8 +39,11 @@ use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Instant;
+use touchdown_core::companion::mavlink::dialects::common::MavAutopilot;
+use touchdown_core::companion::{Companion, CompanionConfig, Profile, ProfileSetting};
 use touchdown_core::family::Family;
 use touchdown_core::filter::CameraMount;
+use touchdown_core::params::ParamId;
 use touchdown_core::pipeline::PipelineConfig;
 use touchdown_eval::flight::{AutopilotKind, ErrorModel, FlightSetup, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace, TraceFrame};
@@ -408,6 +411,48 @@ fn flight_setup(
     Ok(Some(setup))
 }
 
+/// The profile the board sends its targets in during `setup`'s flight: TD_PROFILE after
+/// `setup.params` (applied as the flight applies them), auto resolved with the simulated
+/// autopilot's HEARTBEAT.
+fn board_profile(setup: &FlightSetup) -> Option<Profile> {
+    let mut companion = Companion::new(CompanionConfig::default());
+    for (name, value) in &setup.params {
+        if let Some(id) = ParamId::from_name(name) {
+            // A refused value fails the flight itself with its own message.
+            let _ = companion.set_param(id, *value);
+        }
+    }
+    let heartbeat = match setup.autopilot {
+        AutopilotKind::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+        AutopilotKind::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
+    };
+    ProfileSetting::from_param(companion.params().get_int(ParamId::Profile))
+        .resolve(Profile::from_autopilot(heartbeat))
+}
+
+/// What the simulated autopilot reconstructs the pad from, for the header: it depends on the
+/// frame the board sends (TD_PROFILE), not on the autopilot alone.
+fn reconstruction(setup: &FlightSetup) -> &'static str {
+    match (setup.autopilot, board_profile(setup)) {
+        // The BODY_FRD text is the one README's example output shows.
+        (AutopilotKind::ArduPilot, Some(Profile::ArduPilot)) => {
+            "ArduPilot (body vector, its attitude at receipt - PLND_LAG)"
+        }
+        (AutopilotKind::ArduPilot, Some(Profile::ArduPilotLocalFrd)) => {
+            "ArduPilot 4.7+ (LOCAL_FRD: the vector levelled with the board's attitude at the \
+             exposure, the yaw alone of its attitude at receipt - PLND_LAG)"
+        }
+        (AutopilotKind::ArduPilot, _) => {
+            "ArduPilot (refuses the LOCAL_NED targets of TD_PROFILE 1: no (b))"
+        }
+        (AutopilotKind::Px4, Some(Profile::Px4)) => "PX4 (LOCAL_NED point, minus its own position)",
+        (AutopilotKind::Px4, _) => {
+            "PX4 (sent ArduPilot's frame, TD_PROFILE 0 or 3, which a real PX4 refuses; x, y, z \
+             read as a LOCAL_NED point, minus its own position)"
+        }
+    }
+}
+
 /// The flight the methods ran in: the autopilot, the effects and the error model.
 fn flight_header(args: &ReplayArgs, input: &Input, setup: &FlightSetup) -> String {
     let m = &setup.model;
@@ -415,11 +460,7 @@ fn flight_header(args: &ReplayArgs, input: &Input, setup: &FlightSetup) -> Strin
         "In flight: the board's companion against a simulated {} over MAVLink; scored as \
          (a) what touchdown sends,\n(b) what the autopilot reconstructs from it, (c) what it \
          would reconstruct from an ideal sensor.\n",
-        match setup.autopilot {
-            AutopilotKind::ArduPilot =>
-                "ArduPilot (body vector, its attitude at receipt - PLND_LAG)",
-            AutopilotKind::Px4 => "PX4 (LOCAL_NED point, minus its own position)",
-        }
+        reconstruction(setup)
     );
     if let Some(e) = &input.effects {
         let _ = writeln!(
@@ -514,6 +555,44 @@ mod tests {
     use touchdown_sim::scenario::SCENARIOS;
 
     use super::*;
+
+    /// The header names the frame the board sends and how the simulated autopilot turns it:
+    /// TD_PROFILE 3 is LOCAL_FRD and the yaw alone, whatever the `--board-params` order.
+    #[test]
+    fn the_header_says_what_the_autopilot_reconstructs() {
+        let with = |kind, params: &[(&str, f32)]| {
+            let mut setup = FlightSetup::new(kind, ErrorModel::none());
+            setup.params = params.iter().map(|&(n, v)| (n.to_string(), v)).collect();
+            reconstruction(&setup)
+        };
+        let ardupilot = with(AutopilotKind::ArduPilot, &[]);
+        assert_eq!(
+            ardupilot,
+            "ArduPilot (body vector, its attitude at receipt - PLND_LAG)"
+        );
+        assert_eq!(
+            with(AutopilotKind::ArduPilot, &[("TD_PROFILE", 0.0)]),
+            ardupilot
+        );
+        let local_frd = with(
+            AutopilotKind::ArduPilot,
+            &[
+                ("TD_PROFILE", 0.0),
+                ("TD_CAM_CAL", 0.0),
+                ("TD_PROFILE", 3.0),
+            ],
+        );
+        assert!(
+            local_frd.contains("LOCAL_FRD") && local_frd.contains("yaw alone"),
+            "{local_frd}"
+        );
+        assert!(!local_frd.contains("body vector"), "{local_frd}");
+        let refused = with(AutopilotKind::ArduPilot, &[("TD_PROFILE", 1.0)]);
+        assert!(refused.contains("refuses"), "{refused}");
+        let px4 = with(AutopilotKind::Px4, &[]);
+        assert!(px4.contains("LOCAL_NED point"), "{px4}");
+        assert!(with(AutopilotKind::Px4, &[("TD_PROFILE", 3.0)]).contains("refuses"));
+    }
 
     #[test]
     fn help_names_every_scenario() {
