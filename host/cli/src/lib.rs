@@ -126,6 +126,13 @@ pub enum Outcome {
     Success,
     /// Some inputs failed; each was already reported on stderr.
     PartialFailure,
+    /// A signal stopped the run after its output was written (`touchdown companion`'s
+    /// summary on SIGINT or SIGTERM): exit with `status`, the shell's for that signal
+    /// (128 + its number), once everything is dropped and flushed.
+    Stopped {
+        /// The exit status.
+        status: u8,
+    },
 }
 
 /// Runs a parsed command line, writing results to `out` and per-file problems to `err`.
@@ -159,6 +166,7 @@ pub fn main() -> ExitCode {
     match run(cli, &mut out, &mut err) {
         Ok(Outcome::Success) => ExitCode::SUCCESS,
         Ok(Outcome::PartialFailure) => ExitCode::from(EXIT_FAILURE),
+        Ok(Outcome::Stopped { status }) => ExitCode::from(status),
         Err(error) => {
             // Nothing more can be done if stderr itself is gone.
             let _ = writeln!(err, "error: {error}");

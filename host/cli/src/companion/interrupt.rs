@@ -4,8 +4,9 @@
 //! script or a service manager stops it with SIGTERM; both deserve the same summary as a
 //! run that finished. So the handlers only record the signal (an atomic store, all a
 //! handler may do) and the loop, which checks it every millisecond, stops, prints the
-//! summary and exits with the shell's status for that signal (128 + its number: 130 and
-//! 143). A second signal while the summary is printed ends the process at once.
+//! summary and returns; `main` exits with the shell's status for that signal (128 + its
+//! number: 130 and 143). A second signal while the summary is printed ends the process at
+//! once.
 
 use std::io;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -36,10 +37,15 @@ impl StopSignal {
     }
 
     /// The exit status a shell reports for a process the signal ended: 128 + its number.
-    pub fn exit_status(self) -> i32 {
-        128 + self.number()
+    pub fn exit_status(self) -> u8 {
+        match self {
+            StopSignal::Interrupt => 130,
+            StopSignal::Terminate => 143,
+        }
     }
 
+    /// Its number (SIGINT 2, SIGTERM 15 on every Unix this builds for: `exit_status`'s
+    /// constants are 128 + these, checked by a test).
     fn number(self) -> i32 {
         match self {
             StopSignal::Interrupt => SIGINT,
@@ -54,7 +60,11 @@ pub fn install() -> io::Result<()> {
         let number = signal.number();
         // The shutdown must be registered first, so that the first signal finds STOPPING
         // still false and only the second one terminates.
-        signal_hook::flag::register_conditional_shutdown(number, signal.exit_status(), &STOPPING)?;
+        signal_hook::flag::register_conditional_shutdown(
+            number,
+            i32::from(signal.exit_status()),
+            &STOPPING,
+        )?;
         signal_hook::flag::register(number, &STOPPING)?;
         signal_hook::flag::register_usize(number, &RECEIVED, number as usize)?;
     }
@@ -67,4 +77,16 @@ pub fn received() -> Option<StopSignal> {
     [StopSignal::Interrupt, StopSignal::Terminate]
         .into_iter()
         .find(|s| s.number() == number)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exit_statuses_are_128_plus_the_signal_number() {
+        for signal in [StopSignal::Interrupt, StopSignal::Terminate] {
+            assert_eq!(i32::from(signal.exit_status()), 128 + signal.number());
+        }
+    }
 }

@@ -189,8 +189,8 @@ const TICK: Duration = Duration::from_millis(1);
 ///
 /// Ends with the summary on stdout in every case the run got going: the recording's end
 /// (`Success`), a lost link (the summary, then the error: exit status 2), or SIGINT/SIGTERM
-/// (the summary, then the process exits with 130/143 here: the contract's [`Outcome`] has
-/// no status for a signal).
+/// (the summary, then [`Outcome::Stopped`] with 130/143: returned, not exited here, so that
+/// the endpoint is closed and every buffer flushed on the way out, as after a finished run).
 pub fn run(
     args: &CompanionArgs,
     out: &mut dyn Write,
@@ -362,10 +362,8 @@ fn finish(
     match stop {
         Stop::Finished => Ok(Outcome::Success),
         Stop::LinkLost(reason, _) => Err(CliError(reason)),
-        Stop::Signal(signal, _) => {
-            // Nothing more to say if stdout is gone: the status still tells the signal.
-            let _ = out.flush();
-            std::process::exit(signal.exit_status())
-        }
+        Stop::Signal(signal, _) => Ok(Outcome::Stopped {
+            status: signal.exit_status(),
+        }),
     }
 }
