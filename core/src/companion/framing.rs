@@ -2,8 +2,8 @@
 //!
 //! A UART gives bytes, not frames: a frame may arrive in pieces, line noise inserts garbage,
 //! a byte may be lost (a truncated frame), and a flipped bit breaks a checksum. The parser
-//! owns one fixed buffer of [`MAX_FRAME_LEN`] bytes (the longest MAVLink 2 frame, signature
-//! included) and works like this:
+//! owns one fixed buffer of [`MAX_FRAME_LEN`] + 1 bytes (the longest MAVLink 2 frame,
+//! signature included, and the byte after it) and works like this:
 //!
 //! 1. Drop bytes until a start marker (`0xFD` MAVLink 2, `0xFE` MAVLink 1); they are counted
 //!    as garbage.
@@ -16,13 +16,35 @@
 //!    the truncated frame swallows the beginning of the next one, fails its CRC, and the next
 //!    frame after it is found intact.
 //!
-//! A message id the common dialect does not know has no CRC_EXTRA, so its CRC cannot be
-//! checked, and its announced length cannot be trusted either: random garbage starting with
-//! `0xFD` almost always carries an unknown id, and skipping its whole "length" would swallow
-//! the real frames behind it. So only its start byte is skipped, as for garbage (counted in
-//! [`ParserStats::unknown`]). A real frame of another dialect (ArduPilot's own messages) is
-//! then scanned byte by byte: it costs a little time and may show up in the bad-CRC count
-//! when its payload contains a start marker, but a frame we know is never lost.
+//! A message id the common dialect does not know (ArduPilot's or PX4's own messages, which a
+//! router forwards) has no CRC_EXTRA, so its CRC cannot be checked; only its framing can be.
+//!
+//! - MAVLink 2: when the byte right after its declared end (payload length, plus 13 when
+//!   the signed flag is set) is a start marker, and the span holds no whole frame of a known
+//!   id with a matching CRC, it is a frame of another dialect: counted once in
+//!   [`ParserStats::unknown`] and skipped whole, its payload never scanned for start markers
+//!   (scanning it would make one frame count twice, and stall the frames behind it while a
+//!   false "frame" inside it waits for its length). The parser waits for that one byte: on a
+//!   link it is the next frame's first, so no frame waits behind it meanwhile.
+//! - Otherwise the declared length does not lead to a frame: garbage that began with `0xFD`
+//!   and passed the incompatibility-flags check, or a frame whose length byte was garbled or
+//!   which lost bytes. It is counted once in [`ParserStats::bad_crc`] (corrupt, whatever its
+//!   id) and only its start byte is skipped, as for a bad CRC, so that the frames its false
+//!   length covers are found. The known-frame test matters: a false length ends at a start
+//!   marker far more often than chance, because a link is dense with frame boundaries (a
+//!   frame cut inside its header takes its id from the next frame's header, and its length
+//!   then spans whole frames). What remains is a false length that ends on a `0xFD`/`0xFE`
+//!   byte inside the payload of a known frame it cuts in two (about 1 in 128 such cuts): that
+//!   frame is lost.
+//! - MAVLink 1 (no flags byte to tell garbage from a frame, and a one-byte id, outside common
+//!   for about half of all byte values): counted once as unknown and scanned again from its
+//!   second byte.
+//!
+//! One damaged frame counts once: a rejected candidate (bad CRC, unknown MAVLink 1 id, or an
+//! unknown MAVLink 2 id that is not skipped) that starts inside the declared length of the
+//! last counted one is a start marker of the same damaged stretch, counted as a garbage byte,
+//! not as another frame. A valid frame found inside that stretch is handed out as usual and
+//! ends it.
 //!
 //! Signed MAVLink 2 frames are accepted without checking the signature (the link is a wire
 //! between two boards); frames with unknown incompatibility flags are dropped, as the
@@ -49,6 +71,9 @@ const SIGNATURE_LEN: usize = 13;
 
 /// Largest MAVLink payload.
 const MAX_PAYLOAD_LEN: usize = 255;
+/// The parser's buffer: the longest frame, and the byte after it that tells whether a frame
+/// of an unknown id ends where it says.
+const BUF_LEN: usize = MAX_FRAME_LEN + 1;
 
 /// Serialises one unsigned MAVLink 2 frame of `data` into the front of `out`: its length, or
 /// `None` when `out` is shorter than the frame. The payload is trimmed of trailing zeros as
@@ -124,11 +149,14 @@ pub struct ParserStats {
     pub bytes: u64,
     /// Frames with a valid CRC handed out.
     pub frames: u32,
-    /// Candidate frames whose CRC did not match (corrupted or garbage).
+    /// Candidate frames rejected as corrupted or garbage: a known id whose CRC did not match,
+    /// or a MAVLink 2 unknown id whose declared length does not end at a start marker; once
+    /// per damaged stretch (see the module documentation).
     pub bad_crc: u32,
-    /// Bytes dropped while looking for a start marker.
+    /// Bytes dropped while looking for a start marker (including the bytes of rejected
+    /// candidates after their start byte, and start bytes inside them).
     pub garbage_bytes: u32,
-    /// Frames of message ids the common dialect does not know (skipped).
+    /// Frames of message ids the common dialect does not know (skipped), once each.
     pub unknown: u32,
 }
 
@@ -145,8 +173,11 @@ enum Candidate {
 /// The incremental frame parser (see the module documentation).
 #[derive(Clone)]
 pub struct FrameParser {
-    buf: [u8; MAX_FRAME_LEN],
+    buf: [u8; BUF_LEN],
     len: usize,
+    /// Bytes at the front of the buffer that still lie within the declared length of the last
+    /// counted rejected candidate: a rejected candidate starting there is not counted again.
+    damaged: usize,
     stats: ParserStats,
 }
 
@@ -160,6 +191,7 @@ impl core::fmt::Debug for FrameParser {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("FrameParser")
             .field("buffered", &self.len)
+            .field("damaged", &self.damaged)
             .field("stats", &self.stats)
             .finish()
     }
@@ -169,8 +201,9 @@ impl FrameParser {
     /// An empty parser.
     pub const fn new() -> Self {
         FrameParser {
-            buf: [0; MAX_FRAME_LEN],
+            buf: [0; BUF_LEN],
             len: 0,
+            damaged: 0,
             stats: ParserStats {
                 bytes: 0,
                 frames: 0,
@@ -194,13 +227,14 @@ impl FrameParser {
     /// Forgets any partial frame.
     pub fn clear(&mut self) {
         self.len = 0;
+        self.damaged = 0;
     }
 
     /// Feeds bytes; calls `on_frame` for every complete frame with a valid CRC, in order.
     pub fn push(&mut self, mut bytes: &[u8], mut on_frame: impl FnMut(&RawFrame<'_>)) {
         self.stats.bytes = self.stats.bytes.saturating_add(bytes.len() as u64);
         loop {
-            let space = MAX_FRAME_LEN.saturating_sub(self.len);
+            let space = BUF_LEN.saturating_sub(self.len);
             let take = space.min(bytes.len());
             let (head, rest) = bytes.split_at(take);
             if let Some(dst) = self.buf.get_mut(self.len..self.len + take) {
@@ -209,7 +243,8 @@ impl FrameParser {
             }
             bytes = rest;
             self.process(&mut on_frame);
-            // `process` leaves at most an incomplete frame, shorter than the buffer, so every
+            // `process` leaves at most an incomplete frame, or a whole frame of an unknown id
+            // waiting for the byte after it: shorter than the buffer either way, so every
             // round makes room for at least one more byte.
             if bytes.is_empty() {
                 break;
@@ -224,50 +259,25 @@ impl FrameParser {
         let n = n.min(len);
         self.buf.copy_within(n..len, 0);
         self.len = len - n;
+        self.damaged = self.damaged.saturating_sub(n);
     }
 
     fn byte(&self, i: usize) -> Option<u8> {
-        self.buf.get(..self.len).and_then(|b| b.get(i)).copied()
+        self.data().get(i).copied()
     }
 
-    fn candidate(&self) -> Candidate {
-        let (Some(stx), Some(payload_len)) = (self.byte(0), self.byte(1)) else {
-            return Candidate::Incomplete;
-        };
-        let payload_len = usize::from(payload_len);
-        let len = match stx {
-            STX_V2 => {
-                let Some(incompat) = self.byte(2) else {
-                    return Candidate::Incomplete;
-                };
-                if incompat & !IFLAG_SIGNED != 0 {
-                    return Candidate::Invalid;
-                }
-                let signature = if incompat & IFLAG_SIGNED != 0 {
-                    SIGNATURE_LEN
-                } else {
-                    0
-                };
-                V2_HEADER_LEN + payload_len + 2 + signature
-            }
-            STX_V1 => V1_HEADER_LEN + payload_len + 2,
-            _ => return Candidate::Invalid,
-        };
-        if self.len < len {
-            Candidate::Incomplete
-        } else {
-            Candidate::Complete { len }
-        }
+    /// The buffered bytes.
+    fn data(&self) -> &[u8] {
+        self.buf.get(..self.len).unwrap_or(&[])
     }
 
     fn process(&mut self, on_frame: &mut impl FnMut(&RawFrame<'_>)) {
         loop {
-            let buffered = self.buf.get(..self.len).unwrap_or(&[]);
-            match buffered.iter().position(|&b| b == STX_V2 || b == STX_V1) {
+            match self.data().iter().position(|&b| b == STX_V2 || b == STX_V1) {
                 None => {
                     self.stats.garbage_bytes =
                         self.stats.garbage_bytes.saturating_add(self.len as u32);
-                    self.len = 0;
+                    self.consume(self.len);
                     return;
                 }
                 Some(0) => {}
@@ -276,71 +286,53 @@ impl FrameParser {
                     self.consume(skip);
                 }
             }
-            match self.candidate() {
+            match candidate(self.data()) {
                 Candidate::Incomplete => return,
                 Candidate::Invalid => {
                     self.stats.garbage_bytes = self.stats.garbage_bytes.saturating_add(1);
                     self.consume(1);
                 }
-                Candidate::Complete { len } => match self.check(len) {
+                Candidate::Complete { len } => match check(self.data(), len) {
                     Check::Valid => {
                         self.stats.frames = self.stats.frames.saturating_add(1);
                         if let Some(frame) = self.frame() {
                             on_frame(&frame);
                         }
                         self.consume(len);
+                        self.damaged = 0;
                     }
-                    Check::BadCrc => {
-                        self.stats.bad_crc = self.stats.bad_crc.saturating_add(1);
-                        self.consume(1);
-                    }
-                    Check::Unknown => {
-                        // Cannot be checked: treated like garbage (see the module docs).
+                    Check::UnknownFramed => {
+                        // Skipped whole, payload unscanned (see the module docs).
                         self.stats.unknown = self.stats.unknown.saturating_add(1);
-                        self.consume(1);
+                        self.consume(len);
+                        self.damaged = 0;
                     }
+                    Check::AwaitNextByte => return,
+                    Check::BadCrc | Check::UnknownUnframed => self.reject(len, Rejected::BadCrc),
+                    Check::UnknownV1 => self.reject(len, Rejected::Unknown),
                 },
             }
         }
     }
 
-    /// Header fields of the buffered frame: (version, header length, message id).
-    fn header(&self) -> Option<(MavlinkVersion, usize, u32)> {
-        match self.byte(0)? {
-            STX_V2 => {
-                let id = u32::from_le_bytes([self.byte(7)?, self.byte(8)?, self.byte(9)?, 0]);
-                Some((MavlinkVersion::V2, V2_HEADER_LEN, id))
-            }
-            STX_V1 => Some((MavlinkVersion::V1, V1_HEADER_LEN, u32::from(self.byte(5)?))),
-            _ => None,
+    /// Drops the start byte of a rejected candidate of `len` bytes, the rest to be scanned
+    /// again; counted as `counter` unless it starts inside the last counted one.
+    fn reject(&mut self, len: usize, counter: Rejected) {
+        if self.damaged > 0 {
+            self.stats.garbage_bytes = self.stats.garbage_bytes.saturating_add(1);
+            self.consume(1);
+            return;
         }
-    }
-
-    fn check(&self, _len: usize) -> Check {
-        let Some((_, header_len, id)) = self.header() else {
-            return Check::BadCrc;
-        };
-        let extra = MavMessage::extra_crc(id);
-        if extra == 0 {
-            return Check::Unknown;
+        match counter {
+            Rejected::BadCrc => self.stats.bad_crc = self.stats.bad_crc.saturating_add(1),
+            Rejected::Unknown => self.stats.unknown = self.stats.unknown.saturating_add(1),
         }
-        let payload_len = usize::from(self.byte(1).unwrap_or(0));
-        let end = header_len + payload_len;
-        let (Some(covered), Some(lo), Some(hi)) =
-            (self.buf.get(1..end), self.byte(end), self.byte(end + 1))
-        else {
-            return Check::BadCrc;
-        };
-        let crc = crc16_x25(crc16_x25(0xFFFF, covered), &[extra]);
-        if crc == u16::from_le_bytes([lo, hi]) {
-            Check::Valid
-        } else {
-            Check::BadCrc
-        }
+        self.consume(1);
+        self.damaged = len.saturating_sub(1);
     }
 
     fn frame(&self) -> Option<RawFrame<'_>> {
-        let (version, header_len, message_id) = self.header()?;
+        let (version, header_len, message_id) = header(self.data())?;
         let payload_len = usize::from(self.byte(1)?);
         let (sequence, system_id, component_id) = match version {
             MavlinkVersion::V2 => (self.byte(4)?, self.byte(5)?, self.byte(6)?),
@@ -357,14 +349,135 @@ impl FrameParser {
     }
 }
 
+/// What the header at the start of `bytes` (a start marker) announces.
+fn candidate(bytes: &[u8]) -> Candidate {
+    let (Some(&stx), Some(&payload_len)) = (bytes.first(), bytes.get(1)) else {
+        return Candidate::Incomplete;
+    };
+    let payload_len = usize::from(payload_len);
+    let len = match stx {
+        STX_V2 => {
+            let Some(&incompat) = bytes.get(2) else {
+                return Candidate::Incomplete;
+            };
+            if incompat & !IFLAG_SIGNED != 0 {
+                return Candidate::Invalid;
+            }
+            let signature = if incompat & IFLAG_SIGNED != 0 {
+                SIGNATURE_LEN
+            } else {
+                0
+            };
+            V2_HEADER_LEN + payload_len + 2 + signature
+        }
+        STX_V1 => V1_HEADER_LEN + payload_len + 2,
+        _ => return Candidate::Invalid,
+    };
+    if bytes.len() < len {
+        Candidate::Incomplete
+    } else {
+        Candidate::Complete { len }
+    }
+}
+
+/// Header fields of the frame at the start of `bytes`: (version, header length, message id).
+fn header(bytes: &[u8]) -> Option<(MavlinkVersion, usize, u32)> {
+    let byte = |i: usize| bytes.get(i).copied();
+    match byte(0)? {
+        STX_V2 => {
+            let id = u32::from_le_bytes([byte(7)?, byte(8)?, byte(9)?, 0]);
+            Some((MavlinkVersion::V2, V2_HEADER_LEN, id))
+        }
+        STX_V1 => Some((MavlinkVersion::V1, V1_HEADER_LEN, u32::from(byte(5)?))),
+        _ => None,
+    }
+}
+
+/// Whether the frame at the start of `bytes` has a known id and its CRC matches.
+fn crc_matches(bytes: &[u8]) -> bool {
+    let Some((_, header_len, id)) = header(bytes) else {
+        return false;
+    };
+    let extra = MavMessage::extra_crc(id);
+    if extra == 0 {
+        return false;
+    }
+    let payload_len = usize::from(bytes.get(1).copied().unwrap_or(0));
+    let end = header_len + payload_len;
+    let (Some(covered), Some(&lo), Some(&hi)) =
+        (bytes.get(1..end), bytes.get(end), bytes.get(end + 1))
+    else {
+        return false;
+    };
+    crc16_x25(crc16_x25(0xFFFF, covered), &[extra]) == u16::from_le_bytes([lo, hi])
+}
+
+/// Whether a whole frame of a known id with a matching CRC starts after the first byte of
+/// `span` and ends within it: then `span` is not one frame of another dialect, whatever
+/// follows it (a truncated frame whose id bytes came from the next frame's header, or
+/// garbage, whose false length happened to end at a frame boundary).
+fn holds_a_known_frame(span: &[u8]) -> bool {
+    (1..span.len()).any(|i| {
+        let inner = span.get(i..).unwrap_or(&[]);
+        matches!(inner.first(), Some(&(STX_V2 | STX_V1)))
+            && matches!(candidate(inner), Candidate::Complete { .. })
+            && crc_matches(inner)
+    })
+}
+
+/// What the complete candidate of `len` bytes at the start of `bytes` is (`bytes` may hold
+/// more: the byte after it decides for an unknown MAVLink 2 id).
+fn check(bytes: &[u8], len: usize) -> Check {
+    let Some((version, _, id)) = header(bytes) else {
+        return Check::BadCrc;
+    };
+    if MavMessage::extra_crc(id) != 0 {
+        return if crc_matches(bytes) {
+            Check::Valid
+        } else {
+            Check::BadCrc
+        };
+    }
+    match (version, bytes.get(len)) {
+        (MavlinkVersion::V1, _) => Check::UnknownV1,
+        (MavlinkVersion::V2, None) => Check::AwaitNextByte,
+        (MavlinkVersion::V2, Some(&(STX_V2 | STX_V1)))
+            if !holds_a_known_frame(bytes.get(..len).unwrap_or(&[])) =>
+        {
+            Check::UnknownFramed
+        }
+        (MavlinkVersion::V2, Some(_)) => Check::UnknownUnframed,
+    }
+}
+
+/// What a complete candidate is.
 enum Check {
+    /// A known id with a matching CRC.
     Valid,
+    /// A known id whose CRC does not match.
+    BadCrc,
+    /// MAVLink 2, an unknown id, followed by a start marker: a frame of another dialect.
+    UnknownFramed,
+    /// MAVLink 2, an unknown id, not followed by a start marker, or holding a whole valid
+    /// frame of a known id: garbage or a damaged frame.
+    UnknownUnframed,
+    /// MAVLink 2, an unknown id, the byte after it not received yet.
+    AwaitNextByte,
+    /// MAVLink 1, an unknown id.
+    UnknownV1,
+}
+
+/// The counter a rejected candidate goes to.
+enum Rejected {
     BadCrc,
     Unknown,
 }
 
 #[cfg(test)]
 mod tests {
+    // Test code only: the vectors below never reach the firmware.
+    extern crate std;
+
     use super::*;
     use mavlink::dialects::common::HEARTBEAT_DATA;
     use mavlink::{MAVLinkV2MessageRaw, MavHeader};
@@ -413,6 +526,254 @@ mod tests {
         // Garbage "0xFD 0x13" may swallow bytes until its CRC fails; everything valid is found.
         assert_eq!(seen, 3, "{:?}", p.stats());
         assert!(p.stats().bad_crc >= 2);
+    }
+
+    /// A MAVLink 2 frame (`incompat` flags, 13 signature bytes when signed) of any id, its
+    /// CRC over `extra` (an unknown id has none we know: any byte).
+    fn v2_frame(id: u32, payload: &[u8], incompat: u8, extra: u8) -> ([u8; BUF_LEN], usize) {
+        let mut f = [0u8; BUF_LEN];
+        let id = id.to_le_bytes();
+        let header = [
+            STX_V2,
+            payload.len() as u8,
+            incompat,
+            0,
+            7,
+            1,
+            1,
+            id[0],
+            id[1],
+            id[2],
+        ];
+        f[..V2_HEADER_LEN].copy_from_slice(&header);
+        let end = V2_HEADER_LEN + payload.len();
+        f[V2_HEADER_LEN..end].copy_from_slice(payload);
+        let crc = crc16_x25(crc16_x25(0xFFFF, &f[1..end]), &[extra]);
+        f[end..end + 2].copy_from_slice(&crc.to_le_bytes());
+        let signature = if incompat & IFLAG_SIGNED != 0 {
+            SIGNATURE_LEN
+        } else {
+            0
+        };
+        for (i, b) in f[end + 2..end + 2 + signature].iter_mut().enumerate() {
+            *b = 0x30 + i as u8;
+        }
+        (f, end + 2 + signature)
+    }
+
+    /// ArduPilot's AHRS (163, not in common), its 28-byte payload with two false frame starts
+    /// inside (a MAVLink 2 one with valid flags, a MAVLink 1 one), as real payloads have.
+    fn ahrs_payload() -> [u8; 28] {
+        let mut p = [0u8; 28];
+        for (i, b) in p.iter_mut().enumerate() {
+            *b = 0x10 + i as u8;
+        }
+        p[4..8].copy_from_slice(&[STX_V2, 0x03, 0x00, 0x00]);
+        p[16..18].copy_from_slice(&[STX_V1, 0x02]);
+        p
+    }
+
+    /// Feeds `stream` whole and byte by byte; both must agree. Returns the message ids handed
+    /// out and the counters.
+    fn parse(stream: &[u8]) -> (std::vec::Vec<u32>, ParserStats) {
+        let mut whole = FrameParser::new();
+        let mut ids = std::vec::Vec::new();
+        whole.push(stream, |f| ids.push(f.message_id));
+        let mut bytewise = FrameParser::new();
+        let mut ids_bytewise = std::vec::Vec::new();
+        for b in stream {
+            bytewise.push(core::slice::from_ref(b), |f| {
+                ids_bytewise.push(f.message_id)
+            });
+        }
+        assert_eq!(ids, ids_bytewise);
+        assert_eq!(whole.stats(), bytewise.stats());
+        (ids, whole.stats())
+    }
+
+    fn concat(parts: &[&[u8]]) -> std::vec::Vec<u8> {
+        parts.iter().flat_map(|p| p.iter().copied()).collect()
+    }
+
+    /// A frame of another dialect, start markers in its payload included, is one "unknown"
+    /// and nothing else: skipped by its declared length, its payload not scanned.
+    #[test]
+    fn an_unknown_frame_counts_once_and_is_skipped_whole() {
+        let (u, un) = v2_frame(163, &ahrs_payload(), 0, 127);
+        let (h, hn) = heartbeat_bytes(1);
+        let stream = concat(&[&u[..un], &h[..hn], &u[..un], &h[..hn]]);
+        let (ids, st) = parse(&stream);
+        assert_eq!(ids, [0, 0]);
+        assert_eq!(
+            (st.unknown, st.bad_crc, st.garbage_bytes),
+            (2, 0, 0),
+            "{st:?}"
+        );
+        // Signed: 13 more bytes, skipped as well.
+        let (s, sn) = v2_frame(163, &ahrs_payload(), IFLAG_SIGNED, 127);
+        let (ids, st) = parse(&concat(&[&s[..sn], &h[..hn]]));
+        assert_eq!(ids, [0]);
+        assert_eq!(
+            (st.unknown, st.bad_crc, st.garbage_bytes),
+            (1, 0, 0),
+            "{st:?}"
+        );
+    }
+
+    /// Whether an unknown frame ends where it says is known only from the byte after it: the
+    /// parser waits for it (nothing is behind it to wait), then counts the frame once.
+    #[test]
+    fn an_unknown_frame_waits_for_the_byte_after_it() {
+        let (u, un) = v2_frame(163, &ahrs_payload(), 0, 127);
+        let mut p = FrameParser::new();
+        p.push(&u[..un], |_| panic!("not a frame we know"));
+        assert_eq!((p.buffered(), p.stats().unknown), (un, 0));
+        let (h, hn) = heartbeat_bytes(2);
+        let mut seen = 0;
+        p.push(&h[..hn], |_| seen += 1);
+        assert_eq!((seen, p.stats().unknown, p.buffered()), (1, 1, 0));
+        // The longest frame (255-byte payload, signed) and its next byte fit the buffer.
+        let (big, bn) = v2_frame(163, &[0x55; 255], IFLAG_SIGNED, 0);
+        assert_eq!(bn, MAX_FRAME_LEN);
+        let (ids, st) = parse(&concat(&[&big[..bn], &h[..hn]]));
+        assert_eq!((ids.len(), st.unknown, st.bad_crc), (1, 1, 0));
+    }
+
+    /// The garbled-length cases: a length byte too long or too short, or a byte lost, leaves
+    /// the unknown frame's declared end off a start marker: it is counted once as bad (corrupt),
+    /// its start byte alone skipped, the start markers inside it not counted again, and the
+    /// frames its false length covers are found.
+    #[test]
+    fn an_unknown_frame_with_a_garbled_length_is_one_bad_frame() {
+        let (u, un) = v2_frame(163, &ahrs_payload(), 0, 127);
+        let (h1, n1) = heartbeat_bytes(3);
+        let (h2, n2) = heartbeat_bytes(4);
+        for (what, delta) in [
+            ("3 too long", 3i32),
+            ("5 too short", -5),
+            ("20 too long", 20),
+        ] {
+            let mut garbled = u;
+            garbled[1] = (i32::from(garbled[1]) + delta) as u8;
+            let stream = concat(&[&garbled[..un], &h1[..n1], &h2[..n2]]);
+            let end = V2_HEADER_LEN + usize::from(garbled[1]) + 2;
+            assert!(stream[end] != STX_V2 && stream[end] != STX_V1, "{what}");
+            let (ids, st) = parse(&stream);
+            assert_eq!(ids, [0, 0], "{what}: {st:?}");
+            assert_eq!((st.bad_crc, st.unknown), (1, 0), "{what}: {st:?}");
+            // Every byte of the garbled frame after its start is garbage, none a frame.
+            assert_eq!(st.garbage_bytes as usize, un - 1, "{what}: {st:?}");
+        }
+        // Its last byte lost: the declared end is the heartbeat's length byte.
+        let stream = concat(&[&u[..un - 1], &h1[..n1]]);
+        let (ids, st) = parse(&stream);
+        assert_eq!(ids, [0]);
+        assert_eq!((st.bad_crc, st.unknown), (1, 0), "{st:?}");
+        // A frame cut inside its header takes its id from the next frame's header (here
+        // 3 << 16, unknown) and, with 14 bytes of payload declared, spans that whole heartbeat
+        // to end at the next one's start marker: not skipped, as it holds a known frame.
+        let stream = concat(&[&[STX_V2, 14, 0, 0, 7], &h1[..n1], &h2[..n2]]);
+        assert_eq!(
+            header(&stream),
+            Some((MavlinkVersion::V2, V2_HEADER_LEN, 3 << 16))
+        );
+        assert_eq!(stream[V2_HEADER_LEN + 14 + 2], STX_V2);
+        let (ids, st) = parse(&stream);
+        assert_eq!(ids, [0, 0], "{st:?}");
+        assert_eq!((st.bad_crc, st.unknown), (1, 0), "{st:?}");
+        // Garbled onto the next frame's end (a start marker): the span holds a whole known
+        // frame, so it is not skipped, and that frame is found.
+        let mut garbled = u;
+        garbled[1] += n1 as u8;
+        let (ids, st) = parse(&concat(&[&garbled[..un], &h1[..n1], &h2[..n2]]));
+        assert_eq!(ids, [0, 0]);
+        assert_eq!((st.bad_crc, st.unknown), (1, 0), "{st:?}");
+        // The case that remains: garbled onto a start marker inside the payload of the next
+        // frame, which it cuts in two. That frame is lost; the one after it is found.
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(
+            MavHeader {
+                system_id: 1,
+                component_id: 1,
+                sequence: 9,
+            },
+            &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: u32::from(STX_V2),
+                ..HEARTBEAT_DATA::default()
+            }),
+        );
+        let cut = raw.raw_bytes();
+        assert_eq!(cut[V2_HEADER_LEN], STX_V2);
+        let mut garbled = u;
+        garbled[1] += V2_HEADER_LEN as u8;
+        let (ids, st) = parse(&concat(&[&garbled[..un], cut, &h2[..n2]]));
+        assert_eq!(ids, [0], "{st:?}");
+        assert_eq!(st.unknown, 1, "{st:?}");
+    }
+
+    /// A known frame with a bad CRC and a start marker inside is one bad CRC, not two.
+    #[test]
+    fn a_corrupted_frame_counts_once() {
+        let (h, hn) = heartbeat_bytes(5);
+        let mut bad = h;
+        // custom_mode: a MAVLink 2 start with valid flags, then the CRC broken.
+        bad[V2_HEADER_LEN..V2_HEADER_LEN + 4].copy_from_slice(&[STX_V2, 0x01, 0x00, 0x00]);
+        let stream = concat(&[&bad[..hn], &h[..hn]]);
+        let (ids, st) = parse(&stream);
+        assert_eq!(ids, [0]);
+        assert_eq!((st.bad_crc, st.unknown), (1, 0), "{st:?}");
+        // A MAVLink 1 frame of an unknown id is scanned again from its second byte, and
+        // counted once too.
+        let mut v1 = [0u8; 6 + 10 + 2];
+        v1[..6].copy_from_slice(&[STX_V1, 10, 9, 1, 1, 163]);
+        v1[6..9].copy_from_slice(&[STX_V2, 0x00, 0x00]);
+        let (ids, st) = parse(&concat(&[&v1, &h[..hn]]));
+        assert_eq!(ids, [0]);
+        assert_eq!((st.unknown, st.bad_crc), (1, 0), "{st:?}");
+    }
+
+    /// Random bytes between the frames of a link (as line noise inserts them) and frames cut
+    /// short lose no intact frame: a MAVLink 2 start in noise almost always fails the flags
+    /// check, and a false unknown frame is rescanned unless its declared end is a start
+    /// marker and it holds no whole known frame.
+    #[test]
+    fn noise_and_truncation_lose_no_intact_frame() {
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let (u, un) = v2_frame(163, &ahrs_payload(), 0, 127);
+        let mut stream = std::vec::Vec::new();
+        let mut heartbeats = 0;
+        let mut cut = 0;
+        for i in 0..2000u32 {
+            let (h, hn) = heartbeat_bytes(i as u8);
+            if i % 5 == 2 {
+                // Cut anywhere, the header included.
+                stream.extend_from_slice(&h[..1 + (next() as usize % (hn - 1))]);
+                cut += 1;
+            } else {
+                stream.extend_from_slice(&h[..hn]);
+                heartbeats += 1;
+            }
+            if i % 3 == 0 {
+                stream.extend_from_slice(&u[..un]);
+            }
+            if i % 4 == 0 {
+                for _ in 0..(next() % 24) {
+                    stream.push(next() as u8);
+                }
+            }
+        }
+        let (ids, st) = parse(&stream);
+        assert_eq!(ids.len(), heartbeats, "{st:?}");
+        // Every cut frame is one bad CRC (or, cut inside its id, one unknown), give or take
+        // the few that share a damaged stretch with noise.
+        assert!(st.bad_crc + st.unknown >= cut * 9 / 10, "{cut} cut: {st:?}");
+        std::println!("{cut} cut, {heartbeats} intact: {st:?}");
     }
 
     /// `write_v2_frame` is byte-identical to the mavlink crate's own serialiser.

@@ -11,7 +11,7 @@
 //! - `--profile ardupilot-local-frd` (TD_PROFILE 3): LANDING_TARGET in MAV_FRAME_LOCAL_FRD
 //!   once the autopilot streams its attitude.
 //! - The summary counts a frame of a message id outside the dialect as such, apart from a
-//!   frame with a bad CRC.
+//!   frame with a bad CRC, each once although start markers are inside them.
 
 #![cfg(unix)]
 
@@ -438,33 +438,26 @@ fn x25(mut crc: u16, bytes: &[u8]) -> u16 {
 }
 
 /// A valid MAVLink 2 frame of ArduPilot's AHRS (id 163, CRC_EXTRA 127: ardupilotmega, not
-/// common), with no start marker after its first byte (so that the parser, which skips only
-/// the start byte of a frame it cannot check, finds nothing more in it).
+/// common), with two false frame starts in its payload (a MAVLink 2 one with valid flags, a
+/// MAVLink 1 one), as real payloads have: the parser skips it by its declared length and
+/// must count it once.
 fn ardupilot_ahrs_frame() -> Vec<u8> {
-    let payload: Vec<u8> = (1..=28).collect();
-    for seq in 0..=255u8 {
-        let mut frame = vec![0xFD, 28, 0, 0, seq, 1, 1, 163, 0, 0];
-        frame.extend_from_slice(&payload);
-        let crc = x25(x25(0xFFFF, &frame[1..]), &[127]);
-        frame.extend_from_slice(&crc.to_le_bytes());
-        if !frame[1..].iter().any(|&b| b == 0xFD || b == 0xFE) {
-            return frame;
-        }
-    }
-    unreachable!("some sequence number gives a checksum without a start marker")
+    let mut payload: Vec<u8> = (1..=28).collect();
+    payload[4..8].copy_from_slice(&[0xFD, 3, 0, 0]);
+    payload[16..18].copy_from_slice(&[0xFE, 2]);
+    let mut frame = vec![0xFD, 28, 0, 0, 0, 1, 1, 163, 0, 0];
+    frame.extend_from_slice(&payload);
+    let crc = x25(x25(0xFFFF, &frame[1..]), &[127]);
+    frame.extend_from_slice(&crc.to_le_bytes());
+    frame
 }
 
-/// A HEARTBEAT with a flipped checksum bit, with no start marker after its first byte.
+/// A HEARTBEAT whose first payload bytes were changed into a false MAVLink 2 frame start
+/// (the checksum no longer matches): one bad CRC, not two.
 fn corrupted_heartbeat() -> Vec<u8> {
-    for seq in 100..=255u8 {
-        let mut frame = heartbeat(seq);
-        let last = frame.len() - 1;
-        frame[last] ^= 0x01;
-        if !frame[1..].iter().any(|&b| b == 0xFD || b == 0xFE) {
-            return frame;
-        }
-    }
-    unreachable!("some sequence number gives a checksum without a start marker")
+    let mut frame = heartbeat(100);
+    frame[10..14].copy_from_slice(&[0xFD, 1, 0, 0]);
+    frame
 }
 
 #[test]

@@ -4,7 +4,10 @@
 //! The receive counters keep apart what the link did and what the dialect cannot read: a
 //! frame whose message id is outside MAVLink's common set (ArduPilot's and PX4's own
 //! messages, forwarded by a router) is normal traffic, not a corrupt link, and is counted
-//! as "not in the dialect"; only a frame whose checksum fails is counted as a bad CRC.
+//! once as "not in the dialect"; only a corrupted frame is counted as a bad CRC: a checksum
+//! that fails, or a frame of an unknown id whose declared length does not end where the next
+//! frame starts (`touchdown_core::companion::FrameParser`), once however many start markers
+//! are inside it.
 
 use std::io::{self, Write};
 use std::time::Duration;
