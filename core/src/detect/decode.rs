@@ -1,7 +1,8 @@
 //! Step 5: reading the cells and looking the code up.
 //!
 //! The quad's corners give the homography from the family's cell grid (grid units, the
-//! detected square at [`Family::quad_offset`]) to the image. Each cell is read at its
+//! detected square at [`Family::quad_offset`]) to the image (through a distorting lens, to
+//! the ideal-lens image, and from there through the lens: [`GridMap`]). Each cell is read at its
 //! centre (bilinear; for cells of 4 pixels or more, the mean of 3x3 points around it so a
 //! single noisy pixel cannot flip it).
 //!
@@ -13,7 +14,8 @@
 //! A candidate whose border is not black or whose margin is not white is dropped before any
 //! look-up, which is what keeps random quads from ever reaching the code table.
 
-use super::DetectorConfig;
+use super::{lens, DetectorConfig};
+use crate::camera::CameraModel;
 use crate::family::{CellRole, Decoded, Family, MAX_GRID};
 use crate::geometry::cyclic;
 use crate::geometry::{Homography, Point};
@@ -41,6 +43,10 @@ const UNCERTAIN_CELL_MARGIN: f32 = 0.2;
 const REGISTRATION_CHECK_SLACK: u8 = 5;
 /// How far the registration check moves the sampling grid, cells.
 const REGISTRATION_SHIFT: f32 = 0.25;
+/// Image samples' worth of work of undistorting a read's four corners through the lens
+/// ([`GridMap::new`]): a Newton inversion is about as much as four bilinear samples. (The
+/// lens's own cost per mapped point, a polynomial, is within the per-cell figure's slack.)
+const LENS_CORNERS_COST: u32 = 16;
 
 /// A decoded marker before de-duplication.
 #[derive(Debug, Clone, Copy)]
@@ -122,18 +128,71 @@ impl PlaneFit {
     }
 }
 
+/// Where the family's cell grid lies in the frame: a homography from the grid onto the
+/// marker's plane as the frame shows it or, through a distorting lens, as an ideal lens would
+/// (its ideal-lens pixels, `lens`), each mapped point then taken through the lens into the
+/// frame. A wide-angle lens bows a large marker's edges by a good part of a cell: a grid laid
+/// through its true corners by a homography alone reads the cells along its edges off their
+/// centres.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct GridMap {
+    h: Homography,
+    lens: Option<CameraModel>,
+}
+
+impl GridMap {
+    /// The map of `family`'s grid for a clockwise quad (frame pixels) whose first corner is
+    /// taken as the grid's top-left, through `lens` when given; `None` when a corner cannot
+    /// be undistorted or the quad is degenerate.
+    pub(crate) fn new(
+        family: &Family<'_>,
+        quad: &[Point; 4],
+        lens: Option<&CameraModel>,
+    ) -> Option<Self> {
+        let Some(camera) = lens else {
+            return Some(GridMap {
+                h: grid_homography(family, quad)?,
+                lens: None,
+            });
+        };
+        let mut ideal = *quad;
+        for corner in ideal.iter_mut() {
+            *corner = lens::ideal_pixel(camera, *corner)?;
+        }
+        Some(GridMap {
+            h: grid_homography(family, &ideal)?,
+            lens: Some(*camera),
+        })
+    }
+
+    /// The map by a homography alone (no lens).
+    pub(crate) fn homography(h: Homography) -> Self {
+        GridMap { h, lens: None }
+    }
+
+    /// The frame pixel of grid point (u, v).
+    #[inline]
+    fn map(&self, u: f32, v: f32) -> Option<Point> {
+        let p = self.h.map(u, v)?;
+        match &self.lens {
+            None => Some(p),
+            Some(camera) => lens::frame_pixel(camera, p),
+        }
+    }
+}
+
 /// Reads a cell centred at grid point (u, v).
 #[inline]
-fn read_cell(image: &GrayImage<'_>, h: &Homography, u: f32, v: f32, multi: bool) -> Option<f32> {
+fn read_cell(image: &GrayImage<'_>, h: &GridMap, u: f32, v: f32, multi: bool) -> Option<f32> {
     if !multi {
         let p = h.map(u, v)?;
         return Some(image.sample(p.x, p.y));
     }
     // Five samples: the centre and four points a quarter cell off it diagonally (each
     // bilinear sample already averages four pixels, so at four or more pixels per cell these
-    // cover the cell's middle half). Across a quarter cell the homography is affine to a
-    // tiny fraction of a pixel, so the offsets are mapped once (two extra points) rather
-    // than each sample through the projective division.
+    // cover the cell's middle half). Across a quarter cell the map (homography and lens) is
+    // affine to a tiny fraction of a pixel, so the offsets are mapped once (two extra points)
+    // rather than each sample through the projective division.
     const OFFSET: f32 = 0.25;
     let centre = h.map(u, v)?;
     let along_u = h.map(u + OFFSET, v)?;
@@ -162,11 +221,7 @@ pub(crate) fn grid_homography(family: &Family<'_>, quad: &[Point; 4]) -> Option<
 }
 
 /// Corners, centre and the rotation applied: `out[j] = outer_border_corner[(j + k) % 4]`.
-fn oriented_corners(
-    family: &Family<'_>,
-    h: &Homography,
-    rotation: u8,
-) -> Option<([Point; 4], Point)> {
+fn oriented_corners(family: &Family<'_>, h: &GridMap, rotation: u8) -> Option<([Point; 4], Point)> {
     let n = family.grid as f32;
     let b = family.border_ring as f32;
     let outer = [
@@ -189,7 +244,7 @@ fn oriented_corners(
 /// that share a layout (tag36h11 and aruco_6x6_250, say) share this work.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct GridRead {
-    h: Homography,
+    h: GridMap,
     readings: [u64; 4],
     margin: f32,
     contrast: f32,
@@ -202,7 +257,7 @@ impl GridRead {
     /// counts as clear, the decision margin is 1.
     pub(crate) fn certain(h: Homography, readings: [u64; 4], contrast: f32) -> Self {
         GridRead {
-            h,
+            h: GridMap::homography(h),
             readings,
             margin: 1.0,
             contrast,
@@ -237,7 +292,8 @@ pub(crate) fn lookup(family: &Family<'_>, grid: &GridRead, max_hamming: u8) -> O
     })
 }
 
-/// Reads a candidate's cells with touchdown's method, using `family`'s layout.
+/// Reads a candidate's cells with touchdown's method, using `family`'s layout, through
+/// `lens` when given ([`GridMap`]).
 ///
 /// Adds the cells it read, weighted by their cost in image samples and mapped points, to
 /// `samples` (the detector's work accounting).
@@ -245,11 +301,16 @@ pub(crate) fn read_robust(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     quad: &[Point; 4],
+    lens: Option<&CameraModel>,
     config: &DetectorConfig,
     samples: &mut u32,
 ) -> Option<GridRead> {
     let cost = core::cell::Cell::new(0u32);
-    let grid = read_robust_counted(image, family, quad, config, &cost);
+    if lens.is_some() {
+        // The corners' undistortion (Newton, about as much as four samples each).
+        cost.set(LENS_CORNERS_COST);
+    }
+    let grid = read_robust_counted(image, family, quad, lens, config, &cost);
     *samples = samples.saturating_add(cost.get());
     grid
 }
@@ -259,10 +320,11 @@ fn read_robust_counted(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     quad: &[Point; 4],
+    lens: Option<&CameraModel>,
     config: &DetectorConfig,
     cost: &core::cell::Cell<u32>,
 ) -> Option<GridRead> {
-    let h = grid_homography(family, quad)?;
+    let h = GridMap::new(family, quad, lens)?;
     let n = family.grid as usize;
     let b = family.border_ring as isize;
     let reversed = family.reversed();
@@ -271,7 +333,7 @@ fn read_robust_counted(
     let multi = cell_px >= MULTI_SAMPLE_CELL_PX;
     // A single read: one mapped point, one sample; a multi-sampled one: three and five.
     let cost_per_cell: u32 = if multi { 8 } else { 2 };
-    let read_cell = |image: &GrayImage<'_>, h: &Homography, u: f32, v: f32, multi: bool| {
+    let read_cell = |image: &GrayImage<'_>, h: &GridMap, u: f32, v: f32, multi: bool| {
         cost.set(cost.get().saturating_add(cost_per_cell));
         read_cell(image, h, u, v, multi)
     };

@@ -11,7 +11,10 @@
 //! again, and the fit runs there. Its four corners are distorted back, so the quad handed on
 //! (to the quick look, the edge refinement and the cell reading) is in the frame's own
 //! pixels like every other: the detector's output convention does not depend on the camera,
-//! and the pose, which undistorts the reported corners itself, does so exactly once.
+//! and the pose, which undistorts the reported corners itself, does so exactly once. The
+//! steps after the fit use the lens the same way (`refine`: the edges fitted where they are
+//! straight; `decode`: the cell grid laid on the ideal-lens marker and each cell's point
+//! taken into the frame), with [`ideal_pixel`] and [`frame_pixel`] from here.
 //!
 //! Bounded work: the boundary is first thinned to at most [`MAX_LENS_POINTS`] evenly spaced
 //! points (the fit's tolerance is a fiftieth of the length, so the corners lose nothing a
@@ -55,11 +58,25 @@ pub(crate) struct Straightened {
     pub origin: Point,
 }
 
-/// The pixel a distortion-free camera with `camera`'s intrinsics sees `pixel` at.
-fn ideal_pixel(camera: &CameraModel, pixel: Point) -> Option<Point> {
+/// The pixel a distortion-free camera with `camera`'s intrinsics sees `pixel` at (its
+/// ideal-lens pixel).
+pub(super) fn ideal_pixel(camera: &CameraModel, pixel: Point) -> Option<Point> {
     let n = camera.undistort(pixel)?;
     let p = Point::new(camera.fx * n.x + camera.cx, camera.fy * n.y + camera.cy);
     (p.x.is_finite() && p.y.is_finite()).then_some(p)
+}
+
+/// The frame pixel of an ideal-lens pixel: the inverse of [`ideal_pixel`].
+pub(super) fn frame_pixel(camera: &CameraModel, ideal: Point) -> Option<Point> {
+    camera.pixel_from_normalized(normalized(camera, ideal))
+}
+
+/// The normalised image coordinates of an ideal-lens pixel.
+pub(super) fn normalized(camera: &CameraModel, ideal: Point) -> Point {
+    Point::new(
+        (ideal.x - camera.cx) / camera.fx,
+        (ideal.y - camera.cy) / camera.fy,
+    )
 }
 
 /// Up to [`MAX_LENS_POINTS`] evenly spaced points of `boundary`, at their ideal-lens
@@ -102,12 +119,10 @@ pub(crate) fn bend_back(
 ) -> Option<Quad> {
     let mut corners = quad.corners;
     for c in corners.iter_mut() {
-        let ideal = Point::new(c.x + straight.origin.x, c.y + straight.origin.y);
-        let normalized = Point::new(
-            (ideal.x - camera.cx) / camera.fx,
-            (ideal.y - camera.cy) / camera.fy,
-        );
-        *c = camera.pixel_from_normalized(normalized)?;
+        *c = frame_pixel(
+            camera,
+            Point::new(c.x + straight.origin.x, c.y + straight.origin.y),
+        )?;
     }
     Some(Quad {
         corners,

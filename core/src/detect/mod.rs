@@ -30,6 +30,13 @@
 //!    corners with their decoded pattern, blurred, to the pixels: the edge search of step 4
 //!    is biased in scale when a cell is as narrow as the blur.
 //!
+//! ## Through the lens
+//! Given the camera ([`Detector::set_camera`]; the per-frame path,
+//! [`crate::pipeline::FramePipeline`], gives it its own), steps 3 to 5 work on a large marker
+//! as a distortion-free lens would show it (`lens`): the boundary is fitted undistorted, the
+//! edges are refined where they are straight and the cell grid is laid on the undistorted
+//! marker, every point taken back into the frame's pixels, in which the corners are reported.
+//!
 //! ## The paper's method
 //! [`Method::Paper`] reproduces the reference paper's tables. What it does differently
 //! (an edge map instead of step 1, every contour traced, no quick look, corners stepped back
@@ -394,9 +401,11 @@ impl Detector {
     }
 
     /// The camera the frames come from, or `None` (the default). With a camera whose lens
-    /// distorts, each boundary is undistorted before the quad fit, so markers whose edges the
-    /// lens bends are found (see `lens`); the corners reported stay in the frame's own
-    /// (distorted) pixels either way. A model that does not validate counts as none.
+    /// distorts, each long boundary is undistorted before the quad fit, so markers whose
+    /// edges the lens bends are found (see `lens`), and the edges of markers of about 30
+    /// pixels and more are refined and their cells read through the lens (`refine`,
+    /// `decode`); the corners reported stay in the frame's own (distorted) pixels either way.
+    /// A model that does not validate counts as none.
     pub fn set_camera(&mut self, camera: Option<CameraModel>) {
         self.camera = camera.filter(|c| c.validate().is_ok() && c.has_distortion());
     }

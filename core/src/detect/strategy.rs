@@ -5,6 +5,7 @@
 //! methods' choices, and the choices of each method sit together.
 
 use super::{contour, decode, quad, refine, threshold, Candidates, DetectorConfig, WORK_PRECHECK};
+use crate::camera::CameraModel;
 use crate::family::Family;
 use crate::geometry::{cyclic, Point};
 use crate::image::GrayImage;
@@ -138,7 +139,13 @@ impl Strategy for Robust {
             .map(|k| cyclic(c, k).distance(cyclic(c, k + 1)))
             .fold(f32::MAX, f32::min);
         let radius = (0.5 * shortest / candidates.max_quad_cells as f32).clamp(0.75, 4.0);
-        refine::refine_corners(candidates.image, quad, radius, samples)
+        refine::refine_corners(
+            candidates.image,
+            quad,
+            radius,
+            lens_for(candidates, c),
+            samples,
+        )
     }
 
     fn read(
@@ -149,7 +156,8 @@ impl Strategy for Robust {
         samples: &mut u32,
     ) -> Option<decode::GridRead> {
         let (image, config) = (candidates.image, candidates.config);
-        decode::read_robust(image, family, corners, config, samples)
+        let lens = lens_for(candidates, corners);
+        decode::read_robust(image, family, corners, lens, config, samples)
     }
 
     fn max_hamming(&self, config: &DetectorConfig) -> u8 {
@@ -159,4 +167,20 @@ impl Strategy for Robust {
     fn fits_patterns(&self, config: &DetectorConfig) -> bool {
         config.refine_edges && config.fit_small_markers
     }
+}
+
+/// The lens a candidate with these corners is refined and read through: the detector's
+/// camera, for markers of at least [`refine::MIN_LENS_PERIMETER_PX`] around; smaller ones
+/// have straight edges to within the refinement's own precision, and their cells are read by
+/// the homography alone.
+fn lens_for<'c>(
+    candidates: &Candidates<'c, '_, '_>,
+    corners: &[Point; 4],
+) -> Option<&'c CameraModel> {
+    let perimeter: f32 = (0..4)
+        .map(|k| cyclic(corners, k).distance(cyclic(corners, k + 1)))
+        .sum();
+    candidates
+        .camera
+        .filter(|_| perimeter >= refine::MIN_LENS_PERIMETER_PX)
 }

@@ -16,7 +16,8 @@
 //! and filter chain the board did not run.
 //!
 //! What it owns: the [`Detector`] (with its configuration), the families searched, the pad as
-//! built and as currently scaled, the camera model, the [`PadEstimator`] and the
+//! built and as currently scaled, the camera model (the detector's too: it fits long
+//! boundaries through the lens, [`Detector::set_camera`]), the [`PadEstimator`] and the
 //! [`PipelineSettings`] in force. What it is handed per frame: the image, its exposure time,
 //! what the vehicle has told us ([`VehicleState`], which the MAVLink side keeps) and the
 //! detector's frame-sized work memory ([`Buffers`], which the firmware keeps in DMA-reachable
@@ -184,6 +185,11 @@ impl<'a> FramePipeline<'a> {
             last_rotation: None,
             last_translation: None,
         };
+        // The detector fits long boundaries through the same lens as the pose (a
+        // distortion-free camera leaves it as without one), so that what a replay or a bench
+        // measures is what the board runs. Set in place, not on a local detector moved in
+        // after: the detector is tens of KiB, and the firmware's stack is measured.
+        pipeline.detector.set_camera(Some(camera));
         // The error is kept in the pad (as built); `apply` reports it to callers that ask.
         let _ = pipeline.apply(settings);
         pipeline

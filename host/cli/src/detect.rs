@@ -1,7 +1,10 @@
 //! `touchdown detect`: find markers in image files (the contract's host CLI).
 //!
 //! One [`Detector`] and one [`HostWorkspace`] serve every image of a run, as on the camera
-//! board, so the figures printed are those of a warm detector. `time_ms` is measured around
+//! board, so the figures printed are those of a warm detector. With `--camera` the detector
+//! is given the camera, as the board's per-frame path gives it its own: markers whose edges
+//! the lens bends are fitted undistorted (touchdown's method only; the paper's stays as
+//! published). `time_ms` is measured around
 //! [`Detector::detect`] alone: decoding the file is not part of the detection time.
 
 use std::io::{self, Write};
@@ -58,7 +61,9 @@ marker-frame points into the camera frame, X_cam = R X_marker + t (marker frame:
 y up, z out of the printed face; camera frame: x right, y down, z forward; metres), and the
 RMS reprojection error of the corners in pixels. Corners are undistorted with the camera's
 Brown-Conrady coefficients; the pose is IPPE's better planar solution refined by
-Levenberg-Marquardt.
+Levenberg-Marquardt. With a distorting camera the detector also fits the outlines of large
+markers through the lens (their edges are straight again there), which finds markers a
+wide-angle lens bends; the corners printed stay in the image's own pixels either way.
 
 Exit status: 0 when every image was read (even with no marker found); 2 when an image could
 not be read (one line per file on stderr; the other images are still processed) or an option
@@ -202,6 +207,11 @@ pub fn run(
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
     let mut detector = Detector::new(args.method.config());
+    // With --camera, touchdown's detector fits long boundaries through the lens, as the
+    // board's per-frame path does (`FramePipeline`); the paper's method stays as published.
+    if args.method == MethodArg::Robust {
+        detector.set_camera(pose_setup.as_ref().map(|(camera, _)| *camera));
+    }
     let mut workspace = HostWorkspace::new();
     let mut totals = Totals::default();
 
@@ -236,7 +246,7 @@ pub fn run(
             if (camera.width as usize, camera.height as usize) != (frame.width, frame.height) {
                 let _ = writeln!(
                     err,
-                    "warning: {}: image is {}x{} but the camera file is for {}x{}; poses use the camera file as given",
+                    "warning: {}: image is {}x{} but the camera file is for {}x{}; the detection's lens model and the poses use the camera file as given",
                     path.display(),
                     frame.width,
                     frame.height,

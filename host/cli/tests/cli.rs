@@ -308,6 +308,127 @@ fn family_file_is_accepted() {
     assert_contract_shape(&json_lines(&output)[0]);
 }
 
+/// `detect --camera` hands the camera to the detector, as the board's per-frame path does: a
+/// 250-pixel marker under a wide-angle lens (k1 = -0.35), whose edges the lens bows by
+/// pixels, rendered by the simulator. Its corners come out within a fraction of a pixel of
+/// the truth with the camera, pixels off without it.
+#[test]
+fn detect_with_a_distorting_camera_fits_through_the_lens() {
+    use touchdown_formats::pad::{MarkerConfig, PadConfig};
+    use touchdown_sim::camera::SimCamera;
+    use touchdown_sim::pad::PrintedPad;
+    use touchdown_sim::scenario::{FramePlan, Scenario};
+    use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
+    use touchdown_sim::Simulator;
+
+    let mut scenario = Scenario::named("paper", 7).expect("the paper scenario");
+    scenario.camera = SimCamera::with_fov(640, 480, 70.0, [-0.35, 0.35 / 3.0, 0.0, 0.0, 0.0]);
+    scenario.trajectory = Trajectory {
+        segments: vec![Segment {
+            t0: 0.0,
+            t1: 1.0,
+            from: [0.0, 0.0, 1.0],
+            to: [0.0, 0.0, 1.0],
+            profile: Profile::Hold,
+        }],
+        yaw: 0.0,
+        wobble: Wobble::none(),
+        tilt_with_acceleration: false,
+        trim: (0.05, -0.03),
+    };
+    scenario.exposure_time_s = 0.0;
+    scenario.frames = vec![FramePlan {
+        t_us: 0,
+        label: None,
+    }];
+    let mut sim = Simulator::new(scenario);
+    let model = sim.scenario.camera.model;
+    let pose = sim.camera_pose(0.0);
+    let pad_of = |size: f64| {
+        PrintedPad::from_config(&PadConfig {
+            name: "lens".to_string(),
+            markers: vec![MarkerConfig {
+                family: "aruco_6x6_250".to_string(),
+                id: 42,
+                size,
+                x: 0.0,
+                y: 0.0,
+                yaw_deg: 17.0,
+            }],
+        })
+        .expect("a one-marker pad")
+    };
+    let corners_of = |pad: &PrintedPad| {
+        pad.markers[0].corners().map(|p| {
+            sim.scenario
+                .camera
+                .project(pose.to_camera(p))
+                .expect("in front of the camera")
+        })
+    };
+    // The lens shrinks the marker: its printed size is scaled until it is 250 px across.
+    let mut size = 250.0 / f64::from(model.fx);
+    for _ in 0..3 {
+        let c = corners_of(&pad_of(size));
+        let edge = (0..4)
+            .map(|k| {
+                let (a, b) = (c[k], c[(k + 1) % 4]);
+                (a[0] - b[0]).hypot(a[1] - b[1])
+            })
+            .sum::<f64>()
+            / 4.0;
+        size *= 250.0 / edge;
+    }
+    let pad = pad_of(size);
+    let truth = corners_of(&pad);
+    sim.world.pad = pad;
+    let frame = sim.render(0).expect("one frame").image;
+    let image = scratch("lens-marker.png");
+    save_png(&image, &frame).expect("write");
+    let camera = scratch("lens-camera.toml");
+    let d = model.distortion;
+    std::fs::write(
+        &camera,
+        format!(
+            "width = 640\nheight = 480\nfx = {}\nfy = {}\ncx = {}\ncy = {}\ndistortion = [{}, {}, {}, {}, {}]\n",
+            model.fx, model.fy, model.cx, model.cy, d[0], d[1], d[2], d[3], d[4]
+        ),
+    )
+    .expect("write");
+    let size_text = format!("{size}");
+    let corner_error = |extra: &[&str]| -> f64 {
+        let mut args = vec!["detect", "--json", "--family", "aruco_6x6_250"];
+        args.extend_from_slice(extra);
+        args.push(path_str(&image));
+        let output = touchdown(&args);
+        assert_eq!(exit_code(&output), Some(0), "{}", text(&output.stderr));
+        let json = &json_lines(&output)[0];
+        let detections = json["detections"].as_array().expect("detections");
+        assert_eq!(detections.len(), 1, "{json}");
+        assert_eq!(detections[0]["id"], 42);
+        let corners = detections[0]["corners"].as_array().expect("corners");
+        corners
+            .iter()
+            .zip(&truth)
+            .map(|(c, t)| {
+                let (x, y) = (c[0].as_f64().expect("x"), c[1].as_f64().expect("y"));
+                (x - t[0]).hypot(y - t[1])
+            })
+            .fold(0.0, f64::max)
+    };
+    let with_camera = corner_error(&["--camera", path_str(&camera), "--tag-size", &size_text]);
+    let without = corner_error(&[]);
+    println!("corner error with the camera {with_camera:.3} px, without {without:.3} px");
+    assert!(
+        with_camera < 0.3,
+        "with the camera: corners {with_camera} px off"
+    );
+    assert!(
+        without > 1.5,
+        "without the camera: corners {without} px off"
+    );
+}
+
 #[test]
 fn camera_options_are_checked_and_give_the_pose() {
     let image = scratch("camera-blank.pgm");
