@@ -72,13 +72,22 @@ fn attitude(seq: u8, time_boot_ms: u32) -> Vec<u8> {
     raw.raw_bytes().to_vec()
 }
 
-/// 20 frames of the simulated descent (pad in view, --ideal), rendered once for all tests.
+/// A scratch directory of these tests under the target directory (not /tmp, where every
+/// run would leave one more), emptied: what a previous run left there goes first.
+fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("companion-net-tests")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// 20 frames of the simulated descent (pad in view, --ideal), rendered once for all tests of
+/// a run (they only read it) and replaced by the next run.
 fn recording() -> &'static PathBuf {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let dir =
-            std::env::temp_dir().join(format!("touchdown-net-descent-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = scratch("descent");
         let status = touchdown()
             .args([
                 "simulate",
@@ -487,6 +496,20 @@ fn summary_counts_unknown_messages_apart_from_bad_crcs() {
         !stdout.contains("Some(") && !stdout.contains("None"),
         "{stdout}"
     );
+}
+
+/// The rendered recording lives under the target directory, never in /tmp.
+#[test]
+fn the_recording_is_in_the_target_directory() {
+    let dir = recording();
+    assert!(
+        dir.starts_with(env!("CARGO_TARGET_TMPDIR")),
+        "{}",
+        dir.display()
+    );
+    assert!(dir.join("frames.csv").is_file(), "{}", dir.display());
+    let old = std::env::temp_dir().join(format!("touchdown-net-descent-{}", std::process::id()));
+    assert!(!old.exists(), "{}", old.display());
 }
 
 /// Without a link the command says which options give one, in one line, with status 2.
