@@ -302,7 +302,7 @@ impl FrameParser {
                         self.damaged = 0;
                     }
                     Check::UnknownFramed => {
-                        // Skipped whole, payload unscanned (see the module docs).
+                        // Skipped whole: nothing in its payload is counted (see the module docs).
                         self.stats.unknown = self.stats.unknown.saturating_add(1);
                         self.consume(len);
                         self.damaged = 0;
