@@ -169,8 +169,23 @@ impl GridMap {
     pub(crate) fn homography(h: Homography) -> Self {
         GridMap { h, lens: None }
     }
+}
 
+/// A map from grid points to frame pixels: the reads are generic over it, so that without a
+/// lens they map by the bare homography, as fast as before there was a lens to ask about.
+trait CellMap {
     /// The frame pixel of grid point (u, v).
+    fn map(&self, u: f32, v: f32) -> Option<Point>;
+}
+
+impl CellMap for Homography {
+    #[inline]
+    fn map(&self, u: f32, v: f32) -> Option<Point> {
+        Homography::map(self, u, v)
+    }
+}
+
+impl CellMap for GridMap {
     #[inline]
     fn map(&self, u: f32, v: f32) -> Option<Point> {
         let p = self.h.map(u, v)?;
@@ -183,7 +198,7 @@ impl GridMap {
 
 /// Reads a cell centred at grid point (u, v).
 #[inline]
-fn read_cell(image: &GrayImage<'_>, h: &GridMap, u: f32, v: f32, multi: bool) -> Option<f32> {
+fn read_cell<M: CellMap>(image: &GrayImage<'_>, h: &M, u: f32, v: f32, multi: bool) -> Option<f32> {
     if !multi {
         let p = h.map(u, v)?;
         return Some(image.sample(p.x, p.y));
@@ -310,21 +325,39 @@ pub(crate) fn read_robust(
         // The corners' undistortion (Newton, about as much as four samples each).
         cost.set(LENS_CORNERS_COST);
     }
-    let grid = read_robust_counted(image, family, quad, lens, config, &cost);
+    let grid = match lens {
+        None => {
+            let h = grid_homography(family, quad)?;
+            read_robust_counted(
+                image,
+                family,
+                quad,
+                &h,
+                GridMap::homography(h),
+                config,
+                &cost,
+            )
+        }
+        Some(_) => {
+            let map = GridMap::new(family, quad, lens)?;
+            read_robust_counted(image, family, quad, &map, map, config, &cost)
+        }
+    };
     *samples = samples.saturating_add(cost.get());
     grid
 }
 
-/// [`read_robust`], counting its reads in `cost`.
-fn read_robust_counted(
+/// [`read_robust`], reading the cells through `h` (`grid`, kept in the result for the
+/// corners, maps the same), counting its reads in `cost`.
+fn read_robust_counted<M: CellMap>(
     image: &GrayImage<'_>,
     family: &Family<'_>,
     quad: &[Point; 4],
-    lens: Option<&CameraModel>,
+    h: &M,
+    grid: GridMap,
     config: &DetectorConfig,
     cost: &core::cell::Cell<u32>,
 ) -> Option<GridRead> {
-    let h = GridMap::new(family, quad, lens)?;
     let n = family.grid as usize;
     let b = family.border_ring as isize;
     let reversed = family.reversed();
@@ -333,7 +366,7 @@ fn read_robust_counted(
     let multi = cell_px >= MULTI_SAMPLE_CELL_PX;
     // A single read: one mapped point, one sample; a multi-sampled one: three and five.
     let cost_per_cell: u32 = if multi { 8 } else { 2 };
-    let read_cell = |image: &GrayImage<'_>, h: &GridMap, u: f32, v: f32, multi: bool| {
+    let read_cell = |image: &GrayImage<'_>, h: &M, u: f32, v: f32, multi: bool| {
         cost.set(cost.get().saturating_add(cost_per_cell));
         read_cell(image, h, u, v, multi)
     };
@@ -346,7 +379,7 @@ fn read_robust_counted(
     let mut values = [0.0f32; MAX_GRID * MAX_GRID];
     for_ring(n, b, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
-        if let Some(z) = read_cell(image, &h, u, v, multi) {
+        if let Some(z) = read_cell(image, h, u, v, multi) {
             black.add(u, v, z);
             if let Some(slot) = values.get_mut(r as usize * n + c as usize) {
                 *slot = z;
@@ -357,7 +390,7 @@ fn read_robust_counted(
     let mut white_count = 0usize;
     for_ring(n, white_ring, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
-        if let Some(z) = read_cell(image, &h, u, v, multi) {
+        if let Some(z) = read_cell(image, h, u, v, multi) {
             white.add(u, v, z);
             if let Some(slot) = white_samples.get_mut(white_count) {
                 *slot = z;
@@ -414,7 +447,7 @@ fn read_robust_counted(
             for c in 0..n {
                 if family.role(r, c) == CellRole::Data {
                     let (u, v) = (c as f32 + 0.5 + shift.0, r as f32 + 0.5 + shift.1);
-                    let z = read_cell(image, &h, u, v, multi)?;
+                    let z = read_cell(image, h, u, v, multi)?;
                     if let Some(slot) = values.get_mut(r * n + c) {
                         *slot = z;
                     }
@@ -505,7 +538,7 @@ fn read_robust_counted(
         return None;
     }
     Some(GridRead {
-        h,
+        h: grid,
         readings: family.codes_of_grid(cells.get(..n * n)?),
         margin,
         contrast,
