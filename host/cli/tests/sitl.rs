@@ -11,10 +11,15 @@
 //!   5 cm.
 //! - Honest: a board that believes its camera is turned 90 degrees (TD_CAM_YAW = 90, every
 //!   target turned a quarter turn) does not land on the pad, in still air.
+//! - `--record DIR` writes a recording `touchdown replay DIR` replays: the same frames, and
+//!   the replay's board sends and its autopilot receives the targets the landing did. Started
+//!   low (4 m), which also keeps the frames that end a landing, the pad a few millimetres
+//!   from the lens and blurred by thousands of pixels, fast to render.
 //!
 //! Rendered at 320x240 (the same lens, 2x2 supersampling) and 10 frames per second, the
 //! seeds flown on threads, to keep the test within CI's budget.
 
+use std::path::PathBuf;
 use std::process::Command;
 
 /// The gusty landings' bound, cm (see the module docs).
@@ -100,6 +105,57 @@ fn ten_gusty_seeds_land_on_the_pad_and_still_air_within_5_cm() {
         missed,
         "a turned target landed on the pad: {landing} {stderr}"
     );
+}
+
+/// A fresh scratch directory path (removed if it exists, not created).
+fn scratch(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("touchdown-cli-sitl-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn a_recorded_landing_replays_frame_for_frame() {
+    let dir = scratch("record");
+    let dir_arg = dir.to_str().expect("a UTF-8 temp path");
+    let started = std::time::Instant::now();
+    let (code, report, stderr) = sitl(&["--height", "4", "--offset", "0.5", "--record", dir_arg]);
+    assert_eq!(code, 0, "{stderr}");
+    eprintln!("landing from 4 m, recorded, in {:.1?}", started.elapsed());
+    let landing = &report["landings"][0];
+    let frames = landing["frames"].as_u64().expect("frames");
+    assert!(frames > 40, "{landing}");
+
+    let out = touchdown()
+        .args(["replay", dir_arg, "--json", "--no-plots"])
+        .output()
+        .expect("touchdown runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let replay: serde_json::Value = serde_json::from_slice(&out.stdout).expect("replay JSON");
+    assert_eq!(
+        replay["setup"]["frames"].as_u64(),
+        Some(frames),
+        "{}",
+        replay["setup"]
+    );
+    assert_eq!(replay["summary"]["frames"].as_u64(), Some(frames));
+    let ours = replay["summary"]["methods"]
+        .as_array()
+        .and_then(|m| m.iter().find(|m| m["name"] == "ours"))
+        .expect("the replay scores ours");
+    // The replay flies the same board against the same simulated autopilot on the same
+    // frames: it finds the pad in as many, and its autopilot receives as many targets.
+    assert_eq!(ours["detected"], landing["frames_with_fix"], "{ours}");
+    assert_eq!(
+        ours["flight"]["reconstructed"]["frames"], landing["targets_received"],
+        "{ours}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -214,8 +214,29 @@ fn paper_bbox(
 }
 
 /// Separable Gaussian blur, edges replicated.
+///
+/// A kernel that reaches past the image (the defocus of a pad a few millimetres from the
+/// lens: a sigma of thousands of pixels) takes [`wide_blur_pass`], whose cost is bounded
+/// by the image's size; the usual small kernel keeps the direct sum, so the images it gives
+/// are unchanged to the bit.
 pub(crate) fn gaussian_blur(buffer: &mut [f32], w: usize, h: usize, sigma: f64) {
-    let radius = (4.0 * sigma).ceil().max(1.0) as isize;
+    let radius = (4.0 * sigma).ceil().max(1.0);
+    if radius >= w.max(h) as f64 {
+        let kernel = WideKernel::new(sigma, radius, w.max(h));
+        let mut line = Vec::new();
+        for y in 0..h {
+            if let Some(row) = buffer.get_mut(y * w..(y + 1) * w) {
+                wide_blur_pass(row, 1, &kernel, &mut line);
+            }
+        }
+        for x in 0..w {
+            if let Some(column) = buffer.get_mut(x..) {
+                wide_blur_pass(column, w, &kernel, &mut line);
+            }
+        }
+        return;
+    }
+    let radius = radius as isize;
     let mut kernel: Vec<f32> = (-radius..=radius)
         .map(|k| (-(k * k) as f64 / (2.0 * sigma * sigma)).exp() as f32)
         .collect();
@@ -246,6 +267,89 @@ pub(crate) fn gaussian_blur(buffer: &mut [f32], w: usize, h: usize, sigma: f64) 
                 *out = acc;
             }
         }
+    }
+}
+
+/// A normalised Gaussian kernel of `radius` taps each side, stored only as far as an image
+/// line of up to `len` pixels can tell its taps apart: every tap further out lands on the
+/// line's edge pixel (edges replicated), so it enters as a tail sum.
+struct WideKernel {
+    /// `weights[j]`: the weight of the taps at offset +-j, j < len.
+    weights: Vec<f64>,
+    /// `tails[m]`: the weights of the offsets m..=radius added up, m in 0..=len.
+    tails: Vec<f64>,
+}
+
+/// Above this many taps beyond the stored ones the far tail is summed over coarser steps
+/// (trapezoids over [`FAR_TAIL_STEPS`] intervals): a Gaussian that wide is flat to far
+/// below an f32's resolution over one step, and the sum stays bounded in time however close
+/// the scene comes.
+const FAR_TAIL_EXACT_TAPS: f64 = 1.0e6;
+/// Intervals of the coarse far-tail sum.
+const FAR_TAIL_STEPS: usize = 100_000;
+
+impl WideKernel {
+    fn new(sigma: f64, radius: f64, len: usize) -> Self {
+        let g = |j: f64| (-(j * j) / (2.0 * sigma * sigma)).exp();
+        let weights: Vec<f64> = (0..len).map(|j| g(j as f64)).collect();
+        // The taps from `len` to `radius`, as far as any line can reach.
+        let first = len as f64;
+        let far = if radius - first <= FAR_TAIL_EXACT_TAPS {
+            let mut sum = 0.0;
+            let mut j = first;
+            while j <= radius {
+                sum += g(j);
+                j += 1.0;
+            }
+            sum
+        } else {
+            let step = (radius - first) / FAR_TAIL_STEPS as f64;
+            let inner: f64 = (1..FAR_TAIL_STEPS)
+                .map(|k| g(first + k as f64 * step))
+                .sum();
+            // The sum of unit-spaced taps is the integral (trapezoids of width `step`) plus
+            // half of each end's tap (Euler-Maclaurin; the next term is below 1e-12 here).
+            (0.5 * (g(first) + g(radius)) + inner) * step + 0.5 * (g(first) + g(radius))
+        };
+        let mut tails = vec![0.0; len + 1];
+        let mut acc = far;
+        if let Some(t) = tails.get_mut(len) {
+            *t = acc;
+        }
+        for m in (0..len).rev() {
+            acc += weights.get(m).copied().unwrap_or(0.0);
+            if let Some(t) = tails.get_mut(m) {
+                *t = acc;
+            }
+        }
+        // Both sides, the centre tap once.
+        let total =
+            2.0 * tails.first().copied().unwrap_or(1.0) - weights.first().copied().unwrap_or(0.0);
+        let norm = if total > 0.0 { 1.0 / total } else { 0.0 };
+        WideKernel {
+            weights: weights.iter().map(|v| v * norm).collect(),
+            tails: tails.iter().map(|v| v * norm).collect(),
+        }
+    }
+}
+
+/// Blurs one line of `data` (every `stride`-th value) with `kernel`, in place.
+fn wide_blur_pass(data: &mut [f32], stride: usize, kernel: &WideKernel, line: &mut Vec<f32>) {
+    line.clear();
+    line.extend(data.iter().step_by(stride).copied());
+    let n = line.len();
+    let (Some(&first), Some(&last)) = (line.first(), line.last()) else {
+        return;
+    };
+    let tail = |m: usize| kernel.tails.get(m).copied().unwrap_or(0.0);
+    for (x, out) in data.iter_mut().step_by(stride).enumerate() {
+        // Offsets below -x all land on the first pixel, those past n - 1 - x on the last.
+        let mut acc = tail(x + 1) * f64::from(first) + tail(n - x) * f64::from(last);
+        for (s, &v) in line.iter().enumerate() {
+            let weight = kernel.weights.get(s.abs_diff(x)).copied().unwrap_or(0.0);
+            acc += weight * f64::from(v);
+        }
+        *out = acc as f32;
     }
 }
 
