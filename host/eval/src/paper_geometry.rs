@@ -239,30 +239,69 @@ pub fn run(config: &Config, methods: &[Method]) -> Result<Report, ExperimentErro
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ ((index as u64) << 32));
         let wander = Wander::new(&mut rng, config);
         let total = config.settle_frames + config.frames_per_set_point;
-        for k in 0..total {
-            let t = k as f64 * dt;
-            let (offset, angles) = wander.at(t);
-            let position = sp.position + Vector3::from(offset);
-            let rotation = camera_to_pad(sp.heading_deg, angles);
-            let rendered = render(
-                config,
-                &pattern,
-                f64::from(marker.size),
-                &position,
-                &rotation,
-                rng.random(),
-            );
+        // Where each frame is seen from, and its noise seed, drawn in frame order (so the
+        // frames do not depend on how many threads render them).
+        let views: Vec<(f64, Vector3<f64>, Matrix3<f64>, u64)> = (0..total)
+            .map(|k| {
+                let t = k as f64 * dt;
+                let (offset, angles) = wander.at(t);
+                let position = sp.position + Vector3::from(offset);
+                (
+                    t,
+                    position,
+                    camera_to_pad(sp.heading_deg, angles),
+                    rng.random(),
+                )
+            })
+            .collect();
+        // Rendering is most of the run's time and each frame is independent: it is spread
+        // over the machine's cores; the methods then see the frames in order.
+        let rendered = render_all(config, &pattern, f64::from(marker.size), &views);
+        for (k, ((t, position, rotation, _), image)) in views.iter().zip(&rendered).enumerate() {
             let frame = Frame {
                 set_point: (k >= config.settle_frames).then_some(&sp.set_point),
                 t_us: (t * 1e6).round() as u64,
-                truth: position,
+                truth: *position,
                 attitude: Some(rotation.cast::<f32>()),
-                image: rendered.view(),
+                image: image.view(),
             };
             experiment.process(&frame)?;
         }
     }
     Ok(experiment.report())
+}
+
+/// [`render`] of every view, in order, on as many threads as the machine has cores.
+fn render_all(
+    config: &Config,
+    pattern: &MarkerPattern,
+    size: f64,
+    views: &[(f64, Vector3<f64>, Matrix3<f64>, u64)],
+) -> Vec<touchdown_formats::image_io::GrayFrame> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let chunk = views.len().div_ceil(threads.max(1)).max(1);
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = views
+            .chunks(chunk)
+            .map(|part| {
+                scope.spawn(move || {
+                    part.iter()
+                        .map(|(_, position, rotation, seed)| {
+                            render(config, pattern, size, position, rotation, *seed)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|worker| {
+                worker
+                    .join()
+                    .unwrap_or_else(|e| std::panic::resume_unwind(e))
+            })
+            .collect()
+    })
 }
 
 /// One frame of the marker seen from `position` with camera-to-pad `rotation`.
