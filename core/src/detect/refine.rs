@@ -217,6 +217,28 @@ pub(crate) fn half_pixel_adjusted(quad: &Quad) -> [Point; 4] {
     offset_quad(quad, 0.5)
 }
 
+/// Where an edge's profiles are taken: one point per pixel of the edge from `a` to `b` (on
+/// small, steep markers every point counts), keeping clear of the corners by the profile's
+/// reach (at least 4 %, at most 30 % of the edge at each end).
+fn edge_sample_points(a: Point, b: Point, radius: f32) -> impl Iterator<Item = Point> {
+    let len = a.distance(b);
+    let count = (len as usize).clamp(3, MAX_SAMPLES);
+    let skip = ((radius + 1.0) / len).clamp(0.04, 0.3);
+    (0..count).map(move |i| {
+        let s = skip + (1.0 - 2.0 * skip) * (i as f32 + 0.5) / count as f32;
+        Point::new(a.x + s * (b.x - a.x), a.y + s * (b.y - a.y))
+    })
+}
+
+/// Corner `k` where fitted edges `k - 1` and `k` meet, if it lies near the rough corner
+/// (within 15 % of the edge from it, at least 2.5 px): a corner further off means a line fit
+/// went wrong.
+fn corner_near(lines: &[Line; 4], rough: &[Point; 4], k: usize) -> Option<Point> {
+    let q = intersect(&cyclic(lines, k + 3), &cyclic(lines, k))?;
+    let limit = (0.15 * cyclic(rough, k).distance(cyclic(rough, k + 1))).max(2.5);
+    (q.distance(cyclic(rough, k)) <= limit).then_some(q)
+}
+
 /// Sub-pixel corners of `quad`. `radius` (pixels) bounds how far an edge may move, and must
 /// stay below a cell so the search never reaches the next edge inside the marker. With a
 /// `lens`, the edges are found and fitted through it ([`refine_corners_through_lens`]). Adds
@@ -252,14 +274,8 @@ fn refine_straight(
         let Some(n) = outward_normal(a, b) else {
             return fallback;
         };
-        let len = a.distance(b);
-        // One point per pixel of edge: on small, steep markers every point counts.
-        let count = (len as usize).clamp(3, MAX_SAMPLES);
-        let skip = ((radius + 1.0) / len).clamp(0.04, 0.3);
         let mut points: heapless::Vec<(Point, f32), MAX_SAMPLES> = heapless::Vec::new();
-        for i in 0..count {
-            let s = skip + (1.0 - 2.0 * skip) * (i as f32 + 0.5) / count as f32;
-            let p = Point::new(a.x + s * (b.x - a.x), a.y + s * (b.y - a.y));
+        for p in edge_sample_points(a, b, radius) {
             *samples = samples.saturating_add(profile_samples(radius) as u32);
             if let Some(found) = edge_point(image, p, n, sign, radius) {
                 let _ = points.push(found);
@@ -272,13 +288,9 @@ fn refine_straight(
     }
     let mut out = [Point::default(); 4];
     for (k, slot) in out.iter_mut().enumerate() {
-        let Some(q) = intersect(&cyclic(&lines, k + 3), &cyclic(&lines, k)) else {
+        let Some(q) = corner_near(&lines, c, k) else {
             return fallback;
         };
-        let limit = (0.15 * cyclic(c, k).distance(cyclic(c, k + 1))).max(2.5);
-        if q.distance(cyclic(c, k)) > limit {
-            return fallback;
-        }
         *slot = q;
     }
     out
@@ -335,13 +347,8 @@ fn refine_corners_through_lens(
     for (k, slot) in lines.iter_mut().enumerate() {
         let (a, b) = (cyclic(&ideal, k), cyclic(&ideal, k + 1));
         let n = outward_normal(a, b)?;
-        let len = a.distance(b);
-        let count = (len as usize).clamp(3, MAX_SAMPLES);
-        let skip = ((radius + 1.0) / len).clamp(0.04, 0.3);
         let mut points: heapless::Vec<(Point, f32), MAX_SAMPLES> = heapless::Vec::new();
-        for i in 0..count {
-            let s = skip + (1.0 - 2.0 * skip) * (i as f32 + 0.5) / count as f32;
-            let q = Point::new(a.x + s * (b.x - a.x), a.y + s * (b.y - a.y));
+        for q in edge_sample_points(a, b, radius) {
             *samples = samples.saturating_add(profile_samples(radius) as u32 + LENS_POINT_SAMPLES);
             let Some((p, n_frame, stretch)) = through_lens(camera, q, n) else {
                 continue;
@@ -355,12 +362,7 @@ fn refine_corners_through_lens(
     }
     let mut out = [Point::default(); 4];
     for (k, slot) in out.iter_mut().enumerate() {
-        let q = intersect(&cyclic(&lines, k + 3), &cyclic(&lines, k))?;
-        let limit = (0.15 * cyclic(&ideal, k).distance(cyclic(&ideal, k + 1))).max(2.5);
-        if q.distance(cyclic(&ideal, k)) > limit {
-            return None;
-        }
-        *slot = lens::frame_pixel(camera, q)?;
+        *slot = lens::frame_pixel(camera, corner_near(&lines, &ideal, k)?)?;
     }
     Some(out)
 }

@@ -30,7 +30,7 @@
 //! heading) to the camera frame; with the vehicle attitude `R_ned_from_body` and the mount
 //! `R_body_from_camera`, it is `(R_ned_from_body R_body_from_camera)^T R_ned_from_level`,
 //! where `R_ned_from_level` maps (x, y, z-up) to NED, e.g. x = north, y = west, z = up.
-// Fixed 3x3/6x6 matrix indices only, never from data.
+// Fixed 3x3/6x6 matrix indices and the two image axes only, never from data.
 #![allow(clippy::indexing_slicing)]
 
 use super::pad_pose::{layout_marker, PadFix, PIXEL_NOISE_FLOOR_PX};
@@ -54,8 +54,8 @@ pub const ROW_RATE_PRIOR_RAD_S: f32 = 0.44;
 #[derive(Clone, Copy)]
 struct Equation {
     t_part: Vector3<f32>,
-    /// The image's y axis (rows): the rate that stretches; else x, the one that shears.
-    vertical: bool,
+    /// The image axis: 0 = x (the rate that shears), 1 = y (rows: the rate that stretches).
+    axis: usize,
     /// The corner's row against the corners' mean row, normalised units (0: no rates).
     s: f32,
     b: f32,
@@ -122,7 +122,7 @@ pub fn level_pad_fix(
     // for the translation, whose inverse is also the translation's covariance with the rates
     // free (the Schur complement), and which has no panic path (a general 5x5 inverse has).
     let mut translation = fix.pose.translation;
-    let mut schur = Matrix3::<f32>::zeros();
+    let mut schur_inverse = Matrix3::<f32>::zeros();
     let mut residual_sq = 0.0f32;
     let mut equations = 0usize;
     for _ in 0..2 {
@@ -158,56 +158,47 @@ pub fn level_pad_fix(
                 let pair = [
                     Equation {
                         t_part: Vector3::new(w, 0.0, -n.x * w),
-                        vertical: false,
+                        axis: 0,
                         s,
                         b: (n.x * p.z - p.x) * w,
                     },
                     Equation {
                         t_part: Vector3::new(0.0, w, -n.y * w),
-                        vertical: true,
+                        axis: 1,
                         s,
                         b: (n.y * p.z - p.y) * w,
                     },
                 ];
                 for equation in pair {
-                    let axis = usize::from(equation.vertical);
                     normal += equation.t_part * equation.t_part.transpose();
                     rhs += equation.t_part * equation.b;
-                    if let (Some(d), Some(c), Some(r)) = (
-                        rate_normal.get_mut(axis),
-                        coupling.get_mut(axis),
-                        rate_rhs.get_mut(axis),
-                    ) {
-                        *d += s * s;
-                        *c += equation.t_part * s;
-                        *r += s * equation.b;
-                    }
+                    let axis = equation.axis;
+                    rate_normal[axis] += s * s;
+                    coupling[axis] += equation.t_part * s;
+                    rate_rhs[axis] += s * equation.b;
                     let _ = rows.push(equation);
                 }
             }
         }
         equations = rows.len();
         // Eliminate the rates (each `rate_normal` is at least the prior's, > 0).
-        schur = normal;
+        let mut schur = normal;
         let mut reduced = rhs;
         for axis in 0..2 {
             let (d, c, r) = (rate_normal[axis], coupling[axis], rate_rhs[axis]);
             schur -= c * c.transpose() / d;
             reduced -= c * (r / d);
         }
-        let inverse = schur.try_inverse().ok_or(PoseError::NoSolution)?;
-        translation = inverse * reduced;
+        schur_inverse = schur.try_inverse().ok_or(PoseError::NoSolution)?;
+        translation = schur_inverse * reduced;
         let rates = [0, 1]
             .map(|axis| (rate_rhs[axis] - coupling[axis].dot(&translation)) / rate_normal[axis]);
         residual_sq = rows
             .iter()
             .map(|equation| {
-                let rate = if equation.vertical {
-                    rates[1]
-                } else {
-                    rates[0]
-                };
-                let e = equation.t_part.dot(&translation) + equation.s * rate - equation.b;
+                let e = equation.t_part.dot(&translation)
+                    + equation.s * rates.get(equation.axis).copied().unwrap_or(0.0)
+                    - equation.b;
                 e * e
             })
             .sum();
@@ -217,7 +208,7 @@ pub fn level_pad_fix(
     }
     let rms_normalised = libm::sqrtf(residual_sq / equations as f32);
     let sigma = rms_normalised.max(noise_normalised);
-    let translation_cov = schur.try_inverse().ok_or(PoseError::NoSolution)? * (sigma * sigma);
+    let translation_cov = schur_inverse * (sigma * sigma);
     // Rotation: only the heading is still uncertain, a rotation about the vertical, which is
     // `up` in the camera frame (the covariance is over left increments in the camera frame).
     // Its variance is the image fix's along that axis; the tilt's is gone.
@@ -260,8 +251,8 @@ mod tests {
         camera
     }
 
-    /// Straight down, image right = level x (north), image down = level y... turned: the
-    /// level frame's y (west) is the image's up, z (up) is against the optical axis.
+    /// Straight down: the level frame's x (north) is the image's right, its y (west) the
+    /// image's up, its z (up) against the optical axis.
     fn down() -> Matrix3<f32> {
         Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
     }

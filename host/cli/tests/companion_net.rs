@@ -15,6 +15,8 @@
 
 #![cfg(unix)]
 
+mod common;
+
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
 use std::path::PathBuf;
@@ -23,34 +25,13 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use touchdown_core::companion::mavlink::dialects::common::{
-    MavAutopilot, MavFrame, MavMessage, MavModeFlag, MavState, MavType, ATTITUDE_QUATERNION_DATA,
-    HEARTBEAT_DATA,
+    MavFrame, MavMessage, ATTITUDE_QUATERNION_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::FrameParser;
 
 fn touchdown() -> Command {
     Command::new(env!("CARGO_BIN_EXE_touchdown"))
-}
-
-/// An ArduPilot copter's HEARTBEAT (system 1, component 1) as MAVLink 2 bytes.
-fn heartbeat(seq: u8) -> Vec<u8> {
-    let header = MavHeader {
-        system_id: 1,
-        component_id: 1,
-        sequence: seq,
-    };
-    let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_QUADROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    });
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(header, &msg);
-    raw.raw_bytes().to_vec()
 }
 
 /// A level ATTITUDE_QUATERNION, nose 30 degrees east of north, from the same autopilot.
@@ -72,22 +53,12 @@ fn attitude(seq: u8, time_boot_ms: u32) -> Vec<u8> {
     raw.raw_bytes().to_vec()
 }
 
-/// A scratch directory of these tests under the target directory (not /tmp, where every
-/// run would leave one more), emptied: what a previous run left there goes first.
-fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("companion-net-tests")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
-
 /// 20 frames of the simulated descent (pad in view, --ideal), rendered once for all tests of
 /// a run (they only read it) and replaced by the next run.
 fn recording() -> &'static PathBuf {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let dir = scratch("descent");
+        let dir = common::scratch("companion-net-tests", "descent");
         let status = touchdown()
             .args([
                 "simulate",
@@ -194,7 +165,7 @@ fn play_autopilot_with_attitude(mut stream: TcpStream, extra: &[u8], attitude: b
             next_attitude += Duration::from_millis(20);
         }
         if Instant::now() >= next_heartbeat {
-            let _ = stream.write_all(&heartbeat(seq));
+            let _ = stream.write_all(&common::ardupilot_heartbeat(seq));
             seq = seq.wrapping_add(1);
             if seq == 2 {
                 let _ = stream.write_all(extra);
@@ -229,7 +200,7 @@ fn play_autopilot_on_udp(
     let deadline = Instant::now() + Duration::from_secs(60);
     while Instant::now() < deadline && child.try_wait().expect("wait").is_none() {
         if let (Some(addr), true) = (to, Instant::now() >= next_heartbeat) {
-            let _ = socket.send_to(&heartbeat(seq), addr);
+            let _ = socket.send_to(&common::ardupilot_heartbeat(seq), addr);
             seq = seq.wrapping_add(1);
             next_heartbeat += Duration::from_millis(100);
         }
@@ -413,7 +384,9 @@ fn signalled_run(signal: &str) -> Output {
     // Its first datagram (a HEARTBEAT) comes after the handlers are installed.
     let mut buf = [0u8; 512];
     let (_, from) = autopilot.recv_from(&mut buf).expect("touchdown talks");
-    autopilot.send_to(&heartbeat(0), from).expect("send");
+    autopilot
+        .send_to(&common::ardupilot_heartbeat(0), from)
+        .expect("send");
     std::thread::sleep(Duration::from_millis(500));
     let status = Command::new("kill")
         .args([signal, &child.id().to_string()])
@@ -464,7 +437,7 @@ fn ardupilot_ahrs_frame() -> Vec<u8> {
 /// A HEARTBEAT whose first payload bytes were changed into a false MAVLink 2 frame start
 /// (the checksum no longer matches): one bad CRC, not two.
 fn corrupted_heartbeat() -> Vec<u8> {
-    let mut frame = heartbeat(100);
+    let mut frame = common::ardupilot_heartbeat(100);
     frame[10..14].copy_from_slice(&[0xFD, 1, 0, 0]);
     frame
 }

@@ -9,50 +9,19 @@
 
 #![cfg(unix)]
 
+mod common;
+
 use std::net::UdpSocket;
-use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
 use signal_hook::consts::SIGINT;
 use touchdown_cli::companion::{self, CompanionArgs, ProfileArg};
 use touchdown_cli::Outcome;
-use touchdown_core::companion::mavlink::dialects::common::{
-    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
-};
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
-
-/// A scratch directory of this test under the target directory, emptied.
-fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("companion-signal-tests")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
-
-fn heartbeat() -> Vec<u8> {
-    let header = MavHeader {
-        system_id: 1,
-        component_id: 1,
-        sequence: 0,
-    };
-    let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_QUADROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    });
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(header, &msg);
-    raw.raw_bytes().to_vec()
-}
 
 #[test]
 fn sigint_returns_the_outcome_after_the_summary() {
-    let dir = scratch("descent");
+    let dir = common::scratch("companion-signal-tests", "descent");
     let status = Command::new(env!("CARGO_BIN_EXE_touchdown"))
         .args([
             "simulate",
@@ -91,7 +60,9 @@ fn sigint_returns_the_outcome_after_the_summary() {
     let signaller = std::thread::spawn(move || {
         let mut buf = [0u8; 512];
         let (_, from) = autopilot.recv_from(&mut buf).expect("touchdown talks");
-        autopilot.send_to(&heartbeat(), from).expect("send");
+        autopilot
+            .send_to(&common::ardupilot_heartbeat(0), from)
+            .expect("send");
         std::thread::sleep(Duration::from_millis(500));
         signal_hook::low_level::raise(SIGINT).expect("raise SIGINT");
     });

@@ -40,10 +40,10 @@ use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Instant;
 use touchdown_core::companion::mavlink::dialects::common::MavAutopilot;
-use touchdown_core::companion::{Companion, CompanionConfig, Profile, ProfileSetting};
+use touchdown_core::companion::{Profile, ProfileSetting};
 use touchdown_core::family::Family;
 use touchdown_core::filter::CameraMount;
-use touchdown_core::params::ParamId;
+use touchdown_core::params::{ParamId, ParamSet};
 use touchdown_core::pipeline::PipelineConfig;
 use touchdown_eval::flight::{AutopilotKind, ErrorModel, FlightSetup, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace, TraceFrame};
@@ -415,18 +415,18 @@ fn flight_setup(
 /// `setup.params` (applied as the flight applies them), auto resolved with the simulated
 /// autopilot's HEARTBEAT.
 fn board_profile(setup: &FlightSetup) -> Option<Profile> {
-    let mut companion = Companion::new(CompanionConfig::default());
+    let mut params = ParamSet::default();
     for (name, value) in &setup.params {
         if let Some(id) = ParamId::from_name(name) {
             // A refused value fails the flight itself with its own message.
-            let _ = companion.set_param(id, *value);
+            let _ = params.set(id, *value);
         }
     }
     let heartbeat = match setup.autopilot {
         AutopilotKind::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
         AutopilotKind::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
     };
-    ProfileSetting::from_param(companion.params().get_int(ParamId::Profile))
+    ProfileSetting::from_param(params.get_int(ParamId::Profile))
         .resolve(Profile::from_autopilot(heartbeat))
 }
 
