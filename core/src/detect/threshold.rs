@@ -209,8 +209,8 @@ pub(crate) fn local_threshold(
                 *hi = mx;
             }
         }
-        spread_along(mins, u8::min);
-        spread_along(maxs, u8::max);
+        spread_along(mins, byte_min, u8::min);
+        spread_along(maxs, byte_max, u8::max);
     }
     // Spread over the 3x3 tile neighbourhood, in place: the horizontal pass was done per
     // tile row above; the vertical one also turns the window's extrema into thresholds (flat
@@ -268,17 +268,44 @@ pub(crate) fn local_threshold(
     }
 }
 
-/// 3-wide min (or max) filter of one row of tiles, in place (the edges repeat): the write
-/// trails the read by one cell, so the original neighbours stay in registers. (Four tiles a
-/// word, as [`spread_down_to_thresholds`] does, measured no faster: the shifted neighbour
-/// words and the bounds of the look-ahead cost as much as the byte compares they save.)
+/// 3-wide min (or max) filter of one row of tiles, in place (the edges repeat): four tiles
+/// a word by `pick_word` ([`byte_min`] or [`byte_max`]) against the word shifted by one tile
+/// either way (the neighbours across the word's ends come from the words before and after
+/// it), the bytes after the last whole word one at a time by `pick`. The write trails the
+/// read by one word, so the original neighbours stay in registers.
 #[inline(always)]
-fn spread_along(row: &mut [u8], pick: impl Fn(u8, u8) -> u8) {
-    let mut cells = row.iter_mut();
+fn spread_along(row: &mut [u8], pick_word: impl Fn(u32, u32) -> u32, pick: impl Fn(u8, u8) -> u8) {
+    let whole = row.len() / 4 * 4;
+    let (words, tail) = row.split_at_mut(whole);
+    let mut slots = words.chunks_exact_mut(4);
+    // The byte before the tail (its left neighbour), or none when the row is shorter than a
+    // word; then the first tile is its own left neighbour.
+    let mut before_tail = None;
+    if let Some(mut slot) = slots.next() {
+        let mut current = word(slot);
+        // Top byte = the left neighbour of the current word's first tile: itself at the edge.
+        let mut previous = current << 24;
+        let filter = |previous: u32, current: u32, next_first: u32| {
+            let left = (current << 8) | (previous >> 24);
+            let right = (current >> 8) | (next_first << 24);
+            pick_word(pick_word(left, current), right)
+        };
+        for next_slot in slots {
+            let next = word(next_slot);
+            slot.copy_from_slice(&filter(previous, current, next).to_le_bytes());
+            (previous, current, slot) = (current, next, next_slot);
+        }
+        // The last word's right neighbour: the tail's first byte, or itself at the edge.
+        let next_first = tail.first().map_or(current >> 24, |&b| u32::from(b));
+        slot.copy_from_slice(&filter(previous, current, next_first).to_le_bytes());
+        before_tail = Some((current >> 24) as u8);
+    }
+    let mut cells = tail.iter_mut();
     let Some(mut slot) = cells.next() else {
         return;
     };
-    let (mut previous, mut current) = (*slot, *slot);
+    let mut current = *slot;
+    let mut previous = before_tail.unwrap_or(current);
     for cell in cells {
         let next = *cell;
         *slot = pick(pick(previous, current), next);
@@ -291,57 +318,109 @@ fn spread_along(row: &mut [u8], pick: impl Fn(u8, u8) -> u8) {
 /// grids, already filtered along their rows; the edges repeat), then each tile's threshold
 /// ([`tile_thresholds`]) written into `tmin`.
 ///
-/// Four columns at a time, as one 32-bit word per grid (SWAR, see [`byte_min_max`]), walking
-/// down the grid with the previous row's original words in registers; the columns past the
-/// last whole word one at a time.
-fn spread_down_to_thresholds(tmin: &mut [u8], tmax: &[u8], tw: usize, th: usize, min_contrast: u8) {
-    let word_at = |grid: &[u8], i: usize| {
-        grid.get(i..i + 4)
-            .and_then(|b| <[u8; 4]>::try_from(b).ok())
-            .map_or(0, u32::from_le_bytes)
-    };
+/// In place and row by row, in two passes: top down, each row becomes the extreme of itself
+/// and the row below (the row below is still original); bottom up, each row's window is
+/// the extreme of its own pair and the pair above (still a pair), which covers the row
+/// above, itself and the row below, and becomes its threshold. Four tiles a word (SWAR, see
+/// [`byte_min_max`]) along plain rows; the bytes past a row's last whole word one at a time.
+fn spread_down_to_thresholds(
+    tmin: &mut [u8],
+    tmax: &mut [u8],
+    tw: usize,
+    th: usize,
+    min_contrast: u8,
+) {
+    if tw == 0 {
+        return;
+    }
+    for y in 1..th {
+        pair_rows(tmin, tw, y, byte_min, u8::min);
+        pair_rows(tmax, tw, y, byte_max, u8::max);
+    }
     let contrast = u32::from(min_contrast) * 0x0101_0101;
     let whole = tw / 4 * 4;
-    for x in (0..whole).step_by(4) {
-        let (mut previous_lo, mut previous_hi) = (word_at(tmin, x), word_at(tmax, x));
-        let (mut lo, mut hi) = (previous_lo, previous_hi);
-        for y in 0..th {
-            let below = (y + 1) * tw + x;
-            let (next_lo, next_hi) = if y + 1 < th {
-                (word_at(tmin, below), word_at(tmax, below))
-            } else {
-                (lo, hi)
-            };
-            let window_lo = byte_min(byte_min(previous_lo, lo), next_lo);
-            let window_hi = byte_max(byte_max(previous_hi, hi), next_hi);
-            let threshold = tile_thresholds(window_lo, window_hi, contrast);
-            if let Some(out) = tmin.get_mut(y * tw + x..y * tw + x + 4) {
-                out.copy_from_slice(&threshold.to_le_bytes());
+    let tail = |row: &[u8]| -> usize { row.len().min(whole) };
+    for y in (0..th).rev() {
+        // Row y (a pair) and the pair above it; the top row's window is its own pair.
+        let (Some((above_lo, row_lo)), Some((above_hi, row_hi))) = (
+            tmin.split_at_mut_checked(y * tw),
+            tmax.split_at_checked(y * tw),
+        ) else {
+            return;
+        };
+        let (Some(row_lo), Some(row_hi)) = (row_lo.get_mut(..tw), row_hi.get(..tw)) else {
+            return;
+        };
+        let up_lo = above_lo
+            .get(above_lo.len().saturating_sub(tw)..)
+            .unwrap_or(&[]);
+        let up_hi = above_hi
+            .get(above_hi.len().saturating_sub(tw)..)
+            .unwrap_or(&[]);
+        let mut out = row_lo.chunks_exact_mut(4);
+        if y > 0 {
+            let ins = up_lo
+                .chunks_exact(4)
+                .zip(row_hi.chunks_exact(4).zip(up_hi.chunks_exact(4)));
+            for (slot, (up_lo, (hi, up_hi))) in (&mut out).zip(ins) {
+                let lo = byte_min(word(slot), word(up_lo));
+                let hi = byte_max(word(hi), word(up_hi));
+                slot.copy_from_slice(&tile_thresholds(lo, hi, contrast).to_le_bytes());
             }
-            (previous_lo, previous_hi, lo, hi) = (lo, hi, next_lo, next_hi);
+        } else {
+            for (slot, hi) in (&mut out).zip(row_hi.chunks_exact(4)) {
+                let threshold = tile_thresholds(word(slot), word(hi), contrast);
+                slot.copy_from_slice(&threshold.to_le_bytes());
+            }
+        }
+        // The tiles past the last whole word.
+        let cells = out.into_remainder().iter_mut().enumerate();
+        for (i, cell) in cells {
+            let at = |row: &[u8]| row.get(tail(row) + i).copied();
+            let (lo, hi) = match (at(row_hi), at(up_lo), at(up_hi)) {
+                (Some(hi), Some(up_lo), Some(up_hi)) => ((*cell).min(up_lo), hi.max(up_hi)),
+                (Some(hi), ..) => (*cell, hi),
+                _ => (*cell, *cell),
+            };
+            *cell = if hi.saturating_sub(lo) < min_contrast {
+                0
+            } else {
+                (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
+            };
         }
     }
-    for x in whole..tw {
-        let at = |grid: &[u8], y: usize| grid.get(y * tw + x).copied().unwrap_or(0);
-        let (mut previous_lo, mut previous_hi) = (at(tmin, 0), at(tmax, 0));
-        let (mut lo, mut hi) = (previous_lo, previous_hi);
-        for y in 0..th {
-            let (next_lo, next_hi) = if y + 1 < th {
-                (at(tmin, y + 1), at(tmax, y + 1))
-            } else {
-                (lo, hi)
-            };
-            let window_lo = previous_lo.min(lo).min(next_lo);
-            let window_hi = previous_hi.max(hi).max(next_hi);
-            if let Some(cell) = tmin.get_mut(y * tw + x) {
-                *cell = if window_hi - window_lo < min_contrast {
-                    0
-                } else {
-                    (u16::from(window_lo) + u16::from(window_hi)).div_ceil(2) as u8
-                };
-            }
-            (previous_lo, previous_hi, lo, hi) = (lo, hi, next_lo, next_hi);
-        }
+}
+
+/// Four bytes as a little-endian word (0 for a slice of another length).
+#[inline(always)]
+fn word(bytes: &[u8]) -> u32 {
+    <[u8; 4]>::try_from(bytes).map_or(0, u32::from_le_bytes)
+}
+
+/// Row `y - 1` of a `tw`-wide `grid` becomes the per-byte `pick` of itself and row `y`:
+/// four bytes a word by `pick_word`, the bytes past the last whole word by `pick`.
+#[inline(always)]
+fn pair_rows(
+    grid: &mut [u8],
+    tw: usize,
+    y: usize,
+    pick_word: impl Fn(u32, u32) -> u32,
+    pick: impl Fn(u8, u8) -> u8,
+) {
+    let Some((head, rest)) = grid.split_at_mut_checked(y * tw) else {
+        return;
+    };
+    let upper = head.get_mut(y.saturating_sub(1) * tw..);
+    let (Some(upper), Some(lower), true) = (upper, rest.get(..tw), y > 0) else {
+        return;
+    };
+    let mut out = upper.chunks_exact_mut(4);
+    for (slot, below) in (&mut out).zip(lower.chunks_exact(4)) {
+        slot.copy_from_slice(&pick_word(word(slot), word(below)).to_le_bytes());
+    }
+    let below = lower.get(tw / 4 * 4..).unwrap_or(&[]);
+    for (cell, &b) in out.into_remainder().iter_mut().zip(below) {
+        *cell = pick(*cell, b);
     }
 }
 
@@ -443,6 +522,38 @@ mod tests {
                         assert_eq!(got >> 4, expected_other, "{a} {b} {c} {d} < {t}");
                     }
                 }
+            }
+        }
+    }
+
+    /// The word-at-a-time 3-wide filter equals the definition (edges repeat) on every row
+    /// length up to three words and a tail, both ways.
+    #[test]
+    fn spread_along_matches_the_definition() {
+        let mut seed = 7u32;
+        for len in 1..=15usize {
+            for _ in 0..50 {
+                let mut row = [0u8; 15];
+                for cell in row.iter_mut().take(len) {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    *cell = (seed >> 24) as u8;
+                }
+                let original = row;
+                let at = |i: usize| original[i.min(len - 1)];
+                let (mut lows, mut highs) = (row, row);
+                spread_along(&mut lows[..len], byte_min, u8::min);
+                spread_along(&mut highs[..len], byte_max, u8::max);
+                for i in 0..len {
+                    let window = [at(i.saturating_sub(1)), at(i), at(i + 1)];
+                    let (lo, hi) = (window.iter().min(), window.iter().max());
+                    assert_eq!(Some(&lows[i]), lo, "min, length {len} at {i}: {original:?}");
+                    assert_eq!(
+                        Some(&highs[i]),
+                        hi,
+                        "max, length {len} at {i}: {original:?}"
+                    );
+                }
+                assert_eq!(lows[len..], original[len..], "beyond the row");
             }
         }
     }
