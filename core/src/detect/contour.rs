@@ -110,8 +110,10 @@ pub(crate) struct Tracer<'b> {
     bitmap: &'b [u32],
     visited: &'b mut [u32],
     /// Per neighbour direction: the bit-index offset (`DX + DY * stride`) and the packed
-    /// `(x, y)` offset ([`XY_STEP`]), side by side so a move reads one table.
-    moves: [Move; 8],
+    /// `(x, y)` offset ([`XY_STEP`]), side by side so a move reads one table; directions 0
+    /// to 7 twice over, so that the seven directions after any one are a run of the table
+    /// ([`next_dark`]).
+    moves: [Move; 16],
     /// Bits per bitmap row.
     stride: usize,
     /// Work units left for this frame (one per step, see `charge`).
@@ -131,13 +133,18 @@ impl<'b> Tracer<'b> {
         budget: u32,
     ) -> Self {
         let stride = words_per_row * 32;
-        let mut moves = [Move::default(); 8];
-        for (m, ((dx, dy), xy)) in moves.iter_mut().zip(DX.iter().zip(DY.iter()).zip(XY_STEP)) {
+        let mut moves = [Move::default(); 16];
+        let directions = DX.iter().zip(DY.iter()).zip(XY_STEP).cycle();
+        for (m, ((dx, dy), xy)) in moves.iter_mut().zip(directions) {
             *m = Move {
                 bit: dx + dy * stride as isize,
                 xy,
             };
         }
+        // Both bitmaps cut to one length (the detector's are), so that in the walk one bounds
+        // check covers a pixel of either.
+        let words = bitmap.len().min(visited.len());
+        let (bitmap, visited) = (bitmap.split_at(words).0, visited.split_at_mut(words).0);
         Tracer {
             bitmap,
             visited,
@@ -179,27 +186,10 @@ impl<'b> Tracer<'b> {
         self.visited.get(index).copied().unwrap_or(u32::MAX)
     }
 
-    /// Whether the pixel at bit index `bit` is dark (past the bitmap: light).
-    #[inline(always)]
-    fn dark(&self, bit: usize) -> bool {
-        self.bitmap
-            .get(bit / 32)
-            .is_some_and(|w| (w >> (bit % 32)) & 1 == 1)
-    }
-
-    /// First dark neighbour of the pixel at bit index `bit`, searching clockwise from the
-    /// light neighbour in direction `from` (which is not probed again: it is the last light
-    /// pixel the search before this one saw, or the start's light west neighbour).
-    ///
-    /// Probing one neighbour at a time: along a boundary the search usually ends at the first
-    /// or second probe, which measured cheaper on the Cortex-M7 than gathering all eight
-    /// neighbours into a ring mask first.
+    /// First dark neighbour of the pixel at bit index `bit` ([`next_dark`]).
     #[inline(always)]
     fn next(&self, bit: usize, from: usize) -> Option<usize> {
-        (1..8).map(|i| (from + i) & 7).find(|&d| {
-            let offset = self.moves.get(d).map_or(0, |m| m.bit);
-            self.dark(bit.wrapping_add_signed(offset))
-        })
+        next_dark(self.bitmap, &self.moves, bit, from)
     }
 
     /// Follows the boundary through the dark pixel (x0, y0) whose west neighbour is light,
@@ -247,47 +237,60 @@ impl<'b> Tracer<'b> {
         let (mut stored, mut spacing_mask) = (0usize, 0usize);
         // Steps allowed in this walk.
         let limit = self.budget as usize;
+        // Both bitmaps are one length (see `new`); cut here again so that the compiler sees
+        // it, and one bounds check covers a pixel of either.
+        let words = self.bitmap.len().min(self.visited.len());
+        let bitmap = self.bitmap.get(..words).unwrap_or(&[]);
+        let visited = self.visited.get_mut(..words).unwrap_or(&mut []);
+        let moves = &self.moves;
         let result = loop {
-            self.mark(bit);
+            if let Some(word) = visited.get_mut(bit / 32) {
+                *word |= 1 << (bit % 32);
+            }
             if len & spacing_mask == 0 {
-                if stored == capacity && capacity >= 2 {
-                    thin_out(out);
-                    stored = capacity / 2;
-                    spacing_mask = 2 * spacing_mask + 1;
-                }
-                // After thinning, `len` is a multiple of the new spacing too: the buffer
-                // fills exactly at a multiple of twice the old spacing (for an even
-                // `capacity`, as the detector's is).
-                if len & spacing_mask == 0 {
-                    if let Some(slot) = out.get_mut(stored) {
-                        *slot = Pixel {
-                            x: xy as u16,
-                            y: (xy >> 16) as u16,
-                        };
-                        stored += 1;
+                let slot = match out.get_mut(stored) {
+                    Some(slot) => Some(slot),
+                    // Full: keep every second pixel and store at half the rate. `len` is a
+                    // multiple of the new spacing too when the buffer fills (at a multiple
+                    // of twice the old spacing, for an even `capacity` as the detector's).
+                    None if capacity >= 2 => {
+                        thin_out(out);
+                        stored = capacity / 2;
+                        spacing_mask = 2 * spacing_mask + 1;
+                        out.get_mut(stored).filter(|_| len & spacing_mask == 0)
                     }
+                    None => None,
+                };
+                if let Some(slot) = slot {
+                    *slot = Pixel {
+                        x: xy as u16,
+                        y: (xy >> 16) as u16,
+                    };
+                    stored += 1;
                 }
             }
             len += 1;
             if len > limit {
                 break Trace::OutOfBudget;
             }
-            let step = self.moves.get(d).copied().unwrap_or_default();
+            let step = moves.get(d & 7).copied().unwrap_or_default();
             bit = bit.wrapping_add_signed(step.bit);
             xy = xy.wrapping_add(step.xy);
             // The light pixel passed last, seen from the new pixel.
             let from = (d + 6 - (d & 1)) & 7;
             // There is always a dark neighbour: the pixel just left.
-            let closed = Trace::Closed {
-                points: stored,
-                length: len,
-            };
-            let Some(next) = self.next(bit, from) else {
-                break closed;
+            let Some(next) = next_dark(bitmap, moves, bit, from) else {
+                break Trace::Closed {
+                    points: stored,
+                    length: len,
+                };
             };
             // Jacob's criterion: back at the start and about to leave it the same way.
             if bit == start && next == first {
-                break closed;
+                break Trace::Closed {
+                    points: stored,
+                    length: len,
+                };
             }
             d = next;
         };
@@ -310,6 +313,35 @@ impl<'b> Tracer<'b> {
             *word |= 1 << (bit % 32);
         }
     }
+}
+
+/// Whether the pixel at bit index `bit` of `bitmap` is dark (past the bitmap: light). (A
+/// rotation rather than a shift: the Cortex-M7's takes the amount modulo 32 itself, so it
+/// needs no masking instruction.)
+#[inline(always)]
+fn dark(bitmap: &[u32], bit: usize) -> bool {
+    bitmap
+        .get(bit / 32)
+        .is_some_and(|w| w.rotate_right(bit as u32) & 1 == 1)
+}
+
+/// First dark neighbour of the pixel at bit index `bit`, searching clockwise from the light
+/// neighbour in direction `from` (which is not probed again: it is the last light pixel the
+/// search before this one saw, or the start's light west neighbour), by `moves`
+/// ([`Tracer::moves`]).
+///
+/// Probing one neighbour at a time: along a boundary the search usually ends at the first or
+/// second probe, which measured cheaper on the Cortex-M7 than gathering all eight neighbours
+/// into a ring mask and looking the answer up in a table. The seven directions are one run of
+/// `moves`, so each probe reads its offset at a constant distance from the run's start and
+/// the direction is worked out once, when found.
+#[inline(always)]
+fn next_dark(bitmap: &[u32], moves: &[Move; 16], bit: usize, from: usize) -> Option<usize> {
+    let first = (from & 7) + 1;
+    let run = moves.get(first..first + 7)?;
+    run.iter()
+        .position(|m| dark(bitmap, bit.wrapping_add_signed(m.bit)))
+        .map(|i| (first + i) & 7)
 }
 
 /// Keeps every second pixel of a full output buffer, in order, in its first half.
@@ -612,6 +644,39 @@ mod tests {
             let xy = (100u32 | (100 << 16)).wrapping_add(XY_STEP[d]);
             let (x, y) = ((xy & 0xFFFF) as isize, (xy >> 16) as isize);
             assert_eq!((x - 100, y - 100), (DX[d], DY[d]), "direction {d}");
+        }
+    }
+
+    /// The search through the doubled move table equals the definition (the first dark one
+    /// of the seven directions clockwise after `from`) for every neighbourhood, at columns
+    /// inside a word and at both its edges.
+    #[test]
+    fn next_dark_is_the_first_dark_neighbour_clockwise() {
+        use crate::detect::threshold::get_bit;
+        // 3 rows of 2 words (64 x 3): the pixel at row 1, column `x`.
+        for x in [1usize, 17, 30, 31, 32, 33] {
+            for ring in 0..256u32 {
+                let mut bm = [0u32; 6];
+                for d in 0..8 {
+                    if (ring >> d) & 1 == 1 {
+                        let (px, py) = ((x as isize + DX[d]) as usize, (1 + DY[d]) as usize);
+                        set_bit(&mut bm, 2, px, py);
+                    }
+                }
+                set_bit(&mut bm, 2, x, 1);
+                let mut visited = [0u32; 6];
+                let t = Tracer::new(&bm, &mut visited, 2, 1000);
+                for from in 0..8 {
+                    let expected = (1..8)
+                        .map(|i| (from + i) % 8)
+                        .find(|&d| get_bit(&bm, 2, x as isize + DX[d], 1 + DY[d], 64, 3));
+                    assert_eq!(
+                        t.next(64 + x, from),
+                        expected,
+                        "x {x}, ring {ring:08b}, from {from}"
+                    );
+                }
+            }
         }
     }
 
