@@ -233,8 +233,6 @@ impl<'b> Tracer<'b> {
         let (mut bit, mut xy, mut d) = (start, start_xy, first);
         let mut len = 0usize;
         let capacity = out.len();
-        // Pixels stored, and steps per stored pixel minus one (a power of two minus one).
-        let (mut stored, mut spacing_mask) = (0usize, 0usize);
         // Steps allowed in this walk.
         let limit = self.budget as usize;
         // Both bitmaps are one length (see `new`); cut here again so that the compiler sees
@@ -243,56 +241,94 @@ impl<'b> Tracer<'b> {
         let bitmap = self.bitmap.get(..words).unwrap_or(&[]);
         let visited = self.visited.get_mut(..words).unwrap_or(&mut []);
         let moves = &self.moves;
-        let result = loop {
+        // Dense phase: while the buffer has room and the budget lasts, every step is stored
+        // at `out[len]` and neither the spacing nor the budget needs a look (most boundaries
+        // end here). At `dense_end` the general loop below takes over, from the top of the
+        // same step (marking a pixel twice changes nothing).
+        let dense_end = capacity.min(limit);
+        let mut dense = None;
+        while len < dense_end {
             if let Some(word) = visited.get_mut(bit / 32) {
                 *word |= 1 << (bit % 32);
             }
-            if len & spacing_mask == 0 {
-                let slot = match out.get_mut(stored) {
-                    Some(slot) => Some(slot),
-                    // Full: keep every second pixel and store at half the rate. `len` is a
-                    // multiple of the new spacing too when the buffer fills (at a multiple
-                    // of twice the old spacing, for an even `capacity` as the detector's).
-                    None if capacity >= 2 => {
-                        thin_out(out);
-                        stored = capacity / 2;
-                        spacing_mask = 2 * spacing_mask + 1;
-                        out.get_mut(stored).filter(|_| len & spacing_mask == 0)
-                    }
-                    None => None,
+            if let Some(slot) = out.get_mut(len) {
+                *slot = Pixel {
+                    x: xy as u16,
+                    y: (xy >> 16) as u16,
                 };
-                if let Some(slot) = slot {
-                    *slot = Pixel {
-                        x: xy as u16,
-                        y: (xy >> 16) as u16,
-                    };
-                    stored += 1;
-                }
             }
             len += 1;
-            if len > limit {
-                break Trace::OutOfBudget;
-            }
             let step = moves.get(d & 7).copied().unwrap_or_default();
             bit = bit.wrapping_add_signed(step.bit);
             xy = xy.wrapping_add(step.xy);
-            // The light pixel passed last, seen from the new pixel.
             let from = (d + 6 - (d & 1)) & 7;
-            // There is always a dark neighbour: the pixel just left.
-            let Some(next) = next_dark(bitmap, moves, bit, from) else {
-                break Trace::Closed {
-                    points: stored,
-                    length: len,
-                };
-            };
-            // Jacob's criterion: back at the start and about to leave it the same way.
-            if bit == start && next == first {
-                break Trace::Closed {
-                    points: stored,
-                    length: len,
-                };
+            match next_dark(bitmap, moves, bit, from) {
+                Some(next) if bit != start || next != first => d = next,
+                _ => {
+                    dense = Some(Trace::Closed {
+                        points: len,
+                        length: len,
+                    });
+                    break;
+                }
             }
-            d = next;
+        }
+        // Pixels stored, and steps per stored pixel minus one (a power of two minus one).
+        let (mut stored, mut spacing_mask) = (len, 0usize);
+        let result = if let Some(closed) = dense {
+            closed
+        } else {
+            loop {
+                if let Some(word) = visited.get_mut(bit / 32) {
+                    *word |= 1 << (bit % 32);
+                }
+                if len & spacing_mask == 0 {
+                    let slot = match out.get_mut(stored) {
+                        Some(slot) => Some(slot),
+                        // Full: keep every second pixel and store at half the rate. `len` is a
+                        // multiple of the new spacing too when the buffer fills (at a multiple
+                        // of twice the old spacing, for an even `capacity` as the detector's).
+                        None if capacity >= 2 => {
+                            thin_out(out);
+                            stored = capacity / 2;
+                            spacing_mask = 2 * spacing_mask + 1;
+                            out.get_mut(stored).filter(|_| len & spacing_mask == 0)
+                        }
+                        None => None,
+                    };
+                    if let Some(slot) = slot {
+                        *slot = Pixel {
+                            x: xy as u16,
+                            y: (xy >> 16) as u16,
+                        };
+                        stored += 1;
+                    }
+                }
+                len += 1;
+                if len > limit {
+                    break Trace::OutOfBudget;
+                }
+                let step = moves.get(d & 7).copied().unwrap_or_default();
+                bit = bit.wrapping_add_signed(step.bit);
+                xy = xy.wrapping_add(step.xy);
+                // The light pixel passed last, seen from the new pixel.
+                let from = (d + 6 - (d & 1)) & 7;
+                // There is always a dark neighbour: the pixel just left.
+                let Some(next) = next_dark(bitmap, moves, bit, from) else {
+                    break Trace::Closed {
+                        points: stored,
+                        length: len,
+                    };
+                };
+                // Jacob's criterion: back at the start and about to leave it the same way.
+                if bit == start && next == first {
+                    break Trace::Closed {
+                        points: stored,
+                        length: len,
+                    };
+                }
+                d = next;
+            }
         };
         let steps = match result {
             Trace::OutOfBudget => len - 1,
