@@ -231,7 +231,6 @@ impl<'b> Tracer<'b> {
             };
         };
         let (mut bit, mut xy, mut d) = (start, start_xy, first);
-        let mut len = 0usize;
         let capacity = out.len();
         // Steps allowed in this walk.
         let limit = self.budget as usize;
@@ -247,17 +246,15 @@ impl<'b> Tracer<'b> {
         // same step (marking a pixel twice changes nothing).
         let dense_end = capacity.min(limit);
         let mut dense = None;
-        while len < dense_end {
+        let mut slots = out.get_mut(..dense_end).unwrap_or(&mut []).iter_mut();
+        for slot in slots.by_ref() {
             if let Some(word) = visited.get_mut(bit / 32) {
                 *word |= 1 << (bit % 32);
             }
-            if let Some(slot) = out.get_mut(len) {
-                *slot = Pixel {
-                    x: xy as u16,
-                    y: (xy >> 16) as u16,
-                };
-            }
-            len += 1;
+            *slot = Pixel {
+                x: xy as u16,
+                y: (xy >> 16) as u16,
+            };
             let step = moves.get(d & 7).copied().unwrap_or_default();
             bit = bit.wrapping_add_signed(step.bit);
             xy = xy.wrapping_add(step.xy);
@@ -265,14 +262,17 @@ impl<'b> Tracer<'b> {
             match next_dark(bitmap, moves, bit, from) {
                 Some(next) if bit != start || next != first => d = next,
                 _ => {
-                    dense = Some(Trace::Closed {
-                        points: len,
-                        length: len,
-                    });
+                    dense = Some(());
                     break;
                 }
             }
         }
+        // Steps taken (and pixels stored) in the dense phase.
+        let mut len = dense_end - slots.len();
+        let dense = dense.map(|()| Trace::Closed {
+            points: len,
+            length: len,
+        });
         // Pixels stored, and steps per stored pixel minus one (a power of two minus one).
         let (mut stored, mut spacing_mask) = (len, 0usize);
         let result = if let Some(closed) = dense {
