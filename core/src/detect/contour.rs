@@ -134,13 +134,14 @@ impl<'b> Tracer<'b> {
     ) -> Self {
         let stride = words_per_row * 32;
         let mut moves = [Move::default(); 16];
-        let directions = DX.iter().zip(DY.iter()).zip(XY_STEP).cycle();
-        for (m, ((dx, dy), xy)) in moves.iter_mut().zip(directions) {
+        for (m, ((dx, dy), xy)) in moves.iter_mut().zip(DX.iter().zip(DY.iter()).zip(XY_STEP)) {
             *m = Move {
                 bit: dx + dy * stride as isize,
                 xy,
             };
         }
+        let (once, again) = moves.split_at_mut(8);
+        again.copy_from_slice(once);
         // Both bitmaps cut to one length (the detector's are), so that in the walk one bounds
         // check covers a pixel of either.
         let words = bitmap.len().min(visited.len());
