@@ -13,9 +13,11 @@
 //! ring outside the border (the family's quiet ring, or the printed margin every family needs
 //! for its outline to be found). So the image of the marker is predicted, not searched:
 //! the known cells mapped through the corner homography, blurred by a Gaussian of unknown
-//! width, with unknown black and white levels and an unknown (uniform) level beyond the known
-//! area. A Gauss-Newton fit of the 4 corners, the blur, the two levels and the outside level
-//! to every pixel over the marker moves the corners to where the whole pattern agrees: each
+//! width, with unknown black and white levels and an unknown level beyond the known area on
+//! each of its four sides (a pad on grass has dark ground on some sides of a marker and the
+//! white sheet on others). A Gauss-Newton fit of the 4 corners, the blur, the two levels and
+//! the outside levels to every pixel over the marker moves the corners to where the whole
+//! pattern agrees: each
 //! edge is placed with its neighbours modelled instead of trimmed, so the scale is unbiased
 //! whatever the blur.
 //!
@@ -58,8 +60,8 @@ pub const MAX_SIDE_PX: f32 = 40.0;
 /// Most pixels one fit reads: those near the pattern's edges (see `window`), a fixed scatter
 /// of them when there are more. Measured in the tests, the scale is within 0.15 % at 11
 /// pixels across with 128 pixels (96 gave 0.29 %, and a regular lattice of 96 0.35 %: it
-/// beats against the cell grid). Each pixel costs about 1,700 Cortex-M7 instructions per
-/// pass with derivatives.
+/// beats against the cell grid). A fit costs about 2,400 Cortex-M7 instructions per
+/// pixel and pass, its window and solves included.
 pub const MAX_PIXELS: usize = 128;
 /// Levenberg-Marquardt steps. The edge corners start within a few tenths of a pixel and the
 /// model is smooth there: three steps converge to about a hundredth of a pixel (the last
@@ -82,8 +84,8 @@ const DAMPING: f32 = 1e-3;
 pub const MAX_CORNER_SHIFT_PX: f32 = 0.6;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
-/// qvga-far-1: one tag36h11 of 14 pixels): 1.41 million instructions for its pixels and five
-/// passes, about 16,500 units (a fit never reads more pixels than there). It is charged
+/// qvga-far-1: one tag36h11 of 14 pixels): 1.54 million instructions for its pixels and five
+/// passes (1.41 million before the outside had a level per side), about 16,500 units (a fit never reads more pixels than there). It is charged
 /// before it starts and skipped when the frame's budget cannot pay for it.
 pub const WORK_PATTERN_FIT: u32 = 16_500;
 /// Most cells per side of a family grid the fit models.
@@ -100,12 +102,17 @@ const MAX_WINDOW: usize = 8;
 const INITIAL_BLUR_PX: f32 = 0.8;
 /// Parameters: 4 corners (x, y), blur (the logarithm of its width in grid cells: always
 /// positive, and a step of a given size means the same at any blur), black level, contrast,
-/// outside level.
-const N: usize = 12;
+/// and the outside level of each side ([`model::SIDES`], from `OUTSIDE` on).
+const N: usize = 11 + model::SIDES;
 const BLUR: usize = 8;
 const BLACK: usize = 9;
 const CONTRAST: usize = 10;
 const OUTSIDE: usize = 11;
+/// Weight of the pull of each side's outside level towards the mean of the four, in pixels
+/// that lie wholly beyond that side: it keeps a side no pixel measures (a marker at the
+/// image's edge) at the others' level, and is too weak to hold a side that a row of pixels
+/// measures (the tests' scale errors moved by under 0.01 % between 0.5 and 8).
+const OUTSIDE_PULL: f32 = 0.5;
 
 /// One pixel a fit reads: its position and grey level.
 #[derive(Debug, Clone, Copy)]
@@ -273,7 +280,9 @@ pub(crate) fn fit(
     // The levels enter the model linearly: solved exactly for the start geometry and blur
     // (the outside level stays white, a printed margin, when no pixel lies beyond the known
     // area to measure it).
-    params[OUTSIDE] = 1.0;
+    for level in params.iter_mut().skip(OUTSIDE) {
+        *level = 1.0;
+    }
     solve_levels(&pattern, &win, &mut params)?;
     // Levenberg-Marquardt: the start is within a few tenths of a pixel, where the model is
     // nearly linear and the first step usually lands. A step that does not lower the cost

@@ -2,11 +2,12 @@
 //! into normal equations, the linear solve of the levels, and the damped Cholesky solve of
 //! a step.
 
-// The normal equations are fixed 12x12 arrays indexed by loop counters below 12.
-#![allow(clippy::indexing_slicing)]
+// The normal equations are fixed N x N arrays indexed by loop counters below N (and the
+// counters index two arrays at once, which iterators made slower on the Cortex-M7).
+#![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
-use super::model::{blurred, Axis, Pattern};
-use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE};
+use super::model::{blurred, Axis, Pattern, SIDES};
+use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE, OUTSIDE_PULL};
 use crate::geometry::{Homography, Point};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
@@ -25,14 +26,16 @@ pub(super) enum Pass {
     Full,
     /// The cost only.
     Cost,
-    /// The least-squares normal equations of the levels alone, which enter the model
-    /// linearly: the pixel is `black + contrast * cells + (contrast * outside) * beyond`, so
-    /// the first three rows and columns hold the system in (black, contrast, contrast *
-    /// outside) against the pixels themselves.
+    /// The least-squares normal equations of the levels alone, with one outside level for
+    /// all sides, which enter the model linearly: the pixel is `black + contrast * cells +
+    /// (contrast * outside) * beyond`, so the first three rows and columns hold the system
+    /// in (black, contrast, contrast * outside) against the pixels themselves.
     Levels,
 }
 
-/// The model at every window pixel for `params`, accumulated as `pass` says.
+/// The model at every window pixel for `params`, accumulated as `pass` says; each side's
+/// outside level is pulled towards the sides' mean with the weight [`OUTSIDE_PULL`] (in the
+/// cost and, in a full pass, the normal equations).
 ///
 /// The corners' derivatives are closed-form: for the homography of the unit square onto
 /// itself, moving corner k by (dx, dy) moves the point (s, t) by
@@ -50,12 +53,11 @@ pub(super) fn linearise(
 ) -> Option<Normal> {
     let corners = fitted_corners(params);
     let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
-    let (blur, black, contrast, outside) = (
-        libm::expf(params[BLUR]),
-        params[BLACK],
-        params[CONTRAST],
-        params[OUTSIDE],
-    );
+    let (blur, black, contrast) = (libm::expf(params[BLUR]), params[BLACK], params[CONTRAST]);
+    let mut outside = [0.0f32; SIDES];
+    for (level, p) in outside.iter_mut().zip(params.iter().skip(OUTSIDE)) {
+        *level = *p;
+    }
     let (lo, span) = (pattern.quad_lo, pattern.quad_hi - pattern.quad_lo);
     let square_from_image = square_from_image(&corners)?;
     let mut normal = Normal {
@@ -74,15 +76,21 @@ pub(super) fn linearise(
         ) else {
             return None;
         };
-        let b = blurred(pattern, &au, &av, outside);
+        let b = blurred(pattern, &au, &av, &outside);
         let e = observed - (black + contrast * b.value);
         normal.cost += e * e;
         normal.count += 1;
         match pass {
             Pass::Cost => continue,
             Pass::Levels => {
-                let cells = b.value - outside * b.outside;
-                let regressors = [1.0, cells, b.outside];
+                let beyond: f32 = b.outside.iter().sum();
+                let cells = b.value
+                    - outside
+                        .iter()
+                        .zip(b.outside.iter())
+                        .map(|(level, w)| level * w)
+                        .sum::<f32>();
+                let regressors = [1.0, cells, beyond];
                 for (r, &x) in regressors.iter().enumerate() {
                     normal.jte[r] += x * observed;
                     for (c, &y) in regressors.iter().enumerate() {
@@ -111,11 +119,49 @@ pub(super) fn linearise(
         jac[BLUR] = contrast * (b.d_width_u + b.d_width_v) * blur;
         jac[BLACK] = 1.0;
         jac[CONTRAST] = b.value;
-        jac[OUTSIDE] = contrast * b.outside;
-        for r in 0..N {
+        for (j, w) in jac.iter_mut().skip(OUTSIDE).zip(b.outside.iter()) {
+            *j = contrast * w;
+        }
+        // The geometry, blur and levels in full; a side's row and column only where the
+        // pixel sees that side (most pixels see none or one, and this loop is the fit's
+        // cost).
+        for r in 0..OUTSIDE {
             normal.jte[r] += jac[r] * e;
-            for c in r..N {
+            for c in r..OUTSIDE {
                 normal.jtj[r][c] += jac[r] * jac[c];
+            }
+        }
+        for side in OUTSIDE..N {
+            let w = jac[side];
+            if w == 0.0 {
+                continue;
+            }
+            normal.jte[side] += w * e;
+            for r in 0..OUTSIDE {
+                normal.jtj[r][side] += jac[r] * w;
+            }
+            for c in side..N {
+                normal.jtj[side][c] += w * jac[c];
+            }
+        }
+    }
+    // The pull of each side towards the sides' mean: a residual of `OUTSIDE_PULL` pixels
+    // wholly beyond each side, reading that mean. The mean itself stays free (the outside
+    // is as unknown as before), so the pull never holds the levels to a stale value.
+    if pass != Pass::Levels {
+        let mean = outside.iter().sum::<f32>() / SIDES as f32;
+        let weight = OUTSIDE_PULL * contrast * contrast;
+        for (k, level) in outside.iter().enumerate() {
+            let gap = mean - level;
+            normal.cost += weight * gap * gap;
+            if pass == Pass::Full {
+                // The residuals' Jacobian is contrast * (I - 1/SIDES): its square is the
+                // same projection, and it maps the residuals to their own gaps.
+                normal.jte[OUTSIDE + k] += weight * gap;
+                for c in k..SIDES {
+                    let delta = if c == k { 1.0 } else { 0.0 };
+                    normal.jtj[OUTSIDE + k][OUTSIDE + c] += weight * (delta - 1.0 / SIDES as f32);
+                }
             }
         }
     }
@@ -151,7 +197,8 @@ pub(super) fn square_from_image(c: &[Point; 4]) -> Option<[[f32; 2]; 2]> {
 /// Sets the levels of `params` to their least-squares values for its geometry and blur:
 /// the levels enter the model linearly, so one pass finds them exactly, and the nonlinear
 /// steps start with only the geometry and the blur to move. The decoder's contrast is a
-/// mean over blurred cells, often half the real one on a small marker.
+/// mean over blurred cells, often half the real one on a small marker. One outside level
+/// for all sides here (every side is set to it): the steps then tell the sides apart.
 pub(super) fn solve_levels(
     pattern: &Pattern,
     win: &Window,
@@ -179,7 +226,10 @@ pub(super) fn solve_levels(
     }
     params[BLACK] = x[0];
     params[CONTRAST] = x[1];
-    params[OUTSIDE] = x[2] / x[1];
+    let outside = x[2] / x[1];
+    for level in params.iter_mut().skip(OUTSIDE) {
+        *level = outside;
+    }
     Ok(())
 }
 
