@@ -50,7 +50,8 @@
 //! ([`DetectorConfig::work_budget_per_pixel`]), so no image, however hostile, costs more than
 //! the budget allows; the frame is then marked [`DetectStats::truncated`]. The prices of the
 //! steps (`WORK_*`) were measured on the Cortex-M7 benchmark (`bench/m7`), where one unit is
-//! 75 to 100 instructions.
+//! 40 to 100 instructions (a contour step about 60 with its share of the neighbour probes,
+//! the screening and the pattern fit 60 to 100).
 //!
 //! ## Memory
 //! Frame-sized work memory is lent by the caller as [`Buffers`] (sized by

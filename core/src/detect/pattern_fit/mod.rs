@@ -82,11 +82,12 @@ const DAMPING: f32 = 1e-3;
 /// must be allowed to correct; at 0.75 px a fit on a real photo (the apriltag test set)
 /// moved a corner to 1.3 px from the truth.
 pub const MAX_CORNER_SHIFT_PX: f32 = 0.6;
-/// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 75 to
+/// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 40 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
 /// qvga-far-1: one tag36h11 of 14 pixels): 1.54 million instructions for its pixels and five
-/// passes (1.41 million before the outside had a level per side), about 16,500 units (a fit never reads more pixels than there). It is charged
-/// before it starts and skipped when the frame's budget cannot pay for it.
+/// passes (1.41 million before the outside had a level per side), about 16,500 units (a fit
+/// never reads more pixels than there). It is charged before it starts and skipped when the
+/// frame's budget cannot pay for it.
 pub const WORK_PATTERN_FIT: u32 = 16_500;
 /// Most cells per side of a family grid the fit models.
 const MAX_GRID: usize = 16;
