@@ -14,6 +14,15 @@
 //!   newest such estimate; with no target for [`LandParams::target_timeout_s`] (AC_PrecLand's
 //!   1 s) the last estimate is kept (a hold over where the pad was last seen); before the
 //!   first target it holds where LAND began.
+//! - **Pause and final descent** (ArduCopter `mode.cpp`, `Mode::land_run_vertical_control`
+//!   with a target acquired): farther than PLND_XY_DIST_MAX (`AC_PrecLand`, default 2.5 m)
+//!   from the pad estimate it does not descend; when the newest measurement puts the pad
+//!   35-200 cm below, it descends at half LAND_SPEED, slowed by the horizontal error (the
+//!   full half at no error, down to 10 cm/s from 15 cm of error on), so that the last
+//!   metres give the position controller time. AC_PrecLand keeps its last measurement, so a
+//!   pad seen last inside that band keeps the slow descent to the ground; below 35 cm it is
+//!   LAND_SPEED again. A target is acquired until 2 s without a measurement
+//!   (`LANDING_TARGET_TIMEOUT_MS`).
 //! - **Horizontal position control** (`AC_PosControl`, multicopter defaults
 //!   PSC_POSXY_P 1.0, PSC_VELXY_P 2.0, PSC_VELXY_I 1.0, PSC_VELXY_D 0.5, PSC_VELXY_IMAX
 //!   1000 cm/s/s, its D term's input filtered at 5 Hz): P on the position error gives a
@@ -52,6 +61,17 @@ pub struct LandParams {
     pub vel_d_filter_hz: f64,
     /// Largest horizontal speed asked, m/s.
     pub max_speed_mps: f64,
+    /// PLND_XY_DIST_MAX: no descent farther than this from the pad estimate, metres (0: off).
+    pub xy_dist_max_m: f64,
+    /// The final descent's band of the measured pad depth, metres (AC_PrecLand's 35-200 cm).
+    pub final_band_m: (f64, f64),
+    /// Horizontal error at which the final descent is slowed to its least, metres (15 cm).
+    pub final_acceptable_error_m: f64,
+    /// The final descent's least speed, m/s (10 cm/s).
+    pub final_min_speed_mps: f64,
+    /// A target keeps the mode precision-landing this long after its last measurement,
+    /// seconds (AC_PrecLand's LANDING_TARGET_TIMEOUT_MS, 2 s).
+    pub acquired_timeout_s: f64,
 }
 
 impl LandParams {
@@ -69,6 +89,11 @@ impl LandParams {
             vel_imax: 10.0,
             vel_d_filter_hz: 5.0,
             max_speed_mps: 5.0,
+            xy_dist_max_m: 2.5,
+            final_band_m: (0.35, 2.0),
+            final_acceptable_error_m: 0.15,
+            final_min_speed_mps: 0.1,
+            acquired_timeout_s: 2.0,
         }
     }
 }
@@ -90,6 +115,8 @@ pub struct LandController {
     hold_ne: Vector2<f64>,
     /// The pad's estimated position (local NED, north and east) and when it was measured.
     target: Option<(f64, Vector2<f64>)>,
+    /// The newest measurement's depth of the pad below the vehicle, metres.
+    measured_down_m: Option<f64>,
     integral: Vector2<f64>,
     last_error: Option<Vector2<f64>>,
     derivative: Vector2<f64>,
@@ -110,6 +137,7 @@ impl LandController {
             params,
             hold_ne: start_ned.xy(),
             target: None,
+            measured_down_m: None,
             integral: Vector2::zeros(),
             last_error: None,
             derivative: Vector2::zeros(),
@@ -121,11 +149,13 @@ impl LandController {
     }
 
     /// A measurement of the pad's position in the local frame (its position estimate plus the
-    /// reconstructed target), for the time `measured_s`, used from `now_s` on.
-    pub fn measure(&mut self, now_s: f64, measured_s: f64, pad_ned: &Vector3<f64>) {
-        if !pad_ned.iter().all(|v| v.is_finite()) {
+    /// reconstructed target), for the time `measured_s`, used from `now_s` on; `down_m` is
+    /// the reconstructed target's down part (the pad's depth below the vehicle).
+    pub fn measure(&mut self, now_s: f64, measured_s: f64, pad_ned: &Vector3<f64>, down_m: f64) {
+        if !pad_ned.iter().all(|v| v.is_finite()) || !down_m.is_finite() {
             return;
         }
+        self.measured_down_m = Some(down_m);
         if let Some((t, _)) = self.target {
             self.longest_gap_s = self.longest_gap_s.max(measured_s - t);
         }
@@ -165,11 +195,26 @@ impl LandController {
         if phase == Phase::Low {
             self.low_s.get_or_insert(now_s);
         }
-        let down_mps = match phase {
+        let mut down_mps = match phase {
             Phase::High => p.land_speed_high_mps,
             Phase::Low => p.land_speed_mps,
         };
-        let mut wanted = (self.goal_ne() - position_ned.xy()) * p.pos_p;
+        let offset = self.goal_ne() - position_ned.xy();
+        let acquired = self
+            .target
+            .is_some_and(|(t, _)| now_s - t <= p.acquired_timeout_s);
+        if acquired {
+            let error = offset.norm();
+            let (low, high) = p.final_band_m;
+            if p.xy_dist_max_m > 0.0 && error > p.xy_dist_max_m {
+                down_mps = 0.0;
+            } else if self.measured_down_m.is_some_and(|d| d > low && d < high) {
+                let half = 0.5 * p.land_speed_mps;
+                let slowdown = error * half / p.final_acceptable_error_m;
+                down_mps = (half - slowdown).max(p.final_min_speed_mps);
+            }
+        }
+        let mut wanted = offset * p.pos_p;
         if wanted.norm() > p.max_speed_mps {
             wanted *= p.max_speed_mps / wanted.norm();
         }
@@ -206,7 +251,7 @@ mod tests {
         let mut c = LandController::new(LandParams::ardupilot(), &start);
         let dt = 0.0025;
         let mut t = 0.0;
-        c.measure(t, t, &Vector3::zeros());
+        c.measure(t, t, &Vector3::zeros(), 20.0);
         while v.height_m() > 0.0 && t < 120.0 {
             let cmd = c.command(t, dt, &v.position_ned, &v.velocity_ned, v.height_m());
             v.step(dt, &cmd, &wind);
@@ -233,7 +278,7 @@ mod tests {
         let mut c = LandController::new(LandParams::ardupilot(), &start);
         assert_eq!(c.goal_ne(), start.xy());
         assert!(!c.target_fresh(0.0));
-        c.measure(1.0, 0.98, &Vector3::new(0.1, 0.2, 0.0));
+        c.measure(1.0, 0.98, &Vector3::new(0.1, 0.2, 0.0), 20.0);
         assert!(c.target_fresh(1.5) && !c.target_fresh(2.5));
         // Past the timeout the last estimate is kept.
         assert_eq!(c.goal_ne(), Vector2::new(0.1, 0.2));

@@ -373,10 +373,15 @@ pub fn fly(
             let board_us = clock.board_us(reconstructed.t_us);
             let own = belief(&air.truth, clock, flight.errors(), &PAD_NED, board_us)
                 .ok_or("no vehicle state")?;
-            let pad_ned = own.position_ned + relative_ned(&reconstructed.value);
+            let relative = relative_ned(&reconstructed.value);
+            let pad_ned = own.position_ned + relative;
             outcome.targets_received += 1;
-            air.land
-                .measure(air.t_s, reconstructed.t_us as f64 * 1e-6, &pad_ned);
+            air.land.measure(
+                air.t_s,
+                reconstructed.t_us as f64 * 1e-6,
+                &pad_ned,
+                relative.z,
+            );
         }
     }
     // Past the last frame (the pad too close to see, or the time limit) it flies on.

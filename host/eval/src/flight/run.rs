@@ -331,7 +331,7 @@ impl FlightRun {
     /// (b): what this flight's autopilot reconstructs from the LANDING_TARGET it received,
     /// for the exposure at `exposure_us`: ArduPilot from its BODY_FRD or LOCAL_FRD vector
     /// and distance (the simulated ArduPilot is 4.7+, which takes both; any other frame it
-    /// refuses), PX4 from its LOCAL_NED point and time stamp.
+    /// refuses), PX4 from its LOCAL_NED point and time stamp (any other frame it drops).
     pub fn reconstruct_received(
         &self,
         target: &ReceivedTarget,
@@ -351,9 +351,12 @@ impl FlightRun {
                 let receipt = target.receipt_us;
                 self.reconstruct_ardupilot(&xyz, distance, exposure_us, receipt, truth, local_frd)
             }
-            AutopilotKind::Px4 => {
+            // PX4's mavlink_receiver takes a LANDING_TARGET only in MAV_FRAME_LOCAL_NED
+            // and drops any other frame.
+            AutopilotKind::Px4 if d.frame == MavFrame::MAV_FRAME_LOCAL_NED => {
                 self.reconstruct_local_ned(&xyz, d.time_usec, target.receipt_us, truth)
             }
+            AutopilotKind::Px4 => None,
         }
     }
 
