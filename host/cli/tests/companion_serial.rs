@@ -56,7 +56,9 @@ fn autopilot_heartbeat(seq: &mut u8) -> Vec<u8> {
 
 /// A simulated descent of `frames` frames, written to a fresh directory named after `name`.
 fn descent_recording(name: &str, frames: u32) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("touchdown-serial-{name}-{}", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("companion_serial")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     // --ideal: these tests are about the serial link and the parameters, and the descent
     // starts with the pad near the edge of the view, where the default 2 degree mount

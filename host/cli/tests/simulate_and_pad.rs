@@ -9,9 +9,12 @@ use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::Scenario;
 use touchdown_sim::Simulator;
 
-/// A fresh scratch directory path (removed if it exists, not created).
+/// A fresh scratch directory path under the target directory (removed if it exists, not
+/// created).
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("touchdown-cli-{}-{name}", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("simulate_and_pad")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     dir
 }
