@@ -332,20 +332,37 @@ pub(super) fn blurred(
     let beyond_u = left * lo_u.mass + right * hi_u.mass;
     let beyond_v = top * lo_v.mass + bottom * hi_v.mass;
     let (along_u, along_v) = (0.5 * (1.0 + v.known), 0.5 * (1.0 + u.known));
+    // The outside's part of a derivative along one axis: that axis's two sides through their
+    // masses' derivatives (`lo`, `hi`), and the other axis's sides through this axis's known
+    // mass (`known`, half of it: the corner quadrants).
+    let part = |weight: f32, levels: (f32, f32), lo: f32, hi: f32, known: f32, other: f32| {
+        weight * (levels.0 * lo + levels.1 * hi) + 0.5 * known * other
+    };
+    let (lr, tb) = ((left, right), (top, bottom));
+    d_u += part(along_u, lr, lo_u.d_pos, hi_u.d_pos, u.known_d_pos, beyond_v);
+    d_v += part(along_v, tb, lo_v.d_pos, hi_v.d_pos, v.known_d_pos, beyond_u);
+    d_wu += part(
+        along_u,
+        lr,
+        lo_u.d_width,
+        hi_u.d_width,
+        u.known_d_width,
+        beyond_v,
+    );
+    d_wv += part(
+        along_v,
+        tb,
+        lo_v.d_width,
+        hi_v.d_width,
+        v.known_d_width,
+        beyond_u,
+    );
     Blurred {
         value: value + along_u * beyond_u + along_v * beyond_v,
-        d_u: d_u
-            + along_u * (left * lo_u.d_pos + right * hi_u.d_pos)
-            + 0.5 * u.known_d_pos * beyond_v,
-        d_v: d_v
-            + along_v * (top * lo_v.d_pos + bottom * hi_v.d_pos)
-            + 0.5 * v.known_d_pos * beyond_u,
-        d_width_u: d_wu
-            + along_u * (left * lo_u.d_width + right * hi_u.d_width)
-            + 0.5 * u.known_d_width * beyond_v,
-        d_width_v: d_wv
-            + along_v * (top * lo_v.d_width + bottom * hi_v.d_width)
-            + 0.5 * v.known_d_width * beyond_u,
+        d_u,
+        d_v,
+        d_width_u: d_wu,
+        d_width_v: d_wv,
         outside: [
             along_u * lo_u.mass,
             along_u * hi_u.mass,
