@@ -84,7 +84,7 @@ const DAMPING: f32 = 1e-3;
 pub const MAX_CORNER_SHIFT_PX: f32 = 0.6;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 40 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
-/// qvga-far-1: one tag36h11 of 14 pixels): 1.54 million instructions for its pixels and five
+/// qvga-far-1: one tag36h11 of 14 pixels): 1.48 million instructions for its pixels and five
 /// passes (1.41 million before the outside had a level per side), about 16,500 units (a fit
 /// never reads more pixels than there). It is charged before it starts and skipped when the
 /// frame's budget cannot pay for it.

@@ -87,12 +87,9 @@ pub(super) struct Axis {
     len: usize,
     /// Per window cell: the mass, its derivative by the point and by the width.
     cells: [Cell; MAX_WINDOW],
-    known: f32,
-    known_d_pos: f32,
-    known_d_width: f32,
     /// The mass beyond the known area's low end (grid coordinate < 0) and beyond its high
     /// end (> cells), with their derivatives: the outside is modelled side by side (see
-    /// [`Blurred::outside`]).
+    /// [`Blurred::outside`]); the known area's mass is the rest ([`Axis::known`]).
     beyond_lo: Cell,
     beyond_hi: Cell,
 }
@@ -205,16 +202,12 @@ impl Axis {
             first: 0,
             len: 0,
             cells: [Cell::default(); MAX_WINDOW],
-            known: 1.0,
-            known_d_pos: 0.0,
-            known_d_width: 0.0,
             beyond_lo: Cell::default(),
             beyond_hi: Cell::default(),
         };
         if last <= first {
             // Farther than the window from the known area: only the outside level of the
             // side the point is on.
-            axis.known = 0.0;
             let whole = Cell {
                 mass: 1.0,
                 ..Cell::default()
@@ -256,10 +249,6 @@ impl Axis {
         } else {
             (1.0, 0.0, 0.0)
         };
-        axis.known = above.0 - below.0;
-        axis.known_d_pos = -(above.1 - below.1) * inverse;
-        axis.known_d_width = -(above.1 * above.2 - below.1 * below.2) * inverse;
-        // The known mass is 1 - beyond_lo - beyond_hi, and so are its derivatives.
         axis.beyond_lo = Cell {
             mass: below.0,
             d_pos: -below.1 * inverse,
@@ -271,6 +260,17 @@ impl Axis {
             d_width: above.1 * above.2 * inverse,
         };
         Some(axis)
+    }
+
+    /// The Gaussian's mass over the known area and its derivatives: all that is not
+    /// beyond either end.
+    fn known(&self) -> Cell {
+        let (lo, hi) = (&self.beyond_lo, &self.beyond_hi);
+        Cell {
+            mass: 1.0 - lo.mass - hi.mass,
+            d_pos: -(lo.d_pos + hi.d_pos),
+            d_width: -(lo.d_width + hi.d_width),
+        }
     }
 }
 
@@ -331,7 +331,8 @@ pub(super) fn blurred(
     // then their mass times (known v + half the rest), (1 + known v) / 2.
     let beyond_u = left * lo_u.mass + right * hi_u.mass;
     let beyond_v = top * lo_v.mass + bottom * hi_v.mass;
-    let (along_u, along_v) = (0.5 * (1.0 + v.known), 0.5 * (1.0 + u.known));
+    let (known_u, known_v) = (u.known(), v.known());
+    let (along_u, along_v) = (0.5 * (1.0 + known_v.mass), 0.5 * (1.0 + known_u.mass));
     // The outside's part of a derivative along one axis: that axis's two sides through their
     // masses' derivatives (`lo`, `hi`), and the other axis's sides through this axis's known
     // mass (`known`, half of it: the corner quadrants).
@@ -339,14 +340,14 @@ pub(super) fn blurred(
         weight * (levels.0 * lo + levels.1 * hi) + 0.5 * known * other
     };
     let (lr, tb) = ((left, right), (top, bottom));
-    d_u += part(along_u, lr, lo_u.d_pos, hi_u.d_pos, u.known_d_pos, beyond_v);
-    d_v += part(along_v, tb, lo_v.d_pos, hi_v.d_pos, v.known_d_pos, beyond_u);
+    d_u += part(along_u, lr, lo_u.d_pos, hi_u.d_pos, known_u.d_pos, beyond_v);
+    d_v += part(along_v, tb, lo_v.d_pos, hi_v.d_pos, known_v.d_pos, beyond_u);
     d_wu += part(
         along_u,
         lr,
         lo_u.d_width,
         hi_u.d_width,
-        u.known_d_width,
+        known_u.d_width,
         beyond_v,
     );
     d_wv += part(
@@ -354,7 +355,7 @@ pub(super) fn blurred(
         tb,
         lo_v.d_width,
         hi_v.d_width,
-        v.known_d_width,
+        known_v.d_width,
         beyond_u,
     );
     Blurred {
