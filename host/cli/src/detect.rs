@@ -55,15 +55,18 @@ per line:
 time_ms is the detection (and pose) time only (not image decoding); hamming is the number
 of bits the decoder corrected.
 
-Poses: with --camera CAMERA.toml and --tag-size M (every marker is taken to be M metres
-across its outer black border), each marker gets \"pose\": R (row-major) and t map
-marker-frame points into the camera frame, X_cam = R X_marker + t (marker frame: x right,
-y up, z out of the printed face; camera frame: x right, y down, z forward; metres), and the
-RMS reprojection error of the corners in pixels. Corners are undistorted with the camera's
-Brown-Conrady coefficients; the pose is IPPE's better planar solution refined by
-Levenberg-Marquardt. With a distorting camera the detector also fits the outlines of large
-markers through the lens (their edges are straight again there), which finds markers a
-wide-angle lens bends; the corners printed stay in the image's own pixels either way.
+Camera and poses: with --camera CAMERA.toml the detector sees through the camera's lens:
+it fits the outlines of large markers where their edges are straight again (undistorted),
+which finds markers a wide-angle lens bends; the corners printed stay in the image's own
+pixels either way. A marker whose size is known also gets \"pose\": with --tag-size M every
+marker is taken to be M metres across its outer black border; with --pad pad.toml each
+marker of the pad (same family and id) has its own size from the file, and without
+--family the pad's families are searched (--tag-size then sizes the markers not on the
+pad; the others get no pose). R (row-major) and t map marker-frame points into the camera
+frame, X_cam = R X_marker + t (marker frame: x right, y up, z out of the printed face;
+camera frame: x right, y down, z forward; metres), with the RMS reprojection error of the
+corners in pixels. Corners are undistorted with the camera's Brown-Conrady coefficients;
+the pose is IPPE's better planar solution refined by Levenberg-Marquardt.
 
 Exit status: 0 when every image was read (even with no marker found); 2 when an image could
 not be read (one line per file on stderr; the other images are still processed) or an option
@@ -77,13 +80,19 @@ pub struct DetectArgs {
     #[arg(long = "family", value_name = "NAME|FILE")]
     pub families: Vec<String>,
 
-    /// Camera intrinsics (CAMERA.toml) for marker poses; needs --tag-size
+    /// Camera intrinsics (CAMERA.toml): the detector sees through its lens; poses with
+    /// --tag-size or --pad
     #[arg(long, value_name = "CAMERA.toml")]
     pub camera: Option<PathBuf>,
 
     /// Marker size for poses: edge of the outer black border, metres; needs --camera
     #[arg(long, allow_negative_numbers = true, value_name = "M", value_parser = parse_tag_size)]
     pub tag_size: Option<f64>,
+
+    /// Pad layout (pad.toml): each of its markers gets a pose at its own size, and without
+    /// --family its families are searched; needs --camera
+    #[arg(long, value_name = "pad.toml")]
+    pub pad: Option<PathBuf>,
 
     /// Print one JSON object per image per line instead of text
     #[arg(long)]
@@ -152,7 +161,8 @@ pub struct DetectionReport {
     /// Outer black-border corners: top-left, top-right, bottom-right, bottom-left of the
     /// canonical image, pixels, (0, 0) = centre of the top-left pixel.
     pub corners: [[f32; 2]; 4],
-    /// The marker's pose, with `--camera` and `--tag-size` only.
+    /// The marker's pose: with `--camera`, for a marker whose size `--tag-size` or `--pad`
+    /// gives.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose: Option<PoseReport>,
 }
@@ -195,14 +205,14 @@ pub fn run(
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> Result<Outcome, CliError> {
-    let selected = families::resolve_all(&args.families).map_err(CliError::new)?;
+    let pose_setup = check_pose_options(args)?;
+    let selected = searched_families(args)?;
     if selected.len() > MAX_FAMILIES {
         return Err(CliError(format!(
             "at most {MAX_FAMILIES} families can be searched at once ({} given)",
             selected.len()
         )));
     }
-    let pose_setup = check_pose_options(args)?;
 
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
@@ -210,7 +220,7 @@ pub fn run(
     // With --camera, touchdown's detector fits long boundaries through the lens, as the
     // board's per-frame path does (`FramePipeline`); the paper's method stays as published.
     if args.method == MethodArg::Robust {
-        detector.set_camera(pose_setup.as_ref().map(|(camera, _)| *camera));
+        detector.set_camera(pose_setup.as_ref().map(|setup| setup.camera));
     }
     let mut workspace = HostWorkspace::new();
     let mut totals = Totals::default();
@@ -232,17 +242,21 @@ pub fn run(
             .detect(&view, &family_refs, &mut buffers)
             .map(|_| ());
         let poses: Vec<Option<PoseReport>> = match &pose_setup {
-            Some((camera, size)) if searched.is_ok() => detector
+            Some(setup) if searched.is_ok() => detector
                 .detections()
                 .iter()
-                .map(|d| pose_report(d, camera, *size))
+                .map(|d| {
+                    let size = setup.size_of(family_name(&selected, d), d.id)?;
+                    pose_report(d, &setup.camera, size)
+                })
                 .collect(),
             _ => Vec::new(),
         };
         let elapsed = started.elapsed().as_secs_f64();
         searched.map_err(|e| CliError(format!("{}: {}", path.display(), describe(e))))?;
         let detections = detector.detections();
-        if let Some((camera, _)) = &pose_setup {
+        if let Some(setup) = &pose_setup {
+            let camera = &setup.camera;
             if (camera.width as usize, camera.height as usize) != (frame.width, frame.height) {
                 let _ = writeln!(
                     err,
@@ -254,7 +268,12 @@ pub fn run(
                     camera.height
                 );
             }
-            let failed = poses.iter().filter(|p| p.is_none()).count();
+            // A marker of no known size has no pose by design; only a sized one is a failure.
+            let sized = detections
+                .iter()
+                .filter(|d| setup.size_of(family_name(&selected, d), d.id).is_some())
+                .count();
+            let failed = sized.saturating_sub(poses.iter().flatten().count());
             if failed > 0 {
                 let _ = writeln!(
                     err,
@@ -319,22 +338,71 @@ pub fn run(
     })
 }
 
-/// `--camera` and `--tag-size` go together; the camera file is checked in full (so a bad
-/// camera file is reported as such). Returns the camera and the marker size for poses.
-fn check_pose_options(args: &DetectArgs) -> Result<Option<(CameraModel, f32)>, CliError> {
-    match (&args.camera, args.tag_size) {
-        (None, None) => Ok(None),
-        (Some(_), None) => Err(CliError::new(
-            "--camera needs --tag-size (the marker's black-border edge in metres) for poses",
-        )),
-        (None, Some(_)) => Err(CliError::new(
-            "--tag-size needs --camera CAMERA.toml for poses",
-        )),
-        (Some(path), Some(size)) => {
-            let model = touchdown_formats::camera::load_camera(path).map_err(CliError::new)?;
-            Ok(Some((model, size as f32)))
+/// What `--camera`, `--tag-size` and `--pad` ask for.
+struct PoseSetup {
+    camera: CameraModel,
+    /// `--tag-size`: the size of every marker `--pad` does not size.
+    tag_size: Option<f32>,
+    /// `--pad`: (family name, id, size) of each of the pad's markers.
+    pad_markers: Vec<(String, u16, f32)>,
+}
+
+impl PoseSetup {
+    /// The size of a detected marker, if it is known.
+    fn size_of(&self, family: &str, id: u16) -> Option<f32> {
+        self.pad_markers
+            .iter()
+            .find(|(name, marker, _)| *marker == id && name.eq_ignore_ascii_case(family))
+            .map(|&(_, _, size)| size)
+            .or(self.tag_size)
+    }
+}
+
+/// Checks `--camera`, `--tag-size` and `--pad` (the files in full, so a bad one is reported
+/// as such): the sizes need the camera; the camera alone gives the detector its lens.
+fn check_pose_options(args: &DetectArgs) -> Result<Option<PoseSetup>, CliError> {
+    let Some(path) = &args.camera else {
+        return match (args.tag_size, &args.pad) {
+            (None, None) => Ok(None),
+            (Some(_), _) => Err(CliError::new(
+                "--tag-size needs --camera CAMERA.toml for poses",
+            )),
+            (None, Some(_)) => Err(CliError::new("--pad needs --camera CAMERA.toml for poses")),
+        };
+    };
+    let camera = touchdown_formats::camera::load_camera(path).map_err(CliError::new)?;
+    let pad_markers = match &args.pad {
+        Some(pad) => touchdown_formats::pad::load_pad(pad)
+            .map_err(CliError::new)?
+            .markers
+            .iter()
+            .map(|m| (m.family.clone(), m.id, m.size as f32))
+            .collect(),
+        None => Vec::new(),
+    };
+    Ok(Some(PoseSetup {
+        camera,
+        tag_size: args.tag_size.map(|size| size as f32),
+        pad_markers,
+    }))
+}
+
+/// The families to search: `--family`, else the pad's (in its order), else the defaults.
+fn searched_families(args: &DetectArgs) -> Result<Vec<SelectedFamily>, CliError> {
+    let mut names = args.families.clone();
+    if names.is_empty() && args.camera.is_some() {
+        if let Some(pad) = &args.pad {
+            for marker in touchdown_formats::pad::load_pad(pad)
+                .map_err(CliError::new)?
+                .markers
+            {
+                if !names.iter().any(|n| n.eq_ignore_ascii_case(&marker.family)) {
+                    names.push(marker.family);
+                }
+            }
         }
     }
+    families::resolve_all(&names).map_err(CliError::new)
 }
 
 fn describe(error: DetectError) -> &'static str {

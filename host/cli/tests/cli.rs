@@ -395,7 +395,6 @@ fn detect_with_a_distorting_camera_fits_through_the_lens() {
         ),
     )
     .expect("write");
-    let size_text = format!("{size}");
     let corner_error = |extra: &[&str]| -> f64 {
         let mut args = vec!["detect", "--json", "--family", "aruco_6x6_250"];
         args.extend_from_slice(extra);
@@ -406,6 +405,8 @@ fn detect_with_a_distorting_camera_fits_through_the_lens() {
         let detections = json["detections"].as_array().expect("detections");
         assert_eq!(detections.len(), 1, "{json}");
         assert_eq!(detections[0]["id"], 42);
+        // No size was given, so no pose: the camera alone is the detector's lens.
+        assert!(detections[0].get("pose").is_none(), "{json}");
         let corners = detections[0]["corners"].as_array().expect("corners");
         corners
             .iter()
@@ -416,7 +417,7 @@ fn detect_with_a_distorting_camera_fits_through_the_lens() {
             })
             .fold(0.0, f64::max)
     };
-    let with_camera = corner_error(&["--camera", path_str(&camera), "--tag-size", &size_text]);
+    let with_camera = corner_error(&["--camera", path_str(&camera)]);
     let without = corner_error(&[]);
     println!("corner error with the camera {with_camera:.3} px, without {without:.3} px");
     assert!(
@@ -510,10 +511,87 @@ fn camera_options_are_checked_and_give_the_pose() {
         "{pose}"
     );
 
-    let output = touchdown(&["detect", "--camera", path_str(&camera), path_str(&image)]);
-    assert_fails_with_one_line(&output, &["--tag-size"]);
+    // The camera alone: the lens for the detector, no size, so no pose and no warning.
+    let output = touchdown(&[
+        "detect",
+        "--json",
+        "--camera",
+        path_str(&camera),
+        path_str(&marker),
+    ]);
+    assert_eq!(exit_code(&output), Some(0), "{}", text(&output.stderr));
+    let json: Value = serde_json::from_slice(&output.stdout).expect("one JSON line");
+    assert_eq!(json["detections"][0]["id"], 3, "{json}");
+    assert!(json["detections"][0].get("pose").is_none(), "{json}");
+    assert!(output.stderr.is_empty(), "{}", text(&output.stderr));
+
+    // --pad: each marker at its own size, the pad's families searched without --family
+    // (aruco_4x4_50 is not among the defaults; tag36h11 is found only because the pad has
+    // it). Marker 3 is 0.4 m on this pad, so twice as far as at 0.2 m; a marker not on the
+    // pad gets no pose unless --tag-size sizes it.
+    let pad = scratch("camera-pad.toml");
+    let pad_with = |id: u16| {
+        std::fs::write(
+            &pad,
+            format!(
+                "name = \"p\"\n[[marker]]\nfamily = \"aruco_4x4_50\"\nid = 1\nsize = 0.1\nx = 1.0\ny = 0.0\n[[marker]]\nfamily = \"TAG36H11\"\nid = {id}\nsize = 0.4\nx = 0.0\ny = 0.0\n"
+            ),
+        )
+        .expect("write");
+    };
+    let distance = |extra: &[&str]| -> Option<f64> {
+        let mut args = vec!["detect", "--json", "--camera", path_str(&camera), "--pad"];
+        args.push(path_str(&pad));
+        args.extend_from_slice(extra);
+        args.push(path_str(&marker));
+        let output = touchdown(&args);
+        assert_eq!(exit_code(&output), Some(0), "{}", text(&output.stderr));
+        assert!(output.stderr.is_empty(), "{}", text(&output.stderr));
+        let json: Value = serde_json::from_slice(&output.stdout).expect("one JSON line");
+        assert_eq!(json["detections"][0]["id"], 3, "{json}");
+        json["detections"][0]["pose"]["t"][2].as_f64()
+    };
+    pad_with(3);
+    let on_pad = distance(&[]).expect("a pose at the pad's size");
+    assert!((on_pad - 2.56).abs() < 0.02, "distance {on_pad}");
+    pad_with(4);
+    assert_eq!(distance(&[]), None, "a marker the pad does not size");
+    let sized = distance(&["--tag-size", "0.2"]).expect("a pose at --tag-size");
+    assert!((sized - 1.28).abs() < 0.01, "distance {sized}");
+    let output = touchdown(&[
+        "detect",
+        "--family",
+        "aruco_4x4_50",
+        "--camera",
+        path_str(&camera),
+        "--pad",
+        path_str(&pad),
+        path_str(&marker),
+    ]);
+    assert_eq!(exit_code(&output), Some(0));
+    assert!(
+        text(&output.stdout).contains("0 markers"),
+        "--family wins over the pad's"
+    );
+
     let output = touchdown(&["detect", "--tag-size", "0.2", path_str(&image)]);
     assert_fails_with_one_line(&output, &["--camera"]);
+    let output = touchdown(&["detect", "--pad", path_str(&pad), path_str(&image)]);
+    assert_fails_with_one_line(&output, &["--pad", "--camera"]);
+    std::fs::write(
+        &pad,
+        "name = \"p\"\n[[marker]]\nfamily = \"tag36h11\"\nid = 1\nx = 0.0\ny = 0.0\n",
+    )
+    .expect("write");
+    let output = touchdown(&[
+        "detect",
+        "--camera",
+        path_str(&camera),
+        "--pad",
+        path_str(&pad),
+        path_str(&image),
+    ]);
+    assert_fails_with_one_line(&output, &["size"]);
     // clap's own usage errors exit 2 as well.
     assert_eq!(
         exit_code(&touchdown(&[
