@@ -102,24 +102,42 @@ impl<'a> GrayImage<'a> {
     /// outside the image read the nearest edge pixel.
     #[inline]
     pub fn sample(&self, x: f32, y: f32) -> f32 {
-        // Fast path: the 2x2 neighbourhood lies inside the image (NaN fails the comparisons).
-        if x >= 0.0 && y >= 0.0 && x < (self.width - 1) as f32 && y < (self.height - 1) as f32 {
-            let (xi, yi) = (x as usize, y as usize); // truncation is floor for x, y >= 0
-            let (fx, fy) = (x - xi as f32, y - yi as f32);
-            let top = yi * self.stride + xi;
-            let bottom = top + self.stride;
-            if let (Some(&[p00, p10]), Some(&[p01, p11])) = (
-                self.data
-                    .get(top..top + 2)
-                    .and_then(|s| <&[u8; 2]>::try_from(s).ok()),
-                self.data
-                    .get(bottom..bottom + 2)
-                    .and_then(|s| <&[u8; 2]>::try_from(s).ok()),
-            ) {
-                let upper = p00 as f32 + (p10 as f32 - p00 as f32) * fx;
-                let lower = p01 as f32 + (p11 as f32 - p01 as f32) * fx;
-                return upper + (lower - upper) * fy;
-            }
+        if self.bilinear_inside(x, y) {
+            self.sample_inside(x, y)
+        } else {
+            self.sample_clamped(x, y)
+        }
+    }
+
+    /// Whether [`GrayImage::sample`] at (x, y) reads a 2x2 neighbourhood inside the image
+    /// (false for NaN). A caller sampling along a segment whose two ends pass needs no test
+    /// per sample: the box is convex and `a + t * d` rounds monotonically in `t`.
+    #[inline]
+    pub(crate) fn bilinear_inside(&self, x: f32, y: f32) -> bool {
+        x >= 0.0 && y >= 0.0 && x < (self.width - 1) as f32 && y < (self.height - 1) as f32
+    }
+
+    /// [`GrayImage::sample`] at a position that is [`GrayImage::bilinear_inside`], without
+    /// that test (the same value there). Elsewhere it never panics, but reads the clamped
+    /// value only when the neighbourhood's bytes are missing.
+    #[inline]
+    pub(crate) fn sample_inside(&self, x: f32, y: f32) -> f32 {
+        let (xi, yi) = (x as usize, y as usize); // truncation is floor for x, y >= 0
+        let (fx, fy) = (x - xi as f32, y - yi as f32);
+        // Wrapping: a position far outside (a caller's mistake) then misses the data below.
+        // One slice from the top-left to the bottom-right pixel: one bounds check.
+        let top = yi.wrapping_mul(self.stride).wrapping_add(xi);
+        let window = self
+            .data
+            .get(top..)
+            .and_then(|rest| rest.get(..self.stride.wrapping_add(2)))
+            .unwrap_or(&[]);
+        if let (Some(&[p00, p10]), Some(&[p01, p11])) =
+            (window.first_chunk::<2>(), window.last_chunk::<2>())
+        {
+            let upper = p00 as f32 + (p10 as f32 - p00 as f32) * fx;
+            let lower = p01 as f32 + (p11 as f32 - p01 as f32) * fx;
+            return upper + (lower - upper) * fy;
         }
         self.sample_clamped(x, y)
     }

@@ -345,6 +345,7 @@ fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
         fix,
         markers,
         detect_error,
+        ..
     } = region(frame.name, "pipeline", || process(pipeline, t));
     let ok = report(frame, detect_error.map_or(Ok(markers), Err), pipeline);
     // Stages 2 and 3: the link task's LANDING_TARGET and its MAVLink bytes for this frame.

@@ -96,29 +96,25 @@ fn edge_point(
     let steps = profile_steps(radius);
     let count = 2 * steps + 1;
     let centre = 0.5 * sign; // the pixel-centre boundary lies half a pixel off the edge
-    let mut v = [0.0f32; MAX_PROFILE];
-    let mut lo = f32::MAX;
-    let mut hi = f32::MIN;
-    for (j, slot) in v.iter_mut().enumerate().take(count) {
-        let o = centre + (j as f32 - steps as f32) * 0.5;
-        // Orient every profile dark -> light so one search serves both polarities.
-        let s = sign * image.sample(p.x + o * n.x, p.y + o * n.y);
-        *slot = s;
-        lo = lo.min(s);
-        hi = hi.max(s);
-    }
+
+    // Offsets along `n` from `p`: multiples of a half pixel, exact in f32 (so stepping them
+    // by 0.5 gives the same values as computing each).
+    let first_offset = centre + (0.0 - steps as f32) * 0.5;
+    let last_offset = centre + steps as f32 * 0.5;
+    let inside = |o: f32| image.bilinear_inside(p.x + o * n.x, p.y + o * n.y);
+    let mut rise = heapless::Vec::new();
+    let (lo, hi, peak) = if inside(first_offset) && inside(last_offset) {
+        // Both ends inside, so every sample between them is: no test per sample.
+        read_profile(count, first_offset, &mut rise, |o| {
+            sign * image.sample_inside(p.x + o * n.x, p.y + o * n.y)
+        })
+    } else {
+        read_profile(count, first_offset, &mut rise, |o| {
+            sign * image.sample(p.x + o * n.x, p.y + o * n.y)
+        })
+    };
     if hi - lo < MIN_STEP {
         return None;
-    }
-    // Differences between neighbouring samples: rise[j] lies between samples j and j + 1.
-    let mut rise = [0.0f32; MAX_PROFILE];
-    let mut peak = (f32::MIN, 0usize);
-    for (j, slot) in rise.iter_mut().enumerate().take(count - 1) {
-        let g = v.get(j + 1).copied().unwrap_or(0.0) - v.get(j).copied().unwrap_or(0.0);
-        *slot = g;
-        if g > peak.0 {
-            peak = (g, j);
-        }
     }
     // The lobe: the differences around the steepest rise that stay above a tenth of it.
     // The floor keeps sensor noise on the plateaus out of the centroid, and subtracting it
@@ -144,6 +140,45 @@ fn edge_point(
     }
     let o = centre + (msum / wsum + 0.5 - steps as f32) * 0.5;
     Some((Point::new(p.x + o * n.x, p.y + o * n.y), hi - lo))
+}
+
+/// Differences between neighbouring samples of an edge profile: `rise[j]` lies between
+/// samples j and j + 1.
+type Rises = heapless::Vec<f32, { MAX_PROFILE - 1 }>;
+
+/// Reads an edge profile of `count` samples (at most `MAX_PROFILE`), sample `j` by
+/// `sample` at offset `first + j / 2`: its differences into `rise` (a vector, so nothing
+/// is zeroed first: a profile is read for every edge point of every candidate; the
+/// samples themselves are not kept), and returns the samples' lowest and highest values
+/// and the steepest rise with its index (the first of equals).
+#[inline(always)]
+fn read_profile(
+    count: usize,
+    first: f32,
+    rise: &mut Rises,
+    sample: impl Fn(f32) -> f32,
+) -> (f32, f32, (f32, usize)) {
+    let mut o = first;
+    let mut last = sample(o);
+    let (mut lo, mut hi) = (last, last);
+    let mut peak = (f32::MIN, 0usize);
+    let rises = count.clamp(1, MAX_PROFILE) - 1;
+    // The vector's length counts the samples (one register fewer in the loop).
+    while rise.len() < rises {
+        o += 0.5;
+        let s = sample(o);
+        let g = s - last;
+        if g > peak.0 {
+            peak = (g, rise.len());
+        }
+        if rise.push(g).is_err() {
+            break;
+        }
+        lo = lo.min(s);
+        hi = hi.max(s);
+        last = s;
+    }
+    (lo, hi, peak)
 }
 
 /// Half-pixel steps each way of an edge profile for `radius`.
