@@ -25,14 +25,23 @@
 //!   (`LANDING_TARGET_TIMEOUT_MS`).
 //! - **Horizontal position control** (`AC_PosControl`, multicopter defaults
 //!   PSC_POSXY_P 1.0, PSC_VELXY_P 2.0, PSC_VELXY_I 1.0, PSC_VELXY_D 0.5, PSC_VELXY_IMAX
-//!   1000 cm/s/s, its D term's input filtered at 5 Hz): P on the position error gives a
-//!   velocity (limited to [`LandParams::max_speed_mps`]), PID on the velocity error gives
-//!   the acceleration asked of the vehicle ([`super::vehicle::Command`]).
+//!   1000 cm/s/s, PSC_VELXY_FLTE and _FLTD 5 Hz): P on the position error gives a velocity
+//!   (limited to [`LandParams::max_speed_mps`]); the velocity PID (`AC_PID_2D::update_all`)
+//!   low-passes the velocity error at FLTE, takes P and I on that filtered error and D on its
+//!   rate low-passed again at FLTD, and its integrator does not grow while the output is cut
+//!   to the lean-angle limit (ANGLE_MAX, [`LandParams::max_tilt_deg`]); that sum is the
+//!   acceleration asked of the vehicle ([`super::vehicle::Command`]). Not modelled:
+//!   AC_PosControl's jerk-limited shaping of a new target position (`input_pos_vel_accel_xy`,
+//!   PSC_JERK_XY): a jump of the pad estimate is a step of the position error here, where
+//!   ArduCopter slews its position target to it; a still pad's estimate moves by
+//!   centimetres, and the shaping does not change how a gust is rejected.
 //!
 //! It steers on its own estimates (position with its drift, [`super::LandingConfig`]'s error
 //! model), never on the truth.
 
 use nalgebra::{Vector2, Vector3};
+
+use touchdown_sim::trajectory::GRAVITY;
 
 use super::vehicle::Command;
 
@@ -57,8 +66,12 @@ pub struct LandParams {
     pub vel_d: f64,
     /// Largest integral term, m/s^2.
     pub vel_imax: f64,
-    /// Cut-off of the derivative's input filter, Hz.
+    /// Cut-off of the velocity error's filter (P and I terms), Hz (PSC_VELXY_FLTE).
+    pub vel_error_filter_hz: f64,
+    /// Cut-off of the derivative's filter, Hz (PSC_VELXY_FLTD).
     pub vel_d_filter_hz: f64,
+    /// The lean-angle limit the integrator stops growing at, degrees (ANGLE_MAX).
+    pub max_tilt_deg: f64,
     /// Largest horizontal speed asked, m/s.
     pub max_speed_mps: f64,
     /// PLND_XY_DIST_MAX: no descent farther than this from the pad estimate, metres (0: off).
@@ -87,7 +100,9 @@ impl LandParams {
             vel_i: 1.0,
             vel_d: 0.5,
             vel_imax: 10.0,
+            vel_error_filter_hz: 5.0,
             vel_d_filter_hz: 5.0,
+            max_tilt_deg: 30.0,
             max_speed_mps: 5.0,
             xy_dist_max_m: 2.5,
             final_band_m: (0.35, 2.0),
@@ -118,8 +133,11 @@ pub struct LandController {
     /// The newest measurement's depth of the pad below the vehicle, metres.
     measured_down_m: Option<f64>,
     integral: Vector2<f64>,
-    last_error: Option<Vector2<f64>>,
+    /// The velocity error low-passed at FLTE (`None` until the first step).
+    error: Option<Vector2<f64>>,
     derivative: Vector2<f64>,
+    /// The last output when it was beyond the lean-angle limit (zero when it was not).
+    limited: Vector2<f64>,
     /// When the first target was used, seconds.
     pub acquired_s: Option<f64>,
     /// When the slow descent began, seconds.
@@ -139,8 +157,9 @@ impl LandController {
             target: None,
             measured_down_m: None,
             integral: Vector2::zeros(),
-            last_error: None,
+            error: None,
             derivative: Vector2::zeros(),
+            limited: Vector2::zeros(),
             acquired_s: None,
             low_s: None,
             targets_used: 0,
@@ -218,25 +237,52 @@ impl LandController {
         if wanted.norm() > p.max_speed_mps {
             wanted *= p.max_speed_mps / wanted.norm();
         }
-        let error = wanted - velocity_ned.xy();
-        self.integral += error * (p.vel_i * dt_s);
+        // AC_PID_2D: the first step takes the error as it is; later ones low-pass it.
+        let raw_error = wanted - velocity_ned.xy();
+        let error = match self.error {
+            None => raw_error,
+            Some(last) => {
+                let e = last + (raw_error - last) * low_pass_alpha(dt_s, p.vel_error_filter_hz);
+                let rate = (e - last) / dt_s;
+                self.derivative +=
+                    (rate - self.derivative) * low_pass_alpha(dt_s, p.vel_d_filter_hz);
+                e
+            }
+        };
+        self.error = Some(error);
+        // While the last output was cut, a step toward the cut may turn the integrator but
+        // not lengthen it.
+        let step = error * (p.vel_i * dt_s);
+        let before = self.integral.norm();
+        self.integral += step;
+        if step.dot(&self.limited) > 0.0 && self.integral.norm() > before {
+            self.integral *= before / self.integral.norm();
+        }
         if self.integral.norm() > p.vel_imax {
             self.integral *= p.vel_imax / self.integral.norm();
         }
-        let raw = self
-            .last_error
-            .map_or(Vector2::zeros(), |e| (error - e) / dt_s);
-        self.last_error = Some(error);
-        let alpha = {
-            let rc = 1.0 / (std::f64::consts::TAU * p.vel_d_filter_hz);
-            dt_s / (dt_s + rc)
+        let accel = error * p.vel_p + self.integral + self.derivative * p.vel_d;
+        let limit = GRAVITY * p.max_tilt_deg.to_radians().tan();
+        self.limited = if accel.norm() > limit {
+            accel
+        } else {
+            Vector2::zeros()
         };
-        self.derivative += (raw - self.derivative) * alpha;
         Command {
-            accel_ne: error * p.vel_p + self.integral + self.derivative * p.vel_d,
+            accel_ne: accel,
             down_mps,
         }
     }
+}
+
+/// The smoothing factor of a first-order low-pass at `cutoff_hz` sampled every `dt_s`
+/// (ArduPilot's `calc_lowpass_alpha_dt`).
+fn low_pass_alpha(dt_s: f64, cutoff_hz: f64) -> f64 {
+    if cutoff_hz <= 0.0 {
+        return 1.0;
+    }
+    let rc = 1.0 / (std::f64::consts::TAU * cutoff_hz);
+    dt_s / (dt_s + rc)
 }
 
 #[cfg(test)]
