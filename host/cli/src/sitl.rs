@@ -36,13 +36,14 @@ SET_MESSAGE_INTERVAL, the attitude stream, LANDING_TARGET), under the replay's e
 The autopilot model: ArduPilot's precision LAND as its source does it. The LANDING_TARGET's \
 vector (BODY_FRD, or LOCAL_FRD with TD_PROFILE 3) turned with its attitude estimate at \
 receipt - PLND_LAG, plus its position estimate, is the pad's position; the position controller (AC_PosControl's defaults: P 1.0 on \
-position, PID 2.0 / 1.0 / 0.5 on velocity) flies to the newest one (after 1 s without a \
+position, PID 2.0 / 1.0 / 0.5 on the velocity error low-passed at 5 Hz) flies to the newest one (after 1 s without a \
 target it keeps the last); it descends at LAND_SPEED_HIGH 1.5 m/s above LAND_ALT_LOW 10 m and \
 LAND_SPEED 0.5 m/s below; with a target acquired (a measurement within 2 s) it does not \
 descend farther than PLND_XY_DIST_MAX 2.5 m from the pad, and while the newest measurement \
 puts the pad 0.35-2 m below it descends at half LAND_SPEED, down to 0.1 m/s from 15 cm of \
 horizontal error on. The vehicle: a point mass whose tilt follows the commanded \
-acceleration (0.15 s), 30 degrees at most, rotor drag 0.2 /s on the airspeed, in a mean wind \
+acceleration (0.15 s), 30 degrees at most, with ArduPilot SITL's default frame's drag (the \
+rotors' 0.24 /s on the airspeed, the body's 0.036 /m on its square), in a mean wind \
 (--wind-mps, seeded direction) and 1-cos gusts of peak --gust-mps (2-6 s long, every 6 s on \
 average, seeded directions). Touchdown: the camera's true height reaching the pad; the error \
 is the true horizontal position then against the pad's centre (its origin, the landing point).

@@ -3,9 +3,12 @@
 //!
 //! - Horizontal: the thrust's horizontal part (the tilt, `g tan(tilt)`) follows the commanded
 //!   acceleration with a first-order lag ([`VehicleParams::attitude_tau_s`], the attitude
-//!   loop's response), limited to [`VehicleParams::max_tilt_deg`]; the air pushes with a
-//!   linear drag on the airspeed, `drag_per_s * (wind - velocity)` (rotor drag, the term that
-//!   dominates a small multicopter's drag at these speeds).
+//!   loop's response: ArduCopter's ATC_INPUT_TC, 0.15 s), limited to
+//!   [`VehicleParams::max_tilt_deg`]; the air pushes on the airspeed `a = wind - velocity`
+//!   as ArduPilot SITL's multicopter frame does (`SIM_Frame.cpp`, `SIM_Motor.cpp`): the
+//!   rotors' momentum drag, linear in the airspeed (`drag_per_s * a`), and the body's
+//!   drag, quadratic per axis (`body_drag_per_m * a |a|`, SITL's `areaCd * rho / 2` over
+//!   the mass).
 //! - Vertical: the climb rate follows the commanded one with its own first-order lag.
 //! - Attitude: the body's thrust axis along the specific force the vehicle produces, nose at
 //!   a fixed heading ([`touchdown_sim::trajectory::attitude_for`], the simulator's own rule,
@@ -26,8 +29,10 @@ pub struct VehicleParams {
     pub attitude_tau_s: f64,
     /// Time constant of the climb rate following the commanded one, seconds.
     pub climb_tau_s: f64,
-    /// Linear drag on the airspeed, 1/s (acceleration per m/s).
+    /// The rotors' momentum drag, linear in the airspeed, 1/s (acceleration per m/s).
     pub drag_per_s: f64,
+    /// The body's drag, quadratic in the airspeed, 1/m (acceleration per (m/s)^2).
+    pub body_drag_per_m: f64,
     /// Largest tilt, degrees.
     pub max_tilt_deg: f64,
     /// Heading, radians from north toward east.
@@ -35,14 +40,20 @@ pub struct VehicleParams {
 }
 
 impl VehicleParams {
-    /// A small (1.5-2 kg) multicopter: attitude response 0.15 s, climb response 0.3 s,
-    /// rotor drag 0.3 N per m/s on 1.5 kg (0.2 /s), 30 degrees of tilt at most (ArduPilot's
-    /// ANGLE_MAX default), nose north.
+    /// A small multicopter: attitude response 0.15 s, climb response 0.3 s, 30 degrees of
+    /// tilt at most (ArduPilot's ANGLE_MAX default), nose north. Its drag is that of the
+    /// frame ArduPilot SITL flies by default (`SIM_Frame.h`'s default model: 3 kg, 0.385 m^2
+    /// of rotor disc, mdrag_coef 0.2, a reference of 15.08 m/s at 45 degrees of tilt), at sea
+    /// level: momentum drag `mdrag_coef * sqrt(thrust * rho * disc) / mass` = 0.24 /s at
+    /// hover; the body's areaCd is what the reference's drag force leaves over the rotors'
+    /// part, 0.175 m^2, so `0.5 * rho * areaCd / mass` = 0.036 /m (at 5 m/s of airspeed the
+    /// body adds 0.9 m/s^2 to the rotors' 1.2).
     pub fn typical() -> Self {
         VehicleParams {
             attitude_tau_s: 0.15,
             climb_tau_s: 0.3,
-            drag_per_s: 0.2,
+            drag_per_s: 0.24,
+            body_drag_per_m: 0.036,
             max_tilt_deg: 30.0,
             yaw: 0.0,
         }
@@ -103,7 +114,8 @@ impl Vehicle {
         let kz = 1.0 - (-dt_s / p.climb_tau_s.max(1e-6)).exp();
         let down_velocity = self.velocity_ned.z + (command.down_mps - self.velocity_ned.z) * kz;
         self.down_accel = (down_velocity - self.velocity_ned.z) / dt_s;
-        let drag = (wind_ned - self.velocity_ned) * p.drag_per_s;
+        let air = wind_ned - self.velocity_ned;
+        let drag = air * p.drag_per_s + air.map(|a| a * a.abs()) * p.body_drag_per_m;
         let accel = Vector3::new(
             self.tilt_accel_ne.x + drag.x,
             self.tilt_accel_ne.y + drag.y,
