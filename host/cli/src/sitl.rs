@@ -13,11 +13,12 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use clap::Args;
+use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::{CliError, Outcome};
 use crate::effects::EffectArgs;
+use touchdown_eval::closed_loop::wind::WindProfile;
 use touchdown_eval::closed_loop::{self, LandingConfig, LandingOutcome};
 use touchdown_formats::recording::RecordingWriter;
 
@@ -45,7 +46,8 @@ horizontal error on. The vehicle: a point mass whose tilt follows the commanded 
 acceleration (0.15 s), 30 degrees at most, with ArduPilot SITL's default frame's drag (the \
 rotors' 0.24 /s on the airspeed, the body's 0.036 /m on its square), in a mean wind \
 (--wind-mps, seeded direction) and 1-cos gusts of peak --gust-mps (2-6 s long, every 6 s on \
-average, seeded directions). Touchdown: the camera's true height reaching the pad; the error \
+average, seeded directions), the same at every height (--wind-profile sitl: scaled by \
+sqrt(height / 60 m) below 60 m, ArduPilot SITL's default SIM_WIND_T). Touchdown: the camera's true height reaching the pad; the error \
 is the true horizontal position then against the pad's centre (its origin, the landing point).
 
 Output: the start, the timeline (first LANDING_TARGET received, target acquired by LAND, the \
@@ -60,6 +62,24 @@ frames.csv with the truth and veh_ attitude columns) that `touchdown replay DIR`
 
 Exit status: 0 when every landing touched down; 2 with one line on stderr for a bad option, \
 or when a landing did not touch down within --max-time.";
+
+/// `--wind-profile`'s choices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WindProfileArg {
+    /// The same wind at every height.
+    Uniform,
+    /// ArduPilot SITL's default: scaled by sqrt(height / 60 m) below 60 m.
+    Sitl,
+}
+
+impl WindProfileArg {
+    fn profile(self) -> WindProfile {
+        match self {
+            WindProfileArg::Uniform => WindProfile::Uniform,
+            WindProfileArg::Sitl => WindProfile::sitl(),
+        }
+    }
+}
 
 /// Arguments of `touchdown sitl`.
 #[derive(Debug, Clone, Args)]
@@ -87,6 +107,12 @@ pub struct SitlArgs {
     /// Peak of the 1-cos gusts, m/s
     #[arg(long, value_name = "MPS", default_value_t = 3.0)]
     pub gust_mps: f64,
+
+    /// The wind over height: uniform (the same at every height, the gusts at their peak down
+    /// to the ground) or sitl (ArduPilot SITL's default SIM_WIND_T 0: mean and gusts scaled
+    /// by sqrt(height / 60 m) below 60 m)
+    #[arg(long, value_enum, value_name = "PROFILE", default_value = "uniform")]
+    pub wind_profile: WindProfileArg,
 
     /// Camera frames per second [default: 15, the landing scenario's]
     #[arg(long, value_name = "HZ", default_value_t = 15.0)]
@@ -391,6 +417,7 @@ pub fn run(
             offset_m: args.offset,
             wind_mps: args.wind_mps,
             gust_mps: args.gust_mps,
+            wind_profile: args.wind_profile.profile(),
             effects: args.effect_terms.effects(args.ideal),
             params: params.clone(),
             fps: args.fps,
@@ -427,11 +454,16 @@ pub fn run(
         let e = &first.effects;
         let mut text = format!(
             "touchdown sitl: {} closed-loop landing{} against the autopilot model (ArduPilot-like precision LAND), flown in {elapsed_s:.1} s\n\
-             wind {:.1} m/s, gusts {:.1} m/s peak; {} at {:.0} fps; flight effects: readout {} ms, vibration {} deg, mount roll {} pitch {} deg\n",
+             wind {:.1} m/s, gusts {:.1} m/s peak{}; {} at {:.0} fps; flight effects: readout {} ms, vibration {} deg, mount roll {} pitch {} deg\n",
             outcomes.len(),
             if outcomes.len() == 1 { "" } else { "s" },
             first.wind_mps,
             first.gust_mps,
+            if first.wind_profile == WindProfile::Uniform {
+                ""
+            } else {
+                ", thinned toward the ground as SITL's (sqrt of height / 60 m)"
+            },
             if first.qvga { "320x240" } else { "640x480" },
             first.fps,
             e.readout_ms,

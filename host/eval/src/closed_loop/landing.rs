@@ -14,7 +14,7 @@ use touchdown_sim::{SimFrame, Simulator};
 
 use super::land::{LandController, LandParams};
 use super::vehicle::{Vehicle, VehicleParams};
-use super::wind::Wind;
+use super::wind::{Wind, WindProfile};
 use crate::flight::{
     belief, relative_ned, AutopilotKind, ErrorModel, FlightSetup, TruthSource, TruthTable, PAD_NED,
 };
@@ -48,6 +48,8 @@ pub struct LandingConfig {
     pub wind_mps: f64,
     /// Peak of the gusts, m/s ([`super::wind`]).
     pub gust_mps: f64,
+    /// How the wind changes with height ([`WindProfile`]).
+    pub wind_profile: WindProfile,
     /// The flight effects the camera is rendered with.
     pub effects: FlightEffects,
     /// The autopilot's error model.
@@ -80,6 +82,7 @@ impl LandingConfig {
             offset_m: 2.0,
             wind_mps: 2.0,
             gust_mps: 3.0,
+            wind_profile: WindProfile::Uniform,
             effects: FlightEffects::typical(),
             model: ErrorModel::typical(),
             params: Vec::new(),
@@ -151,6 +154,7 @@ struct Air {
     vehicle: Vehicle,
     land: LandController,
     wind: Wind,
+    wind_profile: WindProfile,
     truth: TruthTable,
     t_s: f64,
     touchdown: Option<Touchdown>,
@@ -169,7 +173,8 @@ impl Air {
                 self.vehicle.height_m(),
             );
             let before = self.vehicle;
-            self.vehicle.step(STEP_S, &command, &self.wind.at(self.t_s));
+            let wind = self.wind.at(self.t_s) * self.wind_profile.scale(self.vehicle.height_m());
+            self.vehicle.step(STEP_S, &command, &wind);
             self.t_s += STEP_S;
             let after = self.vehicle;
             if after.height_m() <= 0.0 {
@@ -191,7 +196,7 @@ impl Air {
 /// The simulator's trajectory for the frame at `t_s`: the vehicle's motion linearised about
 /// that time (position and velocity; roll, pitch, yaw and their rates, as slow sines through
 /// their value at `t_s`), exact at `t_s` (see [`super`]).
-fn local_trajectory(truth: &TruthTable, t_s: f64) -> Option<Trajectory> {
+pub fn local_trajectory(truth: &TruthTable, t_s: f64) -> Option<Trajectory> {
     let at = |t: f64| truth.at(t);
     let (now, before, after) = (at(t_s)?, at(t_s - RATE_SPAN_S)?, at(t_s + RATE_SPAN_S)?);
     let euler = |m| Rotation3::from_matrix_unchecked(m).euler_angles();
@@ -300,6 +305,7 @@ pub fn fly(
             config.max_flight_s,
             config.seed,
         ),
+        wind_profile: config.wind_profile,
         truth: TruthTable::new(),
         t_s: 0.0,
         touchdown: None,

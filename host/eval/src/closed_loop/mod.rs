@@ -7,7 +7,8 @@
 //! of [`crate::flight`] over MAVLink bytes ([`crate::Experiment::in_flight`], the very path
 //! `touchdown replay` flies), and what that autopilot reconstructs from the LANDING_TARGET it
 //! received steers the vehicle: an ArduPilot-like precision LAND ([`land`]) commands a
-//! multicopter point mass ([`vehicle`]) in wind and gusts ([`wind`]). The vehicle's true
+//! multicopter point mass ([`vehicle`]) in wind and gusts ([`wind`], the same at every
+//! height or thinned toward the ground as ArduPilot SITL's default profile). The vehicle's true
 //! state history is the [`crate::flight::TruthTable`] the simulated autopilot streams its
 //! (erroneous) attitude and position estimates from, so the loop is closed through the
 //! autopilot's own estimates, the link and the board, never through the truth.
@@ -33,4 +34,6 @@ mod landing;
 pub mod vehicle;
 pub mod wind;
 
-pub use landing::{fly, scene, LandingConfig, LandingOutcome, Touchdown, LOOKAHEAD_S, STEP_S};
+pub use landing::{
+    fly, local_trajectory, scene, LandingConfig, LandingOutcome, Touchdown, LOOKAHEAD_S, STEP_S,
+};

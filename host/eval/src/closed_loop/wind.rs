@@ -11,6 +11,13 @@
 //! Why discrete gusts rather than a filtered noise: "3 m/s gusts" (issue 15) names a peak, and
 //! a gust's rise over seconds is what a position controller must reject; a Dryden-like noise
 //! of that RMS would put twice the peak into the air now and then.
+//!
+//! Over height ([`WindProfile`]): the same air at every height by default (the gusts at
+//! their full peak down to the ground, the hard case), or ArduPilot SITL's default profile
+//! (`SIM_WIND_T` 0, `SITL_State.cpp`): below `SIM_WIND_T_ALT` (60 m) the wind speed is
+//! scaled by `sqrt(height / 60 m)`, so 0.58 of it at 20 m and 0.09 at 0.5 m. SITL scales its
+//! set wind speed that way and adds its turbulence (`SIM_WIND_TURB`) unscaled; SITL has no
+//! discrete gusts, so here the whole wind, mean and gusts, is scaled.
 
 use nalgebra::{Vector2, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -20,6 +27,37 @@ use rand_chacha::ChaCha8Rng;
 pub const GUST_MEAN_INTERVAL_S: f64 = 6.0;
 /// Shortest and longest gust, seconds.
 pub const GUST_LENGTH_S: (f64, f64) = (2.0, 6.0);
+
+/// How the wind changes with the height over the ground (see the module docs).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub enum WindProfile {
+    /// The same wind at every height.
+    #[default]
+    Uniform,
+    /// ArduPilot SITL's default: scaled by `sqrt(height / reference_m)` below `reference_m`.
+    SquareRoot {
+        /// SIM_WIND_T_ALT, metres (SITL's default 60).
+        reference_m: f64,
+    },
+}
+
+impl WindProfile {
+    /// ArduPilot SITL's default profile (SIM_WIND_T 0, SIM_WIND_T_ALT 60 m).
+    pub fn sitl() -> Self {
+        WindProfile::SquareRoot { reference_m: 60.0 }
+    }
+
+    /// The factor on the wind at `height_m` over the ground.
+    pub fn scale(&self, height_m: f64) -> f64 {
+        match *self {
+            WindProfile::Uniform => 1.0,
+            WindProfile::SquareRoot { reference_m } if reference_m > 0.0 => {
+                (height_m / reference_m).clamp(0.0, 1.0).sqrt()
+            }
+            WindProfile::SquareRoot { .. } => 1.0,
+        }
+    }
+}
 
 /// One 1-cos gust.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,5 +161,16 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(strongest > 1.0 && strongest < 6.0 + 1e-9, "{strongest}");
         assert_eq!(Wind::calm().at(3.0), Vector3::zeros());
+    }
+
+    #[test]
+    fn sitl_s_profile_thins_the_wind_toward_the_ground() {
+        let sitl = WindProfile::sitl();
+        assert_eq!(sitl.scale(60.0), 1.0);
+        assert_eq!(sitl.scale(100.0), 1.0);
+        assert!((sitl.scale(15.0) - 0.5).abs() < 1e-12);
+        assert!((sitl.scale(0.6) - 0.1).abs() < 1e-12);
+        assert_eq!(sitl.scale(-1.0), 0.0);
+        assert_eq!(WindProfile::Uniform.scale(0.5), 1.0);
     }
 }
