@@ -4,8 +4,11 @@
 //! core's [`FramePipeline`] (markers, the pad fix, the estimator: the very code the host tools
 //! and the replay run, with the vehicle state the link task last published in
 //! [`channels::VEHICLE`]) and the estimate is posted to the link task with the frame's
-//! exposure time. The software
-//! auto-exposure ([`AutoExposure`]) adjusts the sensor from each frame's mean brightness.
+//! exposure time. The software auto-exposure ([`AutoExposure`]) adjusts the sensor from each
+//! frame's metering, which the pipeline measures with the frame
+//! ([`touchdown_core::pipeline::FrameReport::metering`]: the decoded markers' white and black,
+//! the scene's mean and highlight, the longest exposure the body rate allows), so a replay
+//! that closes the loop meters as the board does.
 //!
 //! The sensor: at start the task power-cycles it and asks the SCCB bus which supported sensor
 //! answers ([`Camera::detect`]: an OV7725 at 0x21 or an OV2640 at 0x30), until one does; each
@@ -77,7 +80,7 @@ use touchdown_core::filter::{EstimatorConfig, PadEstimator, VehicleState};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
-use touchdown_core::sensor::{mean_brightness, AutoExposure, ExposureSetting, FrameTiming};
+use touchdown_core::sensor::{AutoExposure, ExposureSetting, FrameTiming, Metering};
 use touchdown_sensors::any::{self, Camera};
 
 use crate::capture::{Capture, CaptureError, FrameBuffer, HEIGHT, SENSOR_RESOLUTION, WIDTH};
@@ -93,8 +96,6 @@ pub const MAX_CONSECUTIVE_ERRORS: u32 = 3;
 const INIT_RETRY: Duration = Duration::from_millis(500);
 /// Interval of the `info` summary.
 const SUMMARY_PERIOD: Duration = Duration::from_secs(1);
-/// Sample every 8th pixel of every 8th row for the exposure loop.
-const BRIGHTNESS_STEP: usize = 8;
 
 /// The sensor's control pins.
 pub struct SensorPins {
@@ -312,7 +313,7 @@ pub async fn task(
                     &vehicle,
                     workspace,
                 );
-                if let Some(setting) = exposure.update(processed.mean) {
+                if let Some(setting) = exposure.update_metered(&processed.metering) {
                     write_exposure(&mut sensor.camera, setting).await;
                 }
                 Some(processed)
@@ -385,7 +386,7 @@ struct Processed {
     markers: u32,
     fix: bool,
     detect: Duration,
-    mean: u8,
+    metering: Metering,
 }
 
 /// Runs the frame through the pipeline and posts the result to the link. Runs on the CPU
@@ -415,10 +416,9 @@ fn process(
             markers: 0,
             fix: false,
             detect: Duration::from_ticks(0),
-            mean: 0,
+            metering: Metering::mean_only(0),
         };
     };
-    let mean = mean_brightness(&image, BRIGHTNESS_STEP);
     let started = Instant::now();
     let report = pipeline.process(&image, exposure_at, vehicle, &mut workspace.buffers());
     let detect = started.elapsed();
@@ -431,7 +431,7 @@ fn process(
         markers: u32::try_from(report.markers).unwrap_or(u32::MAX),
         fix: has_fix,
         detect,
-        mean,
+        metering: report.metering,
     }
 }
 

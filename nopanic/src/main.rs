@@ -41,7 +41,9 @@ use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_core::pose::{marker_pose, PoseMethod};
-use touchdown_core::sensor::{mean_brightness, AutoExposure, AutoExposureLimits, FrameTiming};
+use touchdown_core::sensor::{
+    mean_brightness, AutoExposure, AutoExposureLimits, FrameTiming, Metering,
+};
 
 /// QVGA, the firmware's frame size.
 const WIDTH: usize = 320;
@@ -71,24 +73,25 @@ struct Pipeline<'a> {
 fn per_frame(pipeline: &mut Pipeline<'_>, pixels: &[u8], rx: &[u8], now_us: u64) {
     let exposure_us = black_box(now_us.wrapping_sub(25_000));
     pipeline.companion.receive(rx, now_us);
-    let estimate = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
+    let (estimate, metering) = match GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
         Ok(image) => {
-            pipeline
-                .vision
-                .process(
-                    &image,
-                    exposure_us,
-                    pipeline.companion.vehicle(),
-                    &mut pipeline.workspace.buffers(),
-                )
-                .estimate
+            let report = pipeline.vision.process(
+                &image,
+                exposure_us,
+                pipeline.companion.vehicle(),
+                &mut pipeline.workspace.buffers(),
+            );
+            (report.estimate, report.metering)
         }
-        Err(_) => FrameEstimate {
-            exposure_us,
-            fix_found: false,
-            estimate: None,
-            mount_correction: None,
-        },
+        Err(_) => (
+            FrameEstimate {
+                exposure_us,
+                fix_found: false,
+                estimate: None,
+                mount_correction: None,
+            },
+            Metering::mean_only(0),
+        ),
     };
     // Not on the firmware's path, but a public core function the host tools call on the same
     // detections (the single-marker pose): covered here.
@@ -117,6 +120,7 @@ fn per_frame(pipeline: &mut Pipeline<'_>, pixels: &[u8], rx: &[u8], now_us: u64)
     let _ = black_box(companion.stats());
     // The vision task's exposure step and, after a PARAM_SET, its settings hand-over: the
     // pipeline's (the detector's correction cap, the scaled pad) and the exposure limits.
+    let _ = black_box(pipeline.exposure.update_metered(&black_box(metering)));
     if let Ok(image) = GrayImage::new(pixels, black_box(WIDTH), black_box(HEIGHT)) {
         let mean = mean_brightness(&image, black_box(8));
         let _ = black_box(pipeline.exposure.update(mean));

@@ -48,7 +48,9 @@
 //! estimator's mount; it is meant to be called between frames (the firmware takes the settings
 //! from the link task's signal before processing the next frame; the host after each received
 //! MAVLink chunk). The exposure loop is not here: it drives a sensor, which the host does not
-//! have.
+//! have. What it is fed is: [`FrameReport::metering`] (the decoded markers' levels, the
+//! scene's, the motion cap), measured here so that the firmware and a replay that closes the
+//! loop ([`crate::sensor::AutoExposure::update_metered`]) meter the same way.
 //!
 //! The reference paper's method is [`PaperPipeline`], beside this one and apart from it, so
 //! that its tables can be reproduced on the same frames.
@@ -69,6 +71,7 @@ use crate::image::GrayImage;
 use crate::pad::{PadError, PadLayout, MAX_PAD_MARKERS};
 use crate::params::PipelineSettings;
 use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix};
+use crate::sensor::{motion_cap_us, pad_levels, scene_levels, Metering, SCENE_STEP};
 use nalgebra::{Matrix3, Vector3};
 
 /// Everything about the pipeline that is fixed at start-up (the tunable part is
@@ -113,6 +116,10 @@ pub struct FrameReport {
     pub markers: usize,
     /// Why detection stopped, when it did (the frame then has no fix).
     pub detect_error: Option<DetectError>,
+    /// What the exposure loop is fed ([`crate::sensor::AutoExposure::update_metered`]): the
+    /// decoded markers' white and black, the scene's mean and highlight, and the longest
+    /// exposure the body rate at the exposure allows through this camera.
+    pub metering: Metering,
 }
 
 /// Oldest last fix whose translation places the pad's plane for the rolling-shutter
@@ -265,9 +272,12 @@ impl<'a> FramePipeline<'a> {
         // The image's own fix is kept beside the levelled one for the mount calibration, which
         // needs the tilt the image measured (the levelled fix's is the attitude's).
         let mut image_fix = None;
+        let mut pad = None;
         let (markers, fix, detect_error) = match self.detector.detect(image, self.families, buffers)
         {
             Ok(raw) => {
+                // The markers' levels where the detector saw them (before any correction).
+                pad = pad_levels(image, raw, self.families);
                 let (families, pad, camera) = (self.families, &self.pad, &self.camera);
                 // The pad's markers as a global shutter would have seen them (both fixes
                 // solve on these); the count reported is the detector's.
@@ -304,6 +314,10 @@ impl<'a> FramePipeline<'a> {
             self.last_rotation = Some(f.pose.rotation);
             self.last_translation = Some((exposure_us, f.pose.translation));
         }
+        let (mean, highlight) = scene_levels(image, SCENE_STEP);
+        let max_exposure_us = at_exposure
+            .body_rate
+            .and_then(|w| motion_cap_us(w.norm(), self.camera.fx.max(self.camera.fy)));
         FrameReport {
             estimate: self.estimator.update_with_image_fix(
                 fix.as_ref(),
@@ -313,6 +327,12 @@ impl<'a> FramePipeline<'a> {
             fix,
             markers,
             detect_error,
+            metering: Metering {
+                mean,
+                highlight,
+                pad,
+                max_exposure_us,
+            },
         }
     }
 

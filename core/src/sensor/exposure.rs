@@ -4,18 +4,57 @@
 //! period. Under a moving drone that means motion blur: at 30 deg/s of body rotation a
 //! 30 ms exposure smears a QVGA image (focal length ~230 px) by ~3.6 px, enough to lose a
 //! small marker, while 4 ms keeps it under half a pixel. In bright sun the AEC picks short
-//! exposures anyway; in shade or dusk it does not. [`AutoExposure`] is a small closed loop the
-//! firmware runs instead: it measures the frame's mean brightness ([`mean_brightness`]) and
-//! sets exposure and gain manually, exposure first up to `max_exposure_us`, then gain up to
+//! exposures anyway; in shade or dusk it does not. And it meters the frame's mean, so a white
+//! pad on dark grass clips. [`AutoExposure`] is a small closed loop the firmware runs instead:
+//! it is fed each frame's [`Metering`] (from the per-frame path,
+//! [`crate::pipeline::FrameReport::metering`]) and sets exposure and gain manually, exposure
+//! first up to `max_exposure_us` (and up to the frame's motion cap), then gain up to
 //! `max_gain` (noise), and nothing beyond either limit: a frame that is too dark at both
 //! limits stays dark rather than blurred.
 //!
-//! The loop multiplies exposure x gain by `target / mean`, limited to a factor of 2 per step
+//! What it aims for, in order:
+//! 1. **Decoded markers** ([`Metering::pad`]): the brightest marker's white cells at
+//!    [`PAD_WHITE_TARGET`], below clipping with headroom, whatever the scene's mean; a white
+//!    that reads [`PAD_CLIPPED`] or more is clipped (how far is unknown) and the exposure is
+//!    halved. For [`PAD_HOLD_FRAMES`] frames after the markers were last seen the setting is
+//!    held rather than handed back to the scene's mean, which would clip the pad again and
+//!    lose it for longer than the one missed frame.
+//! 2. **The scene** otherwise: its mean at `target`, with a highlight guard: the brightest
+//!    1/256 of the frame ([`Metering::highlight`]) is kept at or below [`HIGHLIGHT_CEILING`]
+//!    (halved while it reads [`HIGHLIGHT_CLIPPED`] or more), so a pad too small to be decoded
+//!    yet is not clipped. The guard may lower the mean to a quarter of the target and no
+//!    further ([`GUARD_FLOOR_DIVISOR`]): a white roof filling a tenth of the frame must not
+//!    black out the ground around it.
+//! 3. **Motion** ([`Metering::max_exposure_us`]): the exposure never exceeds what keeps the
+//!    image motion of the vehicle's body rate under half a pixel; gain makes up the light.
+//!
+//! The loop multiplies exposure x gain by `aim / level`, limited to a factor of 2 per step
 //! (the sensor applies new values one or two frames late; bigger steps would oscillate), and
-//! does nothing while the mean is within [`AutoExposureLimits::deadband`] of the target.
+//! does nothing while the level is within the deadband of its aim ([`PAD_DEADBAND`] for the
+//! markers' white, [`AutoExposureLimits::deadband`] for the mean) except moving light between
+//! exposure and gain when the motion cap changed. [`AutoExposure::update`], the mean alone, is
+//! the loop as it was before markers and highlights were metered.
 
+use super::metering::Metering;
 use super::GainX16;
 use crate::image::GrayImage;
+
+/// Grey level the loop holds the decoded markers' white at: 55 levels (22 %) of headroom below
+/// clipping, for the paper outside the sampled cells (larger white areas read a little brighter
+/// through the lens blur) and a brighter marker in the next frame.
+pub const PAD_WHITE_TARGET: u8 = 200;
+/// No adjustment while the markers' white is within this of [`PAD_WHITE_TARGET`].
+pub const PAD_DEADBAND: u8 = 16;
+/// A markers' white at or above this is clipped.
+pub const PAD_CLIPPED: u8 = 245;
+/// Frames the setting is held after the markers were last metered (half a second at 30 fps).
+pub const PAD_HOLD_FRAMES: u8 = 15;
+/// The scene's highlight is kept at or below this.
+pub const HIGHLIGHT_CEILING: u8 = 230;
+/// A highlight at or above this is clipped.
+pub const HIGHLIGHT_CLIPPED: u8 = 250;
+/// The highlight guard lowers the scene's mean to `target / GUARD_FLOOR_DIVISOR` at most.
+pub const GUARD_FLOOR_DIVISOR: u64 = 4;
 
 /// Limits and target of [`AutoExposure`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -58,7 +97,10 @@ pub struct ExposureSetting {
 pub struct AutoExposure {
     limits: AutoExposureLimits,
     max_lines: u16,
+    line_ns: u32,
     setting: ExposureSetting,
+    /// Frames left during which a lost pad's setting is held.
+    pad_hold: u8,
 }
 
 impl AutoExposure {
@@ -73,10 +115,12 @@ impl AutoExposure {
         AutoExposure {
             limits,
             max_lines,
+            line_ns: line_ns.max(1),
             setting: ExposureSetting {
                 lines: (max_lines / 2).max(1),
                 gain: GainX16::ONE,
             },
+            pad_hold: 0,
         }
     }
 
@@ -94,6 +138,7 @@ impl AutoExposure {
         let fresh = AutoExposure::new(limits, line_ns, frame_lines);
         self.limits = limits;
         self.max_lines = fresh.max_lines;
+        self.line_ns = fresh.line_ns;
         // min/max rather than `clamp`, which has a panic path for crossed bounds.
         let next = ExposureSetting {
             lines: self.setting.lines.min(self.max_lines).max(1),
@@ -122,25 +167,39 @@ impl AutoExposure {
         self.setting
     }
 
-    /// Feeds the mean grey level of the latest frame; returns the new setting when it changed.
+    /// Feeds the mean grey level of the latest frame (no markers, no highlight guard, no
+    /// motion cap); returns the new setting when it changed.
     pub fn update(&mut self, mean: u8) -> Option<ExposureSetting> {
-        let target = u64::from(self.limits.target.max(1));
-        let mean = u64::from(mean);
-        if mean.abs_diff(target) <= u64::from(self.limits.deadband) {
-            return None;
-        }
+        self.update_metered(&Metering::mean_only(mean))
+    }
+
+    /// Feeds the latest frame's metering (see the module docs); returns the new setting when
+    /// it changed.
+    pub fn update_metered(&mut self, metering: &Metering) -> Option<ExposureSetting> {
         // Brightness is proportional to exposure x gain; work in (lines x gain/16), in u64
         // (65,535 lines at 4,096x gain times a target of 255 would overflow u32).
         let current = u64::from(self.setting.lines) * u64::from(self.setting.gain.0);
-        let wanted = current * target / mean.max(1);
-        // min/max rather than `clamp`, whose panic on crossed bounds the optimiser cannot rule
-        // out (the no-panic check, nopanic/, covers this loop).
-        let wanted = wanted
-            .min(current.saturating_mul(2))
-            .max(current / 2)
-            .max(16);
+        let wanted = match self.aim(metering) {
+            Some((level, aim)) => {
+                let wanted = current * aim / level.max(1);
+                // min/max rather than `clamp`, whose panic on crossed bounds the optimiser
+                // cannot rule out (the no-panic check, nopanic/, covers this loop).
+                wanted
+                    .min(current.saturating_mul(2))
+                    .max(current / 2)
+                    .max(16)
+            }
+            None => current,
+        };
+        let max_lines = match metering.max_exposure_us {
+            Some(us) => {
+                let by_motion = u64::from(us) * 1000 / u64::from(self.line_ns.max(1));
+                u64::from(self.max_lines).min(by_motion).max(1)
+            }
+            None => u64::from(self.max_lines),
+        };
         let max_gain = u64::from(self.limits.max_gain.0.max(16));
-        let lines = (wanted / 16).min(u64::from(self.max_lines)).max(1);
+        let lines = (wanted / 16).min(max_lines).max(1);
         let gain = (wanted / lines).min(max_gain).max(16);
         let next = ExposureSetting {
             lines: lines as u16,
@@ -151,6 +210,35 @@ impl AutoExposure {
         }
         self.setting = next;
         Some(next)
+    }
+
+    /// The level metered and the level wanted, `(level, aim)`, or `None` to hold (within the
+    /// deadband, or a lost pad's hold).
+    fn aim(&mut self, metering: &Metering) -> Option<(u64, u64)> {
+        if let Some(pad) = metering.pad {
+            self.pad_hold = PAD_HOLD_FRAMES;
+            let white = u64::from(pad.white);
+            if pad.white >= PAD_CLIPPED {
+                return Some((2, 1));
+            }
+            let aim = u64::from(PAD_WHITE_TARGET);
+            return (white.abs_diff(aim) > u64::from(PAD_DEADBAND)).then_some((white, aim));
+        }
+        if self.pad_hold > 0 {
+            self.pad_hold -= 1;
+            return None;
+        }
+        let target = u64::from(self.limits.target.max(1));
+        let mean = u64::from(metering.mean);
+        let highlight = u64::from(metering.highlight);
+        let mut aim = target;
+        if metering.highlight >= HIGHLIGHT_CLIPPED {
+            aim = aim.min(mean / 2);
+        } else if let Some(limit) = (mean * u64::from(HIGHLIGHT_CEILING)).checked_div(highlight) {
+            aim = aim.min(limit);
+        }
+        let aim = aim.max(target / GUARD_FLOOR_DIVISOR);
+        (mean.abs_diff(aim) > u64::from(self.limits.deadband)).then_some((mean, aim))
     }
 }
 
@@ -171,6 +259,7 @@ pub fn mean_brightness(image: &GrayImage<'_>, step: usize) -> u8 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::metering::PadLevels;
     use super::*;
 
     /// QVGA at 30 fps on the OV7725: 120 µs lines, 278 lines.
@@ -284,6 +373,158 @@ mod tests {
         }
         let mean = scene(ae.setting(), 200);
         assert!(mean.abs_diff(60) <= 12, "mean {mean}, {:?}", ae.setting());
+    }
+
+    /// A sunny frame: grass of `ground` and a white pad of `paper` (radiance units of
+    /// [`scene`]) covering `pad_share` of the frame, both clipping at 255; what the metering
+    /// reads with the markers decoded (`decoded`) or not.
+    fn sunny(
+        s: ExposureSetting,
+        ground: u32,
+        paper: u32,
+        pad_share: f32,
+        decoded: bool,
+    ) -> Metering {
+        let (g, w) = (scene(s, ground), scene(s, paper));
+        let mean = (f32::from(g) * (1.0 - pad_share) + f32::from(w) * pad_share) as u8;
+        Metering {
+            mean,
+            highlight: if pad_share >= 1.0 / 256.0 { w } else { g },
+            pad: decoded.then_some(PadLevels {
+                white: w,
+                // Blooming lifts the black of a clipped pad.
+                black: if w == 255 { 190 } else { w / 8 },
+            }),
+            max_exposure_us: None,
+        }
+    }
+
+    #[test]
+    fn a_clipped_pad_brings_the_exposure_down_and_its_white_is_held_below_clipping() {
+        let mut ae = qvga();
+        // Paper 4x brighter than the grass; the mean alone would put the grass at 110 and the
+        // paper far beyond 255.
+        for _ in 0..20 {
+            let m = sunny(ae.setting(), 500, 2_000, 0.02, false);
+            ae.update(m.mean);
+        }
+        assert_eq!(scene(ae.setting(), 2_000), 255);
+        // The markers decode (clipped): the exposure halves, then the white settles at the
+        // target with its headroom.
+        let before = ae.setting();
+        let after = ae
+            .update_metered(&sunny(before, 500, 2_000, 0.02, true))
+            .unwrap();
+        let product = |s: ExposureSetting| u32::from(s.lines) * u32::from(s.gain.0);
+        assert!(
+            product(after) * 2 <= product(before) + 16,
+            "{before:?} -> {after:?}"
+        );
+        for _ in 0..20 {
+            let m = sunny(ae.setting(), 500, 2_000, 0.02, true);
+            ae.update_metered(&m);
+        }
+        let white = scene(ae.setting(), 2_000);
+        assert!(
+            white.abs_diff(PAD_WHITE_TARGET) <= PAD_DEADBAND && white < PAD_CLIPPED,
+            "white {white}, {:?}",
+            ae.setting()
+        );
+        // The pad lost for a frame or two: the setting is held, not handed back to the mean.
+        let held = ae.setting();
+        for _ in 0..usize::from(PAD_HOLD_FRAMES) {
+            assert_eq!(
+                ae.update_metered(&sunny(held, 500, 2_000, 0.0, false)),
+                None
+            );
+        }
+        // Lost for longer: the scene's mean takes over again.
+        assert!(ae
+            .update_metered(&sunny(held, 500, 2_000, 0.0, false))
+            .is_some());
+    }
+
+    #[test]
+    fn without_markers_the_highlight_guard_keeps_a_small_pad_out_of_clipping() {
+        let mut ae = qvga();
+        for _ in 0..30 {
+            let m = sunny(ae.setting(), 500, 2_000, 0.02, false);
+            ae.update_metered(&m);
+        }
+        let s = ae.setting();
+        let (grass, paper) = (scene(s, 500), scene(s, 2_000));
+        assert!(
+            paper < HIGHLIGHT_CLIPPED,
+            "paper {paper}, grass {grass}, {s:?}"
+        );
+        assert!(
+            u16::from(paper) + 40 >= u16::from(HIGHLIGHT_CEILING),
+            "paper {paper}, {s:?}"
+        );
+        // The mean alone would have put the grass near the target.
+        assert!(grass < 80, "grass {grass}");
+    }
+
+    #[test]
+    fn the_guard_cannot_black_out_the_scene() {
+        let mut ae = qvga();
+        // A white roof that always clips (radiance far beyond anything reachable), a tenth
+        // of the frame: the guard lowers the mean to a quarter of the target and no further.
+        for _ in 0..40 {
+            let s = ae.setting();
+            let m = Metering {
+                mean: scene(s, 300),
+                highlight: 255,
+                pad: None,
+                max_exposure_us: None,
+            };
+            ae.update_metered(&m);
+        }
+        let mean = scene(ae.setting(), 300);
+        let floor = (110 / GUARD_FLOOR_DIVISOR) as u8;
+        assert!(
+            mean + 12 >= floor && mean <= floor + 12 + 2,
+            "mean {mean}, {:?}",
+            ae.setting()
+        );
+    }
+
+    #[test]
+    fn the_body_rate_caps_the_exposure_and_gain_takes_over() {
+        let mut ae = qvga();
+        // A dark scene: 4 ms (33 lines) and 8x.
+        for _ in 0..20 {
+            ae.update(scene(ae.setting(), 10));
+        }
+        // A dim scene that needs 20 lines at unity gain.
+        let mut ae = qvga();
+        let radiance = 1_000 * 110 / (20 * 16);
+        for _ in 0..20 {
+            ae.update(scene(ae.setting(), radiance));
+        }
+        let free = ae.setting();
+        assert!(free.lines >= 15 && free.gain == GainX16::ONE, "{free:?}");
+        // Turning fast: at most 1.2 ms (10 lines); the same light from the gain.
+        let turning = |s: ExposureSetting| Metering {
+            max_exposure_us: Some(1_200),
+            ..Metering::mean_only(scene(s, radiance))
+        };
+        let capped = ae.update_metered(&turning(ae.setting())).unwrap();
+        assert_eq!(capped.lines, 10);
+        let product = |s: ExposureSetting| u32::from(s.lines) * u32::from(s.gain.0);
+        assert!(
+            product(capped).abs_diff(product(free)) <= 16,
+            "{free:?} -> {capped:?}"
+        );
+        for _ in 0..10 {
+            ae.update_metered(&turning(ae.setting()));
+            assert!(ae.setting().lines <= 10);
+        }
+        // The turn ends: the exposure takes the light back from the gain.
+        for _ in 0..3 {
+            ae.update(scene(ae.setting(), radiance));
+        }
+        assert_eq!(ae.setting().gain, GainX16::ONE, "{:?}", ae.setting());
     }
 
     #[test]

@@ -7,8 +7,11 @@
 //! What this module offers: [`GainX16`] and [`FrameTiming`], which the drivers report and the
 //! per-frame path stamps frames with, and the auto-exposure loop, [`AutoExposure`] (within
 //! [`AutoExposureLimits`], a new [`ExposureSetting`] per frame from the frame's
-//! [`mean_brightness`]), which sets up the frames the detector ([`crate::detect`]) reads. The
-//! loop is in the private submodule `exposure`.
+//! [`Metering`]: the decoded markers' white and black, the scene's mean and highlight, the
+//! exposure the body rate allows), which sets up the frames the detector ([`crate::detect`])
+//! reads. The loop is in the private submodule `exposure`, what it is fed in `metering`
+//! (measured by the per-frame path, [`crate::pipeline::FramePipeline::process`], so that the
+//! firmware and a replay meter alike).
 //!
 //! The drivers that talk to a sensor (OV7725, OV2640: register tables and SCCB transactions)
 //! are not here but in the `touchdown-sensors` crate (`sensors/`), which builds on these
@@ -20,8 +23,18 @@
 //! ([`crate::params`]) and the no-panic proof of the per-frame path.
 
 mod exposure;
+mod metering;
 
-pub use exposure::{mean_brightness, AutoExposure, AutoExposureLimits, ExposureSetting};
+pub use exposure::{
+    mean_brightness, AutoExposure, AutoExposureLimits, ExposureSetting, GUARD_FLOOR_DIVISOR,
+    HIGHLIGHT_CEILING, HIGHLIGHT_CLIPPED, PAD_CLIPPED, PAD_DEADBAND, PAD_HOLD_FRAMES,
+    PAD_WHITE_TARGET,
+};
+pub use metering::{
+    motion_cap_us, pad_levels, scene_levels, Metering, PadLevels, HIGHLIGHT_SHARE,
+    MAX_METERED_GRID, MAX_METERED_MARKERS, MAX_MOTION_BLUR_PX, MIN_CELL_PX, MIN_PAD_CONTRAST,
+    SCENE_STEP,
+};
 
 /// Analog gain as a multiple of 1/16 (16 = 1x, 32 = 2x, ...).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
