@@ -76,6 +76,7 @@ use touchdown_core::image::GrayImage;
 use touchdown_core::pad::PadLayout;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PaperPipeline, PipelineConfig};
+use touchdown_core::sensor::Metering;
 
 pub mod closed_loop;
 pub mod flight;
@@ -418,6 +419,8 @@ enum Runner<'a> {
 struct Pipeline<'a> {
     method: Method,
     runner: Runner<'a>,
+    /// The board path's metering of the last frame, for an exposure loop closed around it.
+    metering: Option<Metering>,
 }
 
 impl<'a> Pipeline<'a> {
@@ -457,6 +460,7 @@ impl<'a> Pipeline<'a> {
         Ok(Pipeline {
             method: method.clone(),
             runner,
+            metering: None,
         })
     }
 
@@ -564,6 +568,7 @@ impl<'a> Pipeline<'a> {
                 if let Some(e) = report.detect_error {
                     return Err(ExperimentError::Detect(e));
                 }
+                self.metering = Some(report.metering);
                 let vehicle = flight.companion.vehicle().at(exposure);
                 let _ = flight.take_targets();
                 let queued = flight.companion.on_estimate(&report.estimate, delivery)
@@ -634,6 +639,7 @@ impl<'a> Pipeline<'a> {
                 if let Some(e) = report.detect_error {
                     return Err(ExperimentError::Detect(e));
                 }
+                self.metering = Some(report.metering);
                 // What the autopilot makes of the LANDING_TARGET: body FRD turned with its own
                 // attitude (the true one); without one, with this frame's pose rotation.
                 let camera_to_pad = frame
@@ -732,6 +738,12 @@ impl<'a> Experiment<'a> {
             results: Vec::new(),
             flight: Vec::new(),
         })
+    }
+
+    /// What method `method`'s board path metered in the last frame processed (what the
+    /// board's exposure loop is fed); `None` for the paper's method or before any frame.
+    pub fn metering(&self, method: usize) -> Option<Metering> {
+        self.pipelines.get(method)?.metering
     }
 
     /// The three errors of the last frame processed, per method (empty unless in flight).

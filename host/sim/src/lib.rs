@@ -272,17 +272,22 @@ impl Simulator {
     /// the trajectory's jumps on either side (see the crate docs). With a rolling shutter
     /// this is the middle row's; [`Simulator::row_exposure_window`] gives any row's.
     pub fn exposure_window(&self, t: f64) -> (f64, f64) {
-        self.exposure_window_at(t, t)
+        self.exposure_window_at(t, t, self.scenario.exposure_time_s)
     }
 
     /// The exposure of row `row` of the frame at `t`: `exposure_time_s` centred on
     /// [`Simulator::row_time`], cut at the jumps around the frame's time.
     pub fn row_exposure_window(&self, t: f64, row: f64) -> (f64, f64) {
-        self.exposure_window_at(t, self.row_time(t, row))
+        self.row_exposure_window_for(t, row, self.scenario.exposure_time_s)
     }
 
-    fn exposure_window_at(&self, t: f64, middle: f64) -> (f64, f64) {
-        let e = self.scenario.exposure_time_s.max(0.0);
+    /// [`Simulator::row_exposure_window`] for an exposure of `exposure_s` seconds.
+    fn row_exposure_window_for(&self, t: f64, row: f64, exposure_s: f64) -> (f64, f64) {
+        self.exposure_window_at(t, self.row_time(t, row), exposure_s)
+    }
+
+    fn exposure_window_at(&self, t: f64, middle: f64, exposure_s: f64) -> (f64, f64) {
+        let e = exposure_s.max(0.0);
         let (start, end) = self.scenario.trajectory.continuous_span(t);
         let last_before_end = end - trajectory::JUMP_GUARD_S;
         (
@@ -296,6 +301,11 @@ impl Simulator {
     /// [`MOTION_ROWS`] evenly spread from top to bottom with a rolling shutter (every row
     /// gets as many, so the blur is sampled alike over the frame).
     pub fn subframe_count(&self, t: f64) -> usize {
+        self.subframe_count_for(t, self.scenario.exposure_time_s)
+    }
+
+    /// [`Simulator::subframe_count`] for an exposure of `exposure_s` seconds.
+    fn subframe_count_for(&self, t: f64, exposure_s: f64) -> usize {
         let h = self.scenario.camera.height();
         let middle = 0.5 * (h as f64 - 1.0);
         let rows: Vec<f64> = if self.line_time_s() == 0.0 || h < 2 {
@@ -307,7 +317,7 @@ impl Simulator {
         };
         let mut motion = 0.0f64;
         for row in rows {
-            let (open, close) = self.row_exposure_window(t, row);
+            let (open, close) = self.row_exposure_window_for(t, row, exposure_s);
             if close - open > 0.0 {
                 motion = motion.max(self.exposure_motion(open, close));
             }
@@ -318,7 +328,18 @@ impl Simulator {
     /// The `n` poses averaged for row `row` of the frame at `t`: evenly spread over its
     /// exposure, or the pose at its time alone for `n = 1`.
     pub fn row_exposure_poses(&self, t: f64, row: f64, n: usize) -> Vec<CameraPose> {
-        let (open, close) = self.row_exposure_window(t, row);
+        self.row_exposure_poses_for(t, row, n, self.scenario.exposure_time_s)
+    }
+
+    /// [`Simulator::row_exposure_poses`] for an exposure of `exposure_s` seconds.
+    fn row_exposure_poses_for(
+        &self,
+        t: f64,
+        row: f64,
+        n: usize,
+        exposure_s: f64,
+    ) -> Vec<CameraPose> {
+        let (open, close) = self.row_exposure_window_for(t, row, exposure_s);
         let e = close - open;
         if n <= 1 || e <= 0.0 {
             return vec![self.camera_pose(self.row_time(t, row)); n.max(1)];
@@ -331,29 +352,62 @@ impl Simulator {
     /// The poses averaged for the frame at `t` (one when the image does not move); with a
     /// rolling shutter, the middle row's.
     pub fn exposure_poses(&self, t: f64) -> Vec<CameraPose> {
+        self.exposure_poses_for(t, self.scenario.exposure_time_s)
+    }
+
+    fn exposure_poses_for(&self, t: f64, exposure_s: f64) -> Vec<CameraPose> {
         let middle = 0.5 * (self.scenario.camera.height() as f64 - 1.0);
-        self.row_exposure_poses(t, middle, self.subframe_count(t))
+        let n = self.subframe_count_for(t, exposure_s);
+        self.row_exposure_poses_for(t, middle, n, exposure_s)
     }
 
     /// The poses every row of the frame at `t` is averaged over.
     pub fn row_poses(&self, t: f64) -> RowPoses {
-        let n = self.subframe_count(t);
+        self.row_poses_for(t, self.scenario.exposure_time_s)
+    }
+
+    /// [`Simulator::row_poses`] for an exposure of `exposure_s` seconds.
+    fn row_poses_for(&self, t: f64, exposure_s: f64) -> RowPoses {
+        let n = self.subframe_count_for(t, exposure_s);
         if self.line_time_s() == 0.0 {
-            return RowPoses::global(self.exposure_poses(t));
+            return RowPoses::global(self.exposure_poses_for(t, exposure_s));
         }
         let h = self.scenario.camera.height();
         let mut poses = Vec::with_capacity(h * n);
         for y in 0..h {
-            poses.extend(self.row_exposure_poses(t, y as f64, n));
+            poses.extend(self.row_exposure_poses_for(t, y as f64, n, exposure_s));
         }
         RowPoses::per_row(n, poses)
     }
 
     /// Renders frame `index`; `None` past the end.
     pub fn render(&self, index: usize) -> Option<SimFrame> {
+        self.render_exposed(index, None)
+    }
+
+    /// Renders frame `index` with the exposure a controller set for it (`None`: the
+    /// scenario's own, [`Scenario::exposure_time_s`] and its sensor's [`sensor::Exposure`]):
+    /// the exposure time is what motion blurs over and, with the sensor's sensitivity and the
+    /// analog gain, what sets the grey levels ([`sensor::Exposure::Manual`]). `None` past the
+    /// end.
+    pub fn render_exposed(
+        &self,
+        index: usize,
+        manual: Option<sensor::ManualExposure>,
+    ) -> Option<SimFrame> {
         let plan = self.scenario.frames.get(index)?;
         let t = plan.t_us as f64 * 1e-6;
-        let poses = self.row_poses(t);
+        let (exposure_s, sensor) = match manual {
+            Some(m) => (
+                m.exposure_s,
+                sensor::Sensor {
+                    exposure: sensor::Exposure::Manual(m),
+                    ..self.scenario.sensor
+                },
+            ),
+            None => (self.scenario.exposure_time_s, self.scenario.sensor),
+        };
+        let poses = self.row_poses_for(t, exposure_s);
         let subframes = poses.subframes();
         let middle = self.camera_pose(t);
         let s = &self.scenario;
@@ -382,7 +436,7 @@ impl Simulator {
             h,
             &self.rays.cos_off_axis,
             &s.optics,
-            &s.sensor,
+            &sensor,
             blur,
             mix(s.seed, index as u64 + 1),
         );

@@ -7,8 +7,8 @@
 //! | `descent` | nested | 1 m/s down from 20 m to 1 m while drifting 0.5 m/s onto the pad |
 //! | `landing` | nested | approach and landing from 40 m to 0.3 m |
 //! | `hover` | nested | the set-up guide's mount-calibration hover: 3 m over the pad, holding still, 20 s |
-//! | `sun` | nested | hover at 20 ... 1 m in strong sun, auto-exposure metering on grass: the pad clips |
-//! | `shadow` | nested | hover at 20 ... 1 m with a hard shadow edge across the pad on concrete |
+//! | `sun` | nested | hover at 20 ... 1 m in strong sun; the sensor's own auto-exposure meters the grass and the pad clips; a replay closes the board's loop instead (it meters the decoded markers) |
+//! | `shadow` | nested | hover at 20 ... 1 m with a hard shadow edge across the pad on concrete; the sensor's own auto-exposure on the frame's mean, a replay the board's loop |
 //! | `occlusion` | nested | hover at 20 ... 1 m with a dark object lying across part of the pad |
 //!
 //! The camera is the one of the paper's experiments: 640x480 with a 60
@@ -25,6 +25,13 @@
 //! Every named scenario is rendered without the flight effects of [`crate::effects`] (a
 //! global shutter on a rigid, aligned mount), so tests built on them keep their meaning;
 //! [`Scenario::apply_effects`] adds the rolling shutter, vibration and mount misalignment.
+//!
+//! Exposure: `sun` and `shadow` are rendered with the simulated sensor's own auto-exposure
+//! (the frame's mean to a target, as a sensor's AEC does); the others with a fixed exposure.
+//! `touchdown replay` closes the board's auto-exposure loop around `sun` and `shadow` instead
+//! ([`Scenario::board_exposure`]): each frame then gets the exposure time and gain the
+//! board chose, and its motion blur lasts that exposure time
+//! ([`crate::Simulator::render_exposed`]); `--exposure` picks either for any scenario.
 //!
 //! Frames carry set-point labels where the scenario has set points (`z=5`, `x=1.2`,
 //! `hover=3`); the paper's tables group frames by them.
@@ -95,6 +102,11 @@ pub struct Scenario {
     pub trajectory: Trajectory,
     /// The frames.
     pub frames: Vec<FramePlan>,
+    /// Whether a replay closes the board's auto-exposure loop around this scenario by default
+    /// (`touchdown replay --exposure`): the scenarios about light, whose sensor's own AEC
+    /// ([`Exposure::Auto`]) is what the board's loop replaces. The rendering alone
+    /// (`touchdown simulate`, [`crate::Simulator::render`]) always uses the scenario's own.
+    pub board_exposure: bool,
 }
 
 /// The scenario names and what they are, for `--help`.
@@ -227,6 +239,7 @@ impl Scenario {
             supersampling: 4,
             trajectory,
             frames,
+            board_exposure: false,
         };
         let hover_wobble = Wobble::new(0.02, 0.5, 0.4, seed);
         let hover_set = |seed_salt: u64| {
@@ -427,6 +440,7 @@ impl Scenario {
                         ..Sensor::board_camera()
                     },
                     exposure_time_s: 0.001,
+                    board_exposure: true,
                     ..base(name, nested, board_camera, trajectory, frames)
                 }
             }
@@ -445,6 +459,7 @@ impl Scenario {
                         },
                         ..Sensor::board_camera()
                     },
+                    board_exposure: true,
                     ..base(name, nested, board_camera, trajectory, frames)
                 }
             }

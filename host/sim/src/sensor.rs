@@ -9,9 +9,14 @@
 //!    a disc of `f_px A |1/d - 1/d_f|` pixels; the Gaussian with the disc's standard deviation
 //!    (a quarter of its diameter) stands in for it. Fixed-focus board cameras are focused far
 //!    away, so the pad blurs in the last metre of a landing.
-//! 3. **Exposure**: electrons = radiance x `electrons_per_radiance`, either fixed or set per
-//!    frame by auto-exposure, which meters the mean of the frame (as OpenMV's and most
-//!    sensors' AE do). Metering on dark grass makes a white pad clip: the outdoor failure.
+//! 3. **Exposure**: electrons = radiance x `electrons_per_radiance`, either fixed, or set per
+//!    frame by the sensor's own auto-exposure, which meters the mean of the frame (as
+//!    OpenMV's and most sensors' AE do: metering on dark grass makes a white pad clip, the
+//!    outdoor failure), or set manually by a controller (the board's auto-exposure, as a
+//!    replay that closes its loop runs it: [`Exposure::Manual`]): electrons =
+//!    radiance x [`Sensor::sensitivity`] x exposure time, and the analog gain multiplies the
+//!    grey levels per electron (noise and all), so the ADC clips at 255 before the full well
+//!    does.
 //! 4. **Flare** (veiling glare): a fraction of the mean signal added everywhere, lifting the
 //!    blacks in bright scenes.
 //! 5. **Blooming**: charge beyond the full well spills into the neighbourhood (a Gaussian
@@ -98,6 +103,17 @@ pub enum Exposure {
         /// times at the set gain).
         limits: (f64, f64),
     },
+    /// Set from outside, frame by frame.
+    Manual(ManualExposure),
+}
+
+/// An exposure time and an analog gain, as a controller writes them to a sensor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ManualExposure {
+    /// Exposure time, seconds (also what motion blurs over).
+    pub exposure_s: f64,
+    /// Analog gain, 1.0 = unity: grey levels per electron are [`Sensor::gain`] times this.
+    pub analog_gain: f64,
 }
 
 /// The image sensor.
@@ -119,14 +135,19 @@ pub struct Sensor {
     pub flare: f64,
     /// How the exposure is set.
     pub exposure: Exposure,
+    /// Electrons collected per unit radiance (at the image centre) per second of exposure:
+    /// what a [`Exposure::Manual`] exposure time is turned into electrons with.
+    pub sensitivity: f64,
 }
 
 impl Sensor {
     /// A small CMOS sensor (OV-class): 6000 e- full well, 4 e- read noise, unity gain at
     /// full well, a little blooming and flare, fixed exposure putting paper white (albedo
-    /// 0.8) in daylight at about 200.
+    /// 0.8) in daylight at about 200; a sensitivity that does the same in a 4 ms exposure at
+    /// unity gain.
     pub fn board_camera() -> Self {
         let full_well = 6000.0;
+        let electrons_per_radiance = 200.0 / 0.8 / (255.0 / full_well);
         Sensor {
             full_well_e: full_well,
             read_noise_e: 4.0,
@@ -136,8 +157,9 @@ impl Sensor {
             bloom_sigma_px: 1.5,
             flare: 0.01,
             exposure: Exposure::Fixed {
-                electrons_per_radiance: 200.0 / 0.8 / (255.0 / full_well),
+                electrons_per_radiance,
             },
+            sensitivity: electrons_per_radiance / 0.004,
         }
     }
 
@@ -155,6 +177,7 @@ impl Sensor {
             exposure: Exposure::Fixed {
                 electrons_per_radiance: 250.0,
             },
+            sensitivity: 250.0 / 0.004,
         }
     }
 
@@ -173,6 +196,15 @@ impl Sensor {
                 let wanted = (target_mean - self.black_level).max(1.0) / self.gain / mean.max(1e-9);
                 wanted.clamp(limits.0, limits.1.max(limits.0))
             }
+            Exposure::Manual(m) => self.sensitivity * m.exposure_s.max(0.0),
+        }
+    }
+
+    /// Grey levels per electron: [`Sensor::gain`] times a manual exposure's analog gain.
+    pub fn grey_per_electron(&self) -> f64 {
+        match self.exposure {
+            Exposure::Manual(m) => self.gain * m.analog_gain.max(0.0),
+            _ => self.gain,
         }
     }
 }
@@ -220,6 +252,7 @@ pub fn expose(
             }
         }
     }
+    let grey_per_electron = sensor.grey_per_electron();
     let mut rng = ChaCha8Rng::seed_from_u64(noise_seed);
     let mut normals = NormalPairs::default();
     let noisy = sensor.read_noise_e > 0.0 || sensor.full_well_e.is_finite();
@@ -234,7 +267,7 @@ pub fn expose(
             } else {
                 e
             };
-            (sensor.black_level + e * sensor.gain)
+            (sensor.black_level + e * grey_per_electron)
                 .round()
                 .clamp(0.0, 255.0) as u8
         })
@@ -301,7 +334,7 @@ mod tests {
                 Exposure::Fixed {
                     electrons_per_radiance,
                 } => electrons_per_radiance,
-                Exposure::Auto { .. } => unreachable!(),
+                Exposure::Auto { .. } | Exposure::Manual(_) => unreachable!(),
             };
         // Variance in grey levels: gain^2 e (plus 1/12 from rounding).
         let expected = sensor.gain * sensor.gain * e + 1.0 / 12.0;

@@ -23,6 +23,12 @@ Input, one of:
   --scenario NAME    render the scenario in memory (nothing is written to disk); NAME is one
                      of paper, lateral, descent, landing, hover, sun, shadow, occlusion (see
                      `touchdown simulate --help`); --seed picks the randomness
+  --exposure WHO     who sets a scenario's exposure: board (the board's auto-exposure,
+                     metering the decoded markers, closed around the rendering: each frame
+                     rendered with the exposure time and gain it chose two frames before,
+                     after 30 frames of settling at the first frame's pose) or scenario (the
+                     scenario's own: fixed, or the simulated sensor's AEC on the frame's
+                     mean); default board for sun and shadow, scenario for the others
 
 Methods:
   paper's method     the paper's detector, its homography pose of the largest pad marker,
@@ -121,6 +127,13 @@ pub struct ReplayArgs {
     /// Replay only the first N frames
     #[arg(long, allow_negative_numbers = true, value_name = "N")]
     pub frames: Option<usize>,
+
+    /// Who sets each frame's exposure (--scenario only): `board`, the board's auto-exposure
+    /// closed around the rendering, or `scenario`, the scenario's own (fixed, or the
+    /// simulated sensor's AEC on the frame's mean) [default: board for sun and shadow, else
+    /// scenario]
+    #[arg(long, value_name = "WHO")]
+    pub exposure: Option<String>,
 
     /// Directory for the figures [default: replay-<NAME>]
     #[arg(long, value_name = "DIR")]

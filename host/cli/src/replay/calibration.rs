@@ -108,7 +108,7 @@ pub(super) fn calibration_hover(
         total: input.frames,
         started: Instant::now(),
     };
-    let (trace, _) = fly(&input, &mut experiment, &methods, true, &mut progress)?;
+    let (trace, _) = fly(&input, &mut experiment, &methods, true, None, &mut progress)?;
     let run = experiment
         .flight_run(0)
         .ok_or_else(|| experiment_error(touchdown_eval::ExperimentError::BadFlightSetup))?;

@@ -13,6 +13,7 @@ use touchdown_formats::pad::PadConfig;
 use touchdown_formats::recording::{CameraTruth, RecordingReader};
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
+use touchdown_sim::sensor::ManualExposure;
 use touchdown_sim::{math, Simulator};
 
 /// One frame from either input.
@@ -46,6 +47,9 @@ pub(super) struct Input {
     pub(super) effects: Option<FlightEffects>,
     /// The true camera mount, camera to body FRD (a scenario only).
     pub(super) true_mount: Option<Matrix3<f32>>,
+    /// The scenario asks for the board's exposure loop by default
+    /// ([`Scenario::board_exposure`]; false for a recording).
+    pub(super) board_exposure: bool,
     /// A recording's truth between frames.
     truth_table: Option<TruthTable>,
     pub(super) source: Source,
@@ -161,6 +165,7 @@ impl Input {
             labels,
             effects: Some(*effects),
             true_mount: Some(Matrix3::from_fn(|i, j| mount[i][j] as f32)),
+            board_exposure: simulator.scenario.board_exposure,
             truth_table: None,
             source: Source::Simulator(Box::new(simulator)),
         }
@@ -215,6 +220,7 @@ impl Input {
             labels,
             effects: None,
             true_mount: None,
+            board_exposure: false,
             truth_table: (!table.is_empty()).then_some(table),
             source: Source::Recording(reader),
         })
@@ -231,12 +237,17 @@ impl Input {
         }
     }
 
-    /// Frame `k`.
-    pub(super) fn frame(&self, k: usize) -> Result<InputFrame, CliError> {
+    /// Frame `k`, a scenario's rendered with `exposure` when given (see the submodule
+    /// `exposure`; a recording's frames are as recorded).
+    pub(super) fn frame(
+        &self,
+        k: usize,
+        exposure: Option<ManualExposure>,
+    ) -> Result<InputFrame, CliError> {
         match &self.source {
             Source::Simulator(simulator) => {
                 let frame = simulator
-                    .render(k)
+                    .render_exposed(k, exposure)
                     .ok_or_else(|| CliError(format!("the scenario has no frame {k}")))?;
                 Ok(InputFrame {
                     index: frame.index,

@@ -52,6 +52,7 @@ use touchdown_formats::families::{self, SelectedFamily};
 
 mod args;
 mod calibration;
+mod exposure;
 mod input;
 mod json;
 mod tables;
@@ -176,6 +177,19 @@ pub fn run(
     }
     .map_err(|e| CliError(format!("cannot set up the methods: {e:?}")))?;
     let in_flight = flight.is_some() && input.has_truth;
+    let mut board_exposure = match exposure_control(args, &input)? {
+        ExposureControl::Scenario => None,
+        ExposureControl::Board => {
+            let limits = board_settings(flight.as_ref()).exposure;
+            let mut loop_ = exposure::BoardExposure::new(limits);
+            exposure::preroll(&mut loop_, &input, &family_refs, layout)?;
+            let method = methods
+                .iter()
+                .position(|m| m.name == Method::ours().name)
+                .unwrap_or(1);
+            Some(ClosedExposure { loop_, method })
+        }
+    };
     let mut progress = Progress {
         err,
         enabled: std::io::stderr().is_terminal(),
@@ -183,7 +197,14 @@ pub fn run(
         total: input.frames,
         started,
     };
-    let (trace, flight_trace) = fly(&input, &mut experiment, &methods, in_flight, &mut progress)?;
+    let (trace, flight_trace) = fly(
+        &input,
+        &mut experiment,
+        &methods,
+        in_flight,
+        board_exposure.as_mut(),
+        &mut progress,
+    )?;
     let elapsed = started.elapsed().as_secs_f64();
 
     let report = experiment.report();
@@ -231,6 +252,7 @@ pub fn run(
         return Ok(Outcome::Success);
     }
     let mut text = header(&input, &trace, elapsed, in_flight);
+    text.push_str(&exposure_header(&input, board_exposure.as_ref()));
     if let Some(setup) = flight.as_ref().filter(|_| in_flight) {
         text.push_str(&flight_header(args, &input, setup));
         if let Some(hover) = &hover {
@@ -279,15 +301,76 @@ pub fn run(
     Ok(Outcome::Success)
 }
 
+/// Who sets a scenario's exposure (`--exposure`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ExposureControl {
+    /// The scenario's own (fixed, or the simulated sensor's AEC).
+    Scenario,
+    /// The board's loop, closed around the rendering (submodule `exposure`).
+    Board,
+}
+
+/// `--exposure`, or the scenario's default.
+fn exposure_control(args: &ReplayArgs, input: &Input) -> Result<ExposureControl, CliError> {
+    let given = match args.exposure.as_deref() {
+        None => None,
+        Some("board") => Some(ExposureControl::Board),
+        Some("scenario") => Some(ExposureControl::Scenario),
+        Some(other) => {
+            return Err(CliError(format!(
+                "--exposure: unknown `{other}` (board or scenario)"
+            )))
+        }
+    };
+    match (given, &input.source) {
+        (Some(_), input::Source::Recording(_)) => Err(CliError(
+            "--exposure applies to --scenario only (a recording's exposure is recorded)".into(),
+        )),
+        (Some(c), _) => Ok(c),
+        (None, _) if input.board_exposure => Ok(ExposureControl::Board),
+        (None, _) => Ok(ExposureControl::Scenario),
+    }
+}
+
+/// The board's exposure loop closed around the rendering, and the method whose metering
+/// feeds it.
+struct ClosedExposure {
+    loop_: exposure::BoardExposure,
+    method: usize,
+}
+
+/// The header's line on who set the exposure.
+fn exposure_header(input: &Input, closed: Option<&ClosedExposure>) -> String {
+    match (closed, &input.source) {
+        (Some(_), _) => format!(
+            "Exposure: the board's auto-exposure (metering the decoded markers, the scene's \
+             highlight, the body rate), closed around\nthe rendering: each frame exposed with \
+             the setting chosen {} frames before; {} frames of settling at the first frame's \
+             pose.\n",
+            exposure::LATENCY_FRAMES,
+            exposure::PREROLL_FRAMES
+        ),
+        (None, input::Source::Simulator(_)) => {
+            "Exposure: the scenario's own (fixed, or the simulated sensor's AEC on the frame's \
+             mean).\n"
+                .into()
+        }
+        (None, input::Source::Recording(_)) => String::new(),
+    }
+}
+
 /// Runs every frame of `input` through `experiment`, in flight (with the truth between
 /// frames) when `in_flight`: the frames are rendered or decoded on a second thread, a couple
-/// ahead of the one processed. Returns the per-frame trace and, in flight, the three errors
-/// per frame.
+/// ahead of the one processed. With `closed`, each frame is rendered with the exposure the
+/// board's loop chose [`exposure::LATENCY_FRAMES`] frames before (the loop is fed the
+/// metering of `closed.method` after each frame and its new setting is sent back to the
+/// rendering thread). Returns the per-frame trace and, in flight, the three errors per frame.
 fn fly(
     input: &Input,
     experiment: &mut Experiment<'_>,
     methods: &[Method],
     in_flight: bool,
+    mut closed: Option<&mut ClosedExposure>,
     progress: &mut Progress<'_>,
 ) -> Result<(Trace, FlightTrace), CliError> {
     let mut flight_trace = FlightTrace::new(methods.iter().map(|m| m.name.clone()).collect());
@@ -300,10 +383,30 @@ fn fly(
 
     let truth_source = input.truth_source();
     let (sender, receiver) = mpsc::sync_channel::<Result<InputFrame, CliError>>(FRAMES_AHEAD);
+    // The exposures of the first frames, then one back from each frame processed.
+    let mut queued: std::collections::VecDeque<_> = closed
+        .as_ref()
+        .map(|c| c.loop_.queued())
+        .unwrap_or_default()
+        .into();
+    let is_closed = closed.is_some();
+    let (feedback, exposures) = mpsc::channel();
     let processed: Result<(), CliError> = std::thread::scope(|scope| {
+        // Owned by this side, so that it is dropped (and the rendering thread, waiting on
+        // it, stops) when this side returns early.
+        let feedback = feedback;
         scope.spawn(move || {
             for k in 0..input.frames {
-                let frame = input.frame(k);
+                let exposure = match (is_closed, queued.pop_front()) {
+                    (false, _) => None,
+                    (true, Some(e)) => Some(e),
+                    (true, None) => match exposures.recv() {
+                        Ok(e) => Some(e),
+                        // The replay stopped.
+                        Err(_) => break,
+                    },
+                };
+                let frame = input.frame(k, exposure);
                 let failed = frame.is_err();
                 // A closed channel means the replay stopped: nothing more to produce.
                 if sender.send(frame).is_err() || failed {
@@ -347,6 +450,11 @@ fn fly(
                     )),
                     other => experiment_error(other),
                 })?;
+            if let Some(c) = closed.as_deref_mut() {
+                c.loop_.after_frame(experiment.metering(c.method).as_ref());
+                // The rendering thread may have stopped (an error): nothing to tell it.
+                let _ = feedback.send(c.loop_.newest());
+            }
             if in_flight {
                 flight_trace
                     .frames
@@ -409,6 +517,18 @@ fn flight_setup(
         }
     }
     Ok(Some(setup))
+}
+
+/// The board's settings after `setup`'s parameters (the defaults without a flight).
+fn board_settings(setup: Option<&FlightSetup>) -> touchdown_core::params::PipelineSettings {
+    let mut params = ParamSet::default();
+    for (name, value) in setup.map_or(&[][..], |s| &s.params[..]) {
+        if let Some(id) = ParamId::from_name(name) {
+            // A refused value fails the flight itself with its own message.
+            let _ = params.set(id, *value);
+        }
+    }
+    touchdown_core::params::PipelineSettings::from_params(&params)
 }
 
 /// The profile the board sends its targets in during `setup`'s flight: TD_PROFILE after
