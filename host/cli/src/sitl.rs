@@ -16,7 +16,10 @@ use std::time::Instant;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
+mod connect;
+
 use super::{CliError, Outcome};
+use crate::companion::endpoint::EndpointSpec;
 use crate::effects::EffectArgs;
 use touchdown_eval::closed_loop::wind::WindProfile;
 use touchdown_eval::closed_loop::{self, LandingConfig, LandingOutcome};
@@ -59,6 +62,15 @@ median, max}} (keys in docs/interfaces.md).
 
 --record DIR (one seed): the flight as a recording (camera.toml, pad.toml, frames/, \
 frames.csv with the truth and veh_ attitude columns) that `touchdown replay DIR` replays.
+
+A running SITL (--tcp, --udp or --udp-listen) instead of the model: the SITL flies its own \
+vehicle; touchdown reads its ground truth (ArduPilot's SIM_STATE, PX4's HIL_STATE_QUATERNION, \
+asked for with SET_MESSAGE_INTERVAL), renders the pad from it, runs the per-frame path and the \
+companion, and talks to the SITL over the link as the board would, in wall-clock time. The pad \
+lies at --pad-at or under the vehicle where the first sample found it (start with the vehicle on \
+the ground, then take off and LAND from the ground station). It ends at touchdown (on the pad \
+plane at rest for 1 s after having been above 2 m) or --max-time, and prints the touchdown error \
+against the pad's centre.
 
 Exit status: 0 when every landing touched down; 2 with one line on stderr for a bad option, \
 or when a landing did not touch down within --max-time.";
@@ -149,6 +161,75 @@ pub struct SitlArgs {
     /// Threads [default: all cores]: seeds in parallel, or one seed's rendering
     #[arg(long, value_name = "N", help_heading = "Advanced")]
     pub threads: Option<usize>,
+
+    /// Against a running SITL instead of the model: TCP client to HOST:PORT (ArduPilot
+    /// SITL's SERIAL1, 5762)
+    #[arg(long, value_name = "HOST:PORT", help_heading = "A running SITL",
+          conflicts_with_all = ["udp", "udp_listen"])]
+    pub tcp: Option<String>,
+
+    /// Against a running SITL: UDP client to HOST:PORT (PX4 SITL's onboard link, 14580)
+    #[arg(
+        long,
+        value_name = "HOST:PORT",
+        help_heading = "A running SITL",
+        conflicts_with = "udp_listen"
+    )]
+    pub udp: Option<String>,
+
+    /// Our source port for --udp (PX4 answers only the first address that reached it)
+    #[arg(
+        long,
+        value_name = "N",
+        help_heading = "A running SITL",
+        requires = "udp"
+    )]
+    pub udp_local_port: Option<u16>,
+
+    /// Against a running SITL: UDP server on ADDR:PORT (ArduPilot SITL
+    /// `--serial1 udpclient:127.0.0.1:14560`)
+    #[arg(long, value_name = "ADDR:PORT", help_heading = "A running SITL")]
+    pub udp_listen: Option<String>,
+
+    /// With a running SITL: the pad's origin LAT,LON,ALT (degrees, metres AMSL) [default:
+    /// under the vehicle at the first ground-truth sample, 0.1 m below its body origin]
+    #[arg(long, value_name = "LAT,LON,ALT", help_heading = "A running SITL",
+          value_parser = parse_pad_at, allow_hyphen_values = true)]
+    pub pad_at: Option<[f64; 3]>,
+}
+
+fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| "expected LAT,LON,ALT: three numbers".to_string())?;
+    match values.as_slice() {
+        [lat, lon, alt] if lat.abs() <= 90.0 && lon.abs() <= 180.0 && alt.is_finite() => {
+            Ok([*lat, *lon, *alt])
+        }
+        _ => Err(
+            "expected LAT,LON,ALT: latitude within 90, longitude within 180 degrees, \
+                  altitude in metres"
+                .to_string(),
+        ),
+    }
+}
+
+impl SitlArgs {
+    /// The running SITL's link, if one is named.
+    fn sitl_endpoint(&self) -> Option<EndpointSpec> {
+        if let Some(addr) = &self.tcp {
+            Some(EndpointSpec::TcpClient(addr.clone()))
+        } else if let Some(addr) = &self.udp_listen {
+            Some(EndpointSpec::UdpListen(addr.clone()))
+        } else {
+            self.udp.as_ref().map(|remote| EndpointSpec::UdpClient {
+                remote: remote.clone(),
+                local_port: self.udp_local_port,
+            })
+        }
+    }
 }
 
 fn check(args: &SitlArgs) -> Result<(), CliError> {
@@ -404,6 +485,14 @@ pub fn run(
     check(args)?;
     let started = Instant::now();
     let params = crate::parse_board_params(args.board_params.as_deref())?;
+    if let Some(endpoint) = args.sitl_endpoint() {
+        return connect::run(args, endpoint, params, out, _err);
+    }
+    if args.pad_at.is_some() {
+        return Err(CliError::new(
+            "--pad-at places the pad for a running SITL: give --tcp, --udp or --udp-listen",
+        ));
+    }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = args.threads.unwrap_or(cores);
     let (workers, render_threads) = if args.seeds > 1 {

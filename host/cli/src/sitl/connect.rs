@@ -1,0 +1,578 @@
+//! `touchdown sitl --tcp | --udp | --udp-listen`: a landing against a running ArduPilot or PX4
+//! SITL instead of the autopilot model.
+//!
+//! The SITL flies its own vehicle in its own physics; we only watch it and play the camera
+//! board. Its *true* state comes from the simulator's ground-truth message, ArduPilot's
+//! SIM_STATE (108: `lat_int`/`lon_int` in 1e-7 degrees, altitude AMSL in metres, attitude
+//! quaternion body FRD to NED; its float `lat`/`lon` carry 1e-7 degrees too, which a 32-bit
+//! float rounds to some 40 cm, so the integers are used when present) or PX4's
+//! HIL_STATE_QUATERNION (115: PX4 streams its ground truth in it). Both are asked for with
+//! SET_MESSAGE_INTERVAL once a second until they flow. From that truth, linearised about each
+//! frame's time exactly as the model's closed loop does, the simulator renders the camera's
+//! view of the landing scenario's nested pad; the board's per-frame path
+//! ([`touchdown_core::pipeline::FramePipeline`]) and its
+//! [`touchdown_core::companion::Companion`] run on it, and every byte the companion sends goes
+//! to the SITL over the link, every byte from it to the companion: the SITL sees exactly what
+//! the board would send it on its UART, in wall-clock time.
+//!
+//! The pad lies where `--pad-at` puts it, or, by default, under the vehicle where it was when
+//! the first truth sample arrived (start the run with the vehicle on the ground, take off
+//! and land with the ground station), its plane [`GEAR_HEIGHT_M`] below the body origin then.
+//! Touchdown is the first time the body origin is within [`LANDED_HEIGHT_M`] of the pad
+//! plane after it has been above [`AIRBORNE_HEIGHT_M`], once it has stayed there at walking
+//! pace for [`LANDED_HOLD_S`]; the error is the horizontal position then against the pad's
+//! origin, as in the model's closed loop.
+//!
+//! Each frame is rendered [`FRAME_DELAY_S`] in the past, so that the truth is interpolated
+//! between two samples instead of extrapolated: like the board, which processes a frame
+//! after its readout, the frame is older than the moment it is processed.
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use touchdown_core::companion::mavlink::dialects::common::{MavCmd, MavMessage, COMMAND_LONG_DATA};
+use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::{Companion, CompanionConfig, FrameParser, MAX_FRAME_LEN};
+use touchdown_core::image::GrayImage;
+use touchdown_core::params::{ParamId, PipelineSettings};
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
+use touchdown_eval::closed_loop::{self, LandingConfig};
+use touchdown_eval::flight::{TrueState, TruthSource, TruthTable, NED_FROM_PAD};
+use touchdown_eval::workspace::HostWorkspace;
+use touchdown_formats::families::{self, SelectedFamily};
+use touchdown_sim::scenario::FramePlan;
+use touchdown_sim::Simulator;
+
+use crate::companion::endpoint::{Endpoint, EndpointSpec, Received};
+use crate::companion::interrupt;
+use crate::CliError;
+
+/// Metres per radian of latitude (the WGS-84 equatorial radius, ArduPilot's scaling too).
+const EARTH_RADIUS_M: f64 = 6_378_137.0;
+/// The pad plane below the body origin at the first sample (landing gear).
+pub const GEAR_HEIGHT_M: f64 = 0.1;
+/// The body origin this close to the pad plane counts as on the ground, metres.
+pub const LANDED_HEIGHT_M: f64 = 0.3;
+/// A landing counts only after the vehicle has been this high, metres.
+pub const AIRBORNE_HEIGHT_M: f64 = 2.0;
+/// On the ground at below [`LANDED_SPEED_MPS`] for this long: landed, seconds.
+pub const LANDED_HOLD_S: f64 = 1.0;
+/// Slower than this on the ground: at rest, m/s.
+const LANDED_SPEED_MPS: f64 = 0.2;
+/// A frame is rendered this long before it is processed, seconds.
+pub const FRAME_DELAY_S: f64 = 0.05;
+/// Below this height no frame is rendered (the pad fills the lens), metres.
+const MIN_RENDER_HEIGHT_M: f64 = 0.2;
+/// Ground-truth rate asked for, µs between samples (50 Hz).
+const TRUTH_INTERVAL_US: f32 = 20_000.0;
+/// The ground-truth messages: ArduPilot's SIM_STATE and SIMSTATE (sent together), PX4's
+/// HIL_STATE_QUATERNION.
+const TRUTH_MESSAGES: [u32; 3] = [108, 164, 115];
+/// How often the loop looks at the link and the clock.
+const TICK: Duration = Duration::from_millis(1);
+
+/// What a connected landing is told.
+#[derive(Debug, Clone)]
+pub struct ConnectConfig {
+    /// The link to the SITL.
+    pub endpoint: EndpointSpec,
+    /// The scene, camera, effects, parameters and frame rate (the landing's other fields,
+    /// wind and autopilot model, are the SITL's own here).
+    pub landing: LandingConfig,
+    /// The pad's origin: latitude and longitude (degrees), altitude AMSL (metres).
+    pub pad_at: Option<[f64; 3]>,
+    /// Give up after this long, seconds.
+    pub max_time_s: f64,
+}
+
+/// A ground-truth sample as the SITL sent it, in its geodetic terms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct GeoSample {
+    lat_deg: f64,
+    lon_deg: f64,
+    alt_m: f64,
+    body_to_ned: UnitQuaternion<f64>,
+}
+
+/// The ground truth of a decoded message, if it is one.
+fn ground_truth(message: &MavMessage) -> Option<GeoSample> {
+    let quaternion = |w: f32, x: f32, y: f32, z: f32| {
+        let q = Quaternion::new(f64::from(w), f64::from(x), f64::from(y), f64::from(z));
+        (q.norm() > 0.5).then(|| UnitQuaternion::from_quaternion(q))
+    };
+    match message {
+        MavMessage::SIM_STATE(s) => {
+            // ArduPilot fills the float fields with 1e-7 degrees as well; a |value| beyond
+            // 180 can only be that.
+            let float_deg = |v: f32| {
+                let v = f64::from(v);
+                if v.abs() > 180.0 {
+                    v * 1e-7
+                } else {
+                    v
+                }
+            };
+            let (lat_deg, lon_deg) = if s.lat_int != 0 || s.lon_int != 0 {
+                (f64::from(s.lat_int) * 1e-7, f64::from(s.lon_int) * 1e-7)
+            } else {
+                (float_deg(s.lat), float_deg(s.lon))
+            };
+            Some(GeoSample {
+                lat_deg,
+                lon_deg,
+                alt_m: f64::from(s.alt),
+                body_to_ned: quaternion(s.q1, s.q2, s.q3, s.q4)?,
+            })
+        }
+        MavMessage::HIL_STATE_QUATERNION(s) => {
+            let [w, x, y, z] = s.attitude_quaternion;
+            Some(GeoSample {
+                lat_deg: f64::from(s.lat) * 1e-7,
+                lon_deg: f64::from(s.lon) * 1e-7,
+                alt_m: f64::from(s.alt) * 1e-3,
+                body_to_ned: quaternion(w, x, y, z)?,
+            })
+        }
+        _ => None,
+    }
+}
+
+/// The truth in the pad frame (x east, y north, z up from the pad's origin), on a local
+/// tangent plane: at the few hundred metres of a landing its error is far below a millimetre.
+fn in_pad_frame(sample: &GeoSample, pad: &[f64; 3]) -> TrueState {
+    let north = (sample.lat_deg - pad[0]).to_radians() * EARTH_RADIUS_M;
+    let east = (sample.lon_deg - pad[1]).to_radians() * EARTH_RADIUS_M * pad[0].to_radians().cos();
+    let ned = Vector3::new(north, east, -(sample.alt_m - pad[2]));
+    TrueState {
+        position: NED_FROM_PAD * ned,
+        body_to_ned: *sample.body_to_ned.to_rotation_matrix().matrix(),
+    }
+}
+
+/// Where and when the vehicle came down.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConnectedTouchdown {
+    /// Seconds from the start of the run.
+    pub t_s: f64,
+    /// North and east of the pad's origin, metres.
+    pub north_m: f64,
+    /// See `north_m`.
+    pub east_m: f64,
+}
+
+/// What a connected landing did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ConnectedOutcome {
+    /// Ground-truth samples received.
+    pub truth_samples: usize,
+    /// Frames rendered and processed.
+    pub frames: usize,
+    /// Frames with a pad fix.
+    pub frames_with_fix: usize,
+    /// LANDING_TARGETs sent.
+    pub targets_sent: u32,
+    /// Seconds from the start to the first LANDING_TARGET sent.
+    pub first_target_s: Option<f64>,
+    /// The touchdown, if it came.
+    pub touchdown: Option<ConnectedTouchdown>,
+    /// Seconds run.
+    pub run_s: f64,
+    /// Why the run ended early (a lost link, a signal), if it did.
+    pub stopped: Option<String>,
+}
+
+/// Flies one landing against the SITL at `config.endpoint`; progress lines go to `err`.
+pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutcome, CliError> {
+    let scenario = closed_loop::scene(&config.landing).map_err(CliError)?;
+    let mut simulator = Simulator::new(scenario).with_threads(config.landing.threads);
+    let camera = simulator.scenario.camera.model;
+    let pad = simulator.scenario.pad.config.clone();
+    let layout = pad
+        .layout()
+        .map_err(|e| CliError(format!("pad `{}`: invalid layout: {e:?}", pad.name)))?;
+    let selected = families::resolve_pad(&pad).map_err(CliError::new)?;
+    let views: Vec<_> = selected.iter().map(SelectedFamily::family).collect();
+    let family_refs: Vec<_> = views.iter().collect();
+
+    let mut companion = Companion::new(CompanionConfig::default());
+    for (name, value) in &config.landing.params {
+        let id =
+            ParamId::from_name(name).ok_or_else(|| CliError(format!("no parameter {name}")))?;
+        companion
+            .set_param(id, *value)
+            .map_err(|e| CliError(format!("{name} = {value}: {e:?}")))?;
+    }
+    let mut settings = PipelineSettings::from_params(companion.params());
+    let mut pipeline = FramePipeline::new(
+        &family_refs,
+        &layout,
+        camera,
+        PipelineConfig::default(),
+        settings,
+    )
+    .map_err(|e| CliError(format!("pipeline configuration: {e:?}")))?;
+    let mut workspace = HostWorkspace::new();
+
+    let name = config.endpoint.describe();
+    interrupt::install().map_err(|e| CliError(format!("signal handlers: {e}")))?;
+    let mut endpoint =
+        Endpoint::open(&config.endpoint).map_err(|e| CliError(format!("{name}: {e}")))?;
+    let mut parser = FrameParser::new();
+    let mut truth = TruthTable::new();
+    let mut pad_at = config.pad_at;
+    let mut outcome = ConnectedOutcome::default();
+    let mut rx = [0u8; 4096];
+    let mut tx = [0u8; MAX_FRAME_LEN];
+    let mut request_seq = 0u8;
+    let mut next_request_s = 0.0;
+    let mut airborne = false;
+    let mut on_ground_since: Option<(f64, Vector3<f64>)> = None;
+    let frame_period_s = 1.0 / config.landing.fps;
+    let mut next_frame_s = 0.0;
+    let start = Instant::now();
+    let now_s = || start.elapsed().as_secs_f64();
+
+    let _ = writeln!(
+        err,
+        "{name}: waiting for the SITL's ground truth (SIM_STATE or HIL_STATE_QUATERNION)"
+    );
+    'run: loop {
+        let t = now_s();
+        outcome.run_s = t;
+        if t > config.max_time_s {
+            break;
+        }
+        if let Some(signal) = interrupt::received() {
+            outcome.stopped = Some(format!("stopped by {}", signal.name()));
+            break;
+        }
+        // Bytes in: to the companion as they come, and the ground truth out of them.
+        loop {
+            match endpoint.recv(&mut rx) {
+                Ok(Received::Bytes(0)) => break,
+                Ok(Received::Bytes(n)) => {
+                    let bytes = rx.get(..n).unwrap_or(&[]);
+                    let now_us = (now_s() * 1e6) as u64;
+                    companion.receive(bytes, now_us);
+                    let mut samples = Vec::new();
+                    parser.push(bytes, |frame| {
+                        if let Some(sample) = frame.decode().ok().as_ref().and_then(ground_truth) {
+                            samples.push(sample);
+                        }
+                    });
+                    for sample in samples {
+                        let pad = *pad_at.get_or_insert([
+                            sample.lat_deg,
+                            sample.lon_deg,
+                            sample.alt_m - GEAR_HEIGHT_M,
+                        ]);
+                        if outcome.truth_samples == 0 {
+                            let _ = writeln!(
+                                err,
+                                "{name}: ground truth flowing; the pad at {:.7}, {:.7}, {:.2} m AMSL",
+                                pad[0], pad[1], pad[2]
+                            );
+                        }
+                        outcome.truth_samples += 1;
+                        truth.push(now_s(), in_pad_frame(&sample, &pad));
+                    }
+                }
+                Ok(Received::Closed) => {
+                    outcome.stopped = Some(format!("{name}: the peer closed the connection"));
+                    break 'run;
+                }
+                Err(e) => {
+                    outcome.stopped = Some(format!("{name}: {e}"));
+                    break 'run;
+                }
+            }
+        }
+        // Until the truth flows, ask for it (the SITL may not stream it on this port).
+        if outcome.truth_samples == 0 && t >= next_request_s && endpoint.peer().is_some() {
+            next_request_s = t + 1.0;
+            for id in TRUTH_MESSAGES {
+                let ids = (
+                    companion.params().get_int(ParamId::SysId),
+                    companion.params().get_int(ParamId::CompId),
+                );
+                let frame = message_interval_request(id, ids, &mut request_seq);
+                let _ = endpoint.send(&frame);
+            }
+        }
+        let new_settings = PipelineSettings::from_params(companion.params());
+        if new_settings != settings {
+            if let Err(e) = pipeline.apply(new_settings) {
+                let _ = writeln!(
+                    err,
+                    "warning: pad not scaled ({e:?}): searching it as built"
+                );
+            }
+            settings = new_settings;
+        }
+        // The landing's state from the newest truth.
+        if let Some(state) = truth.at(t) {
+            let height = state.position.z;
+            airborne |= height > AIRBORNE_HEIGHT_M;
+            let resting = truth.at(t - 0.1).is_some_and(|before| {
+                (state.position - before.position).norm() / 0.1 < LANDED_SPEED_MPS
+            });
+            if airborne && height < LANDED_HEIGHT_M && resting {
+                let (since, at) = *on_ground_since.get_or_insert((t, state.position));
+                if t - since >= LANDED_HOLD_S {
+                    outcome.touchdown = Some(ConnectedTouchdown {
+                        t_s: since,
+                        north_m: at.y,
+                        east_m: at.x,
+                    });
+                    break;
+                }
+            } else {
+                on_ground_since = None;
+            }
+        }
+        // A frame when one is due and the truth covers its time.
+        let frame_s = t - FRAME_DELAY_S;
+        if t >= next_frame_s && !truth.is_empty() && frame_s > 0.0 {
+            next_frame_s = (next_frame_s + frame_period_s).max(t);
+            let high_enough = truth
+                .at(frame_s)
+                .is_some_and(|s| s.position.z > MIN_RENDER_HEIGHT_M);
+            if let (true, Some(trajectory)) =
+                (high_enough, closed_loop::local_trajectory(&truth, frame_s))
+            {
+                let t_us = (frame_s * 1e6).round() as u64;
+                simulator.scenario.trajectory = trajectory;
+                simulator
+                    .scenario
+                    .frames
+                    .push(FramePlan { t_us, label: None });
+                let index = simulator.scenario.frames.len() - 1;
+                let frame = simulator
+                    .render(index)
+                    .ok_or_else(|| CliError::new("the simulator rendered nothing"))?;
+                let image =
+                    GrayImage::new(&frame.image.pixels, frame.image.width, frame.image.height)
+                        .map_err(|e| CliError(format!("frame {index}: {e:?}")))?;
+                let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
+                let report = pipeline.process(&image, t_us, companion.vehicle(), &mut buffers);
+                outcome.frames += 1;
+                outcome.frames_with_fix += usize::from(report.fix.is_some());
+                companion.on_estimate(&report.estimate, (now_s() * 1e6) as u64);
+            }
+        }
+        while let Some(n) = companion.poll_transmit((now_s() * 1e6) as u64, &mut tx) {
+            let _ = endpoint.send(tx.get(..n).unwrap_or(&[]));
+        }
+        let sent = companion.stats().landing_targets;
+        if sent > 0 && outcome.first_target_s.is_none() {
+            outcome.first_target_s = Some(now_s());
+        }
+        outcome.targets_sent = sent;
+        std::thread::sleep(TICK);
+    }
+    Ok(outcome)
+}
+
+/// A COMMAND_LONG asking the autopilot to stream message `id` at the ground-truth rate.
+/// `ids`: our system and component ids (TD_SYSID, TD_COMPID), as the companion sends with.
+fn message_interval_request(id: u32, ids: (i32, i32), seq: &mut u8) -> Vec<u8> {
+    let command = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: id as f32,
+        param2: TRUTH_INTERVAL_US,
+        command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        target_system: 0,
+        target_component: 0,
+        ..COMMAND_LONG_DATA::DEFAULT
+    });
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(
+        MavHeader {
+            system_id: u8::try_from(ids.0).unwrap_or(1).into(),
+            component_id: u8::try_from(ids.1).unwrap_or(191),
+            sequence: *seq,
+        },
+        &command,
+    );
+    *seq = seq.wrapping_add(1);
+    raw.raw_bytes().to_vec()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use touchdown_core::companion::mavlink::dialects::common::SIM_STATE_DATA;
+
+    #[test]
+    fn sim_state_reads_the_integer_position_and_the_float_one_in_either_unit() {
+        let pad = [-35.363_261_0, 149.165_230_0, 584.0];
+        let base = SIM_STATE_DATA {
+            q1: 1.0,
+            alt: 594.0,
+            ..SIM_STATE_DATA::DEFAULT
+        };
+        // 1e-5 degrees of latitude north of the pad: 1.113 m.
+        let with_ints = SIM_STATE_DATA {
+            lat_int: -353_632_510,
+            lon_int: 1_491_652_300,
+            lat: -353_632_510_i32 as f32,
+            lon: 1_491_652_300_i32 as f32,
+            ..base
+        };
+        let s = ground_truth(&MavMessage::SIM_STATE(with_ints.clone())).expect("truth");
+        let state = in_pad_frame(&s, &pad);
+        assert!((state.position.y - 1.113).abs() < 0.01, "{state:?}");
+        assert!(state.position.x.abs() < 0.01, "{state:?}");
+        assert!((state.position.z - 10.0).abs() < 1e-6, "{state:?}");
+        // Without the integers: the float in 1e-7 degrees (ArduPilot) or in degrees.
+        for (lat, lon) in [
+            (-353_632_510_i32 as f32, 1_491_652_300_i32 as f32),
+            (-35.363_25_f32, 149.165_23_f32),
+        ] {
+            let s = ground_truth(&MavMessage::SIM_STATE(SIM_STATE_DATA {
+                lat,
+                lon,
+                ..base.clone()
+            }))
+            .expect("truth");
+            let state = in_pad_frame(&s, &pad);
+            // A float's rounding at these magnitudes: tens of centimetres.
+            assert!((state.position.y - 1.113).abs() < 1.0, "{state:?}");
+        }
+        // No attitude: not a sample.
+        let none = SIM_STATE_DATA {
+            q1: 0.0,
+            ..with_ints
+        };
+        assert_eq!(ground_truth(&MavMessage::SIM_STATE(none)), None);
+    }
+
+    #[test]
+    fn the_truth_is_turned_into_the_pad_frame_east_north_up() {
+        let pad = [47.0, 8.0, 400.0];
+        let east_of_pad = GeoSample {
+            lat_deg: 47.0,
+            lon_deg: 8.0 + (2.0 / (EARTH_RADIUS_M * 47f64.to_radians().cos())).to_degrees(),
+            alt_m: 405.0,
+            body_to_ned: UnitQuaternion::identity(),
+        };
+        let state = in_pad_frame(&east_of_pad, &pad);
+        assert!(
+            (state.position - Vector3::new(2.0, 0.0, 5.0)).norm() < 1e-6,
+            "{state:?}"
+        );
+    }
+}
+
+/// The JSON record of a connected landing (keys in docs/interfaces.md).
+#[derive(Debug, serde::Serialize)]
+struct ConnectedJson {
+    autopilot: &'static str,
+    endpoint: String,
+    touched_down: bool,
+    touchdown_s: Option<f64>,
+    north_cm: Option<f64>,
+    east_cm: Option<f64>,
+    horizontal_cm: Option<f64>,
+    first_target_s: Option<f64>,
+    truth_samples: usize,
+    frames: usize,
+    frames_with_fix: usize,
+    targets_sent: u32,
+    run_s: f64,
+    stopped: Option<String>,
+}
+
+/// `touchdown sitl` against a running SITL: flies, prints the outcome (text or `--json`).
+pub(super) fn run(
+    args: &super::SitlArgs,
+    endpoint: EndpointSpec,
+    params: Vec<(String, f32)>,
+    out: &mut dyn Write,
+    err: &mut dyn Write,
+) -> Result<super::Outcome, CliError> {
+    if args.seeds > 1 || args.record.is_some() {
+        return Err(CliError::new(
+            "--seeds and --record fly the model; a running SITL flies one landing",
+        ));
+    }
+    let landing = LandingConfig {
+        effects: args.effect_terms.effects(args.ideal),
+        params,
+        fps: args.fps,
+        qvga: args.qvga,
+        threads: args
+            .threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        ..LandingConfig::issue_15(args.seed)
+    };
+    let config = ConnectConfig {
+        endpoint: endpoint.clone(),
+        landing,
+        pad_at: args.pad_at,
+        max_time_s: args.max_time,
+    };
+    let o = fly(&config, err)?;
+    let td = o.touchdown;
+    let horizontal = td.map(|t| 100.0 * t.north_m.hypot(t.east_m));
+    let text = if args.json {
+        let json = ConnectedJson {
+            autopilot: "sitl",
+            endpoint: endpoint.describe(),
+            touched_down: td.is_some(),
+            touchdown_s: td.map(|t| t.t_s),
+            north_cm: td.map(|t| 100.0 * t.north_m),
+            east_cm: td.map(|t| 100.0 * t.east_m),
+            horizontal_cm: horizontal,
+            first_target_s: o.first_target_s,
+            truth_samples: o.truth_samples,
+            frames: o.frames,
+            frames_with_fix: o.frames_with_fix,
+            targets_sent: o.targets_sent,
+            run_s: o.run_s,
+            stopped: o.stopped.clone(),
+        };
+        let mut line = serde_json::to_string(&json).map_err(CliError::new)?;
+        line.push('\n');
+        line
+    } else {
+        let seconds = |v: Option<f64>| v.map_or("-".to_string(), |s| format!("{s:.2}"));
+        let mut t = format!(
+            "{}: {} ground-truth samples; timeline, s from the start of the run:\n",
+            endpoint.describe(),
+            o.truth_samples
+        );
+        t.push_str(&format!(
+            "  {:>7}  first LANDING_TARGET sent\n",
+            seconds(o.first_target_s)
+        ));
+        match (td, horizontal) {
+            (Some(td), Some(h)) => t.push_str(&format!(
+                "  {:>7}  touchdown\ntouchdown: {h:.1} cm from the pad centre (north {:+.1}, east {:+.1} cm)\n",
+                seconds(Some(td.t_s)),
+                100.0 * td.north_m,
+                100.0 * td.east_m
+            )),
+            _ => t.push_str(&format!(
+                "no touchdown in {:.0} s{}\n",
+                o.run_s,
+                o.stopped.as_deref().map_or(String::new(), |s| format!(" ({s})"))
+            )),
+        }
+        t.push_str(&format!(
+            "frames {} ({} with a pad fix), LANDING_TARGETs sent {}\n",
+            o.frames, o.frames_with_fix, o.targets_sent
+        ));
+        t
+    };
+    out.write_all(text.as_bytes())
+        .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+    match (td, o.stopped) {
+        (Some(_), _) => Ok(super::Outcome::Success),
+        (None, Some(reason)) => Err(CliError(reason)),
+        (None, None) => Err(CliError(format!(
+            "no touchdown within --max-time {:.0} s",
+            args.max_time
+        ))),
+    }
+}

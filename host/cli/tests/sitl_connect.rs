@@ -1,0 +1,228 @@
+//! `touchdown sitl --tcp` against a stand-in for ArduPilot SITL: a TCP server that speaks
+//! what ArduCopter SITL sends on a serial port (HEARTBEAT, SYSTEM_TIME, ATTITUDE_QUATERNION,
+//! SIM_STATE with the position in 1e-7 degrees in both its float and its integer fields,
+//! TIMESYNC answers) for a vehicle it flies on a script: a hover at 6 m, 30 cm north and 20 cm
+//! west of the pad, heading 30 degrees, then straight down at 1 m/s onto the ground.
+//!
+//! Asserted: every LANDING_TARGET the run sends is in BODY_FRD and points at the pad as the
+//! script has it (the horizontal components, which the script holds constant, within a few
+//! centimetres); enough of them arrive; and the run reports the touchdown where the script
+//! put the vehicle down. That is the whole connected path: ground truth decoded from the
+//! SITL's messages, the frames rendered from it, the per-frame path and the companion on
+//! them, and the bytes both ways over TCP in wall-clock time.
+
+#[allow(dead_code)] // `scratch` is for the tests that write files; this one writes none.
+mod common;
+
+use std::io::{Read, Write};
+use std::net::TcpListener;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use touchdown_core::companion::mavlink::dialects::common::{
+    MavBool, MavFrame, MavMessage, ATTITUDE_QUATERNION_DATA, SIM_STATE_DATA, SYSTEM_TIME_DATA,
+    TIMESYNC_DATA,
+};
+use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::FrameParser;
+
+/// The pad's origin (ArduPilot SITL's default home, CMAC).
+const PAD: [f64; 3] = [-35.363_261, 149.165_230, 584.0];
+const NORTH_M: f64 = 0.30;
+const EAST_M: f64 = -0.20;
+const YAW_DEG: f64 = 30.0;
+const HOVER_S: f64 = 2.0;
+const START_HEIGHT_M: f64 = 6.0;
+const GEAR_M: f64 = 0.1;
+
+/// The scripted vehicle's height over the pad at `t` seconds.
+fn height(t: f64) -> f64 {
+    (START_HEIGHT_M - (t - HOVER_S).max(0.0)).max(GEAR_M)
+}
+
+fn frame(seq: &mut u8, msg: &MavMessage) -> Vec<u8> {
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(
+        MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: *seq,
+        },
+        msg,
+    );
+    *seq = seq.wrapping_add(1);
+    raw.raw_bytes().to_vec()
+}
+
+#[test]
+fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+    let port = listener.local_addr().expect("addr").port();
+    let pad_at = format!("{},{},{}", PAD[0], PAD[1], PAD[2]);
+    let child = Command::new(env!("CARGO_BIN_EXE_touchdown"))
+        .args([
+            "sitl",
+            "--tcp",
+            &format!("127.0.0.1:{port}"),
+            "--pad-at",
+            &pad_at,
+            "--ideal",
+            "--qvga",
+            "--fps",
+            "10",
+            "--max-time",
+            "40",
+            "--json",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("touchdown sitl");
+    // Accept without blocking, so that a run that fails before it connects fails the test
+    // with its message instead of hanging it.
+    let mut child = child;
+    listener
+        .set_nonblocking(true)
+        .expect("non-blocking listener");
+    let waited = Instant::now();
+    let mut stream = loop {
+        match listener.accept() {
+            Ok((stream, _)) => break stream,
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+            Err(e) => panic!("accept: {e}"),
+        }
+        if child.try_wait().expect("the run").is_some() || waited.elapsed().as_secs() > 30 {
+            let _ = child.kill();
+            let output = child.wait_with_output().expect("the run");
+            panic!(
+                "the run never connected: {}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    stream.set_nonblocking(true).expect("non-blocking");
+
+    let yaw = YAW_DEG.to_radians();
+    let (half_cos, half_sin) = ((yaw / 2.0).cos() as f32, (yaw / 2.0).sin() as f32);
+    let lat_e7 = ((PAD[0] + (NORTH_M / 6_378_137.0).to_degrees()) * 1e7).round();
+    let lon_e7 = ((PAD[1] + (EAST_M / (6_378_137.0 * PAD[0].to_radians().cos())).to_degrees())
+        * 1e7)
+        .round();
+    // The pad seen from the body: NED (-north, -east, +height) turned by -yaw.
+    let (c, s) = (yaw.cos(), yaw.sin());
+    let body_x = c * -NORTH_M + s * -EAST_M;
+    let body_y = -s * -NORTH_M + c * -EAST_M;
+
+    let start = Instant::now();
+    let mut seq = 0u8;
+    let mut parser = FrameParser::new();
+    let mut next_sample = 0.0;
+    let mut next_second = 0.0;
+    let mut targets = 0usize;
+    let mut worst_cm = 0.0f64;
+    let mut wrong_frames = 0usize;
+    let mut buf = [0u8; 4096];
+    while start.elapsed() < Duration::from_secs(40) {
+        let t = start.elapsed().as_secs_f64();
+        let boot_ms = (t * 1e3) as u32;
+        let mut out = Vec::new();
+        if t >= next_second {
+            next_second += 1.0;
+            out.extend(common::ardupilot_heartbeat(seq));
+            seq = seq.wrapping_add(1);
+            out.extend(frame(
+                &mut seq,
+                &MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
+                    time_unix_usec: 0,
+                    time_boot_ms: boot_ms,
+                }),
+            ));
+        }
+        if t >= next_sample {
+            next_sample += 0.02;
+            out.extend(frame(
+                &mut seq,
+                &MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
+                    time_boot_ms: boot_ms,
+                    q1: half_cos,
+                    q4: half_sin,
+                    ..ATTITUDE_QUATERNION_DATA::DEFAULT
+                }),
+            ));
+            out.extend(frame(
+                &mut seq,
+                &MavMessage::SIM_STATE(SIM_STATE_DATA {
+                    q1: half_cos,
+                    q4: half_sin,
+                    yaw: yaw as f32,
+                    lat: lat_e7 as f32,
+                    lon: lon_e7 as f32,
+                    lat_int: lat_e7 as i32,
+                    lon_int: lon_e7 as i32,
+                    alt: (PAD[2] + height(t)) as f32,
+                    vd: if height(t) > GEAR_M && t > HOVER_S {
+                        1.0
+                    } else {
+                        0.0
+                    },
+                    ..SIM_STATE_DATA::DEFAULT
+                }),
+            ));
+        }
+        match stream.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => {
+                let mut answers = Vec::new();
+                parser.push(&buf[..n], |f| match f.decode() {
+                    Ok(MavMessage::TIMESYNC(ts)) if ts.tc1 == 0 => {
+                        answers.push(MavMessage::TIMESYNC(TIMESYNC_DATA {
+                            tc1: (t * 1e9) as i64,
+                            ts1: ts.ts1,
+                            target_system: 0,
+                            target_component: 0,
+                        }))
+                    }
+                    Ok(MavMessage::LANDING_TARGET(lt)) => {
+                        targets += 1;
+                        if lt.frame != MavFrame::MAV_FRAME_BODY_FRD
+                            || lt.position_valid != MavBool::MAV_BOOL_TRUE
+                        {
+                            wrong_frames += 1;
+                        }
+                        let miss = (f64::from(lt.x) - body_x).hypot(f64::from(lt.y) - body_y);
+                        worst_cm = worst_cm.max(100.0 * miss);
+                    }
+                    _ => {}
+                });
+                for answer in answers {
+                    out.extend(frame(&mut seq, &answer));
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+            Err(_) => break,
+        }
+        if !out.is_empty() && stream.write_all(&out).is_err() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let output = child.wait_with_output().expect("the run ends");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(0), "{stdout}\n{stderr}");
+    let json: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
+    println!("{json}\ntargets {targets}, worst horizontal miss {worst_cm:.1} cm");
+    assert_eq!(json["autopilot"], "sitl");
+    assert_eq!(json["touched_down"], true, "{json}");
+    let north = json["north_cm"].as_f64().expect("north");
+    let east = json["east_cm"].as_f64().expect("east");
+    assert!((north - 100.0 * NORTH_M).abs() < 1.0, "{json}");
+    assert!((east - 100.0 * EAST_M).abs() < 1.0, "{json}");
+    assert_eq!(wrong_frames, 0, "targets not BODY_FRD with a position");
+    assert!(
+        targets >= 20,
+        "only {targets} LANDING_TARGETs arrived: {json}"
+    );
+    assert!(worst_cm < 5.0, "a target {worst_cm:.1} cm off the pad");
+}
