@@ -256,9 +256,10 @@ pub struct DetectorConfig {
     /// runs out, detection stops and [`DetectStats::truncated`] is set.
     ///
     /// The default, [`CAMERA_WORK_BUDGET`], is for the camera board: it holds the worst
-    /// frames of the Cortex-M7 benchmark (uniform noise, hundreds of small squares) under
-    /// twice the cost of a typical landing frame. Simulated landing frames use 0.04 to 0.27
-    /// units per pixel. Cluttered photos with dozens of markers use more (up to 0.37 in the
+    /// frames of the Cortex-M7 benchmark (uniform noise, hundreds of small squares) to about
+    /// 2.5 times the cost of a typical landing frame (`scripts/m7_check.sh`). Simulated
+    /// frames use 0.04 to 0.34 units per pixel (the `sun` scenario's glare; landing and
+    /// descent at most 0.094). Cluttered photos with dozens of markers use more (up to 0.37 in the
     /// test data): [`DetectorConfig::offline`] is the setting for photos on a host. Not a
     /// number, or below 0, counts as 0.
     pub work_budget_per_pixel: f32,
