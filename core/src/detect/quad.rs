@@ -387,9 +387,14 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
         let point = |i: usize| points.get(i % m).copied().unwrap_or_default();
         line_distance(point(k), point(k + m - 1), point(k + 1))
     };
+    // Measured only when there is a vertex to drop: most boundaries come out of
+    // Douglas-Peucker with four, and the bends' square roots (software on the Cortex-M7:
+    // about 50 instructions each) were a fifth of the fit on a frame of small quads.
     let mut bends: heapless::Vec<f32, MAX_VERTICES> = heapless::Vec::new();
-    for k in 0..corners.len() {
-        let _ = bends.push(bend(&corners, k));
+    if corners.len() > 4 {
+        for k in 0..corners.len() {
+            let _ = bends.push(bend(&corners, k));
+        }
     }
     while corners.len() > 4 {
         let (least, bent) = bends
@@ -442,13 +447,18 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
 pub(crate) fn check_shape(c: &[Point; 4], min_edge: f32) -> bool {
     let mut shortest = f32::MAX;
     let mut longest = 0.0f32;
+    // Convex first (no square root), then each edge's length once (the corner after it uses
+    // it again): four square roots, not eight. Edge k runs from corner k to corner k + 1.
     for k in 0..4 {
-        let (a, b, d) = (cyclic(c, k), cyclic(c, k + 1), cyclic(c, k + 2));
-        if !(cross(a, b, d) > 0.0) {
+        if !(cross(cyclic(c, k), cyclic(c, k + 1), cyclic(c, k + 2)) > 0.0) {
             return false;
         }
-        let e1 = b.distance(a);
-        let e2 = d.distance(b);
+    }
+    let edges: [f32; 4] = core::array::from_fn(|k| cyclic(c, k + 1).distance(cyclic(c, k)));
+    for k in 0..4 {
+        let (a, b, d) = (cyclic(c, k), cyclic(c, k + 1), cyclic(c, k + 2));
+        let e1 = cyclic(&edges, k);
+        let e2 = cyclic(&edges, k + 1);
         shortest = shortest.min(e1);
         longest = longest.max(e1);
         if e1 < 1e-3 || e2 < 1e-3 {

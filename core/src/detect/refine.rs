@@ -229,10 +229,15 @@ fn fit_line(points: &[(Point, f32)]) -> Option<Line> {
 pub(crate) fn offset_quad(quad: &Quad, distance: f32) -> [Point; 4] {
     let sign = if quad.hole { -distance } else { distance };
     let c = &quad.corners;
+    // Each edge's normal once (both of its corners use it): four square roots, not eight.
+    // Edge k runs from corner k to corner k + 1.
+    let normals: [Point; 4] = core::array::from_fn(|k| {
+        outward_normal(cyclic(c, k), cyclic(c, k + 1)).unwrap_or_default()
+    });
     let mut out = *c;
     for (k, slot) in out.iter_mut().enumerate() {
-        let prev = outward_normal(cyclic(c, k + 3), cyclic(c, k)).unwrap_or_default();
-        let next = outward_normal(cyclic(c, k), cyclic(c, k + 1)).unwrap_or_default();
+        let prev = cyclic(&normals, k + 3);
+        let next = cyclic(&normals, k);
         // The corner moves along the bisector so that both edges move by `distance`.
         let (bx, by) = (prev.x + next.x, prev.y + next.y);
         let cos_half_sq = 0.25 * (bx * bx + by * by);
