@@ -89,7 +89,12 @@ impl Metering {
 /// `(mean, highlight)`, `(0, 0)` for an empty image.
 pub fn scene_levels(image: &GrayImage<'_>, step: usize) -> (u8, u8) {
     let step = step.max(1);
-    let mut histogram = [0u32; 256];
+    // u16 counts (512 B of stack, not 1 KB: the vision task's frame path runs on the boot
+    // stack). A bin saturates past 65,535 samples, which cannot change the highlight while
+    // the image gives fewer than 256 x 65,535 (16.7 million) samples: the downward scan has
+    // reached `wanted` (count / 256 <= 65,535) by the time it adds a saturated bin. The mean
+    // is summed apart from the histogram, exactly.
+    let mut histogram = [0u16; 256];
     let mut sum = 0u64;
     let mut count = 0u32;
     for y in (0..image.height()).step_by(step) {
@@ -111,7 +116,7 @@ pub fn scene_levels(image: &GrayImage<'_>, step: usize) -> (u8, u8) {
     let mut above = 0u32;
     let mut highlight = 0u8;
     for (level, &n) in histogram.iter().enumerate().rev() {
-        above = above.saturating_add(n);
+        above = above.saturating_add(u32::from(n));
         if above >= wanted {
             highlight = level as u8;
             break;
@@ -253,6 +258,26 @@ mod tests {
         let image = GrayImage::new(&flat, 32, 32).unwrap();
         assert_eq!(scene_levels(&image, 8), (90, 90));
         assert_eq!(scene_levels(&image, 0), (90, 90));
+    }
+
+    #[test]
+    fn a_saturated_bin_leaves_the_highlight_exact() {
+        // 512 x 256 = 131,072 samples, twice a u16 bin: 130,000 at 240 (that bin saturates),
+        // 1,072 at 20. The highlight is 240 and the mean is summed exactly.
+        let mut data = [240u8; 512 * 256];
+        for p in data.iter_mut().take(1_072) {
+            *p = 20;
+        }
+        let image = GrayImage::new(&data, 512, 256).unwrap();
+        let expected_mean = ((130_000u64 * 240 + 1_072 * 20) / 131_072) as u8;
+        assert_eq!(scene_levels(&image, 1), (expected_mean, 240));
+        // 600 bright samples (more than 131,072 / 256 = 512) above a saturated dark bin.
+        let mut data = [30u8; 512 * 256];
+        for p in data.iter_mut().skip(1_000).take(600) {
+            *p = 250;
+        }
+        let image = GrayImage::new(&data, 512, 256).unwrap();
+        assert_eq!(scene_levels(&image, 1).1, 250);
     }
 
     #[test]
