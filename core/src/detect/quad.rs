@@ -444,32 +444,42 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
 }
 
 /// Convex, edges long enough and not too unequal, no degenerate angle.
+///
+/// On squared lengths: no square root (software on the Cortex-M7, about 50 instructions
+/// each, four per candidate were a tenth of the fit on a frame of small quads). Every test
+/// is the square of the one on lengths (`|cos| > c` as `dot^2 > c^2 e1^2 e2^2`), the same
+/// up to rounding.
 pub(crate) fn check_shape(c: &[Point; 4], min_edge: f32) -> bool {
-    let mut shortest = f32::MAX;
-    let mut longest = 0.0f32;
-    // Convex first (no square root), then each edge's length once (the corner after it uses
-    // it again): four square roots, not eight. Edge k runs from corner k to corner k + 1.
     for k in 0..4 {
         if !(cross(cyclic(c, k), cyclic(c, k + 1), cyclic(c, k + 2)) > 0.0) {
             return false;
         }
     }
-    let edges: [f32; 4] = core::array::from_fn(|k| cyclic(c, k + 1).distance(cyclic(c, k)));
+    // Edge k runs from corner k to corner k + 1.
+    let edges2: [f32; 4] = core::array::from_fn(|k| {
+        let (a, b) = (cyclic(c, k), cyclic(c, k + 1));
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        dx * dx + dy * dy
+    });
+    let mut shortest2 = f32::MAX;
+    let mut longest2 = 0.0f32;
     for k in 0..4 {
         let (a, b, d) = (cyclic(c, k), cyclic(c, k + 1), cyclic(c, k + 2));
-        let e1 = cyclic(&edges, k);
-        let e2 = cyclic(&edges, k + 1);
-        shortest = shortest.min(e1);
-        longest = longest.max(e1);
-        if e1 < 1e-3 || e2 < 1e-3 {
+        let e1 = cyclic(&edges2, k);
+        let e2 = cyclic(&edges2, k + 1);
+        shortest2 = shortest2.min(e1);
+        longest2 = longest2.max(e1);
+        if e1 < 1e-6 || e2 < 1e-6 {
             return false;
         }
-        let cos = ((a.x - b.x) * (d.x - b.x) + (a.y - b.y) * (d.y - b.y)) / (e1 * e2);
-        if cos.abs() > MIN_ANGLE_COS {
+        let dot = (a.x - b.x) * (d.x - b.x) + (a.y - b.y) * (d.y - b.y);
+        if dot * dot > MIN_ANGLE_COS * MIN_ANGLE_COS * (e1 * e2) {
             return false;
         }
     }
-    shortest >= min_edge && longest <= MAX_EDGE_RATIO * shortest
+    // A negative `min_edge` passes any edge, not a number none (as on lengths).
+    let long_enough = min_edge <= 0.0 || shortest2 >= min_edge * min_edge;
+    long_enough && longest2 <= MAX_EDGE_RATIO * MAX_EDGE_RATIO * shortest2
 }
 
 #[cfg(test)]
@@ -543,5 +553,36 @@ mod tests {
             v.push(Pixel { x: 10, y: 50 - i }).unwrap();
         }
         assert!(fit_quad(&v, 8.0).is_none());
+    }
+
+    /// The shape check on squared lengths decides as the one on lengths would, on each of
+    /// its limits: edge length, edge ratio, corner angle, orientation.
+    #[test]
+    fn shape_check_limits() {
+        let quad = |p: [(f32, f32); 4]| p.map(|(x, y)| Point::new(x, y));
+        let square = quad([(0.0, 0.0), (10.0, 0.0), (10.0, 10.0), (0.0, 10.0)]);
+        assert!(check_shape(&square, 10.0));
+        assert!(!check_shape(&square, 10.01));
+        assert!(check_shape(&square, -1.0));
+        assert!(!check_shape(&square, f32::NAN));
+        // Counter-clockwise on screen: not convex in the expected turn.
+        let mut reversed = square;
+        reversed.reverse();
+        assert!(!check_shape(&reversed, 1.0));
+        // Sides 1 : 12 pass, 1 : 12.5 do not.
+        let ratio = |r: f32| quad([(0.0, 0.0), (r, 0.0), (r, 1.0), (0.0, 1.0)]);
+        assert!(check_shape(&ratio(12.0), 1.0));
+        assert!(!check_shape(&ratio(12.5), 1.0));
+        // A parallelogram whose sharp corners are 15 degrees passes, 13 degrees does not
+        // (the limit, acos 0.97, is 14.07 degrees).
+        let lean = |deg: f32| {
+            let (dx, dy) = (
+                10.0 * libm::cosf(deg.to_radians()),
+                10.0 * libm::sinf(deg.to_radians()),
+            );
+            quad([(0.0, 0.0), (10.0, 0.0), (10.0 + dx, dy), (dx, dy)])
+        };
+        assert!(check_shape(&lean(15.0), 1.0));
+        assert!(!check_shape(&lean(13.0), 1.0));
     }
 }
