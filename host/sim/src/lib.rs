@@ -510,6 +510,37 @@ impl Simulator {
     }
 }
 
+impl Simulator {
+    /// How many pad markers frame `index` shows whole: all four outer corners (where the
+    /// rolling shutter puts them, [`Simulator::marker_corners_rolling_shutter`]) at least
+    /// `margin_px` inside the image and every side at least `min_side_px` long. `None` past
+    /// the end. For scoring a detector over the frames it could have decoded: a marker cut
+    /// by the image's edge, or too small to find, is no miss of the detector's.
+    pub fn markers_in_view(&self, index: usize, margin_px: f64, min_side_px: f64) -> Option<usize> {
+        let plan = self.scenario.frames.get(index)?;
+        let (w, h) = (
+            self.scenario.camera.width() as f64,
+            self.scenario.camera.height() as f64,
+        );
+        let inside = |p: &[f64; 2]| {
+            p[0] >= margin_px
+                && p[1] >= margin_px
+                && p[0] <= w - 1.0 - margin_px
+                && p[1] <= h - 1.0 - margin_px
+        };
+        let side = |a: &[f64; 2], b: &[f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+        let whole = self
+            .marker_corners_rolling_shutter(plan.t_us as f64 * 1e-6)
+            .into_iter()
+            .flatten()
+            .filter(|c| {
+                c.iter().all(inside) && (0..4).all(|i| side(&c[i], &c[(i + 1) % 4]) >= min_side_px)
+            })
+            .count();
+        Some(whole)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -589,5 +620,21 @@ mod tests {
             "mean |difference| {mean_difference:.2} grey levels, {} sub-frames",
             frame.subframes
         );
+    }
+
+    #[test]
+    fn markers_in_view_counts_whole_markers_only() {
+        // The paper's hover shows its pad whole at the first set point.
+        let paper = Simulator::new(Scenario::named("paper", 1).unwrap());
+        assert!(paper.markers_in_view(0, 1.0, 8.0).unwrap() >= 1);
+        // Nothing is in view if it must be larger than the image.
+        assert_eq!(paper.markers_in_view(0, 1.0, 1.0e4), Some(0));
+        assert_eq!(paper.markers_in_view(paper.frame_count(), 1.0, 8.0), None);
+        // lateral's tilts swing the pad out of the frame for some frames, not all.
+        let lateral = Simulator::new(Scenario::named("lateral", 1).unwrap());
+        let seen = (0..lateral.frame_count())
+            .filter(|&k| lateral.markers_in_view(k, 1.0, 8.0).unwrap() > 0)
+            .count();
+        assert!(seen > 0 && seen < lateral.frame_count(), "{seen}");
     }
 }

@@ -10,6 +10,7 @@ use serde_json::{json, Map, Value};
 
 use super::{ReplayArgs, ALTITUDE_CHECKPOINTS_M, ALTITUDE_TOLERANCE};
 use crate::replay::calibration::HoverCalibration;
+use crate::replay::in_view::InViewSummary;
 use crate::replay::input::Input;
 use touchdown_eval::flight::{ErrorKind, ErrorStats, FlightSetup, FlightTrace};
 use touchdown_eval::trace::{MethodSummary, Trace};
@@ -63,6 +64,8 @@ pub(super) struct Results<'a> {
     pub(super) elapsed_s: f64,
     /// In flight: the setup and the three errors.
     pub(super) flight: Option<FlightResults<'a>>,
+    /// A scenario: each method's figures over the frames with a marker in view.
+    pub(super) in_view: Option<&'a [InViewSummary]>,
 }
 
 /// What a replay in flight adds.
@@ -144,6 +147,7 @@ pub(super) fn document(
         summaries,
         elapsed_s,
         flight,
+        in_view,
     } = results;
     let (report, trace, summaries, elapsed_s) = (*report, *trace, *summaries, *elapsed_s);
     let mut root = Map::new();
@@ -173,6 +177,13 @@ pub(super) fn document(
                 Some((mean, max)) => json!({"mean": mean, "max": max}),
                 None => Value::Null,
             };
+        }
+    }
+    if let Some(methods) = summary["methods"].as_array_mut() {
+        for (m, entry) in methods.iter_mut().enumerate() {
+            entry["in_view"] = in_view
+                .and_then(|v| v.get(m))
+                .map_or(Value::Null, in_view_summary);
         }
     }
     root.insert("summary".into(), summary);
@@ -370,6 +381,20 @@ fn summary(trace: &Trace, summaries: &[MethodSummary], has_truth: bool) -> Value
         "frames": trace.frames.len(),
         "frame_rate_hz": trace.frame_period_s().map(|p| 1.0 / p),
         "methods": methods,
+    })
+}
+
+/// A method's figures over the frames with a marker in view (`replay::in_view`).
+fn in_view_summary(v: &InViewSummary) -> Value {
+    json!({
+        "frames": v.frames,
+        "detected": v.detected,
+        "detection_rate": v.detection_rate(),
+        "longest_gap": v.longest_gap.map(|(frames, seconds, first_index)| json!({
+            "frames": frames,
+            "seconds": seconds,
+            "first_index": first_index,
+        })),
     })
 }
 

@@ -53,6 +53,7 @@ use touchdown_formats::families::{self, SelectedFamily};
 mod args;
 mod calibration;
 mod exposure;
+mod in_view;
 mod input;
 mod json;
 mod tables;
@@ -207,6 +208,7 @@ pub fn run(
     )?;
     let elapsed = started.elapsed().as_secs_f64();
 
+    let in_view = in_view::flags(&input, &trace).map(|flags| in_view::summaries(&trace, &flags));
     let report = experiment.report();
     let summaries: Vec<MethodSummary> =
         (0..trace.methods.len()).map(|m| trace.summary(m)).collect();
@@ -241,6 +243,7 @@ pub fn run(
                         hover: hover.as_ref(),
                         trace: &flight_trace,
                     }),
+                in_view: in_view.as_deref(),
             },
             figure_dir.as_deref().zip(figures.as_ref().map(Vec::len)),
         );
@@ -268,6 +271,9 @@ pub fn run(
         }
     }
     text.push_str(&summary_table(&trace, &summaries, input.has_truth));
+    if let Some(in_view) = &in_view {
+        text.push_str(&in_view::table(&trace, in_view));
+    }
     if in_flight {
         text.push_str(&flight_summary_table(&flight_trace, &trace));
     }
