@@ -69,7 +69,7 @@ use crate::filter::{
 };
 use crate::image::GrayImage;
 use crate::pad::{PadError, PadLayout, MAX_PAD_MARKERS};
-use crate::params::PipelineSettings;
+use crate::params::{ParamSet, PipelineSettings};
 use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix};
 use crate::sensor::{motion_cap_us, pad_levels, scene_levels, Metering, SCENE_STEP};
 use nalgebra::{Matrix3, Vector3};
@@ -229,6 +229,20 @@ impl<'a> FramePipeline<'a> {
                 Err(e)
             }
         }
+    }
+
+    /// Follows the parameters (call between frames): takes their settings
+    /// ([`PipelineSettings::from_params`]) when they differ from the ones it runs with, and
+    /// says whether they did (`Ok(true)`), so that every caller that holds the parameters
+    /// itself (the host's companion, replay and sitl loops) hands them over the same way.
+    /// The firmware does not call this: its link task owns the parameters and sends the
+    /// settings to the vision task, which calls [`FramePipeline::apply`].
+    pub fn follow_params(&mut self, params: &ParamSet) -> Result<bool, PadError> {
+        let settings = PipelineSettings::from_params(params);
+        if settings == self.settings {
+            return Ok(false);
+        }
+        self.apply(settings).map(|()| true)
     }
 
     /// Forgets the tracks: the next frame starts a new, independent sequence.
@@ -470,6 +484,27 @@ mod tests {
         assert_eq!(pipeline.apply(PipelineSettings::default()), Ok(()));
         assert_eq!(*pipeline.pad(), designs::NESTED);
         assert_eq!(*pipeline.built_pad(), designs::NESTED);
+    }
+
+    #[test]
+    fn following_the_parameters_applies_only_a_change() {
+        let mut pipeline = nested_pipeline();
+        let mut params = ParamSet::default();
+        assert_eq!(pipeline.follow_params(&params), Ok(false));
+        params.set(ParamId::MaxHamming, 0.0).unwrap();
+        assert_eq!(pipeline.follow_params(&params), Ok(true));
+        assert_eq!(pipeline.detector().config().max_hamming, 0);
+        assert_eq!(pipeline.follow_params(&params), Ok(false));
+        params.set(ParamId::TagSize, 0.625).unwrap();
+        assert_eq!(pipeline.follow_params(&params), Ok(true));
+        let largest = pipeline
+            .pad()
+            .markers()
+            .iter()
+            .map(|m| m.size)
+            .fold(0.0, f32::max);
+        assert_eq!(largest, 0.625);
+        assert_eq!(pipeline.follow_params(&params), Ok(false));
     }
 
     #[test]

@@ -576,10 +576,7 @@ impl<'a> Pipeline<'a> {
                 // The companion may have adopted a mount correction (TD_CAM_ROLL/PITCH): the
                 // pipeline takes the new settings before the next frame, as the firmware's
                 // vision task does.
-                let settings = PipelineSettings::from_params(flight.companion.params());
-                if settings != *pipeline.settings() {
-                    let _ = pipeline.apply(settings);
-                }
+                let _ = pipeline.follow_params(flight.companion.params());
                 flight.advance_to(delivery + flight::SETTLE_US, truth);
                 let received = flight.take_targets().pop();
                 let mut outcome = FlightOutcome::default();

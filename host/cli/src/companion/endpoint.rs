@@ -71,6 +71,24 @@ pub enum Received {
     Closed,
 }
 
+/// Why [`Endpoint::drain`] stopped: the link is gone.
+#[derive(Debug)]
+pub enum LinkLost {
+    /// The peer of a `--tcp` connection closed it.
+    Closed,
+    /// The link failed (its error).
+    Failed(io::Error),
+}
+
+impl core::fmt::Display for LinkLost {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            LinkLost::Closed => f.write_str("the peer closed the connection"),
+            LinkLost::Failed(e) => write!(f, "{e}"),
+        }
+    }
+}
+
 /// What became of a frame handed to [`Endpoint::send`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Sent {
@@ -202,6 +220,20 @@ impl Endpoint {
             // A UDP client hears ICMP "port unreachable" until the other end is up.
             Err(e) if e.kind() == ErrorKind::ConnectionRefused => Ok(Received::Bytes(0)),
             Err(e) => Err(e),
+        }
+    }
+
+    /// Hands every byte waiting to `take`, read by read, until none is left: what each loop
+    /// tick of `touchdown companion` and `touchdown sitl` does before it sends. A link that
+    /// closed or failed ends the drain with why.
+    pub fn drain(&mut self, buf: &mut [u8], mut take: impl FnMut(&[u8])) -> Result<(), LinkLost> {
+        loop {
+            match self.recv(buf) {
+                Ok(Received::Bytes(0)) => return Ok(()),
+                Ok(Received::Bytes(n)) => take(buf.get(..n).unwrap_or(&[])),
+                Ok(Received::Closed) => return Err(LinkLost::Closed),
+                Err(e) => return Err(LinkLost::Failed(e)),
+            }
         }
     }
 

@@ -229,7 +229,7 @@ pub fn run(
     // included, and TD_CAM_ROLL/TD_CAM_PITCH when the companion adopts the estimator's mount
     // calibration in `on_estimate`: applied before the next frame), and the estimator reading
     // the vehicle state the companion decodes.
-    let mut pipeline_settings = PipelineSettings::from_params(companion.params());
+    let pipeline_settings = PipelineSettings::from_params(companion.params());
     let mut pipeline = FramePipeline::new(
         &family_refs,
         &layout,
@@ -291,18 +291,8 @@ pub fn run(
         if let Some(signal) = interrupt::received() {
             break Stop::Signal(signal, start.elapsed());
         }
-        loop {
-            match endpoint.recv(&mut rx) {
-                Ok(Received::Bytes(0)) => break,
-                Ok(Received::Bytes(n)) => companion.receive(rx.get(..n).unwrap_or(&[]), now_us()),
-                Ok(Received::Closed) => {
-                    let reason = format!("{endpoint_name}: the peer closed the connection");
-                    break 'run Stop::LinkLost(reason, start.elapsed());
-                }
-                Err(e) => {
-                    break 'run Stop::LinkLost(format!("{endpoint_name}: {e}"), start.elapsed())
-                }
-            }
+        if let Err(lost) = endpoint.drain(&mut rx, |bytes| companion.receive(bytes, now_us())) {
+            break 'run Stop::LinkLost(format!("{endpoint_name}: {lost}"), start.elapsed());
         }
         if endpoint.peer() != peer {
             peer = endpoint.peer();
@@ -311,15 +301,11 @@ pub fn run(
                 None => writeln!(err, "{endpoint_name}: the peer left; waiting for the next"),
             };
         }
-        let settings = PipelineSettings::from_params(companion.params());
-        if settings != pipeline_settings {
-            if let Err(e) = pipeline.apply(settings) {
-                let _ = writeln!(
-                    err,
-                    "warning: pad not scaled ({e:?}): searching it as built"
-                );
-            }
-            pipeline_settings = settings;
+        if let Err(e) = pipeline.follow_params(companion.params()) {
+            let _ = writeln!(
+                err,
+                "warning: pad not scaled ({e:?}): searching it as built"
+            );
         }
         if let Some(entry) = reader.entries.get(counts.frames) {
             let exposure_us = lead_us + (entry.t_us - t0);

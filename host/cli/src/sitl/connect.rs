@@ -44,7 +44,7 @@ use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::scenario::FramePlan;
 use touchdown_sim::Simulator;
 
-use crate::companion::endpoint::{Endpoint, EndpointSpec, Received};
+use crate::companion::endpoint::{Endpoint, EndpointSpec};
 use crate::companion::interrupt;
 use crate::CliError;
 
@@ -203,7 +203,7 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
             .set_param(id, *value)
             .map_err(|e| CliError(format!("{name} = {value}: {e:?}")))?;
     }
-    let mut settings = PipelineSettings::from_params(companion.params());
+    let settings = PipelineSettings::from_params(companion.params());
     let mut pipeline = FramePipeline::new(
         &family_refs,
         &layout,
@@ -248,45 +248,36 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
             break;
         }
         // Bytes in: to the companion as they come, and the ground truth out of them.
-        loop {
-            match endpoint.recv(&mut rx) {
-                Ok(Received::Bytes(0)) => break,
-                Ok(Received::Bytes(n)) => {
-                    let bytes = rx.get(..n).unwrap_or(&[]);
-                    let now_us = (now_s() * 1e6) as u64;
-                    companion.receive(bytes, now_us);
-                    let mut samples = Vec::new();
-                    parser.push(bytes, |frame| {
-                        if let Some(sample) = frame.decode().ok().as_ref().and_then(ground_truth) {
-                            samples.push(sample);
-                        }
-                    });
-                    for sample in samples {
-                        let pad = *pad_at.get_or_insert([
-                            sample.lat_deg,
-                            sample.lon_deg,
-                            sample.alt_m - GEAR_HEIGHT_M,
-                        ]);
-                        if outcome.truth_samples == 0 {
-                            let _ = writeln!(
-                                err,
-                                "{name}: ground truth flowing; the pad at {:.7}, {:.7}, {:.2} m AMSL",
-                                pad[0], pad[1], pad[2]
-                            );
-                        }
-                        outcome.truth_samples += 1;
-                        truth.push(now_s(), in_pad_frame(&sample, &pad));
-                    }
-                }
-                Ok(Received::Closed) => {
-                    outcome.stopped = Some(format!("{name}: the peer closed the connection"));
-                    break 'run;
-                }
-                Err(e) => {
-                    outcome.stopped = Some(format!("{name}: {e}"));
-                    break 'run;
-                }
+        let mut bytes_in = Vec::new();
+        let drained = endpoint.drain(&mut rx, |bytes| {
+            companion.receive(bytes, (now_s() * 1e6) as u64);
+            bytes_in.extend_from_slice(bytes);
+        });
+        let mut samples = Vec::new();
+        parser.push(&bytes_in, |frame| {
+            if let Some(sample) = frame.decode().ok().as_ref().and_then(ground_truth) {
+                samples.push(sample);
             }
+        });
+        for sample in samples {
+            let pad = *pad_at.get_or_insert([
+                sample.lat_deg,
+                sample.lon_deg,
+                sample.alt_m - GEAR_HEIGHT_M,
+            ]);
+            if outcome.truth_samples == 0 {
+                let _ = writeln!(
+                    err,
+                    "{name}: ground truth flowing; the pad at {:.7}, {:.7}, {:.2} m AMSL",
+                    pad[0], pad[1], pad[2]
+                );
+            }
+            outcome.truth_samples += 1;
+            truth.push(now_s(), in_pad_frame(&sample, &pad));
+        }
+        if let Err(lost) = drained {
+            outcome.stopped = Some(format!("{name}: {lost}"));
+            break 'run;
         }
         // Until the truth flows, ask for it (the SITL may not stream it on this port).
         if outcome.truth_samples == 0 && t >= next_request_s && endpoint.peer().is_some() {
@@ -300,15 +291,11 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
                 let _ = endpoint.send(&frame);
             }
         }
-        let new_settings = PipelineSettings::from_params(companion.params());
-        if new_settings != settings {
-            if let Err(e) = pipeline.apply(new_settings) {
-                let _ = writeln!(
-                    err,
-                    "warning: pad not scaled ({e:?}): searching it as built"
-                );
-            }
-            settings = new_settings;
+        if let Err(e) = pipeline.follow_params(companion.params()) {
+            let _ = writeln!(
+                err,
+                "warning: pad not scaled ({e:?}): searching it as built"
+            );
         }
         // The landing's state from the newest truth.
         if let Some(state) = truth.at(t) {
