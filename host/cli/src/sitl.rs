@@ -477,16 +477,12 @@ fn landing_text(o: &LandingOutcome, config: &LandingConfig) -> String {
 }
 
 /// Runs `touchdown sitl`.
-pub fn run(
-    args: &SitlArgs,
-    out: &mut dyn Write,
-    _err: &mut dyn Write,
-) -> Result<Outcome, CliError> {
+pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome, CliError> {
     check(args)?;
     let started = Instant::now();
     let params = crate::parse_board_params(args.board_params.as_deref())?;
     if let Some(endpoint) = args.sitl_endpoint() {
-        return connect::run(args, endpoint, params, out, _err);
+        return connect::run(args, endpoint, params, out, err);
     }
     if args.pad_at.is_some() {
         return Err(CliError::new(

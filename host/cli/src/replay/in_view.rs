@@ -12,9 +12,8 @@
 //!   the stretch's ends): as the all-frames gap, the time between poses either side, but
 //!   never counting the frames out of view.
 
-use std::fmt::Write as _;
-
 use super::input::{Input, Source};
+use super::tables::MethodTable;
 use touchdown_eval::trace::{Trace, TraceFrame};
 
 /// How far inside the image each corner must be, pixels: the border's outer edge needs a
@@ -63,24 +62,14 @@ pub(super) fn flags(input: &Input, trace: &Trace) -> Option<Vec<bool>> {
 
 /// The text table: per method, detection and the longest gap over the in-view frames.
 pub(super) fn table(trace: &Trace, summaries: &[InViewSummary]) -> String {
-    const LEFT: usize = 38;
-    const COLUMN: usize = 30;
     let frames = summaries.first().map_or(0, |s| s.frames);
-    let mut s = format!(
+    let title = format!(
         "\nOver the {frames} of {} frames with a marker whole in view (simulated corners)\n\n",
         trace.frames.len()
     );
-    let _ = write!(s, "{:<LEFT$}", "");
-    for name in &trace.methods {
-        let _ = write!(s, "| {:<w$}", name, w = COLUMN - 2);
-    }
-    s.push('\n');
+    let mut table = MethodTable::new(&title, &trace.methods);
     let mut row = |name: &str, cell: &dyn Fn(&InViewSummary) -> String| {
-        let _ = write!(s, "{name:<LEFT$}");
-        for summary in summaries {
-            let _ = write!(s, "| {:<w$}", cell(summary), w = COLUMN - 2);
-        }
-        s.push('\n');
+        table.row(name, summaries.iter().map(cell))
     };
     row("in view: frames with a pose", &|m| {
         format!("{} ({:.1} %)", m.detected, 100.0 * m.detection_rate())
@@ -92,7 +81,7 @@ pub(super) fn table(trace: &Trace, summaries: &[InViewSummary]) -> String {
             None => "none".into(),
         },
     );
-    s
+    table.finish()
 }
 
 /// Per method, its in-view figures for `trace` whose frame `k` is in view when `in_view[k]`.

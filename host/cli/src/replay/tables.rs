@@ -170,27 +170,53 @@ pub(super) fn vision_only_table(report: &Report) -> String {
     s
 }
 
-/// Over all frames, per method.
-pub(super) fn summary_table(trace: &Trace, summaries: &[MethodSummary], has_truth: bool) -> String {
+/// A table with one column per method (the summary tables' layout): a heading column
+/// [`MethodTable::LEFT`] characters wide, then a cell [`MethodTable::COLUMN`] wide per method.
+pub(super) struct MethodTable {
+    text: String,
+}
+
+impl MethodTable {
     const LEFT: usize = 38;
     const COLUMN: usize = 30;
+
+    /// The table under `title` (its blank lines included), with a header of `methods`.
+    pub(super) fn new(title: &str, methods: &[String]) -> Self {
+        let mut text = String::from(title);
+        let _ = write!(text, "{:<w$}", "", w = Self::LEFT);
+        for name in methods {
+            let _ = write!(text, "| {:<w$}", name, w = Self::COLUMN - 2);
+        }
+        text.push('\n');
+        MethodTable { text }
+    }
+
+    /// A row: its heading and one cell per method, in the header's order.
+    pub(super) fn row(&mut self, name: &str, cells: impl IntoIterator<Item = String>) {
+        let _ = write!(self.text, "{name:<w$}", w = Self::LEFT);
+        for cell in cells {
+            let _ = write!(self.text, "| {:<w$}", cell, w = Self::COLUMN - 2);
+        }
+        self.text.push('\n');
+    }
+
+    /// The table's text.
+    pub(super) fn finish(self) -> String {
+        self.text
+    }
+}
+
+/// Over all frames, per method.
+pub(super) fn summary_table(trace: &Trace, summaries: &[MethodSummary], has_truth: bool) -> String {
     let period = trace.frame_period_s();
-    let mut s = format!(
+    let title = format!(
         "\nSummary over all {} frames{}\n\n",
         trace.frames.len(),
         period.map_or(String::new(), |p| format!(" ({:.1} Hz)", 1.0 / p))
     );
-    let _ = write!(s, "{:<LEFT$}", "");
-    for name in &trace.methods {
-        let _ = write!(s, "| {:<w$}", name, w = COLUMN - 2);
-    }
-    s.push('\n');
+    let mut table = MethodTable::new(&title, &trace.methods);
     let mut row = |name: &str, cell: &dyn Fn(&MethodSummary) -> String| {
-        let _ = write!(s, "{name:<LEFT$}");
-        for summary in summaries {
-            let _ = write!(s, "| {:<w$}", cell(summary), w = COLUMN - 2);
-        }
-        s.push('\n');
+        table.row(name, summaries.iter().map(cell))
     };
     row("frames with a pose (detection)", &|m| {
         format!("{} ({:.1} %)", m.detected, 100.0 * m.detection_rate())
@@ -233,7 +259,7 @@ pub(super) fn summary_table(trace: &Trace, summaries: &[MethodSummary], has_trut
             },
         );
     }
-    s
+    table.finish()
 }
 
 /// Mean |error| near each altitude checkpoint (runs without set points).
@@ -296,26 +322,15 @@ pub(super) fn altitude_table(trace: &Trace) -> String {
 /// In flight, over all frames: the three errors per method (RMS per axis, mean horizontal
 /// and vertical |error|) and the targets' latency.
 pub(super) fn flight_summary_table(flight: &FlightTrace, trace: &Trace) -> String {
-    const LEFT: usize = 38;
-    const COLUMN: usize = 30;
-    let mut s = String::from(
+    let mut table = MethodTable::new(
         "\nIn flight, over all frames: (a) what touchdown sends, in the true body axes at the \
          exposure; (b) what the\nautopilot reconstructs from it, against the truth at the time \
          it assigns it to; (c) the same from an ideal sensor\n\n",
+        &trace.methods,
     );
-    let _ = write!(s, "{:<LEFT$}", "");
-    for name in &trace.methods {
-        let _ = write!(s, "| {:<w$}", name, w = COLUMN - 2);
-    }
-    s.push('\n');
     let methods = trace.methods.len();
-    let mut row = |name: &str, cell: &dyn Fn(usize) -> String| {
-        let _ = write!(s, "{name:<LEFT$}");
-        for m in 0..methods {
-            let _ = write!(s, "| {:<w$}", cell(m), w = COLUMN - 2);
-        }
-        s.push('\n');
-    };
+    let mut row =
+        |name: &str, cell: &dyn Fn(usize) -> String| table.row(name, (0..methods).map(cell));
     for kind in ErrorKind::ALL {
         let name = match kind {
             ErrorKind::Sent => "(a) sent: RMS x / y / z, cm",
@@ -353,7 +368,7 @@ pub(super) fn flight_summary_table(flight: &FlightTrace, trace: &Trace) -> Strin
             None => "-".into(),
         },
     );
-    s
+    table.finish()
 }
 
 /// In flight: the three errors near each altitude checkpoint (runs without set points).

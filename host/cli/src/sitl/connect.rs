@@ -219,6 +219,8 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
     let mut endpoint =
         Endpoint::open(&config.endpoint).map_err(|e| CliError(format!("{name}: {e}")))?;
     let mut parser = FrameParser::new();
+    // The ground-truth samples of one loop tick (kept to reuse its allocation).
+    let mut samples: Vec<GeoSample> = Vec::new();
     let mut truth = TruthTable::new();
     let mut pad_at = config.pad_at;
     let mut outcome = ConnectedOutcome::default();
@@ -248,18 +250,16 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
             break;
         }
         // Bytes in: to the companion as they come, and the ground truth out of them.
-        let mut bytes_in = Vec::new();
+        samples.clear();
         let drained = endpoint.drain(&mut rx, |bytes| {
             companion.receive(bytes, (now_s() * 1e6) as u64);
-            bytes_in.extend_from_slice(bytes);
+            parser.push(bytes, |frame| {
+                if let Some(sample) = frame.decode().ok().as_ref().and_then(ground_truth) {
+                    samples.push(sample);
+                }
+            });
         });
-        let mut samples = Vec::new();
-        parser.push(&bytes_in, |frame| {
-            if let Some(sample) = frame.decode().ok().as_ref().and_then(ground_truth) {
-                samples.push(sample);
-            }
-        });
-        for sample in samples {
+        for &sample in &samples {
             let pad = *pad_at.get_or_insert([
                 sample.lat_deg,
                 sample.lon_deg,
@@ -282,11 +282,11 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
         // Until the truth flows, ask for it (the SITL may not stream it on this port).
         if outcome.truth_samples == 0 && t >= next_request_s && endpoint.peer().is_some() {
             next_request_s = t + 1.0;
+            let ids = (
+                companion.params().get_int(ParamId::SysId),
+                companion.params().get_int(ParamId::CompId),
+            );
             for id in TRUTH_MESSAGES {
-                let ids = (
-                    companion.params().get_int(ParamId::SysId),
-                    companion.params().get_int(ParamId::CompId),
-                );
                 let frame = message_interval_request(id, ids, &mut request_seq);
                 let _ = endpoint.send(&frame);
             }
@@ -383,72 +383,6 @@ fn message_interval_request(id: u32, ids: (i32, i32), seq: &mut u8) -> Vec<u8> {
     );
     *seq = seq.wrapping_add(1);
     raw.raw_bytes().to_vec()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use touchdown_core::companion::mavlink::dialects::common::SIM_STATE_DATA;
-
-    #[test]
-    fn sim_state_reads_the_integer_position_and_the_float_one_in_either_unit() {
-        let pad = [-35.363_261_0, 149.165_230_0, 584.0];
-        let base = SIM_STATE_DATA {
-            q1: 1.0,
-            alt: 594.0,
-            ..SIM_STATE_DATA::DEFAULT
-        };
-        // 1e-5 degrees of latitude north of the pad: 1.113 m.
-        let with_ints = SIM_STATE_DATA {
-            lat_int: -353_632_510,
-            lon_int: 1_491_652_300,
-            lat: -353_632_510_i32 as f32,
-            lon: 1_491_652_300_i32 as f32,
-            ..base
-        };
-        let s = ground_truth(&MavMessage::SIM_STATE(with_ints.clone())).expect("truth");
-        let state = in_pad_frame(&s, &pad);
-        assert!((state.position.y - 1.113).abs() < 0.01, "{state:?}");
-        assert!(state.position.x.abs() < 0.01, "{state:?}");
-        assert!((state.position.z - 10.0).abs() < 1e-6, "{state:?}");
-        // Without the integers: the float in 1e-7 degrees (ArduPilot) or in degrees.
-        for (lat, lon) in [
-            (-353_632_510_i32 as f32, 1_491_652_300_i32 as f32),
-            (-35.363_25_f32, 149.165_23_f32),
-        ] {
-            let s = ground_truth(&MavMessage::SIM_STATE(SIM_STATE_DATA {
-                lat,
-                lon,
-                ..base.clone()
-            }))
-            .expect("truth");
-            let state = in_pad_frame(&s, &pad);
-            // A float's rounding at these magnitudes: tens of centimetres.
-            assert!((state.position.y - 1.113).abs() < 1.0, "{state:?}");
-        }
-        // No attitude: not a sample.
-        let none = SIM_STATE_DATA {
-            q1: 0.0,
-            ..with_ints
-        };
-        assert_eq!(ground_truth(&MavMessage::SIM_STATE(none)), None);
-    }
-
-    #[test]
-    fn the_truth_is_turned_into_the_pad_frame_east_north_up() {
-        let pad = [47.0, 8.0, 400.0];
-        let east_of_pad = GeoSample {
-            lat_deg: 47.0,
-            lon_deg: 8.0 + (2.0 / (EARTH_RADIUS_M * 47f64.to_radians().cos())).to_degrees(),
-            alt_m: 405.0,
-            body_to_ned: UnitQuaternion::identity(),
-        };
-        let state = in_pad_frame(&east_of_pad, &pad);
-        assert!(
-            (state.position - Vector3::new(2.0, 0.0, 5.0)).norm() < 1e-6,
-            "{state:?}"
-        );
-    }
 }
 
 /// The JSON record of a connected landing (keys in docs/interfaces.md).
@@ -561,5 +495,71 @@ pub(super) fn run(
             "no touchdown within --max-time {:.0} s",
             args.max_time
         ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use touchdown_core::companion::mavlink::dialects::common::SIM_STATE_DATA;
+
+    #[test]
+    fn sim_state_reads_the_integer_position_and_the_float_one_in_either_unit() {
+        let pad = [-35.363_261_0, 149.165_230_0, 584.0];
+        let base = SIM_STATE_DATA {
+            q1: 1.0,
+            alt: 594.0,
+            ..SIM_STATE_DATA::DEFAULT
+        };
+        // 1e-5 degrees of latitude north of the pad: 1.113 m.
+        let with_ints = SIM_STATE_DATA {
+            lat_int: -353_632_510,
+            lon_int: 1_491_652_300,
+            lat: -353_632_510_i32 as f32,
+            lon: 1_491_652_300_i32 as f32,
+            ..base
+        };
+        let s = ground_truth(&MavMessage::SIM_STATE(with_ints.clone())).expect("truth");
+        let state = in_pad_frame(&s, &pad);
+        assert!((state.position.y - 1.113).abs() < 0.01, "{state:?}");
+        assert!(state.position.x.abs() < 0.01, "{state:?}");
+        assert!((state.position.z - 10.0).abs() < 1e-6, "{state:?}");
+        // Without the integers: the float in 1e-7 degrees (ArduPilot) or in degrees.
+        for (lat, lon) in [
+            (-353_632_510_i32 as f32, 1_491_652_300_i32 as f32),
+            (-35.363_25_f32, 149.165_23_f32),
+        ] {
+            let s = ground_truth(&MavMessage::SIM_STATE(SIM_STATE_DATA {
+                lat,
+                lon,
+                ..base.clone()
+            }))
+            .expect("truth");
+            let state = in_pad_frame(&s, &pad);
+            // A float's rounding at these magnitudes: tens of centimetres.
+            assert!((state.position.y - 1.113).abs() < 1.0, "{state:?}");
+        }
+        // No attitude: not a sample.
+        let none = SIM_STATE_DATA {
+            q1: 0.0,
+            ..with_ints
+        };
+        assert_eq!(ground_truth(&MavMessage::SIM_STATE(none)), None);
+    }
+
+    #[test]
+    fn the_truth_is_turned_into_the_pad_frame_east_north_up() {
+        let pad = [47.0, 8.0, 400.0];
+        let east_of_pad = GeoSample {
+            lat_deg: 47.0,
+            lon_deg: 8.0 + (2.0 / (EARTH_RADIUS_M * 47f64.to_radians().cos())).to_degrees(),
+            alt_m: 405.0,
+            body_to_ned: UnitQuaternion::identity(),
+        };
+        let state = in_pad_frame(&east_of_pad, &pad);
+        assert!(
+            (state.position - Vector3::new(2.0, 0.0, 5.0)).norm() < 1e-6,
+            "{state:?}"
+        );
     }
 }
