@@ -527,27 +527,28 @@ fn flight_setup(
 
 /// The board's settings after `setup`'s parameters (the defaults without a flight).
 fn board_settings(setup: Option<&FlightSetup>) -> touchdown_core::params::PipelineSettings {
-    let mut params = ParamSet::default();
-    for (name, value) in setup.map_or(&[][..], |s| &s.params[..]) {
+    let params = board_param_set(setup.map_or(&[][..], |s| &s.params[..]));
+    touchdown_core::params::PipelineSettings::from_params(&params)
+}
+
+/// The board's parameters after `params` (TD_* names and values): the flight's own
+/// companion applies the same list and reports what it refuses, so unknown names and refused
+/// values are skipped here.
+fn board_param_set(params: &[(String, f32)]) -> ParamSet {
+    let mut set = ParamSet::default();
+    for (name, value) in params {
         if let Some(id) = ParamId::from_name(name) {
-            // A refused value fails the flight itself with its own message.
-            let _ = params.set(id, *value);
+            let _ = set.set(id, *value);
         }
     }
-    touchdown_core::params::PipelineSettings::from_params(&params)
+    set
 }
 
 /// The profile the board sends its targets in during `setup`'s flight: TD_PROFILE after
 /// `setup.params` (applied as the flight applies them), auto resolved with the simulated
 /// autopilot's HEARTBEAT.
 fn board_profile(setup: &FlightSetup) -> Option<Profile> {
-    let mut params = ParamSet::default();
-    for (name, value) in &setup.params {
-        if let Some(id) = ParamId::from_name(name) {
-            // A refused value fails the flight itself with its own message.
-            let _ = params.set(id, *value);
-        }
-    }
+    let params = board_param_set(&setup.params);
     let heartbeat = match setup.autopilot {
         AutopilotKind::ArduPilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
         AutopilotKind::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,

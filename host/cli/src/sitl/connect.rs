@@ -33,12 +33,12 @@ use std::time::{Duration, Instant};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use touchdown_core::companion::mavlink::dialects::common::{MavCmd, MavMessage, COMMAND_LONG_DATA};
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
-use touchdown_core::companion::{Companion, CompanionConfig, FrameParser, MAX_FRAME_LEN};
+use touchdown_core::companion::{FrameParser, MAX_FRAME_LEN};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::{ParamId, PipelineSettings};
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::closed_loop::{self, LandingConfig};
-use touchdown_eval::flight::{TrueState, TruthSource, TruthTable, NED_FROM_PAD};
+use touchdown_eval::flight::{board_companion, TrueState, TruthSource, TruthTable, NED_FROM_PAD};
 use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::scenario::FramePlan;
@@ -195,14 +195,7 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
     let views: Vec<_> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<_> = views.iter().collect();
 
-    let mut companion = Companion::new(CompanionConfig::default());
-    for (name, value) in &config.landing.params {
-        let id =
-            ParamId::from_name(name).ok_or_else(|| CliError(format!("no parameter {name}")))?;
-        companion
-            .set_param(id, *value)
-            .map_err(|e| CliError(format!("{name} = {value}: {e:?}")))?;
-    }
+    let mut companion = board_companion(&config.landing.params).map_err(CliError)?;
     let settings = PipelineSettings::from_params(companion.params());
     let mut pipeline = FramePipeline::new(
         &family_refs,

@@ -71,7 +71,7 @@ pub use autopilot::{
     belief, AutopilotBelief, AutopilotKind, BoardClock, Link, ReceivedTarget, SimAutopilot,
 };
 pub use error_model::{ErrorModel, Realisation, EKF_RATE_HZ};
-pub use run::{FlightRun, FlightSetup, PAD_NED, SETTLE_US, STEP_US};
+pub use run::{board_companion, FlightRun, FlightSetup, PAD_NED, SETTLE_US, STEP_US};
 pub use trace::{ErrorKind, ErrorStats, FlightTrace};
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};

@@ -81,18 +81,24 @@ pub struct FlightRun {
     out: [u8; MAX_FRAME_LEN],
 }
 
+/// The board's companion with `params` (TD_* names and values) set, in order, as a user
+/// sets them over MAVLink; an unknown or refused parameter is an error naming it.
+pub fn board_companion(params: &[(String, f32)]) -> Result<Companion, String> {
+    let mut companion = Companion::new(CompanionConfig::default());
+    for (name, value) in params {
+        let id = ParamId::from_name(name).ok_or_else(|| format!("no parameter {name}"))?;
+        companion
+            .set_param(id, *value)
+            .map_err(|e| format!("{name} = {value}: {e:?}"))?;
+    }
+    Ok(companion)
+}
+
 impl FlightRun {
     /// A flight of `setup`; an unknown or refused parameter is an error naming it.
     pub fn new(setup: &FlightSetup) -> Result<Self, String> {
-        let mut companion = Companion::new(CompanionConfig::default());
-        for (name, value) in &setup.params {
-            let id = ParamId::from_name(name).ok_or_else(|| format!("no parameter {name}"))?;
-            companion
-                .set_param(id, *value)
-                .map_err(|e| format!("{name} = {value}: {e:?}"))?;
-        }
         Ok(FlightRun {
-            companion,
+            companion: board_companion(&setup.params)?,
             autopilot: SimAutopilot::new(setup.autopilot, PAD_NED),
             errors: Realisation::new(setup.model, setup.seed),
             clock: BoardClock {
