@@ -54,8 +54,12 @@
 //! - TIMESYNC requests (1 Hz) and answers to the autopilot's requests ([`TimeSync`]), the
 //!   answers ahead of everything else waiting (PX4 discards round trips of 10 ms or more).
 //! - COMMAND_LONG `MAV_CMD_SET_MESSAGE_INTERVAL` for the vehicle state it needs
-//!   (ATTITUDE_QUATERNION; LOCAL_POSITION_NED too for PX4), repeated every second while that
-//!   stream is not arriving, so a rebooted autopilot gets asked again.
+//!   (ATTITUDE_QUATERNION; LOCAL_POSITION_NED too for PX4), and for any stream a host tool
+//!   adds with [`Companion::request_stream`] (`touchdown sitl` asks a SITL for its ground
+//!   truth this way), repeated every second while that stream is not arriving, so a
+//!   rebooted autopilot gets asked again. Every frame goes out in the companion's one
+//!   sequence: a second sender with the same ids would look like lost frames to the
+//!   autopilot's link statistics.
 //! - PARAM_VALUE for the parameter protocol ([`crate::params`]); a full list is paced at one
 //!   PARAM_VALUE per [`CompanionConfig::param_stream_interval_us`].
 //! - STATUSTEXT when the firmware reports a fault ([`Companion::queue_status_text`]: camera
@@ -129,6 +133,9 @@ const _: () = assert!(
 
 /// Capacity of the transmit queue (heartbeat, TIMESYNC, commands, PARAM_VALUE).
 pub const TX_QUEUE_CAPACITY: usize = 16;
+/// How many message streams the companion keeps asking for: its own two (attitude, local
+/// position) and room for a host tool's ([`Companion::request_stream`]).
+pub const MAX_STREAMS: usize = 6;
 /// Capacity of the STATUSTEXT queue (faults are rare; more are dropped and counted).
 pub const STATUS_QUEUE_CAPACITY: usize = 4;
 /// Longest STATUSTEXT text, bytes (MAVLink's field; longer text is cut).
@@ -268,12 +275,40 @@ struct PendingVpe {
     data: VISION_POSITION_ESTIMATE_DATA,
 }
 
-/// A vehicle-state stream we request.
+/// A message stream we ask the autopilot for, and ask again while it is not arriving.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Stream {
     message_id: u32,
+    /// The interval asked for, µs.
+    interval_us: u32,
+    /// Asked for under the PX4 profile only (LOCAL_POSITION_NED: ArduPilot needs none of
+    /// our vehicle position).
+    px4_only: bool,
     last_rx_us: Option<u64>,
     next_request_us: u64,
+}
+
+impl Stream {
+    fn new(message_id: u32, interval_us: u32, px4_only: bool) -> Stream {
+        Stream {
+            message_id,
+            interval_us,
+            px4_only,
+            last_rx_us: None,
+            next_request_us: 0,
+        }
+    }
+}
+
+/// Why [`Companion::request_stream`] refused a stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StreamError {
+    /// [`MAX_STREAMS`] streams are asked for already.
+    Full,
+    /// An interval of 0 asks the autopilot for its default rate and -1 stops the stream:
+    /// neither is a rate to keep asking for.
+    ZeroInterval,
 }
 
 /// Everything but the receive parser (so the parser can call into it).
@@ -301,7 +336,7 @@ struct State {
     announced: Option<Profile>,
     next_heartbeat_us: u64,
     next_timesync_us: u64,
-    streams: [Stream; 2],
+    streams: heapless::Vec<Stream, MAX_STREAMS>,
     param_cursor: Option<usize>,
     next_param_us: u64,
     last_target_exposure_us: Option<u64>,
@@ -313,6 +348,24 @@ struct State {
 pub struct Companion {
     parser: FrameParser,
     state: State,
+}
+
+/// The vehicle-state streams every companion asks for.
+fn own_streams(config: &CompanionConfig) -> heapless::Vec<Stream, MAX_STREAMS> {
+    let mut streams = heapless::Vec::new();
+    // Two of MAX_STREAMS: neither push can fail (and a failed one would only leave a stream
+    // unrequested, not panic).
+    let _ = streams.push(Stream::new(
+        MSG_ATTITUDE_QUATERNION,
+        config.attitude_interval_us,
+        false,
+    ));
+    let _ = streams.push(Stream::new(
+        MSG_LOCAL_POSITION_NED,
+        config.position_interval_us,
+        true,
+    ));
+    streams
 }
 
 impl Companion {
@@ -338,18 +391,7 @@ impl Companion {
                 announced: None,
                 next_heartbeat_us: 0,
                 next_timesync_us: 0,
-                streams: [
-                    Stream {
-                        message_id: MSG_ATTITUDE_QUATERNION,
-                        last_rx_us: None,
-                        next_request_us: 0,
-                    },
-                    Stream {
-                        message_id: MSG_LOCAL_POSITION_NED,
-                        last_rx_us: None,
-                        next_request_us: 0,
-                    },
-                ],
+                streams: own_streams(&config),
                 param_cursor: None,
                 next_param_us: 0,
                 last_target_exposure_us: None,
@@ -377,6 +419,17 @@ impl Companion {
     /// it regularly, e.g. every few milliseconds and after every `on_estimate`/`receive`.
     pub fn poll_transmit(&mut self, now_us: u64, out: &mut [u8]) -> Option<usize> {
         self.state.poll_transmit(now_us, out)
+    }
+
+    /// Asks the autopilot for message `message_id` every `interval_us` (µs) from now on, the
+    /// way the companion asks for its own vehicle state: a SET_MESSAGE_INTERVAL to the
+    /// latched autopilot, sent again every [`CompanionConfig::interval_request_period_us`]
+    /// while no such message has come from it within [`CompanionConfig::stream_timeout_us`]
+    /// (also when the autopilot reboots). Any frame with that id from the autopilot counts,
+    /// decoded or not (a dialect message the common set does not know still proves the
+    /// stream). A message asked for already gets the new interval.
+    pub fn request_stream(&mut self, message_id: u32, interval_us: u32) -> Result<(), StreamError> {
+        self.state.request_stream(message_id, interval_us)
     }
 
     /// Queues a STATUSTEXT with `text` (cut to [`STATUS_TEXT_LEN`] bytes at a character

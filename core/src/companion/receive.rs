@@ -9,7 +9,6 @@ use super::framing::RawFrame;
 use super::profile::Profile;
 use super::{
     Pending, State, MAV_COMP_ID_AUTOPILOT1, MAX_STAMP_DISAGREEMENT_US, MSG_ATTITUDE_QUATERNION,
-    MSG_LOCAL_POSITION_NED,
 };
 use crate::filter::Attitude;
 use crate::filter::PositionSample;
@@ -52,6 +51,12 @@ impl State {
         if frame.system_id == self.sysid() && frame.component_id == self.compid() {
             return; // our own echo (a UDP router may reflect it)
         }
+        if self.is_from_autopilot(frame) {
+            // The stream is arriving, whatever its content: asking again would not mend a
+            // malformed sample, and a message outside the common dialect (ArduPilot's
+            // SIMSTATE) still proves its stream.
+            self.mark_stream(frame.message_id, now_us);
+        }
         let msg = match frame.decode() {
             Ok(m) => m,
             Err(_) => {
@@ -85,7 +90,6 @@ impl State {
                 if let Ok(att) = Attitude::from_quaternion_wxyz([a.q1, a.q2, a.q3, a.q4]) {
                     let t = self.stamp(a.time_boot_ms, now_us);
                     self.vehicle.push_attitude(t, &att, now_us);
-                    self.mark_stream(MSG_ATTITUDE_QUATERNION, now_us);
                 }
             }
             MavMessage::ATTITUDE(a) if from_autopilot => {
@@ -107,7 +111,6 @@ impl State {
                         velocity: Vector3::new(p.vx, p.vy, p.vz),
                     };
                     self.vehicle.push_position(t, sample, now_us);
-                    self.mark_stream(MSG_LOCAL_POSITION_NED, now_us);
                 }
             }
             MavMessage::SYSTEM_TIME(s) if from_autopilot => {

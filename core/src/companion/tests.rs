@@ -440,3 +440,83 @@ fn target_and_vision_estimate_sizes_on_the_wire() {
     let (_, _, vpe) = sent_for(0.0, &[], &frame);
     assert_eq!(vpe, None);
 }
+
+/// Every SET_MESSAGE_INTERVAL the companion sends in `[from_ms, to_ms)`, polled each
+/// millisecond: (time, message id, interval), with every frame's sequence number appended to
+/// `sequences`.
+fn interval_requests(
+    c: &mut Companion,
+    from_ms: u64,
+    to_ms: u64,
+    sequences: &mut std::vec::Vec<u8>,
+) -> std::vec::Vec<(u64, u32, f32)> {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut parser = FrameParser::new();
+    let mut requests = std::vec::Vec::new();
+    for ms in from_ms..to_ms {
+        while let Some(n) = c.poll_transmit(ms * 1000, &mut out) {
+            parser.push(&out[..n], |frame| {
+                sequences.push(frame.sequence);
+                if let Ok(MavMessage::COMMAND_LONG(cmd)) = frame.decode() {
+                    assert_eq!(cmd.command, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL);
+                    assert_eq!((cmd.target_system, cmd.target_component), (1, 1));
+                    requests.push((ms, cmd.param1 as u32, cmd.param2));
+                }
+            });
+        }
+    }
+    requests
+}
+
+/// A host tool's stream (`touchdown sitl`'s ground truth) is asked for like the companion's own:
+/// at once, again every second while it does not arrive, no more once it flows, again when it
+/// stops; every request in the companion's one unbroken sequence.
+#[test]
+fn a_requested_stream_is_asked_for_until_it_flows_in_the_one_sequence() {
+    use mavlink::dialects::common::SIM_STATE_DATA;
+    let mut c = Companion::new(CompanionConfig::default());
+    assert_eq!(c.request_stream(108, 0), Err(StreamError::ZeroInterval));
+    c.request_stream(108, 20_000).unwrap();
+    let mut sequences = std::vec::Vec::new();
+    // Nobody to ask before the autopilot's HEARTBEAT.
+    assert!(interval_requests(&mut c, 0, 500, &mut sequences).is_empty());
+    heartbeat_from(&mut c, 1, 1, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
+    let sim_state_at = |c: &mut Companion, ms: u64| {
+        let mut out = [0u8; MAX_FRAME_LEN];
+        let n = framing::write_v2_frame(&mut out, 0, 1, 1, &SIM_STATE_DATA::DEFAULT).unwrap();
+        c.receive(&out[..n], ms * 1000);
+    };
+    // Silent stream: asked for at once and each second (the attitude with it).
+    let sim_state = |r: &[(u64, u32, f32)]| -> std::vec::Vec<u64> {
+        r.iter().filter(|q| q.1 == 108).map(|q| q.0).collect()
+    };
+    let asked = interval_requests(&mut c, 500, 2600, &mut sequences);
+    assert_eq!(sim_state(&asked), [500, 1500, 2500]);
+    assert!(asked.iter().all(|q| q.1 != 108 || q.2 == 20_000.0));
+    assert!(
+        asked.iter().any(|q| q.1 == 31),
+        "the attitude is asked for too"
+    );
+    // Flowing: not asked again while it arrives within the stream timeout (its frames keep
+    // the autopilot heard, too).
+    let mut quiet = std::vec::Vec::new();
+    for ms in (2600..5000).step_by(100) {
+        sim_state_at(&mut c, ms);
+        quiet.extend(interval_requests(&mut c, ms, ms + 100, &mut sequences));
+    }
+    assert!(sim_state(&quiet).is_empty(), "{quiet:?}");
+    // It stops: asked again once the timeout has passed.
+    let again = interval_requests(&mut c, 5000, 6200, &mut sequences);
+    assert_eq!(sim_state(&again), [5901]);
+    // One sender: each frame's sequence number follows the last one's.
+    assert!(sequences.len() > 10);
+    assert!(sequences.windows(2).all(|w| w[1] == w[0].wrapping_add(1)));
+    // A changed interval is asked for at once; the list is bounded.
+    c.request_stream(108, 10_000).unwrap();
+    let changed = interval_requests(&mut c, 6200, 6201, &mut sequences);
+    assert_eq!(changed, [(6200, 108, 10_000.0)]);
+    for id in 200..(200 + MAX_STREAMS as u32 - 3) {
+        c.request_stream(id, 50_000).unwrap();
+    }
+    assert_eq!(c.request_stream(999, 50_000), Err(StreamError::Full));
+}

@@ -1,5 +1,6 @@
 //! What the companion sends and when: the periodic messages (HEARTBEAT, TIMESYNC requests,
-//! stream requests while a stream is missing, a paced parameter list), and the order of the
+//! stream requests while a stream is missing, its own or a host tool's, a paced parameter
+//! list), and the order of the
 //! transmit queue: TIMESYNC answers first, then the newest LANDING_TARGET (dropped when older
 //! than [`super::CompanionConfig::max_target_latency_us`]), VISION_POSITION_ESTIMATE,
 //! STATUSTEXT, and the rest in order.
@@ -11,7 +12,7 @@ use core::fmt::Write;
 use super::framing;
 use super::profile::Profile;
 use super::{
-    Pending, State, MAX_FRAME_LEN, MSG_ATTITUDE_QUATERNION, STATUS_TEXT_LEN, TX_QUEUE_CAPACITY,
+    Pending, State, Stream, StreamError, MAX_FRAME_LEN, STATUS_TEXT_LEN, TX_QUEUE_CAPACITY,
 };
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
@@ -41,35 +42,30 @@ impl State {
                 self.enqueue(Pending::TimesyncRequest { ts1, target });
                 self.next_timesync_us = now_us.saturating_add(self.config.timesync_period_us);
             }
-            let wants_position = self.profile() == Some(Profile::Px4);
+            let px4 = self.profile() == Some(Profile::Px4);
             let (timeout, period) = (
                 self.config.stream_timeout_us,
                 self.config.interval_request_period_us,
             );
-            let mut requests: [Option<Pending>; 2] = [None, None];
-            for (s, req) in self.streams.iter_mut().zip(requests.iter_mut()) {
-                let wanted = s.message_id == MSG_ATTITUDE_QUATERNION || wants_position;
+            for i in 0..self.streams.len() {
+                let Some(s) = self.streams.get_mut(i) else {
+                    break;
+                };
                 let flowing = s
                     .last_rx_us
                     .is_some_and(|t| now_us.saturating_sub(t) <= timeout);
-                if wanted && !flowing && now_us >= s.next_request_us && s.next_request_us < u64::MAX
-                {
-                    s.next_request_us = now_us.saturating_add(period);
-                    let interval_us = if s.message_id == MSG_ATTITUDE_QUATERNION {
-                        self.config.attitude_interval_us
-                    } else {
-                        self.config.position_interval_us
-                    };
-                    *req = Some(Pending::SetInterval {
-                        message_id: s.message_id,
-                        interval_us,
-                        target,
-                    });
+                let due = now_us >= s.next_request_us && s.next_request_us < u64::MAX;
+                if (s.px4_only && !px4) || flowing || !due {
+                    continue;
                 }
-            }
-            for p in requests.into_iter().flatten() {
+                s.next_request_us = now_us.saturating_add(period);
+                let (message_id, interval_us) = (s.message_id, s.interval_us);
                 self.stats.interval_requests = self.stats.interval_requests.saturating_add(1);
-                self.enqueue(p);
+                self.enqueue(Pending::SetInterval {
+                    message_id,
+                    interval_us,
+                    target,
+                });
             }
         }
         if let Some(i) = self.param_cursor {
@@ -86,6 +82,27 @@ impl State {
                 }
             }
         }
+    }
+
+    /// See [`super::Companion::request_stream`].
+    pub(super) fn request_stream(
+        &mut self,
+        message_id: u32,
+        interval_us: u32,
+    ) -> Result<(), StreamError> {
+        if interval_us == 0 {
+            return Err(StreamError::ZeroInterval);
+        }
+        if let Some(s) = self.streams.iter_mut().find(|s| s.message_id == message_id) {
+            s.interval_us = interval_us;
+            // A changed rate is asked for at once, flowing or not.
+            s.last_rx_us = None;
+            s.next_request_us = 0;
+            return Ok(());
+        }
+        self.streams
+            .push(Stream::new(message_id, interval_us, false))
+            .map_err(|_| StreamError::Full)
     }
 
     pub(super) fn poll_transmit(&mut self, now_us: u64, out: &mut [u8]) -> Option<usize> {

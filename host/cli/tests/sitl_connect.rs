@@ -4,7 +4,12 @@
 //! TIMESYNC answers) for a vehicle it flies on a script: a hover at 6 m, 30 cm north and 20 cm
 //! west of the pad, heading 30 degrees, then straight down at 1 m/s onto the ground.
 //!
-//! Asserted: every LANDING_TARGET the run sends is in BODY_FRD and points at the pad as the
+//! Like ArduPilot on a port that streams nothing unasked, the stand-in sends SIM_STATE only once
+//! it has been asked for it with SET_MESSAGE_INTERVAL.
+//!
+//! Asserted: the run asks for SIM_STATE, and every frame it sends is in one unbroken sequence
+//! (one sender, as the autopilot's link statistics expect of the board); every LANDING_TARGET
+//! the run sends is in BODY_FRD and points at the pad as the
 //! script has it (the horizontal components, which the script holds constant, within a few
 //! centimetres); enough of them arrive; and the run reports the touchdown where the script
 //! put the vehicle down. That is the whole connected path: ground truth decoded from the
@@ -20,8 +25,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use touchdown_core::companion::mavlink::dialects::common::{
-    MavBool, MavFrame, MavMessage, ATTITUDE_QUATERNION_DATA, SIM_STATE_DATA, SYSTEM_TIME_DATA,
-    TIMESYNC_DATA,
+    MavBool, MavCmd, MavFrame, MavMessage, ATTITUDE_QUATERNION_DATA, SIM_STATE_DATA,
+    SYSTEM_TIME_DATA, TIMESYNC_DATA,
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::FrameParser;
@@ -122,6 +127,12 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
     let mut targets = 0usize;
     let mut worst_cm = 0.0f64;
     let mut wrong_frames = 0usize;
+    // SIM_STATE is streamed once asked for (MAV_CMD_SET_MESSAGE_INTERVAL, message 108).
+    let mut truth_asked = false;
+    // The run's frames: the sequence number expected next, and how many broke the sequence.
+    let mut next_seq: Option<u8> = None;
+    let mut sequence_breaks = 0usize;
+    let mut frames_in = 0usize;
     let mut buf = [0u8; 4096];
     while start.elapsed() < Duration::from_secs(40) {
         let t = start.elapsed().as_secs_f64();
@@ -139,7 +150,8 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
                 }),
             ));
         }
-        if t >= next_sample {
+        let sample_due = t >= next_sample;
+        if sample_due {
             next_sample += 0.02;
             out.extend(frame(
                 &mut seq,
@@ -150,6 +162,8 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
                     ..ATTITUDE_QUATERNION_DATA::DEFAULT
                 }),
             ));
+        }
+        if sample_due && truth_asked {
             out.extend(frame(
                 &mut seq,
                 &MavMessage::SIM_STATE(SIM_STATE_DATA {
@@ -174,26 +188,40 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
             Ok(0) => break,
             Ok(n) => {
                 let mut answers = Vec::new();
-                parser.push(&buf[..n], |f| match f.decode() {
-                    Ok(MavMessage::TIMESYNC(ts)) if ts.tc1 == 0 => {
-                        answers.push(MavMessage::TIMESYNC(TIMESYNC_DATA {
-                            tc1: (t * 1e9) as i64,
-                            ts1: ts.ts1,
-                            target_system: 0,
-                            target_component: 0,
-                        }))
+                parser.push(&buf[..n], |f| {
+                    frames_in += 1;
+                    if next_seq.is_some_and(|s| s != f.sequence) {
+                        sequence_breaks += 1;
                     }
-                    Ok(MavMessage::LANDING_TARGET(lt)) => {
-                        targets += 1;
-                        if lt.frame != MavFrame::MAV_FRAME_BODY_FRD
-                            || lt.position_valid != MavBool::MAV_BOOL_TRUE
+                    next_seq = Some(f.sequence.wrapping_add(1));
+                    match f.decode() {
+                        Ok(MavMessage::COMMAND_LONG(c))
+                            if c.command == MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
+                                && c.param1 == 108.0
+                                && (c.target_system, c.target_component) == (1, 1) =>
                         {
-                            wrong_frames += 1;
+                            truth_asked = true;
                         }
-                        let miss = (f64::from(lt.x) - body_x).hypot(f64::from(lt.y) - body_y);
-                        worst_cm = worst_cm.max(100.0 * miss);
+                        Ok(MavMessage::TIMESYNC(ts)) if ts.tc1 == 0 => {
+                            answers.push(MavMessage::TIMESYNC(TIMESYNC_DATA {
+                                tc1: (t * 1e9) as i64,
+                                ts1: ts.ts1,
+                                target_system: 0,
+                                target_component: 0,
+                            }))
+                        }
+                        Ok(MavMessage::LANDING_TARGET(lt)) => {
+                            targets += 1;
+                            if lt.frame != MavFrame::MAV_FRAME_BODY_FRD
+                                || lt.position_valid != MavBool::MAV_BOOL_TRUE
+                            {
+                                wrong_frames += 1;
+                            }
+                            let miss = (f64::from(lt.x) - body_x).hypot(f64::from(lt.y) - body_y);
+                            worst_cm = worst_cm.max(100.0 * miss);
+                        }
+                        _ => {}
                     }
-                    _ => {}
                 });
                 for answer in answers {
                     out.extend(frame(&mut seq, &answer));
@@ -213,6 +241,11 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
     assert_eq!(output.status.code(), Some(0), "{stdout}\n{stderr}");
     let json: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
     println!("{json}\ntargets {targets}, worst horizontal miss {worst_cm:.1} cm");
+    assert!(truth_asked, "the run never asked for SIM_STATE: {stderr}");
+    assert_eq!(
+        sequence_breaks, 0,
+        "{sequence_breaks} of {frames_in} frames broke the run's sequence"
+    );
     assert_eq!(json["autopilot"], "sitl");
     assert_eq!(json["touched_down"], true, "{json}");
     let north = json["north_cm"].as_f64().expect("north");

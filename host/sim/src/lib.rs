@@ -396,7 +396,25 @@ impl Simulator {
         manual: Option<sensor::ManualExposure>,
     ) -> Option<SimFrame> {
         let plan = self.scenario.frames.get(index)?;
-        let t = plan.t_us as f64 * 1e-6;
+        Some(self.render_frame(index, plan.t_us, plan.label.clone(), manual))
+    }
+
+    /// Renders the view at `t_us` on the scenario's trajectory, planned frame or not, with the
+    /// scenario's exposure; `index` numbers the frame and seeds its sensor noise (each index
+    /// its own draw). For a caller that decides its frame times as it goes (`touchdown sitl`
+    /// against a running SITL): nothing is added to [`Scenario::frames`].
+    pub fn render_at(&self, t_us: u64, index: usize) -> SimFrame {
+        self.render_frame(index, t_us, None, None)
+    }
+
+    fn render_frame(
+        &self,
+        index: usize,
+        t_us: u64,
+        label: Option<String>,
+        manual: Option<sensor::ManualExposure>,
+    ) -> SimFrame {
+        let t = t_us as f64 * 1e-6;
         let (exposure_s, sensor) = match manual {
             Some(m) => (
                 m.exposure_s,
@@ -440,9 +458,9 @@ impl Simulator {
             blur,
             mix(s.seed, index as u64 + 1),
         );
-        Some(SimFrame {
+        SimFrame {
             index,
-            t_us: plan.t_us,
+            t_us,
             image: GrayFrame {
                 width: w,
                 height: h,
@@ -450,9 +468,9 @@ impl Simulator {
             },
             truth: truth_of_pose(&middle),
             vehicle_attitude: self.vehicle_attitude(t),
-            label: plan.label.clone(),
+            label,
             subframes,
-        })
+        }
     }
 
     /// Where each pad marker's outer corners (top-left, top-right, bottom-right, bottom-left)

@@ -184,10 +184,13 @@ pub fn run(
             let limits = board_settings(flight.as_ref()).exposure;
             let mut loop_ = exposure::BoardExposure::new(limits);
             exposure::preroll(&mut loop_, &input, &family_refs, layout)?;
+            // The board's loop meters what the board's own method decodes.
             let method = methods
                 .iter()
                 .position(|m| m.name == Method::ours().name)
-                .unwrap_or(1);
+                .ok_or_else(|| {
+                    CliError::new("--exposure board: the board's method (ours) is not replayed")
+                })?;
             Some(ClosedExposure { loop_, method })
         }
     };

@@ -6,8 +6,11 @@
 //! SIM_STATE (108: `lat_int`/`lon_int` in 1e-7 degrees, altitude AMSL in metres, attitude
 //! quaternion body FRD to NED; its float `lat`/`lon` carry 1e-7 degrees too, which a 32-bit
 //! float rounds to some 40 cm, so the integers are used when present) or PX4's
-//! HIL_STATE_QUATERNION (115: PX4 streams its ground truth in it). Both are asked for with
-//! SET_MESSAGE_INTERVAL once a second until they flow. From that truth, linearised about each
+//! HIL_STATE_QUATERNION (115: PX4 streams its ground truth in it). The one of the autopilot
+//! that answers (its HEARTBEAT) is asked for by the companion itself
+//! ([`touchdown_core::companion::Companion::request_stream`]), with SET_MESSAGE_INTERVAL once a
+//! second until it flows: in the companion's own sequence, so the SITL's link statistics see
+//! one sender, as they would see the board. From that truth, linearised about each
 //! frame's time exactly as the model's closed loop does, the simulator renders the camera's
 //! view of the landing scenario's nested pad; the board's per-frame path
 //! ([`touchdown_core::pipeline::FramePipeline`]) and its
@@ -31,17 +34,15 @@ use std::io::Write;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
-use touchdown_core::companion::mavlink::dialects::common::{MavCmd, MavMessage, COMMAND_LONG_DATA};
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
-use touchdown_core::companion::{FrameParser, MAX_FRAME_LEN};
+use touchdown_core::companion::mavlink::dialects::common::MavMessage;
+use touchdown_core::companion::{FrameParser, Profile, MAX_FRAME_LEN};
 use touchdown_core::image::GrayImage;
-use touchdown_core::params::{ParamId, PipelineSettings};
+use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::closed_loop::{self, LandingConfig};
 use touchdown_eval::flight::{board_companion, TrueState, TruthSource, TruthTable, NED_FROM_PAD};
 use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
-use touchdown_sim::scenario::FramePlan;
 use touchdown_sim::Simulator;
 
 use crate::companion::endpoint::{Endpoint, EndpointSpec};
@@ -65,10 +66,12 @@ pub const FRAME_DELAY_S: f64 = 0.05;
 /// Below this height no frame is rendered (the pad fills the lens), metres.
 const MIN_RENDER_HEIGHT_M: f64 = 0.2;
 /// Ground-truth rate asked for, µs between samples (50 Hz).
-const TRUTH_INTERVAL_US: f32 = 20_000.0;
-/// The ground-truth messages: ArduPilot's SIM_STATE and SIMSTATE (sent together), PX4's
-/// HIL_STATE_QUATERNION.
-const TRUTH_MESSAGES: [u32; 3] = [108, 164, 115];
+const TRUTH_INTERVAL_US: u32 = 20_000;
+/// ArduPilot's ground truth, SIM_STATE (its own entry in ArduPilot's message-id map, beside
+/// SIMSTATE 164, which is not in the common dialect).
+const MSG_SIM_STATE: u32 = 108;
+/// PX4's ground truth, HIL_STATE_QUATERNION.
+const MSG_HIL_STATE_QUATERNION: u32 = 115;
 /// How often the loop looks at the link and the clock.
 const TICK: Duration = Duration::from_millis(1);
 
@@ -219,8 +222,7 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
     let mut outcome = ConnectedOutcome::default();
     let mut rx = [0u8; 4096];
     let mut tx = [0u8; MAX_FRAME_LEN];
-    let mut request_seq = 0u8;
-    let mut next_request_s = 0.0;
+    let mut truth_requested = false;
     let mut airborne = false;
     let mut on_ground_since: Option<(f64, Vector3<f64>)> = None;
     let frame_period_s = 1.0 / config.landing.fps;
@@ -272,17 +274,17 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
             outcome.stopped = Some(format!("{name}: {lost}"));
             break 'run;
         }
-        // Until the truth flows, ask for it (the SITL may not stream it on this port).
-        if outcome.truth_samples == 0 && t >= next_request_s && endpoint.peer().is_some() {
-            next_request_s = t + 1.0;
-            let ids = (
-                companion.params().get_int(ParamId::SysId),
-                companion.params().get_int(ParamId::CompId),
-            );
-            for id in TRUTH_MESSAGES {
-                let frame = message_interval_request(id, ids, &mut request_seq);
-                let _ = endpoint.send(&frame);
-            }
+        // The autopilot's ground truth, once its HEARTBEAT has said which autopilot it is (the
+        // SITL may not stream it on this port unasked).
+        if let (false, Some(profile)) = (truth_requested, companion.profile()) {
+            truth_requested = true;
+            let message_id = match profile {
+                Profile::Px4 => MSG_HIL_STATE_QUATERNION,
+                Profile::ArduPilot | Profile::ArduPilotLocalFrd => MSG_SIM_STATE,
+            };
+            companion
+                .request_stream(message_id, TRUTH_INTERVAL_US)
+                .map_err(|e| CliError(format!("asking for the ground truth: {e:?}")))?;
         }
         if let Err(e) = pipeline.follow_params(companion.params()) {
             let _ = writeln!(
@@ -323,14 +325,8 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
             {
                 let t_us = (frame_s * 1e6).round() as u64;
                 simulator.scenario.trajectory = trajectory;
-                simulator
-                    .scenario
-                    .frames
-                    .push(FramePlan { t_us, label: None });
-                let index = simulator.scenario.frames.len() - 1;
-                let frame = simulator
-                    .render(index)
-                    .ok_or_else(|| CliError::new("the simulator rendered nothing"))?;
+                let index = outcome.frames;
+                let frame = simulator.render_at(t_us, index);
                 let image =
                     GrayImage::new(&frame.image.pixels, frame.image.width, frame.image.height)
                         .map_err(|e| CliError(format!("frame {index}: {e:?}")))?;
@@ -352,30 +348,6 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
         std::thread::sleep(TICK);
     }
     Ok(outcome)
-}
-
-/// A COMMAND_LONG asking the autopilot to stream message `id` at the ground-truth rate.
-/// `ids`: our system and component ids (TD_SYSID, TD_COMPID), as the companion sends with.
-fn message_interval_request(id: u32, ids: (i32, i32), seq: &mut u8) -> Vec<u8> {
-    let command = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-        param1: id as f32,
-        param2: TRUTH_INTERVAL_US,
-        command: MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
-        target_system: 0,
-        target_component: 0,
-        ..COMMAND_LONG_DATA::DEFAULT
-    });
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(
-        MavHeader {
-            system_id: u8::try_from(ids.0).unwrap_or(1).into(),
-            component_id: u8::try_from(ids.1).unwrap_or(191),
-            sequence: *seq,
-        },
-        &command,
-    );
-    *seq = seq.wrapping_add(1);
-    raw.raw_bytes().to_vec()
 }
 
 /// The JSON record of a connected landing (keys in docs/interfaces.md).
