@@ -1,9 +1,9 @@
 //! What the companion sends and when: the periodic messages (HEARTBEAT, TIMESYNC requests,
 //! stream requests while a stream is missing, its own or a host tool's, a paced parameter
-//! list), and the order of the
-//! transmit queue: TIMESYNC answers first, then the newest LANDING_TARGET (dropped when older
-//! than [`super::CompanionConfig::max_target_latency_us`]), VISION_POSITION_ESTIMATE,
-//! STATUSTEXT, and the rest in order.
+//! list), and the order of the transmit queue: TIMESYNC answers first, then the newest
+//! LANDING_TARGET (dropped when older than
+//! [`super::CompanionConfig::max_target_latency_us`]), VISION_POSITION_ESTIMATE, STATUSTEXT,
+//! and the rest in order.
 //!
 //! Frames are serialised here, one per call, into the caller's buffer.
 
