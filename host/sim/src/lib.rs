@@ -275,14 +275,9 @@ impl Simulator {
         self.exposure_window_at(t, t, self.scenario.exposure_time_s)
     }
 
-    /// The exposure of row `row` of the frame at `t`: `exposure_time_s` centred on
-    /// [`Simulator::row_time`], cut at the jumps around the frame's time.
-    pub fn row_exposure_window(&self, t: f64, row: f64) -> (f64, f64) {
-        self.row_exposure_window_for(t, row, self.scenario.exposure_time_s)
-    }
-
-    /// [`Simulator::row_exposure_window`] for an exposure of `exposure_s` seconds.
-    fn row_exposure_window_for(&self, t: f64, row: f64, exposure_s: f64) -> (f64, f64) {
+    /// The exposure of row `row` of the frame at `t` exposed for `exposure_s` seconds:
+    /// centred on [`Simulator::row_time`], cut at the jumps around the frame's time.
+    pub fn row_exposure_window(&self, t: f64, row: f64, exposure_s: f64) -> (f64, f64) {
         self.exposure_window_at(t, self.row_time(t, row), exposure_s)
     }
 
@@ -296,16 +291,12 @@ impl Simulator {
         )
     }
 
-    /// Sub-frames averaged for the frame at `t`: one per [`SUBFRAME_STEP_PX`] of image
+    /// Sub-frames averaged for the frame at `t` exposed for `exposure_s` seconds (the
+    /// scenario's own is [`Scenario::exposure_time_s`]): one per [`SUBFRAME_STEP_PX`] of image
     /// motion during the exposure (at most [`MAX_SUBFRAMES`]), the worst of the rows
     /// [`MOTION_ROWS`] evenly spread from top to bottom with a rolling shutter (every row
     /// gets as many, so the blur is sampled alike over the frame).
-    pub fn subframe_count(&self, t: f64) -> usize {
-        self.subframe_count_for(t, self.scenario.exposure_time_s)
-    }
-
-    /// [`Simulator::subframe_count`] for an exposure of `exposure_s` seconds.
-    fn subframe_count_for(&self, t: f64, exposure_s: f64) -> usize {
+    pub fn subframe_count(&self, t: f64, exposure_s: f64) -> usize {
         let h = self.scenario.camera.height();
         let middle = 0.5 * (h as f64 - 1.0);
         let rows: Vec<f64> = if self.line_time_s() == 0.0 || h < 2 {
@@ -317,7 +308,7 @@ impl Simulator {
         };
         let mut motion = 0.0f64;
         for row in rows {
-            let (open, close) = self.row_exposure_window_for(t, row, exposure_s);
+            let (open, close) = self.row_exposure_window(t, row, exposure_s);
             if close - open > 0.0 {
                 motion = motion.max(self.exposure_motion(open, close));
             }
@@ -325,21 +316,16 @@ impl Simulator {
         ((motion / SUBFRAME_STEP_PX).ceil() as usize).clamp(1, MAX_SUBFRAMES)
     }
 
-    /// The `n` poses averaged for row `row` of the frame at `t`: evenly spread over its
-    /// exposure, or the pose at its time alone for `n = 1`.
-    pub fn row_exposure_poses(&self, t: f64, row: f64, n: usize) -> Vec<CameraPose> {
-        self.row_exposure_poses_for(t, row, n, self.scenario.exposure_time_s)
-    }
-
-    /// [`Simulator::row_exposure_poses`] for an exposure of `exposure_s` seconds.
-    fn row_exposure_poses_for(
+    /// The `n` poses averaged for row `row` of the frame at `t` exposed for `exposure_s`
+    /// seconds: evenly spread over its exposure, or the pose at its time alone for `n = 1`.
+    pub fn row_exposure_poses(
         &self,
         t: f64,
         row: f64,
         n: usize,
         exposure_s: f64,
     ) -> Vec<CameraPose> {
-        let (open, close) = self.row_exposure_window_for(t, row, exposure_s);
+        let (open, close) = self.row_exposure_window(t, row, exposure_s);
         let e = close - open;
         if n <= 1 || e <= 0.0 {
             return vec![self.camera_pose(self.row_time(t, row)); n.max(1)];
@@ -349,33 +335,25 @@ impl Simulator {
             .collect()
     }
 
-    /// The poses averaged for the frame at `t` (one when the image does not move); with a
-    /// rolling shutter, the middle row's.
-    pub fn exposure_poses(&self, t: f64) -> Vec<CameraPose> {
-        self.exposure_poses_for(t, self.scenario.exposure_time_s)
-    }
-
-    fn exposure_poses_for(&self, t: f64, exposure_s: f64) -> Vec<CameraPose> {
+    /// The poses averaged for the frame at `t` exposed for `exposure_s` seconds (one when the
+    /// image does not move); with a rolling shutter, the middle row's.
+    pub fn exposure_poses(&self, t: f64, exposure_s: f64) -> Vec<CameraPose> {
         let middle = 0.5 * (self.scenario.camera.height() as f64 - 1.0);
-        let n = self.subframe_count_for(t, exposure_s);
-        self.row_exposure_poses_for(t, middle, n, exposure_s)
+        let n = self.subframe_count(t, exposure_s);
+        self.row_exposure_poses(t, middle, n, exposure_s)
     }
 
-    /// The poses every row of the frame at `t` is averaged over.
-    pub fn row_poses(&self, t: f64) -> RowPoses {
-        self.row_poses_for(t, self.scenario.exposure_time_s)
-    }
-
-    /// [`Simulator::row_poses`] for an exposure of `exposure_s` seconds.
-    fn row_poses_for(&self, t: f64, exposure_s: f64) -> RowPoses {
-        let n = self.subframe_count_for(t, exposure_s);
+    /// The poses every row of the frame at `t` exposed for `exposure_s` seconds is averaged
+    /// over.
+    pub fn row_poses(&self, t: f64, exposure_s: f64) -> RowPoses {
+        let n = self.subframe_count(t, exposure_s);
         if self.line_time_s() == 0.0 {
-            return RowPoses::global(self.exposure_poses_for(t, exposure_s));
+            return RowPoses::global(self.exposure_poses(t, exposure_s));
         }
         let h = self.scenario.camera.height();
         let mut poses = Vec::with_capacity(h * n);
         for y in 0..h {
-            poses.extend(self.row_exposure_poses_for(t, y as f64, n, exposure_s));
+            poses.extend(self.row_exposure_poses(t, y as f64, n, exposure_s));
         }
         RowPoses::per_row(n, poses)
     }
@@ -425,7 +403,7 @@ impl Simulator {
             ),
             None => (self.scenario.exposure_time_s, self.scenario.sensor),
         };
-        let poses = self.row_poses_for(t, exposure_s);
+        let poses = self.row_poses(t, exposure_s);
         let subframes = poses.subframes();
         let middle = self.camera_pose(t);
         let s = &self.scenario;
@@ -580,7 +558,7 @@ mod tests {
             let t = plan.t_us as f64 * 1e-6;
             let truth = simulator.camera_pose(t).position;
             // The hover wobbles by centimetres; the set points are metres apart.
-            for pose in simulator.exposure_poses(t) {
+            for pose in simulator.exposure_poses(t, simulator.scenario.exposure_time_s) {
                 let distance = math::norm(math::sub(pose.position, truth));
                 assert!(
                     distance < 0.05,
@@ -607,7 +585,7 @@ mod tests {
         let (open, close) = simulator.exposure_window(t);
         assert_eq!(open, t);
         assert!((close - t - 0.5 * simulator.scenario.exposure_time_s).abs() < 1e-9);
-        for pose in simulator.exposure_poses(t) {
+        for pose in simulator.exposure_poses(t, simulator.scenario.exposure_time_s) {
             assert!((pose.position[2] - 10.0).abs() < 0.1, "{:?}", pose.position);
         }
     }

@@ -300,9 +300,9 @@ fn vibration_blurs_the_exposure() {
     });
     let still = Simulator::new(still);
     let shaken = Simulator::new(shaken);
-    assert_eq!(still.subframe_count(0.0), 1);
+    assert_eq!(still.subframe_count(0.0, still.scenario.exposure_time_s), 1);
     let counts: Vec<usize> = (0..10)
-        .map(|k| shaken.subframe_count(k as f64 * 0.0123))
+        .map(|k| shaken.subframe_count(k as f64 * 0.0123, shaken.scenario.exposure_time_s))
         .collect();
     println!("sub-frames of a 4 ms exposure with 0.15 deg RMS vibration: {counts:?}");
     assert!(counts.iter().all(|&n| n >= 2), "{counts:?}");
