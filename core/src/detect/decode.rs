@@ -361,9 +361,12 @@ fn read_robust_counted<M: CellMap>(
     let n = family.grid as usize;
     let b = family.border_ring as isize;
     let reversed = family.reversed();
-    let cell_px =
-        quad[0].distance(quad[1]).min(quad[1].distance(quad[2])) / family.quad_cells() as f32;
-    let multi = cell_px >= MULTI_SAMPLE_CELL_PX;
+    // Cells of at least MULTI_SAMPLE_CELL_PX along the first two sides, on squared lengths.
+    let side2 = quad[0]
+        .distance_squared(quad[1])
+        .min(quad[1].distance_squared(quad[2]));
+    let multi_side = MULTI_SAMPLE_CELL_PX * family.quad_cells() as f32;
+    let multi = side2 >= multi_side * multi_side;
     // A single read: one mapped point, one sample; a multi-sampled one: three and five.
     let cost_per_cell: u32 = if multi { 8 } else { 2 };
     let read_cell = |image: &GrayImage<'_>, h: &M, u: f32, v: f32, multi: bool| {

@@ -329,14 +329,16 @@ fn refine_straight(
     radius: f32,
     samples: &mut u32,
 ) -> [Point; 4] {
-    let fallback = half_pixel_adjusted(quad);
+    // Computed only when the refinement fails (its four square roots were spent on every
+    // refined candidate).
+    let fallback = || half_pixel_adjusted(quad);
     let c = &quad.corners;
     let sign = if quad.hole { -1.0 } else { 1.0 };
     let mut lines = [Line::default(); 4];
     for (k, slot) in lines.iter_mut().enumerate() {
         let (a, b) = (cyclic(c, k), cyclic(c, k + 1));
         let Some(n) = outward_normal(a, b) else {
-            return fallback;
+            return fallback();
         };
         let mut points: heapless::Vec<(Point, f32), MAX_SAMPLES> = heapless::Vec::new();
         for p in edge_sample_points(a, b, radius) {
@@ -347,13 +349,13 @@ fn refine_straight(
         }
         match fit_line(&points) {
             Some(line) => *slot = line,
-            None => return fallback,
+            None => return fallback(),
         }
     }
     let mut out = [Point::default(); 4];
     for (k, slot) in out.iter_mut().enumerate() {
         let Some(q) = corner_near(&lines, c, k) else {
-            return fallback;
+            return fallback();
         };
         *slot = q;
     }
