@@ -42,9 +42,16 @@ impl Point {
 
     /// Euclidean distance.
     pub fn distance(self, other: Point) -> f32 {
+        libm::sqrtf(self.distance_squared(other))
+    }
+
+    /// The square of [`Point::distance`], without its square root (libm's `sqrtf` is
+    /// software on the Cortex-M7, about 52 instructions): for comparing a distance with a
+    /// limit, square the limit.
+    pub fn distance_squared(self, other: Point) -> f32 {
         let dx = self.x - other.x;
         let dy = self.y - other.y;
-        libm::sqrtf(dx * dx + dy * dy)
+        dx * dx + dy * dy
     }
 }
 

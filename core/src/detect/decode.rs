@@ -361,9 +361,12 @@ fn read_robust_counted<M: CellMap>(
     let n = family.grid as usize;
     let b = family.border_ring as isize;
     let reversed = family.reversed();
-    let cell_px =
-        quad[0].distance(quad[1]).min(quad[1].distance(quad[2])) / family.quad_cells() as f32;
-    let multi = cell_px >= MULTI_SAMPLE_CELL_PX;
+    // Cells of at least MULTI_SAMPLE_CELL_PX along the first two sides, on squared lengths.
+    let side2 = quad[0]
+        .distance_squared(quad[1])
+        .min(quad[1].distance_squared(quad[2]));
+    let multi_side = MULTI_SAMPLE_CELL_PX * family.quad_cells() as f32;
+    let multi = side2 >= multi_side * multi_side;
     // A single read: one mapped point, one sample; a multi-sampled one: three and five.
     let cost_per_cell: u32 = if multi { 8 } else { 2 };
     let read_cell = |image: &GrayImage<'_>, h: &M, u: f32, v: f32, multi: bool| {
@@ -581,7 +584,8 @@ pub(crate) enum Precheck {
 /// cells, would otherwise each spend the refinement (about 80,000 Cortex-M7 instructions for
 /// a small marker, several times that for a large one) only to be turned down by the read.
 ///
-/// Cheap on purpose, as it runs on every candidate (about 1,000 Cortex-M7 instructions):
+/// Cheap on purpose, as it runs on every candidate (about 780 Cortex-M7 instructions with
+/// its rough quad, [`super::refine::rough_half_pixel_adjusted`]):
 /// nearest pixels at positions blended bilinearly from the corners (no homography:
 /// perspective moves the samples along the ring or across the data area by a fraction of a
 /// cell, which changes neither test), up to four points along the middle half of each side
@@ -666,8 +670,13 @@ pub(crate) fn precheck(
     if !(contrast >= f32::from(min_contrast) * 0.5) {
         return Precheck::NoBorder;
     }
-    let cell_px = quad[0].distance(quad[1]).min(quad[1].distance(quad[2])) / q;
-    if cell_px >= PRECHECK_BORDER_CELL_PX {
+    // Cells of at least PRECHECK_BORDER_CELL_PX along the first two sides, on squared
+    // lengths (no square root: this runs on every candidate).
+    let side2 = quad[0]
+        .distance_squared(quad[1])
+        .min(quad[1].distance_squared(quad[2]));
+    let min_side = PRECHECK_BORDER_CELL_PX * q;
+    if side2 >= min_side * min_side {
         let mid = 0.5 * (black + white);
         let light = border.iter().take(n_border).filter(|&&z| z > mid).count();
         let dark = margin.iter().take(n_margin).filter(|&&z| z < mid).count();

@@ -10,6 +10,13 @@
 //! angle is sharper than [`MIN_ANGLE_COS`] allows, and its sides are not wildly unequal.
 //! The corners are returned clockwise on screen (y down), the order of the canonical corners
 //! top-left, top-right, bottom-right, bottom-left.
+//!
+//! No square roots: every length here is only compared (screening and the chord test on
+//! squared integer distances, the vertex drop on squared bends, the shape check on squared
+//! lengths). libm's `sqrtf` is software on the Cortex-M7 (52 instructions) and micromath's,
+//! 7 instructions, is up to 6 % off, which would move the limits and drop other vertices;
+//! the squared forms are exact and cheaper than either (see the README's "Floating-point
+//! functions").
 
 use super::contour::Pixel;
 use crate::geometry::cyclic;
@@ -45,14 +52,18 @@ fn at(contour: &[Pixel], t: usize) -> Point {
     contour.get(t % n).copied().map(pt).unwrap_or_default()
 }
 
-/// Distance from `p` to the line through `a` and `b` (to `a` when they coincide).
-fn line_distance(p: Point, a: Point, b: Point) -> f32 {
+/// The square of the distance from `p` to the line through `a` and `b` (of the distance to
+/// `a` when they coincide). Squared: the fit only compares these (with each other and with a
+/// limit), and a square root is software on the Cortex-M7 (libm's `sqrtf`, 52 instructions;
+/// micromath's is 6 % off, which would pick a different vertex to drop).
+fn line_distance_squared(p: Point, a: Point, b: Point) -> f32 {
     let (dx, dy) = (b.x - a.x, b.y - a.y);
-    let len = libm::sqrtf(dx * dx + dy * dy);
-    if len < 1e-6 {
-        return p.distance(a);
+    let len2 = dx * dx + dy * dy;
+    if len2 < 1e-12 {
+        return p.distance_squared(a);
     }
-    ((p.x - a.x) * dy - (p.y - a.y) * dx).abs() / len
+    let cross = (p.x - a.x) * dy - (p.y - a.y) * dx;
+    cross * cross / len2
 }
 
 fn cross(o: Point, a: Point, b: Point) -> f32 {
@@ -362,39 +373,22 @@ pub(crate) fn screen(
     })
 }
 
-/// The Douglas-Peucker fit of a screened boundary: a convex quad with sides of at least
-/// `min_edge`, or nothing.
-pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Option<Quad> {
-    let Screened {
-        hole,
-        length,
-        origin,
-        split,
-    } = *screened;
-    let tolerance = (TOLERANCE_PER_PIXEL * length as f32).max(MIN_TOLERANCE);
-    let vertices = simplify(contour, origin, split, tolerance)?;
-    // Drop the vertex that bends the outline least while more than four remain. Each
-    // vertex's bend (its distance from the line through its neighbours) is kept, and only
-    // the two neighbours of a dropped vertex are measured again.
-    // (Filled by pushes and emptied by checked removals: `collect` and `remove` into a
-    // heapless vector have panic paths the no-panic check would find.)
-    let mut corners: heapless::Vec<Point, MAX_VERTICES> = heapless::Vec::new();
-    for &t in vertices.iter() {
-        let _ = corners.push(at(contour, origin + t));
-    }
+/// Drops the vertex that bends the outline least while more than four remain; false when
+/// one that must go bends it by more than twice `tolerance`. Each vertex's bend (the square
+/// of its distance from the line through its neighbours) is kept, and only the two
+/// neighbours of a dropped vertex are measured again. Not inlined: [`fit`] calls it only
+/// when Douglas-Peucker left more than four vertices, and inlined it cost every fit
+/// (about 50 Cortex-M7 instructions on a frame of small quads, none of which needed it).
+#[inline(never)]
+fn drop_least_bent(corners: &mut heapless::Vec<Point, MAX_VERTICES>, tolerance: f32) -> bool {
     let bend = |points: &[Point], k: usize| {
         let m = points.len().max(1);
         let point = |i: usize| points.get(i % m).copied().unwrap_or_default();
-        line_distance(point(k), point(k + m - 1), point(k + 1))
+        line_distance_squared(point(k), point(k + m - 1), point(k + 1))
     };
-    // Measured only when there is a vertex to drop: most boundaries come out of
-    // Douglas-Peucker with four, and the bends' square roots (software on the Cortex-M7:
-    // about 50 instructions each) were a fifth of the fit on a frame of small quads.
     let mut bends: heapless::Vec<f32, MAX_VERTICES> = heapless::Vec::new();
-    if corners.len() > 4 {
-        for k in 0..corners.len() {
-            let _ = bends.push(bend(&corners, k));
-        }
+    for k in 0..corners.len() {
+        let _ = bends.push(bend(corners, k));
     }
     while corners.len() > 4 {
         let (least, bent) = bends
@@ -410,18 +404,42 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
                     }
                 },
             );
-        if bent > 2.0 * tolerance || least >= corners.len() || least >= bends.len() {
-            return None;
+        if bent > 4.0 * tolerance * tolerance || least >= corners.len() || least >= bends.len() {
+            return false;
         }
         corners.remove(least);
         bends.remove(least);
         let m = corners.len();
         for k in [(least + m - 1) % m, least % m] {
-            let b = bend(&corners, k);
+            let b = bend(corners, k);
             if let Some(slot) = bends.get_mut(k) {
                 *slot = b;
             }
         }
+    }
+    true
+}
+
+/// The Douglas-Peucker fit of a screened boundary: a convex quad with sides of at least
+/// `min_edge`, or nothing.
+pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Option<Quad> {
+    let Screened {
+        hole,
+        length,
+        origin,
+        split,
+    } = *screened;
+    let tolerance = (TOLERANCE_PER_PIXEL * length as f32).max(MIN_TOLERANCE);
+    let vertices = simplify(contour, origin, split, tolerance)?;
+    // (Filled by pushes and emptied by checked removals: `collect` and `remove` into a
+    // heapless vector have panic paths the no-panic check would find.)
+    let mut corners: heapless::Vec<Point, MAX_VERTICES> = heapless::Vec::new();
+    for &t in vertices.iter() {
+        let _ = corners.push(at(contour, origin + t));
+    }
+    // Most boundaries come out of Douglas-Peucker with four vertices.
+    if corners.len() > 4 && !drop_least_bent(&mut corners, tolerance) {
+        return None;
     }
     let [c0, c1, c2, c3] = corners.as_slice() else {
         return None;

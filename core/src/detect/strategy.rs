@@ -115,7 +115,7 @@ impl Strategy for Robust {
         if !tracer.charge(WORK_PRECHECK) {
             return Look::OutOfBudget;
         }
-        let rough = refine::half_pixel_adjusted(quad);
+        let rough = refine::rough_half_pixel_adjusted(quad);
         let flat_rejects = !candidates.uniform_decodes;
         let cells = candidates.max_quad_cells;
         let min_contrast = candidates.config.min_contrast;
