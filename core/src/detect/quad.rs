@@ -45,14 +45,18 @@ fn at(contour: &[Pixel], t: usize) -> Point {
     contour.get(t % n).copied().map(pt).unwrap_or_default()
 }
 
-/// Distance from `p` to the line through `a` and `b` (to `a` when they coincide).
-fn line_distance(p: Point, a: Point, b: Point) -> f32 {
+/// Squared distance from `p` to the line through `a` and `b` (to `a` when they coincide):
+/// bends are compared without a square root (software on the Cortex-M7, about 50
+/// instructions each).
+fn line_distance_squared(p: Point, a: Point, b: Point) -> f32 {
     let (dx, dy) = (b.x - a.x, b.y - a.y);
-    let len = libm::sqrtf(dx * dx + dy * dy);
-    if len < 1e-6 {
-        return p.distance(a);
+    let length_squared = dx * dx + dy * dy;
+    if length_squared < 1e-12 {
+        let (ex, ey) = (p.x - a.x, p.y - a.y);
+        return ex * ex + ey * ey;
     }
-    ((p.x - a.x) * dy - (p.y - a.y) * dx).abs() / len
+    let cross = (p.x - a.x) * dy - (p.y - a.y) * dx;
+    cross * cross / length_squared
 }
 
 fn cross(o: Point, a: Point, b: Point) -> f32 {
@@ -374,8 +378,9 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
     let tolerance = (TOLERANCE_PER_PIXEL * length as f32).max(MIN_TOLERANCE);
     let vertices = simplify(contour, origin, split, tolerance)?;
     // Drop the vertex that bends the outline least while more than four remain. Each
-    // vertex's bend (its distance from the line through its neighbours) is kept, and only
-    // the two neighbours of a dropped vertex are measured again.
+    // vertex's bend (its distance from the line through its neighbours, squared: the order
+    // and the limit are the same up to rounding without square roots) is kept, and only the
+    // two neighbours of a dropped vertex are measured again.
     // (Filled by pushes and emptied by checked removals: `collect` and `remove` into a
     // heapless vector have panic paths the no-panic check would find.)
     let mut corners: heapless::Vec<Point, MAX_VERTICES> = heapless::Vec::new();
@@ -385,11 +390,10 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
     let bend = |points: &[Point], k: usize| {
         let m = points.len().max(1);
         let point = |i: usize| points.get(i % m).copied().unwrap_or_default();
-        line_distance(point(k), point(k + m - 1), point(k + 1))
+        line_distance_squared(point(k), point(k + m - 1), point(k + 1))
     };
     // Measured only when there is a vertex to drop: most boundaries come out of
-    // Douglas-Peucker with four, and the bends' square roots (software on the Cortex-M7:
-    // about 50 instructions each) were a fifth of the fit on a frame of small quads.
+    // Douglas-Peucker with four.
     let mut bends: heapless::Vec<f32, MAX_VERTICES> = heapless::Vec::new();
     if corners.len() > 4 {
         for k in 0..corners.len() {
@@ -410,7 +414,8 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
                     }
                 },
             );
-        if bent > 2.0 * tolerance || least >= corners.len() || least >= bends.len() {
+        let limit = 2.0 * tolerance;
+        if bent > limit * limit || least >= corners.len() || least >= bends.len() {
             return None;
         }
         corners.remove(least);
