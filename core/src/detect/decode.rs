@@ -618,28 +618,28 @@ pub(crate) fn precheck(
         )
     };
     // The nearest pixel ((x + 0.5) truncated: below -0.5 it clamps to the edge anyway).
-    let pixel =
-        |p: Point| f32::from(image.pixel_clamped((p.x + 0.5) as isize, (p.y + 0.5) as isize));
+    let pixel = |p: Point| image.pixel_clamped((p.x + 0.5) as isize, (p.y + 0.5) as isize);
     // `count` evenly spaced samples between a and b (mapping a line of the square, which the
-    // bilinear blend keeps straight along s or t), into `out` from index `k`.
-    let along =
-        |a: Point, b: Point, count: usize, out: &mut [f32], k: &mut usize, sum: &mut f32| {
-            let (dx, dy) = ((b.x - a.x) / count as f32, (b.y - a.y) / count as f32);
-            let mut p = Point::new(a.x + 0.5 * dx, a.y + 0.5 * dy);
-            for _ in 0..count {
-                let z = pixel(p);
-                *sum += z;
-                if let Some(slot) = out.get_mut(*k) {
-                    *slot = z;
-                    *k += 1;
-                }
-                p = Point::new(p.x + dx, p.y + dy);
+    // bilinear blend keeps straight along s or t), into `out` from index `k`. Kept as grey
+    // levels: arrays of bytes are zeroed in a few stores, where float ones took a memset
+    // call per quick look.
+    let along = |a: Point, b: Point, count: usize, out: &mut [u8], k: &mut usize, sum: &mut f32| {
+        let (dx, dy) = ((b.x - a.x) / count as f32, (b.y - a.y) / count as f32);
+        let mut p = Point::new(a.x + 0.5 * dx, a.y + 0.5 * dy);
+        for _ in 0..count {
+            let z = pixel(p);
+            *sum += f32::from(z);
+            if let Some(slot) = out.get_mut(*k) {
+                *slot = z;
+                *k += 1;
             }
-        };
+            p = Point::new(p.x + dx, p.y + dy);
+        }
+    };
     // The ring at depth `d` inside the edge (negative: outside), along the middle half of
     // each side (clear of the corners, where rough corners are roughest).
     let per_side = cells.min(PRECHECK_RING_SAMPLES);
-    let read_ring = |d: f32, out: &mut [f32; 4 * PRECHECK_RING_SAMPLES]| {
+    let read_ring = |d: f32, out: &mut [u8; 4 * PRECHECK_RING_SAMPLES]| {
         let (mut k, mut sum) = (0usize, 0.0f32);
         let (lo, hi) = (0.25, 0.75);
         along(at(lo, d), at(hi, d), per_side, out, &mut k, &mut sum);
@@ -662,8 +662,8 @@ pub(crate) fn precheck(
         along(at(d, lo), at(d, hi), per_side, out, &mut k, &mut sum);
         (sum / k.max(1) as f32, k)
     };
-    let mut border = [0.0f32; 4 * PRECHECK_RING_SAMPLES];
-    let mut margin = [0.0f32; 4 * PRECHECK_RING_SAMPLES];
+    let mut border = [0u8; 4 * PRECHECK_RING_SAMPLES];
+    let mut margin = [0u8; 4 * PRECHECK_RING_SAMPLES];
     let (black, n_border) = read_ring(0.5 / q, &mut border);
     let (white, n_margin) = read_ring(-0.5 / q, &mut margin);
     let contrast = white - black;
@@ -678,8 +678,17 @@ pub(crate) fn precheck(
     let min_side = PRECHECK_BORDER_CELL_PX * q;
     if side2 >= min_side * min_side {
         let mid = 0.5 * (black + white);
-        let light = border.iter().take(n_border).filter(|&&z| z > mid).count();
-        let dark = margin.iter().take(n_margin).filter(|&&z| z < mid).count();
+        let level = |z: &&u8| f32::from(**z);
+        let light = border
+            .iter()
+            .take(n_border)
+            .filter(|z| level(z) > mid)
+            .count();
+        let dark = margin
+            .iter()
+            .take(n_margin)
+            .filter(|z| level(z) < mid)
+            .count();
         if light as f32 > PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * n_border as f32
             || dark as f32 > PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * n_margin as f32
         {
@@ -689,7 +698,7 @@ pub(crate) fn precheck(
     if flat_rejects {
         // A lattice over the data cells, which span 1..q-1 cells of the square.
         let (lo, hi) = (1.0 / q, 1.0 - 1.0 / q);
-        let mut lattice = [0.0f32; FLAT_SAMPLES];
+        let mut lattice = [0u8; FLAT_SAMPLES];
         let (mut min, mut max) = (f32::MAX, f32::MIN);
         for j in 0..FLAT_SAMPLES {
             let t = lo + (hi - lo) * (j as f32 + 0.5) / FLAT_SAMPLES as f32;
@@ -703,8 +712,8 @@ pub(crate) fn precheck(
                 &mut sum,
             );
             for &z in lattice.iter().take(k) {
-                min = min.min(z);
-                max = max.max(z);
+                min = min.min(f32::from(z));
+                max = max.max(f32::from(z));
             }
         }
         if max - min < FLAT_INTERIOR_SPREAD * contrast {

@@ -82,7 +82,8 @@ impl Strategy for Robust {
         bitmap: &mut [u32],
         tiles: &mut [u8],
     ) {
-        threshold::local_threshold(image, config.min_contrast, bitmap, tiles);
+        let max_rows = threshold::MaxRows::for_frame(image.width(), image.height());
+        threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles);
     }
 
     /// Hole boundaries are only candidates for white-on-black families; for the others
