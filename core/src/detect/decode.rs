@@ -678,16 +678,15 @@ pub(crate) fn precheck(
     let min_side = PRECHECK_BORDER_CELL_PX * q;
     if side2 >= min_side * min_side {
         let mid = 0.5 * (black + white);
-        let level = |z: &&u8| f32::from(**z);
         let light = border
             .iter()
             .take(n_border)
-            .filter(|z| level(z) > mid)
+            .filter(|&&z| f32::from(z) > mid)
             .count();
         let dark = margin
             .iter()
             .take(n_margin)
-            .filter(|z| level(z) < mid)
+            .filter(|&&z| f32::from(z) < mid)
             .count();
         if light as f32 > PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * n_border as f32
             || dark as f32 > PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * n_margin as f32
