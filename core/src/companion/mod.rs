@@ -427,7 +427,8 @@ impl Companion {
     /// while no such message has come from it within [`CompanionConfig::stream_timeout_us`]
     /// (also when the autopilot reboots). Any frame with that id from the autopilot counts,
     /// decoded or not (a dialect message the common set does not know still proves the
-    /// stream). A message asked for already gets the new interval.
+    /// stream). A message asked for already at another interval is asked for again at once
+    /// with the new one; at the same interval, nothing changes.
     pub fn request_stream(&mut self, message_id: u32, interval_us: u32) -> Result<(), StreamError> {
         self.state.request_stream(message_id, interval_us)
     }

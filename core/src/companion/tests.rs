@@ -515,6 +515,9 @@ fn a_requested_stream_is_asked_for_until_it_flows_in_the_one_sequence() {
     c.request_stream(108, 10_000).unwrap();
     let changed = interval_requests(&mut c, 6200, 6201, &mut sequences);
     assert_eq!(changed, [(6200, 108, 10_000.0)]);
+    // The same interval again changes nothing: no request before the period is out.
+    c.request_stream(108, 10_000).unwrap();
+    assert!(interval_requests(&mut c, 6201, 6300, &mut sequences).is_empty());
     for id in 200..(200 + MAX_STREAMS as u32 - 3) {
         c.request_stream(id, 50_000).unwrap();
     }

@@ -94,10 +94,12 @@ impl State {
             return Err(StreamError::ZeroInterval);
         }
         if let Some(s) = self.streams.iter_mut().find(|s| s.message_id == message_id) {
-            s.interval_us = interval_us;
-            // A changed rate is asked for at once, flowing or not.
-            s.last_rx_us = None;
-            s.next_request_us = 0;
+            if s.interval_us != interval_us {
+                // A changed rate is asked for at once, flowing or not.
+                s.interval_us = interval_us;
+                s.last_rx_us = None;
+                s.next_request_us = 0;
+            }
             return Ok(());
         }
         self.streams
