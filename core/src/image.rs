@@ -21,6 +21,20 @@ pub enum ImageError {
     TooShort,
 }
 
+/// A rectangle of pixels: the top-left pixel (`x`, `y`) and the size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ImageRegion {
+    /// Left column.
+    pub x: usize,
+    /// Top row.
+    pub y: usize,
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+}
+
 /// A read-only grey image: `height` rows of `width` bytes, `stride` bytes apart.
 #[derive(Debug, Clone, Copy)]
 pub struct GrayImage<'a> {
@@ -77,6 +91,19 @@ impl<'a> GrayImage<'a> {
     /// Bytes between the starts of two rows.
     pub fn stride(&self) -> usize {
         self.stride
+    }
+
+    /// The part of the image inside `region`, in place (same rows, no copy); `None` when the
+    /// region is empty or reaches outside the image.
+    pub fn view(&self, region: &ImageRegion) -> Option<GrayImage<'a>> {
+        let x_end = region.x.checked_add(region.width)?;
+        let y_end = region.y.checked_add(region.height)?;
+        if region.width == 0 || region.height == 0 || x_end > self.width || y_end > self.height {
+            return None;
+        }
+        let start = region.y * self.stride + region.x;
+        let data = self.data.get(start..)?;
+        GrayImage::with_stride(data, region.width, region.height, self.stride).ok()
     }
 
     /// Row `y` (exactly `width` bytes), or an empty slice outside the image.
@@ -182,6 +209,28 @@ pub(crate) fn floor(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_view_reads_its_region_of_the_rows_and_refuses_what_reaches_outside() {
+        // 5 x 4 with stride 6: pixel (x, y) = 10 y + x.
+        let data: [u8; 24] = core::array::from_fn(|i| (10 * (i / 6) + i % 6) as u8);
+        let image = GrayImage::with_stride(&data, 5, 4, 6).unwrap();
+        let region = |x, y, width, height| ImageRegion {
+            x,
+            y,
+            width,
+            height,
+        };
+        let view = image.view(&region(1, 2, 4, 2)).unwrap();
+        assert_eq!((view.width(), view.height()), (4, 2));
+        assert_eq!(view.row(0), &[21, 22, 23, 24]);
+        assert_eq!(view.row(1), &[31, 32, 33, 34]);
+        assert_eq!(view.pixel_clamped(9, 9), 34);
+        assert!(image.view(&region(2, 2, 4, 2)).is_none());
+        assert!(image.view(&region(0, 3, 5, 2)).is_none());
+        assert!(image.view(&region(1, 1, 0, 2)).is_none());
+        assert!(image.view(&region(usize::MAX, 0, 2, 2)).is_none());
+    }
 
     #[test]
     fn rejects_bad_shapes() {

@@ -86,10 +86,11 @@ mod threshold;
 use crate::camera::CameraModel;
 use crate::family::Family;
 use crate::geometry::Point;
-use crate::image::GrayImage;
+use crate::image::{GrayImage, ImageRegion};
 
 use candidates::Candidates;
 use strategy::{Look, Robust, Strategy};
+use threshold::ThresholdLevel;
 
 /// Most markers reported per frame.
 pub const MAX_DETECTIONS: usize = 64;
@@ -388,6 +389,8 @@ pub enum DetectError {
     BadFamilyCount,
     /// A family's layout is inconsistent ([`Family::check_layout`]).
     BadFamily,
+    /// The region of [`Detector::detect_region`] is empty or reaches outside the image.
+    RegionOutsideImage,
 }
 
 /// The marker detector. Holds the settings, the fixed-capacity candidate storage and the
@@ -458,6 +461,68 @@ impl Detector {
         families: &[&Family<'_>],
         buffers: &mut Buffers<'_>,
     ) -> Result<&[Detection], DetectError> {
+        let camera = self.camera;
+        self.search(
+            image,
+            camera.as_ref(),
+            ThresholdLevel::MidLevel,
+            families,
+            buffers,
+        )?;
+        Ok(&self.detections)
+    }
+
+    /// Searches `region` of `image` again, binarised at the ratio of the levels instead of
+    /// the mid-level (see `threshold`: across a hard shadow), and returns what it finds there
+    /// in the frame's pixels. This is the per-frame path's second look where it lost a pad it
+    /// was tracking ([`crate::pipeline::FramePipeline::process`]); the work budget and every
+    /// step are those of [`Detector::detect`], scaled to the region. The detections and
+    /// statistics of the frame's own search are replaced.
+    pub fn detect_region(
+        &mut self,
+        image: &GrayImage<'_>,
+        region: &ImageRegion,
+        families: &[&Family<'_>],
+        buffers: &mut Buffers<'_>,
+    ) -> Result<&[Detection], DetectError> {
+        let Some(view) = image.view(region) else {
+            self.detections.clear();
+            self.stats = DetectStats::default();
+            return Err(DetectError::RegionOutsideImage);
+        };
+        let (dx, dy) = (region.x as f32, region.y as f32);
+        // The lens seen from the region: the same camera with its centre moved.
+        let camera = self.camera.map(|c| CameraModel {
+            cx: c.cx - dx,
+            cy: c.cy - dy,
+            ..c
+        });
+        self.search(
+            &view,
+            camera.as_ref(),
+            ThresholdLevel::Ratio,
+            families,
+            buffers,
+        )?;
+        for detection in self.detections.iter_mut() {
+            for corner in detection.corners.iter_mut().chain([&mut detection.center]) {
+                corner.x += dx;
+                corner.y += dy;
+            }
+        }
+        Ok(&self.detections)
+    }
+
+    /// Steps 1 to 7 on `image` through `camera`, binarising at `level`, into
+    /// `self.detections` and `self.stats`.
+    fn search(
+        &mut self,
+        image: &GrayImage<'_>,
+        camera: Option<&CameraModel>,
+        level: ThresholdLevel,
+        families: &[&Family<'_>],
+        buffers: &mut Buffers<'_>,
+    ) -> Result<(), DetectError> {
         self.detections.clear();
         self.stats = DetectStats::default();
         if families.is_empty() || families.len() > MAX_FAMILIES {
@@ -482,11 +547,12 @@ impl Detector {
             contour,
             detections,
             stats,
-            camera,
+            camera: _,
         } = self;
         // The one place the method is looked at: everything after asks the strategy.
+        let robust = Robust { level };
         let strategy: &dyn Strategy = match config.method {
-            Method::Robust => &Robust,
+            Method::Robust => &robust,
             Method::Paper => &paper::Paper,
         };
         strategy.binarise(image, config, bitmap, tiles);
@@ -505,7 +571,7 @@ impl Detector {
                 .max(1),
             uniform_decodes: families.iter().any(|f| decode::uniform_grid_decodes(f)),
             quiet_margins: families.iter().all(|f| f.quiet_rings >= f.border_ring),
-            camera: camera.as_ref(),
+            camera,
         };
         let rule = strategy.start_rule(families);
         let bitmap: &[u32] = bitmap;
@@ -589,7 +655,7 @@ impl Detector {
         }
         stats.trace_steps = tracer.steps();
         stats.work = budget - tracer.remaining();
-        Ok(detections)
+        Ok(())
     }
 }
 

@@ -71,8 +71,12 @@ pub(super) enum Look {
     OutOfBudget,
 }
 
-/// touchdown's method ([`Method::Robust`](super::Method::Robust)).
-pub(super) struct Robust;
+/// touchdown's method ([`Method::Robust`](super::Method::Robust)), binarising at `level`:
+/// the mid-level over a frame, the ratio where a lost pad is looked for again
+/// ([`super::Detector::detect_region`]).
+pub(super) struct Robust {
+    pub(super) level: threshold::ThresholdLevel,
+}
 
 impl Strategy for Robust {
     fn binarise(
@@ -83,7 +87,14 @@ impl Strategy for Robust {
         tiles: &mut [u8],
     ) {
         let max_rows = threshold::MaxRows::for_frame(image.width(), image.height());
-        threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles);
+        threshold::local_threshold(
+            image,
+            config.min_contrast,
+            self.level,
+            max_rows,
+            bitmap,
+            tiles,
+        );
     }
 
     /// Hole boundaries are only candidates for white-on-black families; for the others

@@ -6,6 +6,21 @@
 //! has less than `min_contrast` there is no edge to find, so nothing there is dark: uniform
 //! areas (sky, tarmac, the inside of a big black cell) cost nothing downstream.
 //!
+//! # Across a hard shadow
+//!
+//! The mid-level fails where a shadow's edge crosses a marker's margin: a window holding the
+//! sunlit paper (240) and the shadowed border's black (15) puts its mid-level above the
+//! shadowed paper (90), so a band of shadowed white along the shadow's edge turns dark and
+//! joins the border, and the marker's outline is no longer a quad. A shadow scales every level
+//! under it by the same factor, so what tells paper from ink across it is the *ratio* of the
+//! levels: [`ThresholdLevel::Ratio`] puts the threshold at the geometric mean of the window's
+//! extrema (each raised by [`RATIO_PEDESTAL`], the sensor's black offset and flare), which
+//! keeps the shadowed paper light whenever the shadow darkens less than the ink does (sqrt(31 x
+//! 256) - 16 = 74 in the example). It is no better everywhere: it sits lower, so a thin,
+//! blurred dark line that reaches only part of the way down (a far marker's border) can stay
+//! light. The per-frame path therefore uses the mid-level over the frame and the ratio only
+//! where it looks again for a pad it just lost ([`super::Detector::detect_region`]).
+//!
 //! From VGA up ([`MaxRows::for_frame`]) a tile's maximum comes from two of its four rows
 //! (0 and 2); its minimum still from all four. The dark side decides where an outline is
 //! traced: a marker's border or a thin dark edge must show its darkest pixel in every window
@@ -151,6 +166,46 @@ fn tile_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
     mid & enough
 }
 
+/// Where between a window's darkest and lightest level a pixel turns dark.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ThresholdLevel {
+    /// Halfway: the rounded-up mean of the window's extrema (the frame's search).
+    MidLevel,
+    /// The geometric mean of the extrema, each raised by [`RATIO_PEDESTAL`] (see the module
+    /// docs: across a hard shadow).
+    Ratio,
+}
+
+/// Grey levels added to a window's extrema before their geometric mean
+/// ([`ThresholdLevel::Ratio`]): what a sensor reads for no light at all (its black offset
+/// and the lens's flare) is not scaled by a shadow, and without it a window whose darkest
+/// pixel reads 0 would put the threshold at 0 and nothing would be dark.
+const RATIO_PEDESTAL: u32 = 16;
+
+/// The [`ThresholdLevel::Ratio`] threshold of one window: `ceil(sqrt((lo + P)(hi + P))) - P`
+/// (`P` = [`RATIO_PEDESTAL`]), between `lo` and `hi` like the mid-level.
+#[inline]
+fn ratio_level(lo: u32, hi: u32) -> u32 {
+    let product = (lo + RATIO_PEDESTAL) * (hi + RATIO_PEDESTAL);
+    let root = product.isqrt();
+    let root = if root * root < product {
+        root + 1
+    } else {
+        root
+    };
+    root.saturating_sub(RATIO_PEDESTAL).min(255)
+}
+
+/// [`tile_thresholds`] with the [`ThresholdLevel::Ratio`] level: one tile at a time (there is
+/// no per-byte square root), which only the small regions searched again can afford.
+fn ratio_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
+    let enough = ge_mask(hi.wrapping_sub(lo), min_contrast);
+    let level = [0, 8, 16, 24].iter().fold(0, |word, &shift| {
+        word | ratio_level((lo >> shift) & 0xFF, (hi >> shift) & 0xFF) << shift
+    });
+    level & enough
+}
+
 /// Which rows of a tile its maximum is taken over (its minimum: always all four).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum MaxRows {
@@ -176,11 +231,13 @@ impl MaxRows {
     }
 }
 
-/// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold, the tile maxima
-/// taken over `max_rows`. `tiles` holds at least `2 * ceil(w/4) * ceil(h/4)` bytes.
+/// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold at `level`, the
+/// tile maxima taken over `max_rows`. `tiles` holds at least `2 * ceil(w/4) * ceil(h/4)`
+/// bytes.
 pub(crate) fn local_threshold(
     image: &GrayImage<'_>,
     min_contrast: u8,
+    level: ThresholdLevel,
     max_rows: MaxRows,
     bitmap: &mut [u32],
     tiles: &mut [u8],
@@ -264,7 +321,15 @@ pub(crate) fn local_threshold(
     // Spread over the 3x3 tile neighbourhood, in place: the horizontal pass was done per
     // tile row above; the vertical one also turns the window's extrema into thresholds (flat
     // tiles get 0, so no pixel there is dark).
-    spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
+    // One instance each, so that the frame's search keeps its four tiles a word.
+    match level {
+        ThresholdLevel::MidLevel => {
+            spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast, tile_thresholds);
+        }
+        ThresholdLevel::Ratio => {
+            spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast, ratio_thresholds);
+        }
+    }
     let wpr = words_per_row(w);
     for y in 0..h {
         let row = image.row(y);
@@ -365,7 +430,8 @@ fn spread_along(row: &mut [u8], pick_word: impl Fn(u32, u32) -> u32, pick: impl 
 
 /// The vertical half of the 3x3 min filter of `tmin` and max filter of `tmax` (`tw` x `th`
 /// grids, already filtered along their rows; the edges repeat), then each tile's threshold
-/// ([`tile_thresholds`]) written into `tmin`.
+/// (`thresholds` of four windows' minima and maxima, as [`tile_thresholds`]) written into
+/// `tmin`.
 ///
 /// In place and row by row, in two passes: top down, each row becomes the extreme of itself
 /// and the row below (the row below is still original); bottom up, each row's window is
@@ -378,6 +444,7 @@ fn spread_down_to_thresholds(
     tw: usize,
     th: usize,
     min_contrast: u8,
+    thresholds: impl Fn(u32, u32, u32) -> u32,
 ) {
     if tw == 0 {
         return;
@@ -414,11 +481,11 @@ fn spread_down_to_thresholds(
             for (slot, (up_lo, (hi, up_hi))) in (&mut out).zip(ins) {
                 let lo = byte_min(word(slot), word(up_lo));
                 let hi = byte_max(word(hi), word(up_hi));
-                slot.copy_from_slice(&tile_thresholds(lo, hi, contrast).to_le_bytes());
+                slot.copy_from_slice(&thresholds(lo, hi, contrast).to_le_bytes());
             }
         } else {
             for (slot, hi) in (&mut out).zip(row_hi.chunks_exact(4)) {
-                let threshold = tile_thresholds(word(slot), word(hi), contrast);
+                let threshold = thresholds(word(slot), word(hi), contrast);
                 slot.copy_from_slice(&threshold.to_le_bytes());
             }
         }
@@ -431,11 +498,8 @@ fn spread_down_to_thresholds(
                 (Some(hi), ..) => (*cell, hi),
                 _ => (*cell, *cell),
             };
-            *cell = if hi.saturating_sub(lo) < min_contrast {
-                0
-            } else {
-                (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
-            };
+            // The same threshold as the whole words', in the lowest byte.
+            *cell = thresholds(u32::from(lo), u32::from(hi), u32::from(min_contrast)) as u8;
         }
     }
 }
@@ -607,6 +671,44 @@ mod tests {
         }
     }
 
+    /// Sunlit paper (240) left of x = 16, shadowed paper (90) right of it, and a shadowed ink
+    /// bar (15) at x = 20..24: the mid-level turns the shadowed paper between the shadow's
+    /// edge and the ink dark (one blob from the edge to the bar), the ratio keeps it light
+    /// and the ink dark.
+    #[test]
+    fn the_ratio_keeps_shadowed_paper_light_beside_sunlit_paper() {
+        let (w, h) = (40usize, 16usize);
+        let mut px = [0u8; 40 * 16];
+        for (i, p) in px.iter_mut().enumerate() {
+            *p = match i % w {
+                0..16 => 240,
+                20..24 => 15,
+                _ => 90,
+            };
+        }
+        let img = GrayImage::new(&px, w, h).unwrap();
+        let wpr = words_per_row(w);
+        let dark_at = |level, x| {
+            let mut bitmap = [0u32; 2 * 16];
+            let mut tiles = [0u8; 2 * 10 * 4];
+            local_threshold(&img, 20, level, MaxRows::All, &mut bitmap, &mut tiles);
+            get_bit(&bitmap, wpr, x, 8, w, h)
+        };
+        for x in 16..20 {
+            assert!(dark_at(ThresholdLevel::MidLevel, x), "mid-level at {x}");
+            assert!(!dark_at(ThresholdLevel::Ratio, x), "ratio at {x}");
+        }
+        for x in 20..24 {
+            assert!(dark_at(ThresholdLevel::Ratio, x), "ink at {x}");
+        }
+        assert!(!dark_at(ThresholdLevel::Ratio, 10), "sunlit paper");
+        // The level itself: between the extrema, below the mid-level, above 0 for a black 0.
+        assert_eq!(ratio_level(15, 240), 74);
+        assert_eq!(ratio_level(100, 100), 100);
+        assert_eq!(ratio_level(0, 255), 50);
+        assert_eq!(ratio_level(255, 255), 255);
+    }
+
     #[test]
     fn dark_square_on_white_and_flat_areas() {
         let (w, h) = (40usize, 24usize);
@@ -619,7 +721,14 @@ mod tests {
         let img = GrayImage::new(&px, w, h).unwrap();
         let mut bitmap = [0u32; 2 * 24];
         let mut tiles = [0u8; 2 * 10 * 6];
-        local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles);
+        local_threshold(
+            &img,
+            20,
+            ThresholdLevel::MidLevel,
+            MaxRows::All,
+            &mut bitmap,
+            &mut tiles,
+        );
         let wpr = words_per_row(w);
         assert!(get_bit(&bitmap, wpr, 10, 8, w, h));
         assert!(get_bit(&bitmap, wpr, 29, 15, w, h));
@@ -629,7 +738,14 @@ mod tests {
         assert!(!get_bit(&bitmap, wpr, 0, 0, w, h));
         let flat = [90u8; 40 * 24];
         let img = GrayImage::new(&flat, w, h).unwrap();
-        local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles);
+        local_threshold(
+            &img,
+            20,
+            ThresholdLevel::MidLevel,
+            MaxRows::All,
+            &mut bitmap,
+            &mut tiles,
+        );
         assert!(bitmap.iter().all(|&word| word == 0));
     }
 
@@ -656,7 +772,14 @@ mod tests {
             for max_rows in [MaxRows::All, MaxRows::EveryOther] {
                 let mut bitmap = [0u32; 3 * 50];
                 let mut tiles = [0u8; 2 * 24 * 13];
-                local_threshold(&img, 20, max_rows, &mut bitmap, &mut tiles);
+                local_threshold(
+                    &img,
+                    20,
+                    ThresholdLevel::MidLevel,
+                    max_rows,
+                    &mut bitmap,
+                    &mut tiles,
+                );
                 // Whether pixel (xx, yy) counts in its tile's maximum: every row, or rows 0
                 // and 2 of the tile (the last row standing in for missing ones), and every
                 // row of a partial tile at the end of the rows.

@@ -37,6 +37,19 @@
 //!   taken from gravity instead of the image (where it is barely observable on a small
 //!   marker), which removes the range bias the tilt-range coupling gives at altitude.
 //!
+//! # A second look where the pad was lost
+//!
+//! When a frame gives no fix while the last one, at most [`LOOK_AGAIN_MAX_AGE_US`] before,
+//! did, the detector searches again around where the pad's markers were
+//! ([`Detector::detect_region`]), binarised at the ratio of the levels instead of their
+//! mid-level ([`PipelineConfig::look_again`]). A hard shadow across a marker (a building's, a
+//! tree's, the vehicle's own) is the case: the mid-level turns the shadowed paper along the
+//! shadow's edge dark and the marker's outline stops being a quad, while the ratio keeps paper
+//! and ink apart on both sides. The region is the last fix's markers grown by their own size
+//! on every side; when that is more than [`LOOK_AGAIN_MAX_FRACTION`] of the frame there is no
+//! second look, so a frame costs at most that fraction more than its own search. A frame
+//! without a recent fix (and every frame of a benchmark) is searched once.
+//!
 //! Before the fix, on a rolling-shutter camera ([`CameraModel::line_time_us`] above 0), the
 //! pad's corners are moved to where the camera saw them at the frame's time, from the body
 //! rates and the velocity at the exposure ([`PipelineConfig::correct_rolling_shutter`], in
@@ -67,7 +80,8 @@ use crate::filter::{
     camera_to_ned_matrix, ConfigError, EstimatorConfig, FrameEstimate, PadEstimator,
     VehicleAtExposure, VehicleState,
 };
-use crate::image::GrayImage;
+use crate::geometry::Point;
+use crate::image::{GrayImage, ImageRegion};
 use crate::pad::{PadError, PadLayout, MAX_PAD_MARKERS};
 use crate::params::{ParamSet, PipelineSettings};
 use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix};
@@ -91,6 +105,8 @@ pub struct PipelineConfig {
     /// corner's row time and the frame's), when the camera has a line time and the body rates
     /// at the exposure are known. False solves on the corners as detected.
     pub correct_rolling_shutter: bool,
+    /// Search again where a recently fixed pad was lost (see the module docs).
+    pub look_again: bool,
 }
 
 impl Default for PipelineConfig {
@@ -101,6 +117,7 @@ impl Default for PipelineConfig {
             flip_by_prediction: true,
             level_fix: true,
             correct_rolling_shutter: true,
+            look_again: true,
         }
     }
 }
@@ -126,6 +143,19 @@ pub struct FrameReport {
 /// correction, µs (a hover's drift over it is centimetres).
 const MAX_PLANE_AGE_US: u64 = 500_000;
 
+/// Oldest fix whose markers' place is searched again when a frame gives none, µs: at 30 Hz
+/// fifteen frames, over which a hovering or descending vehicle moves the pad by less than the
+/// region's margin.
+pub const LOOK_AGAIN_MAX_AGE_US: u64 = 500_000;
+
+/// Largest part of a frame the second look searches (1/2: a lost frame costs at most one and
+/// a half searches).
+pub const LOOK_AGAIN_MAX_FRACTION: f32 = 0.5;
+
+/// Smallest margin around the last fix's markers, pixels: a far pad moves by more than its
+/// own few pixels between frames.
+const LOOK_AGAIN_MIN_MARGIN_PX: f32 = 16.0;
+
 /// `R_ned_from_level`: the level frame of [`level_pad_fix`] (x north, y west, z up) in NED.
 const NED_FROM_LEVEL: Matrix3<f32> = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
 
@@ -147,6 +177,146 @@ pub struct FramePipeline<'a> {
     /// the pad's plane for the rolling-shutter correction while the estimator has no
     /// prediction (its tracks are confirmed only after a few fixes).
     last_translation: Option<(u64, Vector3<f32>)>,
+    /// The exposure time of the last fix and the pixels its pad markers covered: where a
+    /// frame without a fix is searched again.
+    last_pad_pixels: Option<(u64, PixelBox)>,
+}
+
+/// The smallest axis-aligned box around some image points, pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PixelBox {
+    min: Point,
+    max: Point,
+}
+
+impl PixelBox {
+    /// Around the corners of the `detections` that are markers of `pad`; `None` if none is.
+    fn around_pad_markers(
+        detections: &[Detection],
+        families: &[&Family<'_>],
+        pad: &PadLayout<'_>,
+    ) -> Option<Self> {
+        detections
+            .iter()
+            .filter(|d| {
+                families
+                    .get(usize::from(d.family))
+                    .is_some_and(|f| pad.find(f.name, d.id).is_some())
+            })
+            .flat_map(|d| d.corners)
+            .fold(None, |bounds: Option<PixelBox>, p| {
+                Some(match bounds {
+                    None => PixelBox { min: p, max: p },
+                    Some(b) => PixelBox {
+                        min: Point::new(b.min.x.min(p.x), b.min.y.min(p.y)),
+                        max: Point::new(b.max.x.max(p.x), b.max.y.max(p.y)),
+                    },
+                })
+            })
+    }
+
+    /// This box grown by its larger side (at least [`LOOK_AGAIN_MIN_MARGIN_PX`]) on every
+    /// side and cut to a `width` x `height` frame, in whole pixels; `None` when that is more
+    /// than [`LOOK_AGAIN_MAX_FRACTION`] of the frame or nothing of it is inside.
+    fn look_again_region(&self, width: usize, height: usize) -> Option<ImageRegion> {
+        let size = (self.max.x - self.min.x).max(self.max.y - self.min.y);
+        let margin = size.max(LOOK_AGAIN_MIN_MARGIN_PX);
+        let clamp = |v: f32, end: usize| {
+            if v.is_nan() {
+                0
+            } else {
+                (v.max(0.0) as usize).min(end)
+            }
+        };
+        let (x0, y0) = (
+            clamp(self.min.x - margin, width),
+            clamp(self.min.y - margin, height),
+        );
+        let x1 = clamp(self.max.x + margin + 1.0, width);
+        let y1 = clamp(self.max.y + margin + 1.0, height);
+        let region = ImageRegion {
+            x: x0,
+            y: y0,
+            width: x1.saturating_sub(x0),
+            height: y1.saturating_sub(y0),
+        };
+        let frame = (width * height) as f32;
+        let small_enough = (region.width * region.height) as f32 <= LOOK_AGAIN_MAX_FRACTION * frame;
+        (region.width > 0 && region.height > 0 && small_enough).then_some(region)
+    }
+}
+
+/// What a frame's detections gave.
+struct Found {
+    /// Markers decoded (of any id, on the pad or not).
+    markers: usize,
+    /// The fix from the image alone, kept for the mount calibration (it needs the tilt the
+    /// image measured; the levelled fix's is the attitude's).
+    image_fix: Option<PadFix>,
+    /// The fix passed on: levelled when the level fix ran.
+    fix: Option<PadFix>,
+    /// The markers' levels where the detector saw them (before any correction).
+    pad: Option<crate::sensor::PadLevels>,
+    /// Where the pad's markers were.
+    pixels: Option<PixelBox>,
+    /// Why detection stopped, when it did.
+    error: Option<DetectError>,
+}
+
+impl Found {
+    fn error(error: DetectError) -> Self {
+        Found {
+            markers: 0,
+            image_fix: None,
+            fix: None,
+            pad: None,
+            pixels: None,
+            error: Some(error),
+        }
+    }
+}
+
+/// What the fixes of a frame's detections are made with: the pad, the camera and the vehicle
+/// state at the exposure.
+struct Fixes<'f, 'a> {
+    families: &'a [&'a Family<'a>],
+    pad: &'f PadLayout<'a>,
+    camera: &'f CameraModel,
+    readout_motion: Option<&'f shutter::ReadoutMotion>,
+    camera_from_level: Option<&'f Matrix3<f32>>,
+    predicted: Option<&'f Vector3<f32>>,
+}
+
+impl Fixes<'_, '_> {
+    /// The pad fixes from `raw`, the detections in `image`.
+    fn from(&self, image: &GrayImage<'_>, raw: &[Detection]) -> Found {
+        let (families, pad, camera) = (self.families, self.pad, self.camera);
+        // The pad's markers as a global shutter would have seen them (both fixes solve on
+        // these); the count reported is the detector's.
+        let mut corrected = heapless::Vec::<Detection, MAX_PAD_MARKERS>::new();
+        let detections = match self.readout_motion {
+            Some(motion) => {
+                shutter::correct_pad_detections(raw, families, pad, camera, motion, &mut corrected);
+                &corrected[..]
+            }
+            None => raw,
+        };
+        let image_fix =
+            pad_pose_with_prediction(detections, families, pad, camera, self.predicted).ok();
+        // The level fix falls back to the image's own fix when it cannot be solved.
+        let fix = image_fix.map(|fix| match self.camera_from_level {
+            Some(c) => level_pad_fix(&fix, detections, families, pad, camera, c).unwrap_or(fix),
+            None => fix,
+        });
+        Found {
+            markers: raw.len(),
+            image_fix,
+            fix,
+            pad: pad_levels(image, raw, families),
+            pixels: PixelBox::around_pad_markers(raw, families, pad),
+            error: None,
+        }
+    }
 }
 
 impl<'a> FramePipeline<'a> {
@@ -191,6 +361,7 @@ impl<'a> FramePipeline<'a> {
             estimator,
             last_rotation: None,
             last_translation: None,
+            last_pad_pixels: None,
         };
         // The detector fits long boundaries through the same lens as the pose (a
         // distortion-free camera leaves it as without one), so that what a replay or a bench
@@ -250,6 +421,7 @@ impl<'a> FramePipeline<'a> {
         self.estimator.reset();
         self.last_rotation = None;
         self.last_translation = None;
+        self.last_pad_pixels = None;
     }
 
     /// Finds the pad in `image`, exposed at `exposure_us` (our clock, µs), and estimates it
@@ -283,50 +455,47 @@ impl<'a> FramePipeline<'a> {
             pad_in_camera.as_ref(),
             camera_from_level.as_ref(),
         );
-        // The image's own fix is kept beside the levelled one for the mount calibration, which
-        // needs the tilt the image measured (the levelled fix's is the attitude's).
-        let mut image_fix = None;
-        let mut pad = None;
-        let (markers, fix, detect_error) = match self.detector.detect(image, self.families, buffers)
-        {
-            Ok(raw) => {
-                // The markers' levels where the detector saw them (before any correction).
-                pad = pad_levels(image, raw, self.families);
-                let (families, pad, camera) = (self.families, &self.pad, &self.camera);
-                // The pad's markers as a global shutter would have seen them (both fixes
-                // solve on these); the count reported is the detector's.
-                let mut corrected = heapless::Vec::<Detection, MAX_PAD_MARKERS>::new();
-                let detections = match &readout_motion {
-                    Some(motion) => {
-                        shutter::correct_pad_detections(
-                            raw,
-                            families,
-                            pad,
-                            camera,
-                            motion,
-                            &mut corrected,
-                        );
-                        &corrected[..]
-                    }
-                    None => raw,
-                };
-                image_fix =
-                    pad_pose_with_prediction(detections, families, pad, camera, predicted.as_ref())
-                        .ok();
-                // The level fix falls back to the image's own fix when it cannot be solved.
-                let fix = image_fix.map(|fix| match &camera_from_level {
-                    Some(c) => {
-                        level_pad_fix(&fix, detections, families, pad, camera, c).unwrap_or(fix)
-                    }
-                    None => fix,
-                });
-                (raw.len(), fix, None)
-            }
-            Err(e) => (0, None, Some(e)),
+        let fixes = Fixes {
+            families: self.families,
+            pad: &self.pad,
+            camera: &self.camera,
+            readout_motion: readout_motion.as_ref(),
+            camera_from_level: camera_from_level.as_ref(),
+            predicted: predicted.as_ref(),
         };
+        let mut found = match self.detector.detect(image, self.families, buffers) {
+            Ok(raw) => fixes.from(image, raw),
+            Err(e) => Found::error(e),
+        };
+        // A second look where the pad was until just now (see the module docs).
+        let region = self
+            .last_pad_pixels
+            .filter(|(t_us, _)| exposure_us.abs_diff(*t_us) <= LOOK_AGAIN_MAX_AGE_US)
+            .and_then(|(_, pixels)| pixels.look_again_region(image.width(), image.height()))
+            .filter(|_| self.config.look_again && found.fix.is_none() && found.error.is_none());
+        if let Some(region) = region {
+            if let Ok(raw) = self
+                .detector
+                .detect_region(image, &region, self.families, buffers)
+            {
+                let again = fixes.from(image, raw);
+                if again.fix.is_some() {
+                    found = again;
+                }
+            }
+        }
+        let Found {
+            markers,
+            image_fix,
+            fix,
+            pad,
+            pixels,
+            error: detect_error,
+        } = found;
         if let Some(f) = &fix {
             self.last_rotation = Some(f.pose.rotation);
             self.last_translation = Some((exposure_us, f.pose.translation));
+            self.last_pad_pixels = pixels.map(|p| (exposure_us, p));
         }
         let (mean, highlight) = scene_levels(image, SCENE_STEP);
         let max_exposure_us = at_exposure

@@ -412,6 +412,7 @@ fn describe(error: DetectError) -> &'static str {
         }
         DetectError::BadFamilyCount => "between 1 and 8 families must be searched",
         DetectError::BadFamily => "a family's tables are inconsistent",
+        DetectError::RegionOutsideImage => "the region searched lies outside the image",
     }
 }
 

@@ -372,7 +372,8 @@ fn json_has_every_table_and_the_numbers_of_the_text() {
             "no flip choice",
             "neither step",
             "no pattern fit",
-            "no shutter correction"
+            "no shutter correction",
+            "no second look"
         ]
     );
     assert!(methods.iter().all(|m| m["attitude_given"] == true));
@@ -380,12 +381,17 @@ fn json_has_every_table_and_the_numbers_of_the_text() {
         .iter()
         .map(|m| m["settings"]["detector"]["fit_small_markers"] == true)
         .collect();
-    assert_eq!(fits, [true, true, true, true, false, true]);
+    assert_eq!(fits, [true, true, true, true, false, true, true]);
     let shutter: Vec<bool> = methods[1..]
         .iter()
         .map(|m| m["settings"]["correct_rolling_shutter"] == true)
         .collect();
-    assert_eq!(shutter, [true, true, true, true, true, false]);
+    assert_eq!(shutter, [true, true, true, true, true, false, true]);
+    let second_look: Vec<bool> = methods[1..]
+        .iter()
+        .map(|m| m["settings"]["look_again"] == true)
+        .collect();
+    assert_eq!(second_look, [true, true, true, true, true, true, false]);
 
     // The summary: the same numbers as the text's, per method, in the same order.
     let summary = doc["summary"]["methods"].as_array().expect("summary");

@@ -39,8 +39,10 @@ Methods:
                      LANDING_TARGET scored as below
   --pose-steps       adds the board's pipeline without the level fix, without the flip
                      choice, without both, without the detector's pattern fit of small
-                     markers' corners on far frames (no pattern fit), and without the
-                     rolling-shutter correction (no shutter correction), in that order
+                     markers' corners on far frames (no pattern fit), without the
+                     rolling-shutter correction (no shutter correction), and without the
+                     second look where a tracked pad was lost (no second look), in that
+                     order
 A recording without truth runs vision only and prints no errors.
 
 In flight (any input with truth): every method runs with the board's MAVLink companion (the

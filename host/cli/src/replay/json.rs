@@ -295,6 +295,7 @@ fn method(m: &Method) -> Value {
                 "flip_by_prediction": config.flip_by_prediction,
                 "detector": {"fit_small_markers": config.detector.fit_small_markers},
                 "correct_rolling_shutter": config.correct_rolling_shutter,
+                "look_again": config.look_again,
             }),
         ),
     };

@@ -154,6 +154,13 @@ pub fn run(
             Method::board("neither step", steps(false, false)),
             Method::board("no pattern fit", no_pattern_fit),
             Method::board("no shutter correction", no_shutter_correction),
+            Method::board(
+                "no second look",
+                PipelineConfig {
+                    look_again: false,
+                    ..PipelineConfig::default()
+                },
+            ),
         ]);
     }
     if !input.has_truth {
