@@ -89,8 +89,7 @@ use crate::geometry::Point;
 use crate::image::{GrayImage, ImageRegion};
 
 use candidates::Candidates;
-use strategy::{Look, Robust, Strategy};
-use threshold::ThresholdLevel;
+use strategy::{Look, Robust, Strategy, ThresholdLevel};
 
 /// Most markers reported per frame.
 pub const MAX_DETECTIONS: usize = 64;

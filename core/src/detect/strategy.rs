@@ -75,7 +75,16 @@ pub(super) enum Look {
 /// the mid-level over a frame, the ratio where a lost pad is looked for again
 /// ([`super::Detector::detect_region`]).
 pub(super) struct Robust {
-    pub(super) level: threshold::ThresholdLevel,
+    pub(super) level: ThresholdLevel,
+}
+
+/// Where between a window's darkest and lightest level a pixel turns dark.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum ThresholdLevel {
+    /// Halfway ([`threshold::local_threshold`]): the frame's search.
+    MidLevel,
+    /// At the ratio of the extrema ([`threshold::ratio_threshold`]): the second look.
+    Ratio,
 }
 
 impl Strategy for Robust {
@@ -87,14 +96,14 @@ impl Strategy for Robust {
         tiles: &mut [u8],
     ) {
         let max_rows = threshold::MaxRows::for_frame(image.width(), image.height());
-        threshold::local_threshold(
-            image,
-            config.min_contrast,
-            self.level,
-            max_rows,
-            bitmap,
-            tiles,
-        );
+        match self.level {
+            ThresholdLevel::MidLevel => {
+                threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles);
+            }
+            ThresholdLevel::Ratio => {
+                threshold::ratio_threshold(image, config.min_contrast, bitmap, tiles);
+            }
+        }
     }
 
     /// Hole boundaries are only candidates for white-on-black families; for the others

@@ -13,13 +13,16 @@
 //! shadowed paper (90), so a band of shadowed white along the shadow's edge turns dark and
 //! joins the border, and the marker's outline is no longer a quad. A shadow scales every level
 //! under it by the same factor, so what tells paper from ink across it is the *ratio* of the
-//! levels: [`ThresholdLevel::Ratio`] puts the threshold at the geometric mean of the window's
+//! levels: [`ratio_threshold`] puts the threshold at the geometric mean of the same windows'
 //! extrema (each raised by [`RATIO_PEDESTAL`], the sensor's black offset and flare), which
-//! keeps the shadowed paper light whenever the shadow darkens less than the ink does (sqrt(31 x
-//! 256) - 16 = 74 in the example). It is no better everywhere: it sits lower, so a thin,
-//! blurred dark line that reaches only part of the way down (a far marker's border) can stay
-//! light. The per-frame path therefore uses the mid-level over the frame and the ratio only
-//! where it looks again for a pad it just lost ([`super::Detector::detect_region`]).
+//! keeps the shadowed paper light whenever the shadow darkens less than the ink does
+//! (sqrt(31 x 256) - 16 = 74 in the example). It is no better everywhere: it sits lower, so a
+//! thin, blurred dark line that reaches only part of the way down (a far marker's border) can
+//! stay light. The per-frame path therefore binarises the frame at the mid-level and uses the
+//! ratio only where it looks again for a pad it just lost ([`super::Detector::detect_region`]),
+//! a region a fraction of the frame: one pixel at a time, apart from the frame's word-wide
+//! pass (sharing that pass's code, even as a second instance of it, cost the frame's pass 2 %
+//! more Cortex-M7 instructions).
 //!
 //! From VGA up ([`MaxRows::for_frame`]) a tile's maximum comes from two of its four rows
 //! (0 and 2); its minimum still from all four. The dark side decides where an outline is
@@ -166,46 +169,6 @@ fn tile_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
     mid & enough
 }
 
-/// Where between a window's darkest and lightest level a pixel turns dark.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum ThresholdLevel {
-    /// Halfway: the rounded-up mean of the window's extrema (the frame's search).
-    MidLevel,
-    /// The geometric mean of the extrema, each raised by [`RATIO_PEDESTAL`] (see the module
-    /// docs: across a hard shadow).
-    Ratio,
-}
-
-/// Grey levels added to a window's extrema before their geometric mean
-/// ([`ThresholdLevel::Ratio`]): what a sensor reads for no light at all (its black offset
-/// and the lens's flare) is not scaled by a shadow, and without it a window whose darkest
-/// pixel reads 0 would put the threshold at 0 and nothing would be dark.
-const RATIO_PEDESTAL: u32 = 16;
-
-/// The [`ThresholdLevel::Ratio`] threshold of one window: `ceil(sqrt((lo + P)(hi + P))) - P`
-/// (`P` = [`RATIO_PEDESTAL`]), between `lo` and `hi` like the mid-level.
-#[inline]
-fn ratio_level(lo: u32, hi: u32) -> u32 {
-    let product = (lo + RATIO_PEDESTAL) * (hi + RATIO_PEDESTAL);
-    let root = product.isqrt();
-    let root = if root * root < product {
-        root + 1
-    } else {
-        root
-    };
-    root.saturating_sub(RATIO_PEDESTAL).min(255)
-}
-
-/// [`tile_thresholds`] with the [`ThresholdLevel::Ratio`] level: one tile at a time (there is
-/// no per-byte square root), which only the small regions searched again can afford.
-fn ratio_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
-    let enough = ge_mask(hi.wrapping_sub(lo), min_contrast);
-    let level = [0, 8, 16, 24].iter().fold(0, |word, &shift| {
-        word | ratio_level((lo >> shift) & 0xFF, (hi >> shift) & 0xFF) << shift
-    });
-    level & enough
-}
-
 /// Which rows of a tile its maximum is taken over (its minimum: always all four).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum MaxRows {
@@ -231,13 +194,11 @@ impl MaxRows {
     }
 }
 
-/// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold at `level`, the
-/// tile maxima taken over `max_rows`. `tiles` holds at least `2 * ceil(w/4) * ceil(h/4)`
-/// bytes.
+/// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold, the tile maxima
+/// taken over `max_rows`. `tiles` holds at least `2 * ceil(w/4) * ceil(h/4)` bytes.
 pub(crate) fn local_threshold(
     image: &GrayImage<'_>,
     min_contrast: u8,
-    level: ThresholdLevel,
     max_rows: MaxRows,
     bitmap: &mut [u32],
     tiles: &mut [u8],
@@ -321,15 +282,7 @@ pub(crate) fn local_threshold(
     // Spread over the 3x3 tile neighbourhood, in place: the horizontal pass was done per
     // tile row above; the vertical one also turns the window's extrema into thresholds (flat
     // tiles get 0, so no pixel there is dark).
-    // One instance each, so that the frame's search keeps its four tiles a word.
-    match level {
-        ThresholdLevel::MidLevel => {
-            spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast, tile_thresholds);
-        }
-        ThresholdLevel::Ratio => {
-            spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast, ratio_thresholds);
-        }
-    }
+    spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
     let wpr = words_per_row(w);
     for y in 0..h {
         let row = image.row(y);
@@ -382,6 +335,113 @@ pub(crate) fn local_threshold(
     }
 }
 
+/// Grey levels added to a window's extrema before their geometric mean
+/// ([`ratio_threshold`]): what a sensor reads for no light at all (its black offset and the
+/// lens's flare) is not scaled by a shadow, and without it a window whose darkest pixel reads
+/// 0 would put the threshold at 0 and nothing would be dark.
+const RATIO_PEDESTAL: u32 = 16;
+
+/// The threshold of one window at the ratio of its extrema: `ceil(sqrt((lo + P)(hi + P))) - P`
+/// (`P` = [`RATIO_PEDESTAL`]), between `lo` and `hi` like the mid-level, below it.
+fn ratio_level(lo: u8, hi: u8) -> u8 {
+    let product = (u32::from(lo) + RATIO_PEDESTAL) * (u32::from(hi) + RATIO_PEDESTAL);
+    let root = product.isqrt();
+    let root = if root * root < product {
+        root + 1
+    } else {
+        root
+    };
+    root.saturating_sub(RATIO_PEDESTAL).min(255) as u8
+}
+
+/// Binarises `image` into `bitmap` (dark = 1) as [`local_threshold`] does (the same tiles,
+/// windows and `min_contrast`, every row of a tile), but with the threshold at the ratio of
+/// the window's extrema ([`ratio_level`], see the module docs). `tiles` holds at least
+/// `2 * ceil(w/4) * ceil(h/4)` bytes.
+pub(crate) fn ratio_threshold(
+    image: &GrayImage<'_>,
+    min_contrast: u8,
+    bitmap: &mut [u32],
+    tiles: &mut [u8],
+) {
+    let (w, h) = (image.width(), image.height());
+    let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
+    let n = tw * th;
+    let Some((tmin, rest)) = tiles.split_at_mut_checked(n) else {
+        return;
+    };
+    let Some(tmax) = rest.get_mut(..n) else {
+        return;
+    };
+    if tw == 0 {
+        return;
+    }
+    let tile_row = |grid: &mut [u8], ty: usize| -> usize { grid.len().min(ty * tw) };
+    // Each tile's extrema, then along the tile rows.
+    tmin.fill(u8::MAX);
+    tmax.fill(0);
+    for y in 0..h {
+        let start = tile_row(tmin, y / TILE);
+        let (Some(lows), Some(highs)) = (tmin.get_mut(start..), tmax.get_mut(start..)) else {
+            return;
+        };
+        for (x, &p) in image.row(y).iter().enumerate() {
+            if let (Some(lo), Some(hi)) = (lows.get_mut(x / TILE), highs.get_mut(x / TILE)) {
+                *lo = (*lo).min(p);
+                *hi = (*hi).max(p);
+            }
+        }
+    }
+    for (lows, highs) in tmin.chunks_exact_mut(tw).zip(tmax.chunks_exact_mut(tw)) {
+        spread_along(lows, byte_min, u8::min);
+        spread_along(highs, byte_max, u8::max);
+    }
+    // Down the columns: each row becomes the extreme of itself and the row below, then
+    // (bottom up, so that the row above is still a pair) of its pair and the pair above,
+    // which is the 3x3 window, and turns into its threshold in `tmin`.
+    for y in 1..th {
+        pair_rows(tmin, tw, y, byte_min, u8::min);
+        pair_rows(tmax, tw, y, byte_max, u8::max);
+    }
+    for y in (0..th).rev() {
+        for x in 0..tw {
+            let at = |grid: &[u8], row: usize| grid.get(row * tw + x).copied();
+            let above = y.checked_sub(1);
+            let lo = above
+                .and_then(|r| at(tmin, r))
+                .into_iter()
+                .chain(at(tmin, y))
+                .min();
+            let hi = above
+                .and_then(|r| at(tmax, r))
+                .into_iter()
+                .chain(at(tmax, y))
+                .max();
+            if let (Some(lo), Some(hi), Some(cell)) = (lo, hi, tmin.get_mut(y * tw + x)) {
+                *cell = if hi.saturating_sub(lo) < min_contrast {
+                    0
+                } else {
+                    ratio_level(lo, hi)
+                };
+            }
+        }
+    }
+    let wpr = words_per_row(w);
+    for y in 0..h {
+        let Some(out) = bitmap.get_mut(y * wpr..y * wpr + wpr) else {
+            return;
+        };
+        out.fill(0);
+        let thresholds = tmin.get((y / TILE) * tw..).unwrap_or(&[]);
+        for (x, &p) in image.row(y).iter().enumerate() {
+            let threshold = thresholds.get(x / TILE).copied().unwrap_or(0);
+            if let Some(word) = out.get_mut(x / 32) {
+                *word |= u32::from(p < threshold) << (x % 32);
+            }
+        }
+    }
+}
+
 /// 3-wide min (or max) filter of one row of tiles, in place (the edges repeat): four tiles
 /// a word by `pick_word` ([`byte_min`] or [`byte_max`]) against the word shifted by one tile
 /// either way (the neighbours across the word's ends come from the words before and after
@@ -430,8 +490,7 @@ fn spread_along(row: &mut [u8], pick_word: impl Fn(u32, u32) -> u32, pick: impl 
 
 /// The vertical half of the 3x3 min filter of `tmin` and max filter of `tmax` (`tw` x `th`
 /// grids, already filtered along their rows; the edges repeat), then each tile's threshold
-/// (`thresholds` of four windows' minima and maxima, as [`tile_thresholds`]) written into
-/// `tmin`.
+/// ([`tile_thresholds`]) written into `tmin`.
 ///
 /// In place and row by row, in two passes: top down, each row becomes the extreme of itself
 /// and the row below (the row below is still original); bottom up, each row's window is
@@ -444,7 +503,6 @@ fn spread_down_to_thresholds(
     tw: usize,
     th: usize,
     min_contrast: u8,
-    thresholds: impl Fn(u32, u32, u32) -> u32,
 ) {
     if tw == 0 {
         return;
@@ -481,11 +539,11 @@ fn spread_down_to_thresholds(
             for (slot, (up_lo, (hi, up_hi))) in (&mut out).zip(ins) {
                 let lo = byte_min(word(slot), word(up_lo));
                 let hi = byte_max(word(hi), word(up_hi));
-                slot.copy_from_slice(&thresholds(lo, hi, contrast).to_le_bytes());
+                slot.copy_from_slice(&tile_thresholds(lo, hi, contrast).to_le_bytes());
             }
         } else {
             for (slot, hi) in (&mut out).zip(row_hi.chunks_exact(4)) {
-                let threshold = thresholds(word(slot), word(hi), contrast);
+                let threshold = tile_thresholds(word(slot), word(hi), contrast);
                 slot.copy_from_slice(&threshold.to_le_bytes());
             }
         }
@@ -498,8 +556,11 @@ fn spread_down_to_thresholds(
                 (Some(hi), ..) => (*cell, hi),
                 _ => (*cell, *cell),
             };
-            // The same threshold as the whole words', in the lowest byte.
-            *cell = thresholds(u32::from(lo), u32::from(hi), u32::from(min_contrast)) as u8;
+            *cell = if hi.saturating_sub(lo) < min_contrast {
+                0
+            } else {
+                (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
+            };
         }
     }
 }
@@ -688,25 +749,60 @@ mod tests {
         }
         let img = GrayImage::new(&px, w, h).unwrap();
         let wpr = words_per_row(w);
-        let dark_at = |level, x| {
-            let mut bitmap = [0u32; 2 * 16];
-            let mut tiles = [0u8; 2 * 10 * 4];
-            local_threshold(&img, 20, level, MaxRows::All, &mut bitmap, &mut tiles);
-            get_bit(&bitmap, wpr, x, 8, w, h)
-        };
+        let (mut mid, mut ratio) = ([0u32; 2 * 16], [0u32; 2 * 16]);
+        let mut tiles = [0u8; 2 * 10 * 4];
+        local_threshold(&img, 20, MaxRows::All, &mut mid, &mut tiles);
+        ratio_threshold(&img, 20, &mut ratio, &mut tiles);
         for x in 16..20 {
-            assert!(dark_at(ThresholdLevel::MidLevel, x), "mid-level at {x}");
-            assert!(!dark_at(ThresholdLevel::Ratio, x), "ratio at {x}");
+            assert!(get_bit(&mid, wpr, x, 8, w, h), "mid-level at {x}");
+            assert!(!get_bit(&ratio, wpr, x, 8, w, h), "ratio at {x}");
         }
         for x in 20..24 {
-            assert!(dark_at(ThresholdLevel::Ratio, x), "ink at {x}");
+            assert!(get_bit(&ratio, wpr, x, 8, w, h), "ink at {x}");
         }
-        assert!(!dark_at(ThresholdLevel::Ratio, 10), "sunlit paper");
+        assert!(!get_bit(&ratio, wpr, 10, 8, w, h), "sunlit paper");
         // The level itself: between the extrema, below the mid-level, above 0 for a black 0.
         assert_eq!(ratio_level(15, 240), 74);
         assert_eq!(ratio_level(100, 100), 100);
         assert_eq!(ratio_level(0, 255), 50);
         assert_eq!(ratio_level(255, 255), 255);
+    }
+
+    /// On random images of every size up to 3 x 3 tiles and a partial tile, the ratio's
+    /// bitmap is the definition: a pixel is dark when it is below the ratio level of the
+    /// extrema over its tile and the eight around it (edges repeat), with `min_contrast`.
+    #[test]
+    fn the_ratio_threshold_matches_the_definition() {
+        let mut seed = 11u32;
+        for w in 1..=14usize {
+            for h in 1..=14usize {
+                let mut px = [0u8; 14 * 14];
+                for p in px.iter_mut().take(w * h) {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    *p = (seed >> 24) as u8;
+                }
+                let img = GrayImage::new(&px[..w * h], w, h).unwrap();
+                let mut bitmap = [u32::MAX; 14];
+                let mut tiles = [0u8; 2 * 4 * 4];
+                ratio_threshold(&img, 40, &mut bitmap, &mut tiles);
+                for y in 0..h {
+                    for x in 0..w {
+                        let (tx, ty) = ((x / TILE) as isize, (y / TILE) as isize);
+                        let (mut lo, mut hi) = (255u8, 0u8);
+                        for (qx, qy) in (0..w).flat_map(|qx| (0..h).map(move |qy| (qx, qy))) {
+                            let (ux, uy) = ((qx / TILE) as isize, (qy / TILE) as isize);
+                            if (ux - tx).abs() <= 1 && (uy - ty).abs() <= 1 {
+                                lo = lo.min(px[qy * w + qx]);
+                                hi = hi.max(px[qy * w + qx]);
+                            }
+                        }
+                        let t = if hi - lo < 40 { 0 } else { ratio_level(lo, hi) };
+                        let dark = get_bit(&bitmap, 1, x as isize, y as isize, w, h);
+                        assert_eq!(dark, px[y * w + x] < t, "{w}x{h} at ({x}, {y})");
+                    }
+                }
+            }
+        }
     }
 
     #[test]
@@ -721,14 +817,7 @@ mod tests {
         let img = GrayImage::new(&px, w, h).unwrap();
         let mut bitmap = [0u32; 2 * 24];
         let mut tiles = [0u8; 2 * 10 * 6];
-        local_threshold(
-            &img,
-            20,
-            ThresholdLevel::MidLevel,
-            MaxRows::All,
-            &mut bitmap,
-            &mut tiles,
-        );
+        local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles);
         let wpr = words_per_row(w);
         assert!(get_bit(&bitmap, wpr, 10, 8, w, h));
         assert!(get_bit(&bitmap, wpr, 29, 15, w, h));
@@ -738,14 +827,7 @@ mod tests {
         assert!(!get_bit(&bitmap, wpr, 0, 0, w, h));
         let flat = [90u8; 40 * 24];
         let img = GrayImage::new(&flat, w, h).unwrap();
-        local_threshold(
-            &img,
-            20,
-            ThresholdLevel::MidLevel,
-            MaxRows::All,
-            &mut bitmap,
-            &mut tiles,
-        );
+        local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles);
         assert!(bitmap.iter().all(|&word| word == 0));
     }
 
@@ -772,14 +854,7 @@ mod tests {
             for max_rows in [MaxRows::All, MaxRows::EveryOther] {
                 let mut bitmap = [0u32; 3 * 50];
                 let mut tiles = [0u8; 2 * 24 * 13];
-                local_threshold(
-                    &img,
-                    20,
-                    ThresholdLevel::MidLevel,
-                    max_rows,
-                    &mut bitmap,
-                    &mut tiles,
-                );
+                local_threshold(&img, 20, max_rows, &mut bitmap, &mut tiles);
                 // Whether pixel (xx, yy) counts in its tile's maximum: every row, or rows 0
                 // and 2 of the tile (the last row standing in for missing ones), and every
                 // row of a partial tile at the end of the rows.
