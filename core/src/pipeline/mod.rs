@@ -45,8 +45,8 @@
 //! mid-level ([`PipelineConfig::look_again`]). A hard shadow across a marker (a building's, a
 //! tree's, the vehicle's own) is the case: the mid-level turns the shadowed paper along the
 //! shadow's edge dark and the marker's outline stops being a quad, while the ratio keeps paper
-//! and ink apart on both sides. The region is the last fix's markers grown by their own size
-//! on every side; when that is more than [`LOOK_AGAIN_MAX_FRACTION`] of the frame there is no
+//! and ink apart on both sides. The region is the whole pad as the last fix places it (every
+//! marker, seen or not) grown by half its size on every side; when that is more than [`LOOK_AGAIN_MAX_FRACTION`] of the frame there is no
 //! second look, so a frame costs at most that fraction more than its own search. A frame
 //! without a recent fix (and every frame of a benchmark) is searched once.
 //!
@@ -84,7 +84,7 @@ use crate::geometry::Point;
 use crate::image::{GrayImage, ImageRegion};
 use crate::pad::{PadError, PadLayout, MAX_PAD_MARKERS};
 use crate::params::{ParamSet, PipelineSettings};
-use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix};
+use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix, Pose};
 use crate::sensor::{motion_cap_us, pad_levels, scene_levels, Metering, SCENE_STEP};
 use nalgebra::{Matrix3, Vector3};
 
@@ -152,7 +152,7 @@ pub const LOOK_AGAIN_MAX_AGE_US: u64 = 500_000;
 /// a half searches).
 pub const LOOK_AGAIN_MAX_FRACTION: f32 = 0.5;
 
-/// Smallest margin around the last fix's markers, pixels: a far pad moves by more than its
+/// Smallest margin around the last fix's pad, pixels: a far pad moves by more than its
 /// own few pixels between frames.
 const LOOK_AGAIN_MIN_MARGIN_PX: f32 = 16.0;
 
@@ -177,8 +177,8 @@ pub struct FramePipeline<'a> {
     /// the pad's plane for the rolling-shutter correction while the estimator has no
     /// prediction (its tracks are confirmed only after a few fixes).
     last_translation: Option<(u64, Vector3<f32>)>,
-    /// The exposure time of the last fix and the pixels its pad markers covered: where a
-    /// frame without a fix is searched again.
+    /// The exposure time of the last fix and the pixels its pad covered: where a frame
+    /// without a fix is searched again.
     last_pad_pixels: Option<(u64, PixelBox)>,
 }
 
@@ -190,20 +190,19 @@ struct PixelBox {
 }
 
 impl PixelBox {
-    /// Around the corners of the `detections` that are markers of `pad`; `None` if none is.
-    fn around_pad_markers(
-        detections: &[Detection],
-        families: &[&Family<'_>],
-        pad: &PadLayout<'_>,
-    ) -> Option<Self> {
-        detections
+    /// Around every marker of `pad` as `pose` (pad to camera) shows it through `camera`,
+    /// seen or not (a far frame may have decoded only one small marker, and the one it lost
+    /// is another); `None` if none projects. Each marker counts as the square around its
+    /// circumscribed circle, whatever its turn on the pad.
+    fn around_pad(pose: &Pose, pad: &PadLayout<'_>, camera: &CameraModel) -> Option<Self> {
+        const SIGNS: [(f32, f32); 4] = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        pad.markers()
             .iter()
-            .filter(|d| {
-                families
-                    .get(usize::from(d.family))
-                    .is_some_and(|f| pad.find(f.name, d.id).is_some())
+            .flat_map(|m| {
+                let reach = m.size * core::f32::consts::FRAC_1_SQRT_2;
+                SIGNS.map(|(sx, sy)| Vector3::new(m.x + sx * reach, m.y + sy * reach, 0.0))
             })
-            .flat_map(|d| d.corners)
+            .filter_map(|corner| camera.project(&pose.transform(&corner)))
             .fold(None, |bounds: Option<PixelBox>, p| {
                 Some(match bounds {
                     None => PixelBox { min: p, max: p },
@@ -215,12 +214,12 @@ impl PixelBox {
             })
     }
 
-    /// This box grown by its larger side (at least [`LOOK_AGAIN_MIN_MARGIN_PX`]) on every
-    /// side and cut to a `width` x `height` frame, in whole pixels; `None` when that is more
+    /// This box grown by half its larger side (at least [`LOOK_AGAIN_MIN_MARGIN_PX`]) on
+    /// every side and cut to a `width` x `height` frame, in whole pixels; `None` when that is more
     /// than [`LOOK_AGAIN_MAX_FRACTION`] of the frame or nothing of it is inside.
     fn look_again_region(&self, width: usize, height: usize) -> Option<ImageRegion> {
         let size = (self.max.x - self.min.x).max(self.max.y - self.min.y);
-        let margin = size.max(LOOK_AGAIN_MIN_MARGIN_PX);
+        let margin = (0.5 * size).max(LOOK_AGAIN_MIN_MARGIN_PX);
         let clamp = |v: f32, end: usize| {
             if v.is_nan() {
                 0
@@ -313,7 +312,7 @@ impl Fixes<'_, '_> {
             image_fix,
             fix,
             pad: pad_levels(image, raw, families),
-            pixels: PixelBox::around_pad_markers(raw, families, pad),
+            pixels: fix.and_then(|f| PixelBox::around_pad(&f.pose, pad, camera)),
             error: None,
         }
     }
@@ -618,6 +617,44 @@ mod tests {
     use crate::family::tables;
     use crate::pad::designs;
     use crate::params::{ParamId, ParamSet};
+
+    #[test]
+    fn the_second_look_searches_around_the_pad_within_half_the_frame() {
+        let boxed = |x0, y0, x1, y1| PixelBox {
+            min: Point::new(x0, y0),
+            max: Point::new(x1, y1),
+        };
+        // A 40 x 20 pad at (100, 100): grown by 20 px each way.
+        let region = boxed(100.0, 100.0, 140.0, 120.0).look_again_region(320, 240);
+        let expected = ImageRegion {
+            x: 80,
+            y: 80,
+            width: 81,
+            height: 61,
+        };
+        assert_eq!(region, Some(expected));
+        // A far pad of 6 px: at least LOOK_AGAIN_MIN_MARGIN_PX; cut at the frame's edge.
+        let region = boxed(2.0, 230.0, 8.0, 236.0).look_again_region(320, 240);
+        let expected = ImageRegion {
+            x: 0,
+            y: 214,
+            width: 25,
+            height: 26,
+        };
+        assert_eq!(region, Some(expected));
+        // Grown past half the frame: no second look; a box off the frame or not a number:
+        // none either.
+        assert_eq!(
+            boxed(60.0, 40.0, 260.0, 200.0).look_again_region(320, 240),
+            None
+        );
+        assert_eq!(
+            boxed(400.0, 10.0, 420.0, 30.0).look_again_region(320, 240),
+            None
+        );
+        let nan = boxed(f32::NAN, 10.0, 20.0, f32::NAN).look_again_region(320, 240);
+        assert!(nan.is_none_or(|r| r.width * r.height <= 320 * 240 / 2));
+    }
 
     /// The firmware's set-up: the default families, the nested pad, a QVGA pinhole camera.
     fn nested_pipeline() -> FramePipeline<'static> {
