@@ -55,10 +55,15 @@ fn fixes(look_again: bool) -> (bool, bool, usize) {
         let image = frame.image.view();
         let mut buffers = workspace.buffers(image.width(), image.height());
         let report = pipeline.process(&image, t_us, &vehicle, &mut buffers);
-        (report.fix.is_some(), report.markers)
+        (report.fix.is_some(), report.markers, report.looked_again)
     };
-    let (first, _) = fix_at(&sunlit, 1_000_000);
-    let (second, markers) = fix_at(&shadowed, 1_033_333);
+    let (first, _, first_looked_again) = fix_at(&sunlit, 1_000_000);
+    assert!(!first_looked_again, "no second look without a fix before");
+    let (second, markers, looked_again) = fix_at(&shadowed, 1_033_333);
+    assert_eq!(
+        looked_again, look_again,
+        "a second look where the pad was lost"
+    );
     (first, second, markers)
 }
 

@@ -133,6 +133,11 @@ pub struct FrameReport {
     pub markers: usize,
     /// Why detection stopped, when it did (the frame then has no fix).
     pub detect_error: Option<DetectError>,
+    /// Whether the frame's own search lost a recently fixed pad and the detector searched
+    /// where the pad was again (see the module docs); the detector's statistics and
+    /// detections are then the second look's, and so are `fix` and `markers` when it found
+    /// the pad.
+    pub looked_again: bool,
     /// What the exposure loop is fed ([`crate::sensor::AutoExposure::update_metered`]): the
     /// decoded markers' white and black, the scene's mean and highlight, and the longest
     /// exposure the body rate at the exposure allows through this camera.
@@ -143,7 +148,7 @@ pub struct FrameReport {
 /// correction, µs (a hover's drift over it is centimetres).
 const MAX_PLANE_AGE_US: u64 = 500_000;
 
-/// Oldest fix whose markers' place is searched again when a frame gives none, µs: at 30 Hz
+/// Oldest fix whose pad's place is searched again when a frame gives none, µs: at 30 Hz
 /// fifteen frames, over which a hovering or descending vehicle moves the pad by less than the
 /// region's margin.
 pub const LOOK_AGAIN_MAX_AGE_US: u64 = 500_000;
@@ -472,6 +477,7 @@ impl<'a> FramePipeline<'a> {
             .filter(|(t_us, _)| exposure_us.abs_diff(*t_us) <= LOOK_AGAIN_MAX_AGE_US)
             .and_then(|(_, pixels)| pixels.look_again_region(image.width(), image.height()))
             .filter(|_| self.config.look_again && found.fix.is_none() && found.error.is_none());
+        let looked_again = region.is_some();
         if let Some(region) = region {
             if let Ok(raw) = self
                 .detector
@@ -509,6 +515,7 @@ impl<'a> FramePipeline<'a> {
             fix,
             markers,
             detect_error,
+            looked_again,
             metering: Metering {
                 mean,
                 highlight,
@@ -600,7 +607,8 @@ impl<'a> FramePipeline<'a> {
         &self.camera
     }
 
-    /// The detector (its statistics of the last frame, its configuration).
+    /// The detector (its configuration, and its statistics and detections of the last search:
+    /// the frame's own, or the second look's, [`FrameReport::looked_again`]).
     pub fn detector(&self) -> &Detector {
         &self.detector
     }
