@@ -8,6 +8,7 @@
 
 use touchdown_core::family::tables;
 use touchdown_core::filter::VehicleState;
+use touchdown_core::pad::PadLayout;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::workspace::HostWorkspace;
@@ -25,30 +26,44 @@ fn first_frame(shadowed: bool) -> (Simulator, SimFrame) {
     (simulator, frame)
 }
 
+/// The scenario's pad.
+fn pad_of(simulator: &Simulator) -> PadLayout<'_> {
+    simulator
+        .scenario
+        .pad
+        .config
+        .layout()
+        .expect("the nested pad")
+}
+
+/// The per-frame path for the scenario's pad and camera, the default families.
+fn pipeline_for<'a>(
+    simulator: &Simulator,
+    layout: &PadLayout<'a>,
+    config: PipelineConfig,
+) -> FramePipeline<'a> {
+    FramePipeline::new(
+        tables::DEFAULT,
+        layout,
+        simulator.scenario.camera.model,
+        config,
+        PipelineSettings::default(),
+    )
+    .expect("the default trackers")
+}
+
 /// Whether each of the two frames, the sunlit one and then the shadowed one 33 ms later,
 /// gives a pad fix, with the second look on or off; and the markers the pipeline's detector
 /// reported for the shadowed frame.
 fn fixes(look_again: bool) -> (bool, bool, usize) {
     let (simulator, sunlit) = first_frame(false);
     let (_, shadowed) = first_frame(true);
-    let layout = simulator
-        .scenario
-        .pad
-        .config
-        .layout()
-        .expect("the nested pad");
+    let layout = pad_of(&simulator);
     let config = PipelineConfig {
         look_again,
         ..PipelineConfig::default()
     };
-    let mut pipeline = FramePipeline::new(
-        tables::DEFAULT,
-        &layout,
-        simulator.scenario.camera.model,
-        config,
-        PipelineSettings::default(),
-    )
-    .expect("the default trackers");
+    let mut pipeline = pipeline_for(&simulator, &layout, config);
     let mut workspace = HostWorkspace::new();
     let vehicle = VehicleState::new();
     let mut fix_at = |frame: &SimFrame, t_us: u64| {
@@ -94,21 +109,9 @@ fn the_second_look_finds_the_marker_where_it_is() {
     // shadow crosses (its two corners 1.2 and 1.4 px off, in opposite directions, so the
     // marker's width and the range are nearly right); the other corners 0.1 and 0.4 px.
     let (simulator, frame) = first_frame(true);
-    let layout = simulator
-        .scenario
-        .pad
-        .config
-        .layout()
-        .expect("the nested pad");
+    let layout = pad_of(&simulator);
     let truth = simulator.marker_corners(&touchdown_sim::pose_of_truth(&frame.truth));
-    let mut pipeline = FramePipeline::new(
-        tables::DEFAULT,
-        &layout,
-        simulator.scenario.camera.model,
-        PipelineConfig::default(),
-        PipelineSettings::default(),
-    )
-    .expect("the default trackers");
+    let mut pipeline = pipeline_for(&simulator, &layout, PipelineConfig::default());
     let (_, sunlit) = first_frame(false);
     let mut workspace = HostWorkspace::new();
     let vehicle = VehicleState::new();

@@ -169,6 +169,21 @@ fn tile_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
     mid & enough
 }
 
+/// The tile grid of a `w` x `h` image: its width and height in tiles and the two grids
+/// (minima, maxima) cut from `tiles`; `None` when `tiles` is too short or the image empty.
+#[inline(always)]
+fn tile_grids(
+    w: usize,
+    h: usize,
+    tiles: &mut [u8],
+) -> Option<(usize, usize, &mut [u8], &mut [u8])> {
+    let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
+    let n = tw * th;
+    let (tmin, rest) = tiles.split_at_mut_checked(n)?;
+    let tmax = rest.get_mut(..n)?;
+    (tw > 0).then_some((tw, th, tmin, tmax))
+}
+
 /// Which rows of a tile its maximum is taken over (its minimum: always all four).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum MaxRows {
@@ -204,17 +219,9 @@ pub(crate) fn local_threshold(
     tiles: &mut [u8],
 ) {
     let (w, h) = (image.width(), image.height());
-    let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
-    let n = tw * th;
-    let Some((tmin, rest)) = tiles.split_at_mut_checked(n) else {
+    let Some((tw, th, tmin, tmax)) = tile_grids(w, h, tiles) else {
         return;
     };
-    let Some(tmax) = rest.get_mut(..n) else {
-        return;
-    };
-    if tw == 0 {
-        return;
-    }
     // Tile extrema, one tile row at a time: a tile's four rows are four 32-bit words, which
     // are reduced to a per-byte min and max word in registers (SWAR, see `byte_min_max`),
     // then to the tile's min and max byte.
@@ -365,17 +372,9 @@ pub(crate) fn ratio_threshold(
     tiles: &mut [u8],
 ) {
     let (w, h) = (image.width(), image.height());
-    let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
-    let n = tw * th;
-    let Some((tmin, rest)) = tiles.split_at_mut_checked(n) else {
+    let Some((tw, th, tmin, tmax)) = tile_grids(w, h, tiles) else {
         return;
     };
-    let Some(tmax) = rest.get_mut(..n) else {
-        return;
-    };
-    if tw == 0 {
-        return;
-    }
     let tile_row = |grid: &mut [u8], ty: usize| -> usize { grid.len().min(ty * tw) };
     // Each tile's extrema, then along the tile rows.
     tmin.fill(u8::MAX);

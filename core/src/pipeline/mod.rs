@@ -632,24 +632,20 @@ mod tests {
             min: Point::new(x0, y0),
             max: Point::new(x1, y1),
         };
+        let region = |x, y, width, height| {
+            Some(ImageRegion {
+                x,
+                y,
+                width,
+                height,
+            })
+        };
         // A 40 x 20 pad at (100, 100): grown by 20 px each way.
-        let region = boxed(100.0, 100.0, 140.0, 120.0).look_again_region(320, 240);
-        let expected = ImageRegion {
-            x: 80,
-            y: 80,
-            width: 81,
-            height: 61,
-        };
-        assert_eq!(region, Some(expected));
+        let found = boxed(100.0, 100.0, 140.0, 120.0).look_again_region(320, 240);
+        assert_eq!(found, region(80, 80, 81, 61));
         // A far pad of 6 px: at least LOOK_AGAIN_MIN_MARGIN_PX; cut at the frame's edge.
-        let region = boxed(2.0, 230.0, 8.0, 236.0).look_again_region(320, 240);
-        let expected = ImageRegion {
-            x: 0,
-            y: 214,
-            width: 25,
-            height: 26,
-        };
-        assert_eq!(region, Some(expected));
+        let found = boxed(2.0, 230.0, 8.0, 236.0).look_again_region(320, 240);
+        assert_eq!(found, region(0, 214, 25, 26));
         // Grown past half the frame: no second look; a box off the frame or not a number:
         // none either.
         assert_eq!(
