@@ -28,12 +28,24 @@
 //! 3. **Motion** ([`Metering::max_exposure_us`]): the exposure never exceeds what keeps the
 //!    image motion of the vehicle's body rate under half a pixel; gain makes up the light.
 //!
-//! The loop multiplies exposure x gain by `aim / level`, limited to a factor of 2 per step
-//! (the sensor applies new values one or two frames late; bigger steps would oscillate), and
-//! does nothing while the level is within the deadband of its aim ([`PAD_DEADBAND`] for the
-//! markers' white, [`AutoExposureLimits::deadband`] for the mean) except moving light between
-//! exposure and gain when the motion cap changed. [`AutoExposure::update`], the mean alone, is
-//! the loop as it was before markers and highlights were metered.
+//! The loop multiplies exposure x gain by `aim / level`, limited to a factor of 2 per step,
+//! and does nothing while the level is within the deadband of its aim ([`PAD_DEADBAND`] for
+//! the markers' white, [`AutoExposureLimits::deadband`] for the mean) except moving light
+//! between exposure and gain when the motion cap changed. [`AutoExposure::update`], the mean
+//! alone, is the loop as it was before markers and highlights were metered.
+//!
+//! # Latency
+//!
+//! A setting computed from frame `n` is written while frame `n + 1` is being exposed, so `n + 2`
+//! is the first frame exposed with it (`n + 3` on a sensor that latches its exposure a frame
+//! late). A step is the whole correction, so the frames metered before it reaches the sensor
+//! must not be corrected for again: after each change of the brightness the loop lets
+//! [`SETTLE_FRAMES`] frames' levels pass (their bookkeeping, the pad's hold, and the motion cap
+//! still apply). Without that, a clipped pad was halved on two frames in a row, then found a
+//! quarter too dark and doubled twice: a limit cycle of six frames (measured on the `sun`
+//! scenario at 20 m: the markers' white 254, 254, 187, 95, 95, 186, 254, ...), a third of the
+//! frames clipped, where blooming made the markers read 1 to 2.5 % small (the altitude as much
+//! high) and the jumps between those and the good frames became the pad tracker's velocity.
 
 use super::metering::Metering;
 use super::GainX16;
@@ -55,6 +67,9 @@ pub const HIGHLIGHT_CEILING: u8 = 230;
 pub const HIGHLIGHT_CLIPPED: u8 = 250;
 /// The highlight guard lowers the scene's mean to `target / GUARD_FLOOR_DIVISOR` at most.
 pub const GUARD_FLOOR_DIVISOR: u64 = 4;
+/// Frames whose levels are not acted on after a change of the brightness: they were exposed
+/// before the change reached the sensor (see the module docs' latency).
+pub const SETTLE_FRAMES: u8 = 2;
 
 /// Limits and target of [`AutoExposure`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,6 +116,8 @@ pub struct AutoExposure {
     setting: ExposureSetting,
     /// Frames left during which a lost pad's setting is held.
     pad_hold: u8,
+    /// Frames left whose levels predate the last change of the brightness.
+    settling: u8,
 }
 
 impl AutoExposure {
@@ -121,6 +138,7 @@ impl AutoExposure {
                 gain: GainX16::ONE,
             },
             pad_hold: 0,
+            settling: 0,
         }
     }
 
@@ -153,6 +171,8 @@ impl AutoExposure {
         if next == self.setting {
             return None;
         }
+        // Pulled inside the new limits: a change of the brightness like the loop's own.
+        self.settling = SETTLE_FRAMES;
         self.setting = next;
         Some(next)
     }
@@ -179,7 +199,12 @@ impl AutoExposure {
         // Brightness is proportional to exposure x gain; work in (lines x gain/16), in u64
         // (65,535 lines at 4,096x gain times a target of 255 would overflow u32).
         let current = u64::from(self.setting.lines) * u64::from(self.setting.gain.0);
-        let wanted = match self.aim(metering) {
+        // The aim is taken on every frame (it keeps the pad's hold), acted on only once the
+        // frames exposed before the last change have passed.
+        let aim = self.aim(metering);
+        let settled = self.settling == 0;
+        self.settling = self.settling.saturating_sub(1);
+        let wanted = match aim.filter(|_| settled) {
             Some((level, aim)) => {
                 let wanted = current * aim / level.max(1);
                 // min/max rather than `clamp`, whose panic on crossed bounds the optimiser
@@ -207,6 +232,10 @@ impl AutoExposure {
         };
         if next == self.setting {
             return None;
+        }
+        // Light moved between exposure and gain alone (the motion cap) changes no level.
+        if wanted != current {
+            self.settling = SETTLE_FRAMES;
         }
         self.setting = next;
         Some(next)
@@ -442,6 +471,51 @@ mod tests {
         assert!(ae
             .update_metered(&sunny(held, 500, 2_000, 0.0, false))
             .is_some());
+    }
+
+    #[test]
+    fn a_sensor_two_frames_late_does_not_make_the_loop_oscillate() {
+        // The board's timing: the setting computed from frame n first exposes frame n + 2. A
+        // clipped pad (paper 4x the grass) after the mean alone set the exposure.
+        let mut ae = qvga();
+        for _ in 0..20 {
+            ae.update(scene(ae.setting(), 500));
+        }
+        let mut exposed = [ae.setting(); 2];
+        let mut whites = [0u8; 40];
+        for white in whites.iter_mut() {
+            let m = sunny(exposed[0], 500, 2_000, 0.02, true);
+            *white = m.pad.map_or(0, |p| p.white);
+            ae.update_metered(&m);
+            exposed = [exposed[1], ae.setting()];
+        }
+        assert_eq!(whites[0], 255);
+        // Settled within the first half and held there: no frame of the second half clipped
+        // or off its target by more than the deadband.
+        for &white in &whites[20..] {
+            assert!(
+                white.abs_diff(PAD_WHITE_TARGET) <= PAD_DEADBAND,
+                "whites {whites:?}"
+            );
+        }
+        // Without the settling frames the same loop cycles for ever between clipping and
+        // a quarter of the light (the failure this guards against).
+        let mut ae = qvga();
+        for _ in 0..20 {
+            ae.update(scene(ae.setting(), 500));
+        }
+        let mut exposed = [ae.setting(); 2];
+        let mut clipped_late = 0;
+        for frame in 0..40 {
+            let m = sunny(exposed[0], 500, 2_000, 0.02, true);
+            if frame >= 20 && m.pad.is_some_and(|p| p.white >= PAD_CLIPPED) {
+                clipped_late += 1;
+            }
+            ae.settling = 0;
+            ae.update_metered(&m);
+            exposed = [exposed[1], ae.setting()];
+        }
+        assert!(clipped_late >= 3, "clipped {clipped_late}");
     }
 
     #[test]
