@@ -49,7 +49,6 @@
 use super::axes::{level_measurement, pad_orientation, Attitude, CameraMount};
 use super::mount_calibration::{
     MountCalibrationConfig, MountCalibrator, MountCorrection, MountEstimate,
-    UNCALIBRATED_TILT_SIGMA_DEG,
 };
 use super::tracker::{ConfigError, Estimate, Tracker, TrackerConfig};
 use super::vehicle::{PositionSample, VehicleAtExposure};
@@ -220,26 +219,6 @@ impl PadEstimator {
     /// The mount calibrator's estimate so far.
     pub fn mount_estimate(&self) -> Option<MountEstimate> {
         self.calibrator.estimate()
-    }
-
-    /// How far the pad's tilt, as the attitude through the mount in force gives it, may be
-    /// off, one sigma per axis, radians: what the level fix weighs the image's own tilt
-    /// against ([`crate::pose`]'s level fix). The autopilot's attitude bias
-    /// ([`MountCalibrationConfig::attitude_bias_deg`]) and the mount's error: once the
-    /// calibrator is confident, its sigma or, if larger, how far its estimate is from the
-    /// mount in force (TD_CAM_CAL 1 reports without adopting it); before,
-    /// [`UNCALIBRATED_TILT_SIGMA_DEG`].
-    pub fn level_tilt_sigma_rad(&self) -> f32 {
-        let mount_deg = match self.calibrator.estimate() {
-            Some(e) if e.confident => {
-                let (roll, pitch) = self.mount_tilt_deg;
-                let off = (e.roll_deg - roll).abs().max((e.pitch_deg - pitch).abs());
-                e.sigma_deg().max(off)
-            }
-            _ => UNCALIBRATED_TILT_SIGMA_DEG,
-        };
-        let attitude_deg = self.calibrator.config().attitude_bias_deg;
-        libm::sqrtf(mount_deg * mount_deg + attitude_deg * attitude_deg).to_radians()
     }
 
     /// Forgets both tracks (a new, independent flight). The mount calibration is kept: the
@@ -520,21 +499,6 @@ mod tests {
             assert_eq!(reports, want, "on {on}, levelled {levelled}");
             if on && levelled {
                 assert_eq!(e.mount_calibrator().stats().tilt_not_measured, 400);
-            }
-            // The level fix's tilt prior: the uncalibrated mount's with the attitude's bias;
-            // confident, the distance from the mount in force (1.8 degrees, not adopted here)
-            // until it is adopted, then the calibration's own sigma.
-            let uncalibrated = libm::sqrtf(1.5 * 1.5 + 0.25 * 0.25).to_radians();
-            let sigma = e.level_tilt_sigma_rad();
-            if reports == 0 {
-                assert!((sigma - uncalibrated).abs() < 1e-6, "{sigma}");
-            } else {
-                let off = libm::sqrtf(1.5 * 1.5 + 0.25 * 0.25).to_radians();
-                assert!((sigma - off).abs() < 1e-3, "{sigma}");
-                let m = e.mount_estimate().unwrap();
-                e.set_mount(0.0, m.roll_deg, m.pitch_deg);
-                let adopted = e.level_tilt_sigma_rad().to_degrees();
-                assert!(adopted > 0.25 && adopted < 0.6, "{adopted}");
             }
         }
     }

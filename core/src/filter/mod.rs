@@ -54,7 +54,7 @@ pub use estimator::{EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate, 
 pub use mount_calibration::{
     roll_pitch_aligning, MountCalibrationConfig, MountCalibrationMode, MountCalibrationStats,
     MountCalibrator, MountCorrection, MountEstimate, MountRefusal, FRAME_DECORRELATION_US,
-    MIN_REREPORT_DEG, REREPORT_SIGMAS, RESTART_AFTER_OUTLIERS, UNCALIBRATED_TILT_SIGMA_DEG,
+    MIN_REREPORT_DEG, REREPORT_SIGMAS, RESTART_AFTER_OUTLIERS,
 };
 pub use paper::{PaperConfig, PaperKalman};
 pub use tracker::{

@@ -35,9 +35,7 @@
 //!   that reproject almost equally well; the one nearer the estimator's prediction wins.
 //! - **level fix** ([`PipelineConfig::level_fix`]): with the attitude at the exposure, the pad's tilt is
 //!   taken from gravity instead of the image (where it is barely observable on a small
-//!   marker), which removes the range bias the tilt-range coupling gives at altitude; within
-//!   the mount's uncertainty ([`PadEstimator::level_tilt_sigma_rad`]) the image's own tilt
-//!   corrects it where the image measures it better.
+//!   marker), which removes the range bias the tilt-range coupling gives at altitude.
 //!
 //! Before the fix, on a rolling-shutter camera ([`CameraModel::line_time_us`] above 0), the
 //! pad's corners are moved to where the camera saw them at the frame's time, from the body
@@ -316,11 +314,9 @@ impl<'a> FramePipeline<'a> {
                     pad_pose_with_prediction(detections, families, pad, camera, predicted.as_ref())
                         .ok();
                 // The level fix falls back to the image's own fix when it cannot be solved.
-                let tilt_sigma = self.estimator.level_tilt_sigma_rad();
                 let fix = image_fix.map(|fix| match &camera_from_level {
                     Some(c) => {
-                        level_pad_fix(&fix, detections, families, pad, camera, c, tilt_sigma)
-                            .unwrap_or(fix)
+                        level_pad_fix(&fix, detections, families, pad, camera, c).unwrap_or(fix)
                     }
                     None => fix,
                 });

@@ -11,25 +11,6 @@
 //! marker. The result is unbiased in altitude and its covariance no longer carries the
 //! tilt-range coupling.
 //!
-//! # The tilt's prior
-//!
-//! The attitude's tilt reaches the camera through the mount, and an uncalibrated mount is a
-//! degree or two off. A wrong tilt is not harmless: a marker seen off the optical axis is
-//! foreshortened along that direction by the cosine of its viewing angle, and a model tilted
-//! by `e` towards or away from the line of sight is foreshortened by a different amount,
-//! which the solve reads as range: `tan(angle) * e / 2` of it, 0.2 % for a marker 6 degrees
-//! off-axis and a 2 degree error (the `sun` scenario's 20 and 10 m hovers read 5 and 2-3 cm
-//! low with the mount's 2 degrees). Where the image measures the tilt well (several markers,
-//! near: a degree at 10 m on the nested pad, tenths below) it should win. So the tilt is
-//! solved beside the translation, with the attitude's as a prior of the sigma the caller
-//! gives ([`crate::filter::PadEstimator::level_tilt_sigma_rad`]: the uncalibrated mount's
-//! 1.5 degrees, the calibration's sigma once it is confident): a maximum a posteriori solve
-//! that keeps the attitude's tilt where one small marker measures its own to several degrees
-//! (20 m), takes the image's where it is measured to a degree or better, and puts the tilt's
-//! uncertainty into the translation's covariance either way. Its linear model of the tilt
-//! (each point's move for a small turn about the level axes) is solved in
-//! [`PASSES`] Gauss-Newton passes; held (a sigma of 0) the tilt is the attitude's, as before.
-//!
 //! # The row rate
 //!
 //! On a rolling-shutter camera each row is exposed at its own time. The pipeline moves the
@@ -58,7 +39,7 @@ use crate::camera::CameraModel;
 use crate::detect::Detection;
 use crate::family::Family;
 use crate::pad::PadLayout;
-use nalgebra::{Matrix2, Matrix3, Matrix5, Vector2, Vector3, Vector5};
+use nalgebra::{Matrix3, Vector3};
 
 /// The prior on the camera's residual turn rate over the readout (rad/s, one sigma per
 /// axis): the mount's vibration, what the rolling-shutter correction from the autopilot's
@@ -68,19 +49,11 @@ use nalgebra::{Matrix2, Matrix3, Matrix5, Vector2, Vector3, Vector5};
 /// poorly, and a looser prior (1 and 3 rad/s were measured) reads the far rows worse.
 pub const ROW_RATE_PRIOR_RAD_S: f32 = 0.44;
 
-/// Gauss-Newton passes of the solve: the first finds the depths (from the image fix's
-/// translation) for the second's weights; with the tilt free a third takes the tilt's step
-/// from the second into the depths and the model (a few degrees: its linearisation error is
-/// under a millimetre at the pad's size).
-const PASSES: usize = 3;
-
-/// One corner's equation along one image axis: `t_part . t + tilt_part . dw + s * rate = b`,
-/// `dw` the tilt's step about the level frame's x and y axes and the rate the row rate along
-/// that axis (see the module docs).
+/// One corner's equation along one image axis: `t_part . t + s * rate = b`, the rate being
+/// the row rate along that axis (see the module docs).
 #[derive(Clone, Copy)]
 struct Equation {
     t_part: Vector3<f32>,
-    tilt_part: Vector2<f32>,
     /// The image axis: 0 = x (the rate that shears), 1 = y (rows: the rate that stretches).
     axis: usize,
     /// The corner's row against the corners' mean row, normalised units (0: no rates).
@@ -88,30 +61,9 @@ struct Equation {
     b: f32,
 }
 
-/// The rotation by the vector `w` (axis times angle, radians): Rodrigues' formula, written
-/// out (nalgebra's constructors keep panic paths, see nopanic/).
-fn rotation_by(w: &Vector3<f32>) -> Matrix3<f32> {
-    let angle = libm::sqrtf(w.dot(w));
-    if !(angle > 1e-9) {
-        return Matrix3::identity();
-    }
-    let k = w / angle;
-    let (s, c) = (libm::sinf(angle), libm::cosf(angle));
-    let cross = k.cross_matrix();
-    Matrix3::identity() + cross * s + cross * cross * (1.0 - c)
-}
-
 /// Re-solves `fix` with the pad's tilt from gravity (see the module docs). The covariance's
-/// rotation part is the heading variance of `fix` about the vertical plus, with the tilt
-/// free, the tilt's; the translation part comes from the linear solve; cross terms are
-/// dropped.
-///
-/// `tilt_sigma_rad` is how far the pad's tilt may be from `camera_from_level`'s, one sigma
-/// per level axis: the attitude's error and the mount's. With 0 the tilt is held at the
-/// attitude's. Above 0 the tilt is solved with that prior beside the translation (a maximum a
-/// posteriori solve): where the image measures the tilt better than the prior (several
-/// markers, near), the image's tilt is used, and the translation's covariance carries the
-/// tilt's uncertainty where it does not.
+/// rotation part is the heading variance of `fix` about the vertical (the tilt is known); the
+/// translation part comes from the linear solve; cross terms are dropped.
 pub fn level_pad_fix(
     fix: &PadFix,
     detections: &[Detection],
@@ -119,7 +71,6 @@ pub fn level_pad_fix(
     layout: &PadLayout<'_>,
     camera: &CameraModel,
     camera_from_level: &Matrix3<f32>,
-    tilt_sigma_rad: f32,
 ) -> Result<PadFix, PoseError> {
     // Heading of the pad in the level frame, from the image fix: M = C^T R should be a
     // rotation about z; its first column gives the angle.
@@ -131,9 +82,7 @@ pub fn level_pad_fix(
     }
     let (c, s) = (c / norm, s / norm);
     let heading = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
-    // The pad's tilt in the level frame (applied after the heading), solved for when free.
-    let mut tilt = Matrix3::<f32>::identity();
-    let free_tilt = tilt_sigma_rad > 0.0 && tilt_sigma_rad.is_finite();
+    let rotation = camera_from_level * heading;
 
     // The row rates' column for each corner: its row against the corners' mean row, in
     // normalised units (so that the rates do not move the pad, only shape it), or nothing on
@@ -154,10 +103,9 @@ pub fn level_pad_fix(
     } else {
         0.0
     };
-    // The priors as pseudo-observations, weighted against the pixel noise floor: a rate of
+    // The prior as two pseudo-observations, weighted against the pixel noise floor: a rate of
     // one prior sigma displaces a row by `ROW_RATE_PRIOR_RAD_S * line_time` radians (one
-    // normalised unit of row is `fy` rows); a tilt of one sigma weighs as one corner's error
-    // of the floor.
+    // normalised unit of row is `fy` rows).
     let focal = 0.5 * (camera.fx + camera.fy);
     let noise_normalised = PIXEL_NOISE_FLOOR_PX / focal;
     let prior_sigma = ROW_RATE_PRIOR_RAD_S * camera.line_time_us * 1e-6 * camera.fy;
@@ -166,33 +114,24 @@ pub fn level_pad_fix(
     } else {
         1.0
     };
-    let tilt_weight = if free_tilt {
-        let w = noise_normalised / tilt_sigma_rad;
-        w * w
-    } else {
-        0.0
-    };
 
-    // Each pass weights each corner's equations by 1/depth so that the residuals are
-    // normalised image errors. The rates are eliminated in closed form (their normal block is
-    // diagonal), then the tilt (a 2x2 block, the prior keeps it invertible): what is left is a
-    // 3x3 solve for the translation, whose inverse is also the translation's covariance with
-    // the rates and the tilt free (the Schur complement), and which has no panic path (a
-    // general 5x5 or 7x7 inverse has).
+    // Two passes: the first finds the depths, the second weights each corner's equations by
+    // 1/depth so that the residuals are normalised image errors. Each equation is
+    // `t_part . t + s * rate[axis] = b`, with one row rate per image axis. The rates are
+    // eliminated in closed form (their normal block is diagonal): what is left is a 3x3 solve
+    // for the translation, whose inverse is also the translation's covariance with the rates
+    // free (the Schur complement), and which has no panic path (a general 5x5 inverse has).
     let mut translation = fix.pose.translation;
-    let mut rotation = *camera_from_level * heading;
     let mut schur_inverse = Matrix3::<f32>::zeros();
-    let mut tilt_cov = Matrix2::<f32>::zeros();
     let mut residual_sq = 0.0f32;
     let mut equations = 0usize;
-    let passes = if free_tilt { PASSES } else { 2 };
-    for _ in 0..passes {
-        let mut normal = Matrix5::<f32>::zeros();
-        let mut rhs = Vector5::<f32>::zeros();
+    for _ in 0..2 {
+        let mut normal = Matrix3::<f32>::zeros();
+        let mut rhs = Vector3::<f32>::zeros();
         // Per image axis: the rate's normal entry (the prior's included), its coupling with
-        // the translation and the tilt, and its right-hand side.
+        // the translation and its right-hand side.
         let mut rate_normal = [prior_weight * prior_weight; 2];
-        let mut coupling = [Vector5::<f32>::zeros(); 2];
+        let mut coupling = [Vector3::<f32>::zeros(); 2];
         let mut rate_rhs = [0.0f32; 2];
         let mut rows: heapless::Vec<Equation, { 2 * super::pad_pose::MAX_PAD_POINTS }> =
             heapless::Vec::new();
@@ -204,9 +143,7 @@ pub fn level_pad_fix(
                 let Some(n) = camera.undistort(*corner) else {
                     continue;
                 };
-                // The corner in the level frame, then in the camera frame.
-                let q = tilt * heading * marker.to_pad(&model);
-                let p = *camera_from_level * q;
+                let p = rotation * marker.to_pad(&model);
                 let depth = (p + translation).z;
                 if !(depth > 1e-3) {
                     return Err(PoseError::NoSolution);
@@ -217,46 +154,27 @@ pub fn level_pad_fix(
                 } else {
                     0.0
                 };
-                // How the corner moves in the camera frame for a tilt step about the level
-                // frame's x and y axes (`e_x x q`, `e_y x q`), when the tilt is free.
-                let (dx, dy) = if free_tilt {
-                    (
-                        *camera_from_level * Vector3::new(0.0, -q.z, q.y),
-                        *camera_from_level * Vector3::new(q.z, 0.0, -q.x),
-                    )
-                } else {
-                    (Vector3::zeros(), Vector3::zeros())
-                };
                 // n - rate * s is where the corner would be without the turn during readout.
                 let pair = [
                     Equation {
                         t_part: Vector3::new(w, 0.0, -n.x * w),
-                        tilt_part: Vector2::new(dx.x - n.x * dx.z, dy.x - n.x * dy.z) * w,
                         axis: 0,
                         s,
                         b: (n.x * p.z - p.x) * w,
                     },
                     Equation {
                         t_part: Vector3::new(0.0, w, -n.y * w),
-                        tilt_part: Vector2::new(dx.y - n.y * dx.z, dy.y - n.y * dy.z) * w,
                         axis: 1,
                         s,
                         b: (n.y * p.z - p.y) * w,
                     },
                 ];
                 for equation in pair {
-                    let j = Vector5::new(
-                        equation.t_part.x,
-                        equation.t_part.y,
-                        equation.t_part.z,
-                        equation.tilt_part.x,
-                        equation.tilt_part.y,
-                    );
-                    normal += j * j.transpose();
-                    rhs += j * equation.b;
+                    normal += equation.t_part * equation.t_part.transpose();
+                    rhs += equation.t_part * equation.b;
                     let axis = equation.axis;
                     rate_normal[axis] += s * s;
-                    coupling[axis] += j * s;
+                    coupling[axis] += equation.t_part * s;
                     rate_rhs[axis] += s * equation.b;
                     let _ = rows.push(equation);
                 }
@@ -264,94 +182,45 @@ pub fn level_pad_fix(
         }
         equations = rows.len();
         // Eliminate the rates (each `rate_normal` is at least the prior's, > 0).
-        let mut reduced_normal = normal;
+        let mut schur = normal;
         let mut reduced = rhs;
         for axis in 0..2 {
             let (d, c, r) = (rate_normal[axis], coupling[axis], rate_rhs[axis]);
-            reduced_normal -= c * c.transpose() / d;
+            schur -= c * c.transpose() / d;
             reduced -= c * (r / d);
         }
-        // Then the tilt step `dw`, whose prior pulls the whole tilt (`tilt` after the step)
-        // back to the attitude's: to first order, towards `dw = -(tilt's own angles)`.
-        let a = Matrix3::from_fn(|r, k| reduced_normal[(r, k)]);
-        let b_block = nalgebra::Matrix3x2::from_fn(|r, k| reduced_normal[(r, k + 3)]);
-        let (tilt_now_x, tilt_now_y) = (tilt[(2, 1)], -tilt[(2, 0)]);
-        let (d_inverse, tilt_rhs) = if free_tilt {
-            let d = Matrix2::new(
-                reduced_normal[(3, 3)] + tilt_weight,
-                reduced_normal[(3, 4)],
-                reduced_normal[(4, 3)],
-                reduced_normal[(4, 4)] + tilt_weight,
-            );
-            let det = d[(0, 0)] * d[(1, 1)] - d[(0, 1)] * d[(1, 0)];
-            if !(det > 0.0 && det.is_finite()) {
-                return Err(PoseError::NoSolution);
-            }
-            let inverse = Matrix2::new(d[(1, 1)], -d[(0, 1)], -d[(1, 0)], d[(0, 0)]) / det;
-            let r = Vector2::new(
-                reduced[3] - tilt_weight * tilt_now_x,
-                reduced[4] - tilt_weight * tilt_now_y,
-            );
-            (inverse, r)
-        } else {
-            (Matrix2::zeros(), Vector2::zeros())
-        };
-        let schur = a - b_block * d_inverse * b_block.transpose();
-        let reduced_t =
-            Vector3::new(reduced[0], reduced[1], reduced[2]) - b_block * (d_inverse * tilt_rhs);
         schur_inverse = schur.try_inverse().ok_or(PoseError::NoSolution)?;
-        translation = schur_inverse * reduced_t;
-        let step = d_inverse * (tilt_rhs - b_block.transpose() * translation);
-        tilt_cov =
-            d_inverse + d_inverse * b_block.transpose() * schur_inverse * b_block * d_inverse;
-        let x = Vector5::new(translation.x, translation.y, translation.z, step.x, step.y);
-        let rates =
-            [0, 1].map(|axis| (rate_rhs[axis] - coupling[axis].dot(&x)) / rate_normal[axis]);
+        translation = schur_inverse * reduced;
+        let rates = [0, 1]
+            .map(|axis| (rate_rhs[axis] - coupling[axis].dot(&translation)) / rate_normal[axis]);
         residual_sq = rows
             .iter()
             .map(|equation| {
                 let e = equation.t_part.dot(&translation)
-                    + equation.tilt_part.dot(&step)
                     + equation.s * rates.get(equation.axis).copied().unwrap_or(0.0)
                     - equation.b;
                 e * e
             })
             .sum();
-        if free_tilt {
-            tilt = rotation_by(&Vector3::new(step.x, step.y, 0.0)) * tilt;
-            rotation = *camera_from_level * tilt * heading;
-        }
     }
-    if equations < 6
-        || !translation.iter().all(|v| v.is_finite())
-        || !rotation.iter().all(|v| v.is_finite())
-    {
+    if equations < 6 || !translation.iter().all(|v| v.is_finite()) {
         return Err(PoseError::NoSolution);
     }
     let rms_normalised = libm::sqrtf(residual_sq / equations as f32);
     let sigma = rms_normalised.max(noise_normalised);
     let translation_cov = schur_inverse * (sigma * sigma);
-    // Rotation: the heading, a rotation about the vertical, which is `up` in the camera frame
-    // (the covariance is over left increments in the camera frame), with the image fix's
-    // variance along that axis; and the tilt's, about the level frame's x and y axes, when
-    // it was solved (held, it has none).
-    let up = *camera_from_level * Vector3::new(0.0, 0.0, 1.0);
+    // Rotation: only the heading is still uncertain, a rotation about the vertical, which is
+    // `up` in the camera frame (the covariance is over left increments in the camera frame).
+    // Its variance is the image fix's along that axis; the tilt's is gone.
+    let up = camera_from_level * Vector3::new(0.0, 0.0, 1.0);
     // Element by element: `fixed_view(..).into_owned()` keeps a panic path (see nopanic/).
     let rotation_cov = Matrix3::from_fn(|r, c| fix.covariance.get((r, c)).copied().unwrap_or(0.0));
     let heading_var = up.dot(&(rotation_cov * up)).max(0.0);
-    let tilt_level = Matrix3::from_fn(|r, k| {
-        if r < 2 && k < 2 {
-            tilt_cov[(r, k)] * sigma * sigma
-        } else {
-            0.0
-        }
-    });
-    let rotation_part = up * up.transpose() * heading_var
-        + *camera_from_level * tilt_level * camera_from_level.transpose();
+    let heading_cov = up * up.transpose() * heading_var;
     let mut covariance = nalgebra::Matrix6::<f32>::zeros();
     for r in 0..3 {
         for k in 0..3 {
-            covariance[(r, k)] = rotation_part[(r, k)];
+            covariance[(r, k)] = heading_cov[(r, k)];
             covariance[(r + 3, k + 3)] = translation_cov[(r, k)];
         }
     }
@@ -423,8 +292,7 @@ mod tests {
         let detections = [detection];
         let layout = designs::PAPER_SINGLE;
         let fix = pad_pose(&detections, &families, &layout, camera).unwrap();
-        let level =
-            level_pad_fix(&fix, &detections, &families, &layout, camera, &down(), 0.0).unwrap();
+        let level = level_pad_fix(&fix, &detections, &families, &layout, camera, &down()).unwrap();
         level.pose.translation.z
     }
 
@@ -444,81 +312,6 @@ mod tests {
         // A shear alone costs the range nothing either way.
         let sheared = detection_at_20_m(0.3 / 27.7, 0.0);
         assert!((levelled_range(sheared, &camera(63.5)) - 20.0).abs() < 0.005);
-    }
-
-    /// The nested pad's 1.25 m marker and four 0.40 m markers seen from `height` straight
-    /// down, exactly, through the paper's camera.
-    fn nested_from(height: f32) -> (heapless::Vec<Detection, 5>, Vector3<f32>) {
-        let camera = camera(0.0);
-        let translation = Vector3::new(0.3, -0.2, height);
-        let mut detections = heapless::Vec::new();
-        for (id, marker) in designs::NESTED.markers().iter().enumerate().take(5) {
-            let corners = marker_corners(marker.size).map(|model| {
-                camera
-                    .project(&(down() * marker.to_pad(&model) + translation))
-                    .unwrap_or(Point { x: 0.0, y: 0.0 })
-            });
-            let _ = detections.push(Detection {
-                family: 0,
-                id: id as u16,
-                hamming: 0,
-                corners,
-                center: corners[0],
-                decision_margin: 1.0,
-                contrast: 100.0,
-            });
-        }
-        (detections, translation)
-    }
-
-    /// The nested pad's levelled fix at 10 m with the attitude's level frame turned by
-    /// `error_deg` about its x axis (a mount error), the tilt's prior `tilt_sigma_deg`; the
-    /// camera's height above the pad in the true level frame (what the autopilot's own
-    /// attitude makes of it), metres.
-    fn nested_height(error_deg: f32, tilt_sigma_deg: f32) -> (f32, PadFix) {
-        let families = [tables::by_name("tag36h11").unwrap()];
-        let (detections, _) = nested_from(10.0);
-        let layout = designs::NESTED;
-        let camera = camera(0.0);
-        let fix = pad_pose(&detections, &families, &layout, &camera).unwrap();
-        let believed = rotation_by(&Vector3::new(error_deg.to_radians(), 0.0, 0.0)) * down();
-        let level = level_pad_fix(
-            &fix,
-            &detections,
-            &families,
-            &layout,
-            &camera,
-            &believed,
-            tilt_sigma_deg.to_radians(),
-        )
-        .unwrap();
-        (-(down().transpose() * level.pose.translation).z, level)
-    }
-
-    #[test]
-    fn a_free_tilt_takes_the_image_s_where_it_is_measured() {
-        // A 1.5 degree mount error read as the pad's tilt: the held tilt's fix reads the
-        // range of the markers seen off-axis through a wrongly foreshortened model.
-        let (held, held_fix) = nested_height(1.5, 0.0);
-        assert!((held - 10.0).abs() > 0.02, "held {held}");
-        // Free within the mount's uncertainty, five markers at 10 m measure the tilt to about
-        // a degree: most of the error goes.
-        let (free, free_fix) = nested_height(1.5, 1.5);
-        assert!(
-            (free - 10.0).abs() < 0.3 * (held - 10.0).abs(),
-            "free {free} held {held}"
-        );
-        // The tilt's uncertainty is in the covariance: the range's is larger, and the
-        // rotation's has a tilt part beside the heading's (held, it has none).
-        assert!(free_fix.covariance[(5, 5)] > held_fix.covariance[(5, 5)]);
-        let rotation_var = |f: &PadFix| (0..3).map(|i| f.covariance[(i, i)]).sum::<f32>();
-        let tilt_var = rotation_var(&free_fix) - rotation_var(&held_fix);
-        assert!(tilt_var > 1e-5, "{tilt_var}");
-        // With the attitude right, freeing the tilt changes nothing (exact corners).
-        let (right_held, _) = nested_height(0.0, 0.0);
-        let (right_free, _) = nested_height(0.0, 1.5);
-        assert!((right_held - 10.0).abs() < 1e-3, "{right_held}");
-        assert!((right_free - 10.0).abs() < 1e-3, "{right_free}");
     }
 
     #[test]

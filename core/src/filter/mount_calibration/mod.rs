@@ -79,11 +79,6 @@ use super::axes::{Attitude, CameraMount};
 use crate::pose::PadFix;
 use nalgebra::{Matrix3, Vector3};
 
-/// The mount's tilt error before the calibrator is confident, one sigma per axis, degrees:
-/// a camera screwed to a frame by hand is a degree or two off the body axes. The level fix
-/// takes it as the uncertainty of the attitude's tilt through the mount
-/// ([`super::PadEstimator::level_tilt_sigma_rad`]).
-pub const UNCALIBRATED_TILT_SIGMA_DEG: f32 = 1.5;
 /// At most one effective sample per this much time span (see the module docs), µs.
 pub const FRAME_DECORRELATION_US: u64 = 100_000;
 /// A later estimate is reported when it moved by more than this many sigma from the last
