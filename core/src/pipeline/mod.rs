@@ -40,15 +40,16 @@
 //! # A second look where the pad was lost
 //!
 //! When a frame gives no fix while the last one, at most [`LOOK_AGAIN_MAX_AGE_US`] before,
-//! did, the detector searches again around where the pad's markers were
+//! did, the detector searches again where that fix places the pad
 //! ([`Detector::detect_region`]), binarised at the ratio of the levels instead of their
 //! mid-level ([`PipelineConfig::look_again`]). A hard shadow across a marker (a building's, a
 //! tree's, the vehicle's own) is the case: the mid-level turns the shadowed paper along the
 //! shadow's edge dark and the marker's outline stops being a quad, while the ratio keeps paper
-//! and ink apart on both sides. The region is the whole pad as the last fix places it (every
-//! marker, seen or not) grown by half its size on every side; when that is more than [`LOOK_AGAIN_MAX_FRACTION`] of the frame there is no
-//! second look, so a frame costs at most that fraction more than its own search. A frame
-//! without a recent fix (and every frame of a benchmark) is searched once.
+//! and ink apart on both sides. The region is the whole pad (every marker, seen or not: a far
+//! frame may have decoded only a small one) grown by half its size on every side; when that
+//! is more than [`LOOK_AGAIN_MAX_FRACTION`] of the frame there is no second look, so a frame
+//! costs at most that fraction more than its own search. A frame without a recent fix (and
+//! every frame of a benchmark) is searched once.
 //!
 //! Before the fix, on a rolling-shutter camera ([`CameraModel::line_time_us`] above 0), the
 //! pad's corners are moved to where the camera saw them at the frame's time, from the body
@@ -220,8 +221,8 @@ impl PixelBox {
     }
 
     /// This box grown by half its larger side (at least [`LOOK_AGAIN_MIN_MARGIN_PX`]) on
-    /// every side and cut to a `width` x `height` frame, in whole pixels; `None` when that is more
-    /// than [`LOOK_AGAIN_MAX_FRACTION`] of the frame or nothing of it is inside.
+    /// every side and cut to a `width` x `height` frame, in whole pixels; `None` when that is
+    /// more than [`LOOK_AGAIN_MAX_FRACTION`] of the frame or nothing of it is inside.
     fn look_again_region(&self, width: usize, height: usize) -> Option<ImageRegion> {
         let size = (self.max.x - self.min.x).max(self.max.y - self.min.y);
         let margin = (0.5 * size).max(LOOK_AGAIN_MIN_MARGIN_PX);
@@ -261,7 +262,7 @@ struct Found {
     fix: Option<PadFix>,
     /// The markers' levels where the detector saw them (before any correction).
     pad: Option<crate::sensor::PadLevels>,
-    /// Where the pad's markers were.
+    /// Where the fix places the whole pad.
     pixels: Option<PixelBox>,
     /// Why detection stopped, when it did.
     error: Option<DetectError>,
