@@ -375,13 +375,12 @@ pub(crate) fn ratio_threshold(
     let Some((tw, th, tmin, tmax)) = tile_grids(w, h, tiles) else {
         return;
     };
-    let tile_row = |grid: &mut [u8], ty: usize| -> usize { grid.len().min(ty * tw) };
     // Each tile's extrema, then along the tile rows.
     tmin.fill(u8::MAX);
     tmax.fill(0);
     for y in 0..h {
-        let start = tile_row(tmin, y / TILE);
-        let (Some(lows), Some(highs)) = (tmin.get_mut(start..), tmax.get_mut(start..)) else {
+        let tiles = (y / TILE) * tw..(y / TILE + 1) * tw;
+        let (Some(lows), Some(highs)) = (tmin.get_mut(tiles.clone()), tmax.get_mut(tiles)) else {
             return;
         };
         for (x, &p) in image.row(y).iter().enumerate() {
@@ -403,20 +402,13 @@ pub(crate) fn ratio_threshold(
         pair_rows(tmax, tw, y, byte_max, u8::max);
     }
     for y in (0..th).rev() {
+        // The top row's window is its own pair.
+        let above = y.saturating_sub(1);
         for x in 0..tw {
-            let at = |grid: &[u8], row: usize| grid.get(row * tw + x).copied();
-            let above = y.checked_sub(1);
-            let lo = above
-                .and_then(|r| at(tmin, r))
-                .into_iter()
-                .chain(at(tmin, y))
-                .min();
-            let hi = above
-                .and_then(|r| at(tmax, r))
-                .into_iter()
-                .chain(at(tmax, y))
-                .max();
-            if let (Some(lo), Some(hi), Some(cell)) = (lo, hi, tmin.get_mut(y * tw + x)) {
+            let at = |grid: &[u8], row: usize| grid.get(row * tw + x).copied().unwrap_or(0);
+            let lo = at(tmin, y).min(at(tmin, above));
+            let hi = at(tmax, y).max(at(tmax, above));
+            if let Some(cell) = tmin.get_mut(y * tw + x) {
                 *cell = if hi.saturating_sub(lo) < min_contrast {
                     0
                 } else {

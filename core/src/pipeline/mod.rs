@@ -181,11 +181,9 @@ pub struct FramePipeline<'a> {
     last_rotation: Option<Matrix3<f32>>,
     /// The exposure time of the last fix and its translation (the pad in the camera frame):
     /// the pad's plane for the rolling-shutter correction while the estimator has no
-    /// prediction (its tracks are confirmed only after a few fixes).
+    /// prediction (its tracks are confirmed only after a few fixes), and with the rotation
+    /// where a frame that lost the pad looks again.
     last_translation: Option<(u64, Vector3<f32>)>,
-    /// The exposure time of the last fix and the pixels its pad covered: where a frame
-    /// without a fix is searched again.
-    last_pad_pixels: Option<(u64, PixelBox)>,
 }
 
 /// The smallest axis-aligned box around some image points, pixels.
@@ -262,8 +260,6 @@ struct Found {
     fix: Option<PadFix>,
     /// The markers' levels where the detector saw them (before any correction).
     pad: Option<crate::sensor::PadLevels>,
-    /// Where the fix places the whole pad.
-    pixels: Option<PixelBox>,
     /// Why detection stopped, when it did.
     error: Option<DetectError>,
 }
@@ -275,7 +271,6 @@ impl Found {
             image_fix: None,
             fix: None,
             pad: None,
-            pixels: None,
             error: Some(error),
         }
     }
@@ -294,7 +289,7 @@ struct Fixes<'f, 'a> {
 
 impl Fixes<'_, '_> {
     /// The pad fixes from `raw`, the detections in `image`.
-    fn from(&self, image: &GrayImage<'_>, raw: &[Detection]) -> Found {
+    fn found_in(&self, image: &GrayImage<'_>, raw: &[Detection]) -> Found {
         let (families, pad, camera) = (self.families, self.pad, self.camera);
         // The pad's markers as a global shutter would have seen them (both fixes solve on
         // these); the count reported is the detector's.
@@ -318,7 +313,6 @@ impl Fixes<'_, '_> {
             image_fix,
             fix,
             pad: pad_levels(image, raw, families),
-            pixels: fix.and_then(|f| PixelBox::around_pad(&f.pose, pad, camera)),
             error: None,
         }
     }
@@ -366,7 +360,6 @@ impl<'a> FramePipeline<'a> {
             estimator,
             last_rotation: None,
             last_translation: None,
-            last_pad_pixels: None,
         };
         // The detector fits long boundaries through the same lens as the pose (a
         // distortion-free camera leaves it as without one), so that what a replay or a bench
@@ -426,7 +419,6 @@ impl<'a> FramePipeline<'a> {
         self.estimator.reset();
         self.last_rotation = None;
         self.last_translation = None;
-        self.last_pad_pixels = None;
     }
 
     /// Finds the pad in `image`, exposed at `exposure_us` (our clock, µs), and estimates it
@@ -469,22 +461,32 @@ impl<'a> FramePipeline<'a> {
             predicted: predicted.as_ref(),
         };
         let mut found = match self.detector.detect(image, self.families, buffers) {
-            Ok(raw) => fixes.from(image, raw),
+            Ok(raw) => fixes.found_in(image, raw),
             Err(e) => Found::error(e),
         };
-        // A second look where the pad was until just now (see the module docs).
-        let region = self
-            .last_pad_pixels
-            .filter(|(t_us, _)| exposure_us.abs_diff(*t_us) <= LOOK_AGAIN_MAX_AGE_US)
-            .and_then(|(_, pixels)| pixels.look_again_region(image.width(), image.height()))
-            .filter(|_| self.config.look_again && found.fix.is_none() && found.error.is_none());
+        // A second look where the last fix, if recent, placed the pad (see the module docs):
+        // the region is worked out only for a frame that lost the pad.
+        let lost = self.config.look_again && found.fix.is_none() && found.error.is_none();
+        let region = match (self.last_rotation, self.last_translation) {
+            (Some(rotation), Some((t_us, translation)))
+                if lost && exposure_us.abs_diff(t_us) <= LOOK_AGAIN_MAX_AGE_US =>
+            {
+                let last = Pose {
+                    rotation,
+                    translation,
+                };
+                PixelBox::around_pad(&last, &self.pad, &self.camera)
+                    .and_then(|pad| pad.look_again_region(image.width(), image.height()))
+            }
+            _ => None,
+        };
         let looked_again = region.is_some();
         if let Some(region) = region {
             if let Ok(raw) = self
                 .detector
                 .detect_region(image, &region, self.families, buffers)
             {
-                let again = fixes.from(image, raw);
+                let again = fixes.found_in(image, raw);
                 if again.fix.is_some() {
                     found = again;
                 }
@@ -495,13 +497,11 @@ impl<'a> FramePipeline<'a> {
             image_fix,
             fix,
             pad,
-            pixels,
             error: detect_error,
         } = found;
         if let Some(f) = &fix {
             self.last_rotation = Some(f.pose.rotation);
             self.last_translation = Some((exposure_us, f.pose.translation));
-            self.last_pad_pixels = pixels.map(|p| (exposure_us, p));
         }
         let (mean, highlight) = scene_levels(image, SCENE_STEP);
         let max_exposure_us = at_exposure
