@@ -3,8 +3,9 @@
 # firmware for every board, frame size and clock variant, and runs each ELF, unchanged, on the
 # emulated STM32H743 from its reset vector until every task waits at its first await, then
 # for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
-# checking the LANDING_TARGETs it sends. Then two self-tests that must fail: a PLL that never
-# locks (the boot) and a camera that never answers (the watchdog must reset the board).
+# checking the LANDING_TARGETs it sends. Before them, the emulator's own unit tests; after
+# them, two self-tests that must fail: a PLL that never locks (the boot) and a camera that
+# never answers (the watchdog must reset the board).
 #
 # Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
 # EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
@@ -73,6 +74,8 @@ expect_failure() {
 
 mkdir -p "${OUT}"
 failed=0
+echo "emulator unit tests (firmware/emu/test_*.py)"
+python3 -m unittest discover --quiet -s firmware/emu -t firmware || failed=1
 for variant in "${VARIANTS[@]}"; do
     read -r -a v <<<"${variant}"
     selected "${v[0]}" "$@" || continue

@@ -42,6 +42,36 @@ def demangle(name):
     return text[1:] if text.startswith("_$") else text
 
 
+def thumb_hint_sites(base, data, mapping, opcode):
+    """Where the 16-bit hint `opcode` (WFE, WFI, SEV) can execute in the code `data` at `base`:
+    (address, sure) for the halfwords with that encoding that may start an instruction.
+
+    `mapping` is the ELF's sorted mapping symbols, (address, "t" | "d" | "a"): `$t` where Thumb
+    code starts, `$d` where data inside code starts (ELF for the Arm Architecture, 5.5.5).
+    From the `$t` before a match, a linear decode (a first halfword with 0b11101, 0b11110 or
+    0b11111 in its top five bits makes a 32-bit instruction: ARMv7-M ARM, A5.1) finds whether
+    an instruction starts there (`sure`) or the match is the second half of a 32-bit one
+    (`b.w` can have 0xBF40 there), which is left out: it never executes as a hint, and patching
+    it would change that instruction. Matches in data are left out. Without mapping symbols (a
+    stripped ELF) every match is returned with `sure` false: the caller must not patch it."""
+    starts = [addr for addr, _ in mapping]
+    sites = []
+    for i in range(0, len(data) - 1, 2):
+        if data[i] | (data[i + 1] << 8) != opcode:
+            continue
+        addr = base + i
+        m = bisect.bisect_right(starts, addr) - 1
+        if not mapping:
+            sites.append((addr, False))
+        elif m >= 0 and mapping[m][1] == "t":
+            at = mapping[m][0] - base
+            while at < i:
+                at += 4 if data[at + 1] >> 3 in (0b11101, 0b11110, 0b11111) else 2
+            if at == i:
+                sites.append((addr, True))
+    return sites
+
+
 class ElfImage:
     """Segments and symbols of one firmware ELF."""
 
@@ -56,13 +86,20 @@ class ElfImage:
             ]
             self.symbols = {}
             functions = []
+            mapping = []  # (address, "t" or "d" or "a"): ARM mapping symbols
             for sym in elf.get_section_by_name(".symtab").iter_symbols():
+                kind = sym.name.split(".")[0]
+                if kind in ("$t", "$d", "$a"):
+                    mapping.append((sym["st_value"], kind[1]))
+                    continue
                 if sym.name:
                     self.symbols.setdefault(sym.name, sym["st_value"])
                 if sym["st_info"]["type"] == "STT_FUNC" and sym["st_value"]:
                     functions.append((sym["st_value"] & ~1, sym["st_size"], sym.name))
             self.text = self._section(elf, ".text")
         functions.sort()
+        mapping.sort()
+        self._mapping = mapping
         self._func_addrs = [f[0] for f in functions]
         self._funcs = functions
 
@@ -91,15 +128,10 @@ class ElfImage:
         """A pc with its function, for messages."""
         return f"pc {pc:#010x} ({self.function_at(pc)})"
 
-    def thumb_hint_addresses(self, opcode):
-        """Addresses in .text where the 16-bit hint `opcode` (WFE, WFI, SEV) starts an
-        instruction, if it is executed. A match inside a literal pool or in the second half of a
-        32-bit instruction is never executed as an instruction, so a code hook on it never fires."""
+    def thumb_hint_sites(self, opcode):
+        """Where the 16-bit hint `opcode` can execute in .text (see `thumb_hint_sites`)."""
         base, data = self.text
-        return [
-            base + i for i in range(0, len(data) - 1, 2)
-            if data[i] | (data[i + 1] << 8) == opcode
-        ]
+        return thumb_hint_sites(base, data, self._mapping, opcode)
 
     def function_addresses(self, demangled):
         """Start addresses of every function whose demangled name is `demangled`."""

@@ -23,10 +23,16 @@ from .system import Exceptions, Scs, Dwt, DWT_BASE
 from .rcc import switch_problems
 
 WFE, WFI, SEV = 0xBF20, 0xBF30, 0xBF40
+HINTS = {WFE: "wait", WFI: "wait", SEV: "event"}
 # The emulator implements WFE/WFI/SEV by replacing them, in its copy of flash, with BKPT
 # instructions (a debugger's software breakpoints; the ELF is not changed): a trap costs only
-# when executed, whereas a code hook slows every instruction of a counted run.
-TRAP_WAIT, TRAP_SEV = 0xBEE0, 0xBEE1
+# when executed, whereas any code hook makes unicorn keep the pc up to date on every
+# instruction (its FAQ, "Why is my execution so slow?"). Only halfwords that the ELF's
+# mapping symbols show to start an instruction are patched (`ElfImage.thumb_hint_sites`): the
+# same bits can be the second half of a 32-bit instruction, which a patch would change (a
+# `b.w` whose offset ends in 0xBF40 once branched 190 bytes short and hung the boot). Where
+# that cannot be known, a code hook on that one address performs the hint instead.
+TRAP = {"wait": 0xBEE0, "event": 0xBEE1}
 EXCP_BKPT = 7
 # A branch to an EXC_RETURN value (0xFFFF_FF00 and above) ends in unicorn (QEMU) as a
 # prefetch abort (3) or its internal "exception exit" (8); the emulator then performs the
@@ -57,7 +63,8 @@ class Machine:
         self.main_at = None
         self.stop_at_first_idle = True
         self.idled = False  # the executor has slept in WFE with nothing to do at least once
-        self.traps = {}
+        self.hints = {}  # address -> "wait" (WFE, WFI) or "event" (SEV)
+        self.traps = set()  # the hints replaced by a BKPT
         self.exc = Exceptions(self)
         self.scb = Scs(self.exc)
         self.periph = Bus(self, spin_bound)
@@ -110,10 +117,14 @@ class Machine:
         uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped)
         uc.hook_add(UC_HOOK_MEM_PROT, self._on_protected)
         uc.hook_add(UC_HOOK_INTR, self._on_interrupt)
-        for hint, trap in ((WFE, TRAP_WAIT), (WFI, TRAP_WAIT), (SEV, TRAP_SEV)):
-            for addr in self.elf.thumb_hint_addresses(hint):
-                uc.mem_write(addr, trap.to_bytes(2, "little"))
-                self.traps[addr] = trap
+        for opcode, kind in HINTS.items():
+            for addr, sure in self.elf.thumb_hint_sites(opcode):
+                self.hints[addr] = kind
+                if sure:
+                    uc.mem_write(addr, TRAP[kind].to_bytes(2, "little"))
+                    self.traps.add(addr)
+                else:
+                    uc.hook_add(UC_HOOK_CODE, self._on_hint, begin=addr, end=addr)
         flash = memmap.FLASH
         self._boot_hooks = [
             uc.hook_add(UC_HOOK_CODE, self._count_pre_main, begin=flash.base, end=flash.end - 1),
@@ -215,13 +226,22 @@ class Machine:
             self.exc.exception_return(pc | 1)
             return
         if intno == EXCP_BKPT and pc in self.traps:
-            uc.reg_write(UC_ARM_REG_PC, (pc + 2) | 1)
-            if self.traps[pc] == TRAP_SEV:
-                self.event = True
-            else:
-                self._wait(pc + 2)
+            self._hint(pc)
             return
         self.fail(f"CPU exception {intno} (UDF/BKPT/SVC or a fault: unicorn's EXCP number)")
+
+    def _on_hint(self, uc, addr, size, _ud):
+        """A hooked WFE, WFI or SEV is about to execute (see `HINTS`)."""
+        self._hint(addr)
+
+    def _hint(self, addr):
+        """Performs the WFE, WFI or SEV at `addr` (trapped or hooked) and goes on after it
+        (unicorn resumes at the pc written here)."""
+        self.uc.reg_write(UC_ARM_REG_PC, (addr + 2) | 1)
+        if self.hints[addr] == "event":
+            self.event = True
+        else:
+            self._wait(addr + 2)
 
     def _count_pre_main(self, uc, addr, size, _ud):
         self._pre_main_count += 1
