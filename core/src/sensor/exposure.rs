@@ -28,12 +28,36 @@
 //! 3. **Motion** ([`Metering::max_exposure_us`]): the exposure never exceeds what keeps the
 //!    image motion of the vehicle's body rate under half a pixel; gain makes up the light.
 //!
-//! The loop multiplies exposure x gain by `aim / level`, limited to a factor of 2 per step
-//! (the sensor applies new values one or two frames late; bigger steps would oscillate), and
-//! does nothing while the level is within the deadband of its aim ([`PAD_DEADBAND`] for the
-//! markers' white, [`AutoExposureLimits::deadband`] for the mean) except moving light between
-//! exposure and gain when the motion cap changed. [`AutoExposure::update`], the mean alone, is
-//! the loop as it was before markers and highlights were metered.
+//! The loop multiplies exposure x gain by `aim / level`, limited to a factor of 2 per step,
+//! and does nothing while the level is within the deadband of its aim ([`PAD_DEADBAND`] for
+//! the markers' white, [`AutoExposureLimits::deadband`] for the mean) except moving light
+//! between exposure and gain when the motion cap changed. [`AutoExposure::update`], the mean
+//! alone, is the loop as it was before markers and highlights were metered.
+//!
+//! # Latency
+//!
+//! A setting computed from frame `n` is written while frame `n + 1` is being exposed, so `n + 2`
+//! is the first frame exposed with it (`n + 3` on a sensor that latches its exposure a frame
+//! late). A step is the whole correction, so the frames metered before it reaches the sensor
+//! must not be corrected for again: after each change of the brightness the loop lets
+//! [`SETTLE_FRAMES`] frames' levels pass (their bookkeeping, the pad's hold, and the motion cap
+//! still apply). Without that, a clipped pad was halved on two frames in a row, then found a
+//! quarter too dark and doubled twice: a limit cycle of six frames (measured on the `sun`
+//! scenario at 20 m: the markers' white 254, 254, 187, 95, 95, 186, 254, ...), a third of the
+//! frames clipped, where blooming made the markers read 1 to 2.5 % small (the altitude as much
+//! high) and the jumps between those and the good frames became the pad tracker's velocity.
+//!
+//! # Search
+//!
+//! The scene's aim is a guess at what the markers need, and in hard light it can be a guess
+//! at which they are not found at all: a shadow edge across the pad at 20 m (the `shadow`
+//! scenario) decodes only a stop above the scene's aim, where the shadowed half of the sheet
+//! is bright enough for the threshold. So while no marker is metered (the metered loop, with
+//! the scene's highlight, not the mean alone), after [`SEARCH_PROBE_AFTER_FRAMES`] settled
+//! frames the loop takes one step a stop brighter, the next time a stop darker, and so on: a
+//! probe costs the frames of one setting (a clipped or dim frame that finds nothing either),
+//! and once a marker decodes the markers' metering holds the exposure where they are. The
+//! limit cycle above did this by accident.
 
 use super::metering::Metering;
 use super::GainX16;
@@ -55,6 +79,12 @@ pub const HIGHLIGHT_CEILING: u8 = 230;
 pub const HIGHLIGHT_CLIPPED: u8 = 250;
 /// The highlight guard lowers the scene's mean to `target / GUARD_FLOOR_DIVISOR` at most.
 pub const GUARD_FLOOR_DIVISOR: u64 = 4;
+/// Frames whose levels are not acted on after a change of the brightness: they were exposed
+/// before the change reached the sensor (see the module docs' latency).
+pub const SETTLE_FRAMES: u8 = 2;
+/// While no marker is metered, after this many settled frames at the scene's aim the loop
+/// probes a stop brighter or darker, alternately (see the module docs' search).
+pub const SEARCH_PROBE_AFTER_FRAMES: u8 = 6;
 
 /// Limits and target of [`AutoExposure`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,6 +131,12 @@ pub struct AutoExposure {
     setting: ExposureSetting,
     /// Frames left during which a lost pad's setting is held.
     pad_hold: u8,
+    /// Frames left whose levels predate the last change of the brightness.
+    settling: u8,
+    /// Settled frames the scene has been metered without markers since the last probe.
+    search_frames: u8,
+    /// The last probe was the brighter one (they alternate).
+    probe_brighter: bool,
 }
 
 impl AutoExposure {
@@ -121,6 +157,9 @@ impl AutoExposure {
                 gain: GainX16::ONE,
             },
             pad_hold: 0,
+            settling: 0,
+            search_frames: 0,
+            probe_brighter: false,
         }
     }
 
@@ -153,6 +192,8 @@ impl AutoExposure {
         if next == self.setting {
             return None;
         }
+        // Pulled inside the new limits: a change of the brightness like the loop's own.
+        self.settling = SETTLE_FRAMES;
         self.setting = next;
         Some(next)
     }
@@ -179,7 +220,12 @@ impl AutoExposure {
         // Brightness is proportional to exposure x gain; work in (lines x gain/16), in u64
         // (65,535 lines at 4,096x gain times a target of 255 would overflow u32).
         let current = u64::from(self.setting.lines) * u64::from(self.setting.gain.0);
-        let wanted = match self.aim(metering) {
+        // The aim is taken on every frame (it keeps the pad's hold), acted on only once the
+        // frames exposed before the last change have passed.
+        let aim = self.aim(metering);
+        let settled = self.settling == 0;
+        self.settling = self.settling.saturating_sub(1);
+        let wanted = match aim.filter(|_| settled) {
             Some((level, aim)) => {
                 let wanted = current * aim / level.max(1);
                 // min/max rather than `clamp`, whose panic on crossed bounds the optimiser
@@ -208,6 +254,10 @@ impl AutoExposure {
         if next == self.setting {
             return None;
         }
+        // Light moved between exposure and gain alone (the motion cap) changes no level.
+        if wanted != current {
+            self.settling = SETTLE_FRAMES;
+        }
         self.setting = next;
         Some(next)
     }
@@ -217,6 +267,7 @@ impl AutoExposure {
     fn aim(&mut self, metering: &Metering) -> Option<(u64, u64)> {
         if let Some(pad) = metering.pad {
             self.pad_hold = PAD_HOLD_FRAMES;
+            self.search_frames = 0;
             let white = u64::from(pad.white);
             if pad.white >= PAD_CLIPPED {
                 return Some((2, 1));
@@ -237,7 +288,21 @@ impl AutoExposure {
         } else if let Some(limit) = (mean * u64::from(HIGHLIGHT_CEILING)).checked_div(highlight) {
             aim = aim.min(limit);
         }
-        let aim = aim.max(target / GUARD_FLOOR_DIVISOR);
+        let mut aim = aim.max(target / GUARD_FLOOR_DIVISOR);
+        // The search's probes (see the module docs), in the metered loop only, once settled.
+        if metering.highlight > 0 && self.settling == 0 {
+            self.search_frames = self.search_frames.saturating_add(1);
+            if self.search_frames > SEARCH_PROBE_AFTER_FRAMES {
+                self.search_frames = 0;
+                self.probe_brighter = !self.probe_brighter;
+                aim = if self.probe_brighter {
+                    aim * 2
+                } else {
+                    aim / 2
+                };
+                return Some((mean, aim.max(1)));
+            }
+        }
         (mean.abs_diff(aim) > u64::from(self.limits.deadband)).then_some((mean, aim))
     }
 }
@@ -445,13 +510,129 @@ mod tests {
     }
 
     #[test]
-    fn without_markers_the_highlight_guard_keeps_a_small_pad_out_of_clipping() {
+    fn a_sensor_two_frames_late_does_not_make_the_loop_oscillate() {
+        // The board's timing: the setting computed from frame n first exposes frame n + 2. A
+        // clipped pad (paper 4x the grass) after the mean alone set the exposure.
         let mut ae = qvga();
-        for _ in 0..30 {
-            let m = sunny(ae.setting(), 500, 2_000, 0.02, false);
+        for _ in 0..20 {
+            ae.update(scene(ae.setting(), 500));
+        }
+        let mut exposed = [ae.setting(); 2];
+        let mut whites = [0u8; 40];
+        for white in whites.iter_mut() {
+            let m = sunny(exposed[0], 500, 2_000, 0.02, true);
+            *white = m.pad.map_or(0, |p| p.white);
+            ae.update_metered(&m);
+            exposed = [exposed[1], ae.setting()];
+        }
+        assert_eq!(whites[0], 255);
+        // Settled within the first half and held there: no frame of the second half clipped
+        // or off its target by more than the deadband.
+        for &white in &whites[20..] {
+            assert!(
+                white.abs_diff(PAD_WHITE_TARGET) <= PAD_DEADBAND,
+                "whites {whites:?}"
+            );
+        }
+        // Without the settling frames the same loop cycles for ever between clipping and
+        // a quarter of the light (the failure this guards against).
+        let mut ae = qvga();
+        for _ in 0..20 {
+            ae.update(scene(ae.setting(), 500));
+        }
+        let mut exposed = [ae.setting(); 2];
+        let mut clipped_late = 0;
+        for frame in 0..40 {
+            let m = sunny(exposed[0], 500, 2_000, 0.02, true);
+            if frame >= 20 && m.pad.is_some_and(|p| p.white >= PAD_CLIPPED) {
+                clipped_late += 1;
+            }
+            ae.settling = 0;
+            ae.update_metered(&m);
+            exposed = [exposed[1], ae.setting()];
+        }
+        assert!(clipped_late >= 3, "clipped {clipped_late}");
+    }
+
+    /// The setting `ae` holds most often over frames 30-60 of a scene metered by `meter`
+    /// (the search's probes aside).
+    fn resting(
+        ae: &mut AutoExposure,
+        meter: impl Fn(ExposureSetting) -> Metering,
+    ) -> ExposureSetting {
+        let mut seen: heapless::Vec<(ExposureSetting, u32), 32> = heapless::Vec::new();
+        for frame in 0..60 {
+            ae.update_metered(&meter(ae.setting()));
+            if frame >= 30 {
+                let s = ae.setting();
+                match seen.iter_mut().find(|(x, _)| *x == s) {
+                    Some((_, n)) => *n += 1,
+                    None => {
+                        let _ = seen.push((s, 1));
+                    }
+                }
+            }
+        }
+        seen.iter()
+            .max_by_key(|(_, n)| *n)
+            .map(|(s, _)| *s)
+            .unwrap()
+    }
+
+    #[test]
+    fn a_pad_the_scene_s_aim_does_not_decode_is_found_by_a_probe_and_held() {
+        // Sun and a shadow edge across the pad: it decodes only at 1.3 times the exposure the
+        // scene's metering rests at (and its white cells are then at 200 * 1.3 / 1.54).
+        let mut ae = qvga();
+        let rest = resting(&mut ae, |s| sunny(s, 500, 2_000, 0.02, false));
+        let product = |s: ExposureSetting| u32::from(s.lines) * u32::from(s.gain.0);
+        let needed = product(rest) * 13 / 10;
+        let shadowed = |s: ExposureSetting| {
+            let decoded = product(s) >= needed;
+            let white = (u32::from(PAD_WHITE_TARGET) * product(s) * 10 / (product(rest) * 154))
+                .min(255) as u8;
+            Metering {
+                pad: decoded.then_some(PadLevels { white, black: 10 }),
+                ..sunny(s, 500, 2_000, 0.02, false)
+            }
+        };
+        let mut first = None;
+        let mut missed_after = 0;
+        for frame in 0..60 {
+            let m = shadowed(ae.setting());
+            if m.pad.is_some() {
+                first.get_or_insert(frame);
+            } else if first.is_some() {
+                missed_after += 1;
+            }
             ae.update_metered(&m);
         }
-        let s = ae.setting();
+        // Found within two probes (the first may be the darker one), then held.
+        let cycle = usize::from(SEARCH_PROBE_AFTER_FRAMES + 2 * SETTLE_FRAMES + 2);
+        assert!(
+            first.is_some_and(|f| f <= 2 * cycle),
+            "first {first:?} missed {missed_after}"
+        );
+        assert_eq!(missed_after, 0, "first {first:?}");
+        // Without the probes it is never found once the scene's metering has settled.
+        let mut ae = qvga();
+        for _ in 0..40 {
+            ae.search_frames = 0;
+            ae.update_metered(&sunny(ae.setting(), 500, 2_000, 0.02, false));
+        }
+        for _ in 0..60 {
+            let m = shadowed(ae.setting());
+            assert!(m.pad.is_none(), "{:?}", ae.setting());
+            ae.search_frames = 0;
+            ae.update_metered(&m);
+        }
+    }
+
+    #[test]
+    fn without_markers_the_highlight_guard_keeps_a_small_pad_out_of_clipping() {
+        let mut ae = qvga();
+        // The setting it rests at between the search's probes.
+        let s = resting(&mut ae, |s| sunny(s, 500, 2_000, 0.02, false));
         let (grass, paper) = (scene(s, 500), scene(s, 2_000));
         assert!(
             paper < HIGHLIGHT_CLIPPED,
@@ -470,17 +651,13 @@ mod tests {
         let mut ae = qvga();
         // A white roof that always clips (radiance far beyond anything reachable), a tenth
         // of the frame: the guard lowers the mean to a quarter of the target and no further.
-        for _ in 0..40 {
-            let s = ae.setting();
-            let m = Metering {
-                mean: scene(s, 300),
-                highlight: 255,
-                pad: None,
-                max_exposure_us: None,
-            };
-            ae.update_metered(&m);
-        }
-        let mean = scene(ae.setting(), 300);
+        let s = resting(&mut ae, |s| Metering {
+            mean: scene(s, 300),
+            highlight: 255,
+            pad: None,
+            max_exposure_us: None,
+        });
+        let mean = scene(s, 300);
         let floor = (110 / GUARD_FLOOR_DIVISOR) as u8;
         assert!(
             mean + 12 >= floor && mean <= floor + 12 + 2,
