@@ -47,7 +47,8 @@ def thumb_hint_sites(base, data, mapping, opcode):
     (address, sure) for the halfwords with that encoding that may start an instruction.
 
     `mapping` is the ELF's sorted mapping symbols, (address, "t" | "d" | "a"): `$t` where Thumb
-    code starts, `$d` where data inside code starts (ELF for the Arm Architecture, "Mapping symbols").
+    code starts, `$d` where data inside code starts (ELF for the Arm Architecture, "Mapping
+    symbols").
     From the `$t` before a match, a linear decode (a first halfword with 0b11101, 0b11110 or
     0b11111 in its top five bits makes a 32-bit instruction: ARMv7-M ARM, A5.1) finds whether
     an instruction starts there (`sure`) or the match is the second half of a 32-bit one
