@@ -4,8 +4,9 @@
 # emulated STM32H743 from its reset vector until every task waits at its first await, then
 # for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
 # checking the LANDING_TARGETs it sends. Before them, the emulator's own unit tests; after
-# them, two self-tests that must fail: a PLL that never locks (the boot) and a camera that
-# never answers (the watchdog must reset the board).
+# them, three self-tests that must fail: a PLL that never locks (the boot), a camera that
+# never answers (the watchdog must reset the board) and a sensor deaf to its exposure
+# registers (the frames stay clipped).
 #
 # Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
 # EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
@@ -96,5 +97,7 @@ if [ -f "${DEFAULT_ELF}" ]; then
         --inject no-pll1rdy --spin-bound 20000 || failed=1
     expect_failure "nucleo-qvga, no camera on the SCCB bus" "${DEFAULT_ELF}" --board nucleo \
         --inject no-camera --fil 4 || failed=1
+    expect_failure "nucleo-qvga, a sensor that ignores its exposure registers" "${DEFAULT_ELF}" \
+        --board nucleo --inject fixed-exposure --fil 1 || failed=1
 fi
 exit "${failed}"

@@ -26,9 +26,10 @@ def parse(argv):
     parser.add_argument("--spin-bound", type=int, default=100_000,
                         help="reads of one register from one pc without a change that count "
                              "as a hang")
-    parser.add_argument("--inject", choices=("no-pll1rdy", "no-camera"),
+    parser.add_argument("--inject", choices=("no-pll1rdy", "no-camera", "fixed-exposure"),
                         help="break the chip model on purpose (shows the test can fail): "
-                             "PLL1 never locks / nothing answers on the SCCB bus")
+                             "PLL1 never locks / nothing answers on the SCCB bus / the sensor "
+                             "ignores its exposure and gain registers")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
     parser.add_argument("--camera", choices=("qvga", "vga"), default="qvga",

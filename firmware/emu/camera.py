@@ -17,7 +17,18 @@ go to / come from the device through the DMA stream (TXDMAEN / RXDMAEN), and at 
 
 The OV7725 (`Ov7725`) answers at 7-bit address 0x21: a one-byte write sets its register
 pointer, a two-byte write sets a register, a read returns the pointed register; PID/VER
-0x77/0x21, MIDH/MIDL 0x7F/0xA2; COM7 bit 7 resets the registers.
+0x77/0x21, MIDH/MIDL 0x7F/0xA2; COM7 bit 7 resets the registers. Its exposure follows the
+registers as the datasheet lays them out: with AEC and AGC off (COM8 bits 0 and 2), the
+exposure in line periods is AECH:AEC and the gain GAIN (bits 7:4 each a doubling, bits 3:0
+sixteenths on top of one). A frame is exposed with the setting in force when it starts, so
+a setting written while frame n is read out first reaches frame n + 1 or n + 2, as on the
+chip.
+
+The frame file is light, not a fixed picture: the DCMI delivers it scaled by the sensor's
+exposure x gain against a reference, clipped at 255 (`Dcmi.brightness`). The reference is
+half the firmware's first manual setting (`REFERENCE_OF_FIRST_SETTING`): the firmware's own
+exposure loop starts on frames twice too bright, their paper clipped, and what it writes
+decides what it sees next.
 
 DCMI (RM0433 §34): with CR.ENABLE and CR.CAPTURE set, the next frame from the sensor (frames
 start every 1/fps) is delivered when it ends: the frame's bytes (grey, i.e. the Y that
@@ -33,6 +44,10 @@ DMA2_IRQS = (56, 57, 58, 59, 60, 68, 69, 70)
 FLAG_SHIFT = (0, 6, 16, 22)
 TCIF, HTIF, TEIF = 1 << 5, 1 << 4, 1 << 3
 CR_EN, CR_TCIE, CR_HTIE, CR_TEIE = 1, 1 << 4, 1 << 3, 1 << 2
+
+# The frame file is what the sensor delivers at this fraction of the firmware's first manual
+# exposure x gain (see the module docs).
+REFERENCE_OF_FIRST_SETTING = 0.5
 
 I2C1_BASE = 0x4000_5400
 DCMI_BASE = 0x4802_0000
@@ -154,14 +169,21 @@ class Ov7725:
     IDS = {0x0A: 0x77, 0x0B: 0x21, 0x1C: 0x7F, 0x1D: 0xA2}
     COM7 = 0x12
 
-    def __init__(self, present=True):
+    GAIN, AECH, AEC, COM8 = 0x00, 0x08, 0x10, 0x13
+    COM8_AUTO_BITS = 0x05  # AGC (bit 2) and AEC (bit 0)
+
+    def __init__(self, present=True, fixed_exposure=False):
         self.present = present  # False: nothing answers (every transfer is NACKed)
+        # True: exposure and gain writes are ignored (fault injection: a loop that cannot act)
+        self.fixed_exposure = fixed_exposure
         self.regs = {}
         self.pointer = 0
         self.writes = 0
         self.resets = 0
+        # (time_ns, (lines, gain in sixteenths) or None) each time the exposure changed.
+        self.exposures = []
 
-    def write(self, data):
+    def write(self, data, now_ns=0.0):
         if len(data) >= 1:
             self.pointer = data[0]
         if len(data) >= 2:
@@ -169,8 +191,32 @@ class Ov7725:
             if self.pointer == self.COM7 and data[1] & 0x80:
                 self.regs = {}
                 self.resets += 1
+            elif self.fixed_exposure and self.pointer in (self.AECH, self.AEC, self.GAIN):
+                pass
             elif self.pointer not in self.IDS:
                 self.regs[self.pointer] = data[1]
+            setting = self.manual_exposure()
+            if not self.exposures or self.exposures[-1][1] != setting:
+                self.exposures.append((now_ns, setting))
+
+    def manual_exposure(self):
+        """(lines, gain in sixteenths) in force, or None while the sensor's own AEC/AGC
+        runs (after a reset COM8 reads as its default, 0xCF: both on)."""
+        if self.regs.get(self.COM8, 0xCF) & self.COM8_AUTO_BITS:
+            return None
+        lines = (self.regs.get(self.AECH, 0) << 8) | self.regs.get(self.AEC, 0)
+        gain = self.regs.get(self.GAIN, 0)
+        sixteenths = (16 + (gain & 0x0F)) << bin(gain >> 4).count("1")
+        return max(lines, 1), sixteenths
+
+    def exposure_at(self, t_ns):
+        """The setting in force at `t_ns` (see `manual_exposure`)."""
+        setting = None
+        for when, value in self.exposures:
+            if when > t_ns:
+                break
+            setting = value
+        return setting
 
     def read(self, n):
         value = self.IDS.get(self.pointer, self.regs.get(self.pointer, 0))
@@ -259,7 +305,7 @@ class I2c(Block):
             else:
                 data = b""
                 self.machine.fail("I2C1 write without TX DMA: not modelled", self.base + 0x28)
-            self.device.write(data)
+            self.device.write(data, now_ns)
         self.transactions.append((address, "read" if reading else "write", data))
         if cr2 >> 24 & 1:
             self.isr |= self.TCR
@@ -289,15 +335,29 @@ class Dcmi(Block):
     FRAME, OVR = 1, 2
     CAPTURE, CM, CROP, ENABLE = 1, 2, 4, 1 << 14
 
-    def __init__(self, frames, fps, dmas):
+    def __init__(self, frames, fps, dmas, sensor):
         super().__init__(DCMI_BASE)
         self.frames = frames  # list of (width, height, bytes)
         self.fps = fps
         self.dmas = dmas
+        self.sensor = sensor
         self.ris = 0
         self.armed_at = None
         self.delivered = 0
         self.overruns = 0
+        self.reference = None  # exposure x gain at which a frame file is delivered as it is
+        self.scales = []  # the brightness of each delivered frame (1.0: the file as it is)
+
+    def brightness(self, start_ns):
+        """The scale of a frame that started exposing at `start_ns` (see the module docs):
+        1.0 while the sensor's own AEC runs or before any manual setting."""
+        setting = self.sensor.exposure_at(start_ns)
+        if setting is None:
+            return 1.0
+        lines, gain = setting
+        if self.reference is None:
+            self.reference = lines * gain * REFERENCE_OF_FIRST_SETTING
+        return lines * gain / self.reference
 
     def read_reg(self, off):
         if off == 0x08:
@@ -333,6 +393,10 @@ class Dcmi(Block):
             return
         width, height, pixels = self.frames[self.delivered % len(self.frames)]
         self.delivered += 1
+        scale = self.brightness(self._frame_end() - 0.9e9 / self.fps)
+        self.scales.append(scale)
+        if scale != 1.0:
+            pixels = pixels.translate(bytes(min(255, round(v * scale)) for v in range(256)))
         data = self._window(width, height, pixels)
         dma = stream = None
         for candidate in self.dmas:

@@ -30,9 +30,10 @@ def build_chip(elf, board, args, frames=((320, 240, bytes(320 * 240)),)):
     dmamux = machine.add_block(Dmamux())
     dmas = [machine.add_block(Dma(0x4002_0000, "DMA1", DMA1_IRQS, dmamux, 0)),
             machine.add_block(Dma(0x4002_0400, "DMA2", DMA2_IRQS, dmamux, 8))]
-    machine.sensor = Ov7725(present=args.inject != "no-camera")
+    machine.sensor = Ov7725(present=args.inject != "no-camera",
+                            fixed_exposure=args.inject == "fixed-exposure")
     machine.i2c = machine.add_block(I2c(machine.sensor, dmas))
-    machine.dcmi = machine.add_block(Dcmi(list(frames), SENSOR_FPS, dmas))
+    machine.dcmi = machine.add_block(Dcmi(list(frames), SENSOR_FPS, dmas, machine.sensor))
     machine.uart = machine.add_block(
         Usart(board.uart_base, board.uart_name, board.uart_irq, board.uart_clock))
     return machine

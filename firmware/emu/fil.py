@@ -3,7 +3,10 @@ for a given emulated time: the OV7725 on the SCCB bus (probe, reset, configurati
 delivering a recorded frame with the firmware's pad in view (30 fps), and an ArduPilot
 autopilot on the UART sending HEARTBEAT at 1 Hz (generated with pymavlink). Everything the
 firmware transmits is decoded with pymavlink: its HEARTBEATs must be well-formed and about
-1 Hz, and its LANDING_TARGETs must agree with the frame's truth (distance and position).
+1 Hz, and its LANDING_TARGETs must agree with the frame's truth (distance and position). The
+frame is delivered at the brightness the firmware's exposure and gain registers give it,
+starting twice too bright (camera.py): the firmware's exposure loop must take its paper out
+of clipping.
 
 The frame (`frames/*.pgm` in this package, with its truth in the `.txt` beside it) was
 rendered by the simulator (`touchdown simulate`) and resampled into the firmware's own pinhole
@@ -111,6 +114,7 @@ class Fil:
             problems.append(f"FIL stopped early: {machine.finished}")
         print(f"  FIL: {self.seconds:g} s emulated after the boot")
         self._report_hardware(machine)
+        problems += self._check_exposure(machine)
         problems += self._check_led(machine, start)
         problems += self._check_link(machine)
         return problems
@@ -125,6 +129,32 @@ class Fil:
             return []
         return [f"LED {self.board.led} toggled {len(toggles)} times in {self.seconds:g} s "
                 "(2 Hz expected)"]
+
+    def _check_exposure(self, machine):
+        """The firmware's exposure loop, closed through the emulated sensor (camera.py: the
+        frames start twice too bright): it must set the exposure manually and bring the
+        frame out of clipping (no pixel at 255: the loop holds the markers' white at 200 to
+        leave the larger paper areas headroom, and a clipped level beside an edge moves it)."""
+        scales = machine.dcmi.scales
+        if not scales:
+            return []
+        brightest = max(self.frame[2])
+        written = sum(1 for _, setting in machine.sensor.exposures if setting is not None)
+        first, last = scales[0], scales[-1]
+
+        def clipped(scale):
+            return sum(1 for v in self.frame[2] if round(v * scale) >= 255)
+
+        print(f"  exposure: {written} setting(s) reached the sensor; frames at {first:.2f} -> "
+              f"{last:.2f} times the file's light, its brightest pixel "
+              f"{min(255, round(brightest * first))} -> {min(255, round(brightest * last))}, "
+              f"clipped pixels {clipped(first)} -> {clipped(last)}")
+        if written == 0:
+            return ["the firmware never set the sensor's exposure (AEC/AGC left on)"]
+        if clipped(last):
+            return [f"{clipped(last)} pixels still clip after {len(scales)} frames "
+                    f"(x {last:.2f} in the last one)"]
+        return []
 
     @staticmethod
     def _report_hardware(machine):
