@@ -20,9 +20,9 @@ pointer, a two-byte write sets a register, a read returns the pointed register; 
 0x77/0x21, MIDH/MIDL 0x7F/0xA2; COM7 bit 7 resets the registers. Its exposure follows the
 registers as the datasheet lays them out: with AEC and AGC off (COM8 bits 0 and 2), the
 exposure in line periods is AECH:AEC and the gain GAIN (bits 7:4 each a doubling, bits 3:0
-sixteenths on top of one). A frame is exposed with the setting in force when it starts, so
-a setting written while frame n is read out first reaches frame n + 1 or n + 2, as on the
-chip.
+sixteenths on top of one). A frame is exposed with the setting in force when it starts: a
+setting the firmware writes while it processes frame n (frame n + 1 already exposing) first
+reaches frame n + 2, the latency the firmware's exposure loop is built for.
 
 The frame file is light, not a fixed picture: the DCMI delivers it scaled by the sensor's
 exposure x gain against a reference, clipped at 255 (`Dcmi.brightness`). The reference is
