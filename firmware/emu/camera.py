@@ -378,12 +378,15 @@ class Dcmi(Block):
                 self.armed_at = None
         self.regs[off] = value
 
-    def _frame_end(self):
-        """End of the first whole frame after arming: frames start every period; one is
-        read out for 90 % of it (the rest is vertical blanking)."""
+    def _frame_start(self):
+        """Start of the first whole frame after arming: frames start every period."""
         period = 1e9 / self.fps
-        start = (int(self.armed_at // period) + 1) * period
-        return start + 0.9 * period
+        return (int(self.armed_at // period) + 1) * period
+
+    def _frame_end(self):
+        """End of that frame: it is read out for 90 % of the period (the rest is vertical
+        blanking)."""
+        return self._frame_start() + 0.9e9 / self.fps
 
     def next_event_ns(self):
         return self._frame_end() if self.armed_at is not None else None
@@ -393,7 +396,7 @@ class Dcmi(Block):
             return
         width, height, pixels = self.frames[self.delivered % len(self.frames)]
         self.delivered += 1
-        scale = self.brightness(self._frame_end() - 0.9e9 / self.fps)
+        scale = self.brightness(self._frame_start())
         self.scales.append(scale)
         if scale != 1.0:
             pixels = pixels.translate(bytes(min(255, round(v * scale)) for v in range(256)))

@@ -55,21 +55,24 @@ def thumb_hint_sites(base, data, mapping, opcode):
     (`b.w` can have 0xBF40 there), which is left out: it never executes as a hint, and patching
     it would change that instruction. Matches in data are left out. Without mapping symbols (a
     stripped ELF) every match is returned with `sure` false: the caller must not patch it."""
+    matches = [i for i in range(0, len(data) - 1, 2) if data[i] | (data[i + 1] << 8) == opcode]
+    if not mapping:
+        return [(base + i, False) for i in matches]
     starts = [addr for addr, _ in mapping]
     sites = []
-    for i in range(0, len(data) - 1, 2):
-        if data[i] | (data[i + 1] << 8) != opcode:
+    # The decode goes on from the last match while the next one is in the same code region,
+    # so each region is decoded once, up to its last match.
+    region, at = None, 0
+    for i in matches:
+        m = bisect.bisect_right(starts, base + i) - 1
+        if m < 0 or mapping[m][1] != "t":
             continue
-        addr = base + i
-        m = bisect.bisect_right(starts, addr) - 1
-        if not mapping:
-            sites.append((addr, False))
-        elif m >= 0 and mapping[m][1] == "t":
-            at = mapping[m][0] - base
-            while at < i:
-                at += 4 if data[at + 1] >> 3 in (0b11101, 0b11110, 0b11111) else 2
-            if at == i:
-                sites.append((addr, True))
+        if m != region:
+            region, at = m, mapping[m][0] - base
+        while at < i:
+            at += 4 if data[at + 1] >> 3 in (0b11101, 0b11110, 0b11111) else 2
+        if at == i:
+            sites.append((base + i, True))
     return sites
 
 

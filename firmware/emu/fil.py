@@ -142,17 +142,16 @@ class Fil:
         written = sum(1 for _, setting in machine.sensor.exposures if setting is not None)
         first, last = scales[0], scales[-1]
 
-        def clipped(scale):
-            return sum(1 for v in self.frame[2] if round(v * scale) >= 255)
-
+        clipped_first, clipped_last = (
+            sum(1 for v in self.frame[2] if round(v * scale) >= 255) for scale in (first, last))
         print(f"  exposure: {written} setting(s) reached the sensor; frames at {first:.2f} -> "
               f"{last:.2f} times the file's light, its brightest pixel "
               f"{min(255, round(brightest * first))} -> {min(255, round(brightest * last))}, "
-              f"clipped pixels {clipped(first)} -> {clipped(last)}")
+              f"clipped pixels {clipped_first} -> {clipped_last}")
         if written == 0:
             return ["the firmware never set the sensor's exposure (AEC/AGC left on)"]
-        if clipped(last):
-            return [f"{clipped(last)} pixels still clip after {len(scales)} frames "
+        if clipped_last:
+            return [f"{clipped_last} pixels still clip after {len(scales)} frames "
                     f"(x {last:.2f} in the last one)"]
         return []
 
