@@ -25,9 +25,12 @@ cannot affect another's timing):
 - OpenCV ArUco (cv2.aruco.ArucoDetector) with the matching DICT_APRILTAG_* / DICT_* dictionary
   and default parameters (no corner refinement), and again with CORNER_REFINE_SUBPIX.
 
-Timing: every detector is given the decoded grey image (file decoding is never timed), runs
-it `--repeats` times in a row (default 10) in one warm process, and the MEDIAN time is
-reported. Times are wall-clock milliseconds on this machine, single-threaded.
+Timing: every detector is given the decoded grey image (file decoding is never timed) and
+runs it `--repeats` times in a row (default 10) in one warm process; the median is that
+round's time. The detectors take turns for `--rounds` rounds (default 3), and an image's
+time is the MEDIAN of its rounds, so that a spell of load on the machine does not land on
+one detector's runs alone (single runs of this script on a shared 2-core machine moved the
+totals by a third). Times are wall-clock milliseconds on this machine, single-threaded.
 
 Per image the table gives each detector's time, its recall (expected markers found with the
 right id / expected; where reference corners exist a detection must also lie on the marker,
@@ -265,6 +268,23 @@ def collect(command):
     return results
 
 
+def merge_round(results, key, result):
+    """Adds one round's `result` (as from `collect`) to `results[key]`: each image's round
+    medians are kept in "rounds" and "ms" becomes their median; the first round's detections
+    stand (every detector here is deterministic). An error string is kept only when no
+    round produced anything."""
+    if isinstance(result, str):
+        results.setdefault(key, result)
+        return
+    merged = results.get(key)
+    if not isinstance(merged, dict):
+        merged = results[key] = {}
+    for image, entry in result.items():
+        kept = merged.setdefault(image, {"detections": entry["detections"], "rounds": []})
+        kept["rounds"].append(entry["ms"])
+        kept["ms"] = statistics.median(kept["rounds"])
+
+
 def run_touchdown(binary, images, repeats, family):
     # Each image repeated in one process: the detector and its work memory stay warm, as in
     # the peers' loops; time_ms excludes decoding.
@@ -332,7 +352,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("paths", nargs="*", help="extra image files or directories")
     parser.add_argument("--family", default="tag36h11", help="family of the extra images (default tag36h11)")
-    parser.add_argument("--repeats", type=int, default=10, help="runs per image; the median is reported")
+    parser.add_argument("--repeats", type=int, default=10, help="runs per image and round (their median is the round's time)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="rounds in which the detectors take turns; an image's time is the median of its rounds")
     parser.add_argument("--data", help="shared data directory (default $TOUCHDOWN_DATA or ../shared/data)")
     parser.add_argument("--touchdown", help="touchdown binary (default: build it with cargo --release)")
     parser.add_argument("--only-extra", action="store_true", help="skip the shared data sets")
@@ -347,6 +369,8 @@ def main():
         return
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
+    if args.rounds < 1:
+        parser.error("--rounds must be at least 1")
 
     data = args.data or os.environ.get("TOUCHDOWN_DATA") or os.path.join(os.path.dirname(REPO), "shared", "data")
     cases = [] if args.only_extra else builtin_cases(data)
@@ -370,17 +394,23 @@ def main():
          if fam in OPENCV_DICTIONARIES else "family not in OpenCV"),
     ]
 
-    # One process per detector and family, covering all that family's images.
+    # One process per detector and family, covering all that family's images; the detectors
+    # take turns, round after round, so that a spell of load on this machine (another
+    # process, a busy neighbour of a virtual machine) slows one round of each rather than all
+    # the runs of whichever detector was running then. An image's time is the median of its
+    # rounds' medians.
     families = sorted({c.family for c in cases})
     results = {}  # (detector, family) -> dict or error string
-    for name, run in detectors:
-        for family in families:
-            images = [c.path for c in cases if c.family == family]
-            print("running %s on %d %s image(s)..." % (name, len(images), family), file=sys.stderr, flush=True)
-            results[(name, family)] = run(images, family)
+    for round_number in range(1, args.rounds + 1):
+        for name, run in detectors:
+            for family in families:
+                images = [c.path for c in cases if c.family == family]
+                print("round %d/%d: running %s on %d %s image(s)..."
+                      % (round_number, args.rounds, name, len(images), family), file=sys.stderr, flush=True)
+                merge_round(results, (name, family), run(images, family))
 
-    print("Times: median of %d runs per image, ms, decoding excluded; ms / td = detector time / "
-          "touchdown time (above 1: touchdown is faster)." % args.repeats)
+    print("Times: per image the median over %d rounds of the median of %d runs, ms, decoding excluded; "
+          "ms / td = detector time / touchdown time (above 1: touchdown is faster)." % (args.rounds, args.repeats))
     # name -> [ms, found, expected, wrong, other, touchdown ms on the same images, error]
     totals = {name: [0.0, 0, 0, 0, 0, 0.0, None] for name, _ in detectors}
     for case in cases:

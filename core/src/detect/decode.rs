@@ -347,6 +347,14 @@ pub(crate) fn read_robust(
     grid
 }
 
+/// The shorter of a quad's first two sides, squared: the size tests compare squared lengths
+/// (no square root: they run on every candidate).
+fn shorter_first_side_squared(quad: &[Point; 4]) -> f32 {
+    quad[0]
+        .distance_squared(quad[1])
+        .min(quad[1].distance_squared(quad[2]))
+}
+
 /// [`read_robust`], reading the cells through `h` (`grid`, kept in the result for the
 /// corners, maps the same), counting its reads in `cost`.
 fn read_robust_counted<M: CellMap>(
@@ -361,10 +369,8 @@ fn read_robust_counted<M: CellMap>(
     let n = family.grid as usize;
     let b = family.border_ring as isize;
     let reversed = family.reversed();
-    // Cells of at least MULTI_SAMPLE_CELL_PX along the first two sides, on squared lengths.
-    let side2 = quad[0]
-        .distance_squared(quad[1])
-        .min(quad[1].distance_squared(quad[2]));
+    // Cells of at least MULTI_SAMPLE_CELL_PX along the first two sides.
+    let side2 = shorter_first_side_squared(quad);
     let multi_side = MULTI_SAMPLE_CELL_PX * family.quad_cells() as f32;
     let multi = side2 >= multi_side * multi_side;
     // A single read: one mapped point, one sample; a multi-sampled one: three and five.
@@ -670,11 +676,8 @@ pub(crate) fn precheck(
     if !(contrast >= f32::from(min_contrast) * 0.5) {
         return Precheck::NoBorder;
     }
-    // Cells of at least PRECHECK_BORDER_CELL_PX along the first two sides, on squared
-    // lengths (no square root: this runs on every candidate).
-    let side2 = quad[0]
-        .distance_squared(quad[1])
-        .min(quad[1].distance_squared(quad[2]));
+    // Cells of at least PRECHECK_BORDER_CELL_PX along the first two sides.
+    let side2 = shorter_first_side_squared(quad);
     let min_side = PRECHECK_BORDER_CELL_PX * q;
     if side2 >= min_side * min_side {
         let mid = 0.5 * (black + white);
