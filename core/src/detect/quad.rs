@@ -73,19 +73,25 @@ fn cross(o: Point, a: Point, b: Point) -> f32 {
 /// Twice the signed area of the boundary polygon: positive when it runs clockwise on
 /// screen (an outer boundary), negative for a hole.
 pub(crate) fn signed_area2(contour: &[Pixel]) -> i64 {
-    // Relative to the first pixel, which makes the first and the closing term zero and keeps
-    // every partial sum (twice the area of a fan from that pixel) within i32: the boundary
-    // lies in a frame of at most `image::MAX_DIMENSION` pixels a side, 2 * 8192^2 < 2^31. 32-bit products are half the
-    // instructions of 64-bit ones on the Cortex-M7, and this runs on every long boundary.
-    let Some(origin) = contour.first() else {
+    // The shoelace sum in wrapping 32-bit arithmetic: its partial sums may wrap, but the
+    // total, twice the area of a polygon inside a frame of at most `image::MAX_DIMENSION`
+    // pixels a side (2 * 8192^2 < 2^31), fits an i32, so modulo 2^32 it comes out exact.
+    // Absolute coordinates, a multiply and a multiply-subtract a pixel: this runs on every
+    // boundary long enough to be screened, most of a noisy frame's screening (32-bit
+    // products are half the instructions of 64-bit ones on the Cortex-M7).
+    let (Some(first), Some(last)) = (contour.first(), contour.last()) else {
         return 0;
     };
-    let (ox, oy) = (i32::from(origin.x), i32::from(origin.y));
-    let mut acc = 0i32;
-    let (mut px, mut py) = (0i32, 0i32);
+    let xy = |p: &Pixel| (i32::from(p.x), i32::from(p.y));
+    // The closing term, from the last pixel back to the first.
+    let ((fx, fy), (lx, ly)) = (xy(first), xy(last));
+    let mut acc = lx.wrapping_mul(fy).wrapping_sub(fx.wrapping_mul(ly));
+    let (mut px, mut py) = (fx, fy);
     for p in contour.get(1..).unwrap_or(&[]) {
-        let (x, y) = (i32::from(p.x) - ox, i32::from(p.y) - oy);
-        acc = acc.wrapping_add(px.wrapping_mul(y).wrapping_sub(x.wrapping_mul(py)));
+        let (x, y) = xy(p);
+        acc = acc
+            .wrapping_add(px.wrapping_mul(y))
+            .wrapping_sub(x.wrapping_mul(py));
         (px, py) = (x, y);
     }
     i64::from(acc)
@@ -520,6 +526,44 @@ mod tests {
             v.push(Pixel { x: x0, y }).unwrap();
         }
         v
+    }
+
+    /// The 32-bit wrapping shoelace equals the exact 64-bit one, for rectangles at the far
+    /// corner of the largest frame (where its partial sums wrap) and for ragged polygons.
+    #[test]
+    fn signed_area_is_exact_where_partial_sums_wrap() {
+        let exact = |c: &[Pixel]| -> i64 {
+            let n = c.len();
+            (0..n)
+                .map(|i| {
+                    let (a, b) = (c[i], c[(i + 1) % n]);
+                    i64::from(a.x) * i64::from(b.y) - i64::from(b.x) * i64::from(a.y)
+                })
+                .sum()
+        };
+        for (x0, y0, w, h) in [(10, 20, 30, 25), (8000, 8000, 120, 100), (0, 8050, 100, 140)] {
+            let c = rectangle(x0, y0, w, h);
+            let area = signed_area2(&c);
+            assert_eq!(area, exact(&c), "rectangle at ({x0}, {y0})");
+            // Pixel centres: (w - 1) x (h - 1), twice, clockwise on screen.
+            assert_eq!(area, 2 * i64::from(w - 1) * i64::from(h - 1));
+            let reversed: heapless::Vec<Pixel, 512> = c.iter().rev().copied().collect();
+            assert_eq!(signed_area2(&reversed), -area);
+        }
+        // Ragged walks of unit steps far from the origin (closed by the last-to-first edge).
+        let mut state = 12345u32;
+        for _ in 0..50 {
+            let mut c: heapless::Vec<Pixel, 512> = heapless::Vec::new();
+            let (mut x, mut y) = (8100u16, 8100u16);
+            for _ in 0..300 {
+                state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                x = (x + (state >> 28) as u16 % 3).saturating_sub(1).min(8191);
+                y = (y + (state >> 24) as u16 % 3).saturating_sub(1).min(8191);
+                c.push(Pixel { x, y }).unwrap();
+            }
+            assert_eq!(signed_area2(&c), exact(&c));
+        }
+        assert_eq!(signed_area2(&[]), 0);
     }
 
     #[test]
