@@ -3,10 +3,12 @@
 # firmware for every board, frame size and clock variant, and runs each ELF, unchanged, on the
 # emulated STM32H743 from its reset vector until every task waits at its first await, then
 # for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
-# checking the LANDING_TARGETs it sends. Before them, the emulator's own unit tests; after
-# them, three self-tests that must fail: a PLL that never locks (the boot), a camera that
-# never answers (the watchdog must reset the board) and a sensor deaf to its exposure
-# registers (the frames stay clipped).
+# checking the LANDING_TARGETs it sends; on one variant per board FIL ends with a parameter
+# set over MAVLink, a power cycle and the parameter read back. Before them, the emulator's
+# own unit tests; after them, four self-tests that must fail: a PLL that never locks (the
+# boot), a camera that never answers (the watchdog must reset the board), a sensor deaf to
+# its exposure registers (the frames stay clipped) and a power cycle that loses the flash
+# (the parameter is gone).
 #
 # Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
 # EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
@@ -26,6 +28,10 @@ readonly OUT="${TARGET_DIR}/emu"
 
 readonly FIL_SECONDS="${EMU_FIL_SECONDS:-2}"
 
+# The variants whose FIL ends with the parameter power cycle (firmware/emu/power_cycle.py):
+# one per board (the OpenMV Cam's starts with foreign data in a parameter sector); the
+# others differ only in the camera and the clock.
+readonly POWER_CYCLE_VARIANTS=(nucleo-qvga openmv-qvga)
 # name board MHz camera cargo-features...
 readonly VARIANTS=(
     "nucleo-qvga nucleo 400 qvga"
@@ -87,6 +93,9 @@ for variant in "${VARIANTS[@]}"; do
     if [ "${FIL_SECONDS}" != 0 ]; then
         fil=(--fil "${FIL_SECONDS}" --camera "${v[3]}")
     fi
+    if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${POWER_CYCLE_VARIANTS[@]}"; then
+        fil+=(--power-cycle)
+    fi
     emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" \
         "${fil[@]}" || failed=1
 done
@@ -99,5 +108,7 @@ if [ -f "${DEFAULT_ELF}" ]; then
         --inject no-camera --fil 4 || failed=1
     expect_failure "nucleo-qvga, a sensor that ignores its exposure registers" "${DEFAULT_ELF}" \
         --board nucleo --inject fixed-exposure --fil 1 || failed=1
+    expect_failure "nucleo-qvga, a power cycle that loses the flash" "${DEFAULT_ELF}" \
+        --board nucleo --inject volatile-flash --fil 1 --power-cycle || failed=1
 fi
 exit "${failed}"

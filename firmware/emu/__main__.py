@@ -1,9 +1,10 @@
 """Runs one touchdown firmware ELF on the emulated STM32H743 and prints a summary.
 
-    python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS]
+    python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS [--power-cycle]]
 
 Without --fil: the boot test (boot.py). With --fil: the boot test, then firmware-in-the-loop
-(fil.py) for SECONDS of emulated time. Exit status 0 when every check passed, 1 on a failure
+(fil.py) for SECONDS of emulated time; with --power-cycle also a parameter set over MAVLink,
+kept through a power cycle (power_cycle.py). Exit status 0 when every check passed, 1 on a failure
 (the message names the pc, the function and the address), 2 on bad usage.
 """
 
@@ -26,12 +27,17 @@ def parse(argv):
     parser.add_argument("--spin-bound", type=int, default=100_000,
                         help="reads of one register from one pc without a change that count "
                              "as a hang")
-    parser.add_argument("--inject", choices=("no-pll1rdy", "no-camera", "fixed-exposure"),
+    parser.add_argument("--inject",
+                        choices=("no-pll1rdy", "no-camera", "fixed-exposure", "volatile-flash"),
                         help="break the chip model on purpose (shows the test can fail): "
                              "PLL1 never locks / nothing answers on the SCCB bus / the sensor "
-                             "ignores its exposure and gain registers")
+                             "ignores its exposure and gain registers / the power cycle loses "
+                             "what the firmware wrote to flash")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
+    parser.add_argument("--power-cycle", action="store_true",
+                        help="after FIL: set a parameter over MAVLink, power-cycle the chip "
+                             "(its flash kept), read it back (power_cycle.py)")
     parser.add_argument("--camera", choices=("qvga", "vga"), default="qvga",
                         help="FIL: the build's frame size (feature camera-vga)")
     parser.add_argument("--frame", default=None,
@@ -54,6 +60,9 @@ def main(argv=None):
     problems = run_boot(machine, board, args)
     if fil and not problems:
         problems += fil.run(machine)
+    if fil and args.power_cycle and not problems:
+        from .power_cycle import PowerCycle
+        problems += PowerCycle(fil, elf, board, args).run(machine)
     problems += report_stack(machine)
     taken = dict(sorted(machine.exc.taken.items()))
     print(f"  {machine.instructions} instructions, {machine.time_ns / 1e6:.1f} ms emulated, "

@@ -3,8 +3,9 @@ boot path and tasks use; any other peripheral address is a failure (see bus.py).
 
 from .camera import DMA1_IRQS, DMA2_IRQS, Dcmi, Dma, Dmamux, I2c, Ov7725
 from .devices import Gpio, Iwdg, RegisterFile, Tim2
+from .flash import SECTOR_SIZE, Flash
 from .machine import Machine
-from .rcc import Flash, Pwr, Rcc, Syscfg
+from .rcc import Pwr, Rcc, Syscfg
 from .uart import Usart
 
 GPIO_BASE = 0x5802_0000
@@ -15,9 +16,16 @@ def build_chip(elf, board, args, frames=((320, 240, bytes(320 * 240)),)):
     """The chip with `board`'s wiring; the camera streams `frames` (width, height, grey
     bytes), cycled."""
     machine = Machine(elf, spin_bound=args.spin_bound)
+    if board.foreign_sector is not None:
+        # Another firmware's data (not erased, no parameter slot in it): the parameter store
+        # must erase it before it can save there (firmware/src/param_store.rs).
+        pattern = b"ROMFS\0" + bytes(range(256))
+        sector = (pattern * (SECTOR_SIZE // len(pattern) + 1))[:SECTOR_SIZE]
+        machine.uc.mem_write(board.foreign_sector, sector)
     machine.rcc = machine.add_block(Rcc(board.hse_hz))
     machine.pwr = machine.add_block(Pwr())
     machine.flash = machine.add_block(Flash())
+    machine.flash.attach(machine)
     machine.syscfg = machine.add_block(Syscfg())
     if args.inject == "no-pll1rdy":
         machine.rcc.inject_no_pll1rdy()

@@ -20,6 +20,8 @@ import os
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from .flash import BANK_SIZE, SECTOR_SIZE
+
 FRAMES_DIR = os.path.join(os.path.dirname(__file__), "frames")
 DEFAULT_FRAME = {"qvga": "nested-qvga.pgm", "vga": "nested-vga.pgm"}
 AUTOPILOT_SYSID = 1
@@ -76,6 +78,31 @@ def expected_target(truth):
             "angle_x": math.atan2(cx, cz), "angle_y": math.atan2(cy, cz)}
 
 
+def position_problems(target, want, scale=1.0, when=""):
+    """How a LANDING_TARGET's distance and x, y, z miss `want` (expected_target) times
+    `scale`: the distance within DISTANCE_TOLERANCE of the expected one, each component
+    within POSITION_TOLERANCE of it."""
+    d = scale * want["distance"]
+    problems = []
+    if abs(target.distance - d) > DISTANCE_TOLERANCE * d:
+        problems.append(f"LANDING_TARGET distance {target.distance:.2f} m{when}, expected "
+                        f"{d:.2f} m")
+    for axis in ("x", "y", "z"):
+        if abs(getattr(target, axis) - scale * want[axis]) > POSITION_TOLERANCE * d:
+            problems.append(f"LANDING_TARGET {axis} {getattr(target, axis):.2f} m{when}, "
+                            f"expected {scale * want[axis]:.2f} m")
+    return problems
+
+
+def sent_messages(machine, since_ns=0.0):
+    """The MAVLink messages the firmware sent from emulated time `since_ns` on, decoded with
+    pymavlink (the reference decoder)."""
+    sent = bytes(b for t, b in machine.uart.sent if t >= since_ns)
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    return [m for m in (mav.parse_buffer(sent) or []) if m.get_type() != "BAD_DATA"]
+
+
 def heartbeat_bytes(mav):
     return mav.heartbeat_encode(
         mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -114,9 +141,30 @@ class Fil:
             problems.append(f"FIL stopped early: {machine.finished}")
         print(f"  FIL: {self.seconds:g} s emulated after the boot")
         self._report_hardware(machine)
+        problems += self._check_flash(machine)
         problems += self._check_exposure(machine)
         problems += self._check_led(machine, start)
         problems += self._check_link(machine)
+        return problems
+
+    def _check_flash(self, machine):
+        """Flash is written only for a reason: no parameter changed here, so nothing may be
+        programmed, and only a sector of foreign data (the OpenMV Cam's ROMFS) erased, once."""
+        flash = machine.flash
+        erased = [(bank, sector) for _, bank, sector in flash.erased]
+        print(f"  flash: {len(flash.programmed)} flash word(s) programmed, sectors erased "
+              f"(bank, sector): {erased or 'none'}")
+        problems = []
+        if flash.programmed:
+            problems.append(f"{len(flash.programmed)} flash word(s) programmed with no "
+                            "parameter changed")
+        want = []
+        if self.board.foreign_sector is not None:
+            offset = self.board.foreign_sector - flash.banks[0].base
+            want = [(offset // BANK_SIZE, offset % BANK_SIZE // SECTOR_SIZE)]
+        if erased != want:
+            problems.append(f"sectors erased {erased}, expected {want} (the board's foreign "
+                            "data only)")
         return problems
 
     def _check_led(self, machine, start):
@@ -165,14 +213,11 @@ class Fil:
               f"overruns; IWDG fed {machine.iwdg.feeds} times")
 
     def _check_link(self, machine):
-        sent = bytes(b for _, b in machine.uart.sent)
-        mav = mavlink.MAVLink(None)
-        mav.robust_parsing = True
-        messages = [m for m in (mav.parse_buffer(sent) or []) if m.get_type() != "BAD_DATA"]
+        messages = sent_messages(machine)
         counts = {}
         for m in messages:
             counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
-        print(f"  UART: {len(sent)} bytes at {machine.uart.baud():.0f} baud, "
+        print(f"  UART: {len(machine.uart.sent)} bytes at {machine.uart.baud():.0f} baud, "
               f"{len(messages)} MAVLink messages: {counts}")
         texts = sorted({m.text for m in messages if m.get_type() == "STATUSTEXT"})
         for text in texts:
@@ -212,13 +257,7 @@ class Fil:
         problems = []
         if last.frame != mavlink.MAV_FRAME_BODY_FRD:
             problems.append(f"LANDING_TARGET frame {last.frame}, expected BODY_FRD")
-        d = want["distance"]
-        if abs(last.distance - d) > DISTANCE_TOLERANCE * d:
-            problems.append(f"LANDING_TARGET distance {last.distance:.2f} m, truth {d:.2f} m")
-        for axis in ("x", "y", "z"):
-            if abs(getattr(last, axis) - want[axis]) > POSITION_TOLERANCE * d:
-                problems.append(f"LANDING_TARGET {axis} {getattr(last, axis):.2f} m, "
-                                f"truth {want[axis]:.2f} m")
+        problems += position_problems(last, want)
         for angle in ("angle_x", "angle_y"):
             if abs(getattr(last, angle) - want[angle]) > ANGLE_TOLERANCE:
                 problems.append(f"LANDING_TARGET {angle} {getattr(last, angle):.3f} rad, "

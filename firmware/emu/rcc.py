@@ -1,12 +1,13 @@
-"""Reset and clock control, power control, the flash interface and SYSCFG (RM0433 chapters 8
-"RCC", 6 "PWR", 4 "FLASH", 12 "SYSCFG"), with the status bits the clock set-up waits for, and
-the check of the resulting clock tree against what `firmware/src/clocks.rs` asks for.
+"""Reset and clock control, power control and SYSCFG (RM0433 chapters 8 "RCC", 6 "PWR", 12
+"SYSCFG"), with the status bits the clock set-up waits for, and the check of the resulting
+clock tree (with the flash wait states, whose register flash.py models) against what
+`firmware/src/clocks.rs` asks for.
 
 Modelled: oscillator and PLL ready bits follow their enable bits at once (HSIRDY, CSIRDY,
 HSI48RDY, HSERDY, PLL1-3RDY, LSIRDY, LSERDY); SWS follows SW; D1CKRDY/D2CKRDY read 1; the
 RCC_C1_* registers alias the common ones (single core); PWR_D3CR.VOSRDY and
 PWR_CSR1.ACTVOSRDY read 1 and ACTVOS follows VOS; PWR_CR3's supply bits are write-once;
-FLASH_ACR reads back its latency; SYSCFG_CCCSR.READY follows EN. Not modelled: oscillator
+SYSCFG_CCCSR.READY follows EN. Not modelled: oscillator
 start-up times, clock security, the PLL lock time, the PLL input/VCO ranges' effect (they are
 checked instead), peripheral clock gating (except SRAM1-3, see memmap.py).
 
@@ -18,7 +19,6 @@ from .bus import Block
 
 RCC_BASE = 0x5802_4400
 PWR_BASE = 0x5802_4800
-FLASH_BASE = 0x5200_2000
 SYSCFG_BASE = 0x5800_0400
 
 HSI_HZ = 64_000_000
@@ -205,28 +205,6 @@ class Pwr(Block):
         bits = (self.regs[0x18] >> 14) & 3
         scale = {3: 1, 2: 2, 1: 3, 0: 3}[bits]
         return 0 if scale == 1 and syscfg.regs.get(0x2C, 0) & 1 else scale
-
-
-class Flash(Block):
-    """FLASH registers (bank 1 at +0x000, bank 2 at +0x100; ACR is shared). Program/erase
-    operations are not modelled: the firmware only reads its parameter sector at boot."""
-
-    name = "FLASH"
-    names = {0x00: "ACR", 0x0C: "CR1", 0x10: "SR1", 0x10C: "CR2", 0x110: "SR2"}
-    reset = {0x00: 0x37, 0x0C: 0x31, 0x10C: 0x31, 0x18: 0x1}
-
-    def __init__(self):
-        super().__init__(FLASH_BASE)
-        self.log = []
-
-    def read_reg(self, off):
-        return self.regs.get(0x00 if off == 0x100 else off, 0)
-
-    def write_reg(self, off, value):
-        self.regs[0x00 if off == 0x100 else off] = value
-
-    def latency(self):
-        return self.regs[0x00] & 0xF, (self.regs[0x00] >> 4) & 3
 
 
 class Syscfg(Block):

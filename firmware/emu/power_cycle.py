@@ -1,0 +1,161 @@
+"""Stage 3, a parameter through a power cycle: after firmware-in-the-loop (fil.py) the emulated
+autopilot sets TD_TAG_SIZE to half the built pad's size with PARAM_SET; then the chip is
+powered off and on (a new emulated chip that keeps only the old one's flash), and the
+autopilot reads the parameter back with PARAM_REQUEST_READ.
+
+Why: a parameter is the one thing a user sets once and expects to keep, and its path crosses
+everything FIL alone does not run: the link task's PARAM_SET handling, the debounced save
+through the SAVE channel, the parameter store writing flash words through embassy's async
+flash driver and the flash interrupt (flash.py), and at the next boot the scan that restores
+them. Telling the firmware that the pad is printed at half size also shows that the value
+reaches the per-frame path: every LANDING_TARGET after the change, and after the power cycle,
+must put the pad at half the distance (the angles stay).
+
+Checked, before the power cycle: a PARAM_VALUE with the new value answers the PARAM_SET; the
+LANDING_TARGETs after it are at half the truth's distance (x, y, z likewise); the firmware
+programs flash words in bank 2 after its save delay (and, on a board that starts with foreign
+data in a parameter sector, erased that sector at boot). After it: the boot test passes again;
+a PARAM_VALUE with the new value answers PARAM_REQUEST_READ; the LANDING_TARGETs are at half
+the distance.
+"""
+
+import os
+import tomllib
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from . import memmap
+from .boot import report_stack, run_boot
+from .chip import build_chip
+from .fil import (AUTOPILOT_SYSID, HEARTBEAT_PERIOD_NS, expected_target, heartbeat_bytes,
+                  position_problems, sent_messages)
+
+PARAM = "TD_TAG_SIZE"
+# The firmware's built pad (firmware/src/config.rs: core's NESTED, which a host test keeps
+# identical to this file).
+PAD_FILE = os.path.join(os.path.dirname(__file__), "..", "..", "pads", "nested.toml")
+# Our MAVLink ids (TD_SYSID / TD_COMPID defaults, docs/interfaces.md).
+FIRMWARE_SYSID, FIRMWARE_COMPID = 1, 191
+# The save delay (core's SAVE_DEBOUNCE_US, 2 s) plus room for the flash words.
+SAVE_WAIT_NS = 2.6e9
+# Emulated time after the PARAM_SET and after the second boot before the checks.
+SETTLE_NS = 0.5e9
+AFTER_BOOT_NS = 1.2e9
+
+
+def half_pad_size():
+    """Half the edge of the built pad's largest marker, metres: TD_TAG_SIZE for the pad
+    printed at half size."""
+    with open(PAD_FILE, "rb") as f:
+        layout = tomllib.load(f)
+    return max(m["size"] for m in layout["marker"]) / 2
+
+
+class PowerCycle:
+    """The stage: `run` takes the machine FIL ran on and returns the problems found."""
+
+    def __init__(self, fil, elf, board, args):
+        self.fil, self.elf, self.board, self.args = fil, elf, board, args
+        self.value = half_pad_size()
+        self.mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
+
+    def _autopilot(self, machine, start_ns, end_ns, message_at, message):
+        """Puts HEARTBEATs at 1 Hz from `start_ns` to `end_ns` and `message` at `message_at`
+        on the firmware's receive line, in time order (the line queues what it is fed)."""
+        sends = [(message_at, message)]
+        t = start_ns
+        while t < end_ns:
+            sends.append((t, heartbeat_bytes(self.mav)))
+            t += HEARTBEAT_PERIOD_NS
+        for at, data in sorted(sends, key=lambda send: send[0]):
+            machine.uart.feed(data, at)
+
+    def run(self, machine):
+        problems = self._set(machine)
+        if problems:
+            return problems
+        return self._after_power_cycle(machine)
+
+    def _set(self, machine):
+        start = machine.time_ns
+        set_at = start + 0.1e9
+        end = set_at + SAVE_WAIT_NS
+        self._autopilot(machine, start + 0.05e9, end, set_at, self.mav.param_set_encode(
+            FIRMWARE_SYSID, FIRMWARE_COMPID, PARAM.encode(), self.value,
+            mavlink.MAV_PARAM_TYPE_REAL32).pack(self.mav))
+        written = len(machine.flash.programmed)
+        machine.run(end, machine.pc())
+        print(f"  power cycle: PARAM_SET {PARAM} = {self.value:g} at "
+              f"{(set_at - start) / 1e9:.1f} s, ran {(end - start) / 1e9:.1f} s")
+        problems = [machine.failure] if machine.failure else []
+        if machine.finished:
+            problems.append(f"stopped early after PARAM_SET: {machine.finished}")
+        messages = sent_messages(machine, set_at)
+        for text in sorted({m.text for m in messages if m.get_type() == "STATUSTEXT"}):
+            print(f"  STATUSTEXT: {text}")
+        problems += self._check_value(messages, "PARAM_SET")
+        problems += self._check_targets(sent_messages(machine, set_at + SETTLE_NS),
+                                        "after PARAM_SET")
+        flash = machine.flash
+        words = flash.programmed[written:]
+        print(f"  flash: {len(words)} flash word(s) programmed after the PARAM_SET"
+              + (f" ({words[0][1]:#010x} first, {(words[0][0] - set_at) / 1e9:.2f} s after it)"
+                 if words else ""))
+        if not words:
+            problems.append(f"no flash word programmed {SAVE_WAIT_NS / 1e9:g} s after the "
+                            "PARAM_SET (the save)")
+        return problems
+
+    def _after_power_cycle(self, old):
+        """A new chip with the old one's flash (all else back to reset), booted and run."""
+        machine = build_chip(self.elf, self.board, self.args, **self.fil.chip_options())
+        if self.args.inject != "volatile-flash":
+            machine.uc.mem_write(memmap.FLASH.base,
+                                 bytes(old.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size)))
+            print("  power cycle: a new chip with the old flash")
+        else:
+            print("  power cycle: a new chip, its flash as flashed (--inject volatile-flash)")
+        problems = run_boot(machine, self.board, self.args)
+        if problems:
+            return [f"after the power cycle: {p}" for p in problems]
+        start = machine.time_ns
+        read_at = start + 0.3e9
+        end = start + AFTER_BOOT_NS
+        machine.stop_at_first_idle = False
+        machine.finished = None
+        self._autopilot(machine, start + 0.05e9, end, read_at, self.mav.param_request_read_encode(
+            FIRMWARE_SYSID, FIRMWARE_COMPID, PARAM.encode(), -1).pack(self.mav))
+        machine.run(end, machine.pc())
+        if machine.failure:
+            return [f"after the power cycle: {machine.failure}"]
+        if machine.finished:
+            problems.append(f"after the power cycle: stopped early: {machine.finished}")
+        problems += self._check_value(sent_messages(machine, read_at), "PARAM_REQUEST_READ")
+        problems += self._check_targets(sent_messages(machine, start + 0.3e9),
+                                        "after the power cycle")
+        problems += [f"after the power cycle: {p}" for p in report_stack(machine)]
+        return problems
+
+    def _check_value(self, messages, asked_by):
+        values = [m for m in messages if m.get_type() == "PARAM_VALUE"
+                  and m.param_id.rstrip("\0") == PARAM]
+        if not values:
+            return [f"no PARAM_VALUE {PARAM} answered the {asked_by}"]
+        got = values[0].param_value
+        print(f"  PARAM_VALUE {PARAM} = {got:g} (answering the {asked_by})")
+        if abs(got - self.value) > 1e-6:
+            return [f"PARAM_VALUE {PARAM} {got:g} answered the {asked_by}, expected "
+                    f"{self.value:g}"]
+        return []
+
+    def _check_targets(self, messages, when):
+        targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
+        if not targets:
+            return [f"no LANDING_TARGET {when}"]
+        want = expected_target(self.fil.truth)
+        half = want["distance"] / 2
+        last = targets[-1]
+        print(f"  LANDING_TARGET x{len(targets)} {when}, last: distance {last.distance:.2f} m "
+              f"(half the truth's: {half:.2f} m), x {last.x:.2f} y {last.y:.2f} z {last.z:.2f}")
+        return position_problems(last, want, scale=0.5,
+                                 when=f" {when} (the pad printed at half size)")
