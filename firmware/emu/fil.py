@@ -20,12 +20,11 @@ import os
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from .autopilot import Autopilot
 from .flash import BANK_SIZE, SECTOR_SIZE
 
 FRAMES_DIR = os.path.join(os.path.dirname(__file__), "frames")
 DEFAULT_FRAME = {"qvga": "nested-qvga.pgm", "vga": "nested-vga.pgm"}
-AUTOPILOT_SYSID = 1
-HEARTBEAT_PERIOD_NS = 1e9
 # How far the firmware's pose may be from the truth: distance within this fraction, each
 # position component within this fraction of the distance, the angles within this (rad).
 DISTANCE_TOLERANCE = 0.10
@@ -68,29 +67,21 @@ def read_truth(path):
     return truth
 
 
-def expected_target(truth):
-    """The pad centre as the firmware should report it (ArduPilot profile, MAV_FRAME_BODY_FRD
-    through the camera mount: looking down, image top toward the nose): body x forward =
-    -camera y, body y right = camera x, body z down = camera z; angle_x/angle_y are the
-    target's angles from the optical axis along the image's x and y."""
-    cx, cy, cz = truth["pad_cam_x"], truth["pad_cam_y"], truth["pad_cam_z"]
-    return {"x": -cy, "y": cx, "z": cz, "distance": math.sqrt(cx * cx + cy * cy + cz * cz),
-            "angle_x": math.atan2(cx, cz), "angle_y": math.atan2(cy, cz)}
-
-
-def position_problems(target, want, scale=1.0, when=""):
-    """How a LANDING_TARGET's distance and x, y, z miss `want` (expected_target) times
-    `scale`: the distance within DISTANCE_TOLERANCE of the expected one, each component
-    within POSITION_TOLERANCE of it."""
-    d = scale * want["distance"]
+def position_problems(target, want, when=""):
+    """How a LANDING_TARGET misses `want` (`Autopilot.expected_target`): its frame, its
+    distance (within DISTANCE_TOLERANCE), each of x, y, z (within POSITION_TOLERANCE of the
+    distance)."""
+    d = want["distance"]
     problems = []
+    if target.frame != want["frame"]:
+        problems.append(f"LANDING_TARGET frame {target.frame}{when}, expected {want['frame']}")
     if abs(target.distance - d) > DISTANCE_TOLERANCE * d:
         problems.append(f"LANDING_TARGET distance {target.distance:.2f} m{when}, expected "
                         f"{d:.2f} m")
     for axis in ("x", "y", "z"):
-        if abs(getattr(target, axis) - scale * want[axis]) > POSITION_TOLERANCE * d:
+        if abs(getattr(target, axis) - want[axis]) > POSITION_TOLERANCE * d:
             problems.append(f"LANDING_TARGET {axis} {getattr(target, axis):.2f} m{when}, "
-                            f"expected {scale * want[axis]:.2f} m")
+                            f"expected {want[axis]:.2f} m")
     return problems
 
 
@@ -103,12 +94,6 @@ def sent_messages(machine, since_ns=0.0):
     return [m for m in (mav.parse_buffer(sent) or []) if m.get_type() != "BAD_DATA"]
 
 
-def heartbeat_bytes(mav):
-    return mav.heartbeat_encode(
-        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, mavlink.MAV_STATE_ACTIVE).pack(mav)
-
-
 class Fil:
     """One FIL run: the frame, the autopilot, the checks."""
 
@@ -118,21 +103,15 @@ class Fil:
         self.frame = read_pgm(name)
         self.truth = read_truth(os.path.splitext(name)[0] + ".txt")
         self.board = board
+        self.autopilot = Autopilot(args.autopilot)
 
     def chip_options(self):
         return {"frames": [self.frame]}
 
-    def _schedule_autopilot(self, machine, start_ns, end_ns):
-        mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
-        t = start_ns
-        while t < end_ns:
-            machine.uart.feed(heartbeat_bytes(mav), t)
-            t += HEARTBEAT_PERIOD_NS
-
     def run(self, machine):
         start = machine.time_ns
         end = start + self.seconds * 1e9
-        self._schedule_autopilot(machine, start + 0.1e9, end)
+        self.autopilot.feed(machine, start + 0.1e9, end)
         machine.stop_at_first_idle = False
         machine.finished = None
         machine.run(end, machine.pc())
@@ -243,10 +222,10 @@ class Fil:
 
     def _check_targets(self, messages):
         targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
-        want = expected_target(self.truth)
+        want = self.autopilot.expected_target(self.truth)
         print(f"  truth: pad at x {want['x']:.2f} y {want['y']:.2f} z {want['z']:.2f} m "
-              f"(body FRD), distance {want['distance']:.2f} m, angle_x {want['angle_x']:.3f} "
-              f"angle_y {want['angle_y']:.3f} rad")
+              f"(frame {want['frame']}), distance {want['distance']:.2f} m, angle_x "
+              f"{want['angle_x']:.3f} angle_y {want['angle_y']:.3f} rad")
         if not targets:
             return ["no LANDING_TARGET sent"]
         last = targets[-1]
@@ -254,10 +233,7 @@ class Fil:
               f"y {last.y:.2f} z {last.z:.2f} m, distance {last.distance:.2f} m, angle_x "
               f"{last.angle_x:.3f} angle_y {last.angle_y:.3f} rad, position_valid "
               f"{last.position_valid}")
-        problems = []
-        if last.frame != mavlink.MAV_FRAME_BODY_FRD:
-            problems.append(f"LANDING_TARGET frame {last.frame}, expected BODY_FRD")
-        problems += position_problems(last, want)
+        problems = position_problems(last, want)
         for angle in ("angle_x", "angle_y"):
             if abs(getattr(last, angle) - want[angle]) > ANGLE_TOLERANCE:
                 problems.append(f"LANDING_TARGET {angle} {getattr(last, angle):.3f} rad, "

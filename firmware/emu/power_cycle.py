@@ -27,8 +27,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from . import memmap
 from .boot import report_stack, run_boot
 from .chip import build_chip
-from .fil import (AUTOPILOT_SYSID, HEARTBEAT_PERIOD_NS, expected_target, heartbeat_bytes,
-                  position_problems, sent_messages)
+from .fil import position_problems, sent_messages
 
 PARAM = "TD_TAG_SIZE"
 # The firmware's built pad (firmware/src/config.rs: core's NESTED, which a host test keeps
@@ -57,18 +56,8 @@ class PowerCycle:
     def __init__(self, fil, elf, board, args):
         self.fil, self.elf, self.board, self.args = fil, elf, board, args
         self.value = half_pad_size()
-        self.mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
-
-    def _autopilot(self, machine, start_ns, end_ns, message_at, message):
-        """Puts HEARTBEATs at 1 Hz from `start_ns` to `end_ns` and `message` at `message_at`
-        on the firmware's receive line, in time order (the line queues what it is fed)."""
-        sends = [(message_at, message)]
-        t = start_ns
-        while t < end_ns:
-            sends.append((t, heartbeat_bytes(self.mav)))
-            t += HEARTBEAT_PERIOD_NS
-        for at, data in sorted(sends, key=lambda send: send[0]):
-            machine.uart.feed(data, at)
+        self.autopilot = fil.autopilot
+        self.mav = fil.autopilot.mav
 
     def run(self, machine):
         problems = self._set(machine)
@@ -80,9 +69,9 @@ class PowerCycle:
         start = machine.time_ns
         set_at = start + 0.1e9
         end = set_at + SAVE_WAIT_NS
-        self._autopilot(machine, start + 0.05e9, end, set_at, self.mav.param_set_encode(
+        self.autopilot.feed(machine, start + 0.05e9, end, [(set_at, self.mav.param_set_encode(
             FIRMWARE_SYSID, FIRMWARE_COMPID, PARAM.encode(), self.value,
-            mavlink.MAV_PARAM_TYPE_REAL32).pack(self.mav))
+            mavlink.MAV_PARAM_TYPE_REAL32).pack(self.mav))])
         written = len(machine.flash.programmed)
         machine.run(end, machine.pc())
         print(f"  power cycle: PARAM_SET {PARAM} = {self.value:g} at "
@@ -123,8 +112,9 @@ class PowerCycle:
         end = start + AFTER_BOOT_NS
         machine.stop_at_first_idle = False
         machine.finished = None
-        self._autopilot(machine, start + 0.05e9, end, read_at, self.mav.param_request_read_encode(
-            FIRMWARE_SYSID, FIRMWARE_COMPID, PARAM.encode(), -1).pack(self.mav))
+        self.autopilot.feed(machine, start + 0.05e9, end, [(
+            read_at, self.mav.param_request_read_encode(
+                FIRMWARE_SYSID, FIRMWARE_COMPID, PARAM.encode(), -1).pack(self.mav))])
         machine.run(end, machine.pc())
         if machine.failure:
             return [f"after the power cycle: {machine.failure}"]
@@ -152,10 +142,10 @@ class PowerCycle:
         targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
         if not targets:
             return [f"no LANDING_TARGET {when}"]
-        want = expected_target(self.fil.truth)
-        half = want["distance"] / 2
+        want = self.autopilot.expected_target(self.fil.truth, scale=0.5)
         last = targets[-1]
         print(f"  LANDING_TARGET x{len(targets)} {when}, last: distance {last.distance:.2f} m "
-              f"(half the truth's: {half:.2f} m), x {last.x:.2f} y {last.y:.2f} z {last.z:.2f}")
-        return position_problems(last, want, scale=0.5,
-                                 when=f" {when} (the pad printed at half size)")
+              f"(for the pad at half size: {want['distance']:.2f} m), x {last.x:.2f} "
+              f"y {last.y:.2f} z {last.z:.2f} (expected {want['x']:.2f} {want['y']:.2f} "
+              f"{want['z']:.2f})")
+        return position_problems(last, want, when=f" {when} (the pad printed at half size)")
