@@ -4,13 +4,15 @@ pymavlink) and where, given the frame's truth, it expects the firmware's LANDING
 - `ardupilot`: HEARTBEAT (MAV_AUTOPILOT_ARDUPILOTMEGA) at 1 Hz, nothing else: the ArduPilot
   profile needs no vehicle state (ArduPilot takes the pad in MAV_FRAME_BODY_FRD and applies
   its own attitude).
-- `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4) and SYSTEM_TIME at 1 Hz, ATTITUDE_QUATERNION and
+- `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4), SYSTEM_TIME and a TIMESYNC request at 1 Hz,
+  ATTITUDE_QUATERNION and
   LOCAL_POSITION_NED at 50 Hz (what the firmware asks for with SET_MESSAGE_INTERVAL), the
   vehicle hovering level at a fixed point, heading 30 degrees, its clock 100 s ahead of the
   firmware's: PX4 takes a position only in MAV_FRAME_LOCAL_NED, so the firmware must turn the
   pad into the vehicle's local frame with this state (docs/interfaces.md, "MAVLink").
 The autopilot does not answer the firmware: its TIMESYNC requests go unanswered, and the
-firmware aligns the clocks on SYSTEM_TIME, as it does until a first answer.
+firmware aligns the clocks on SYSTEM_TIME, as it does until a first answer. The firmware must
+answer PX4's TIMESYNC requests, within PX4's 10 ms (fil.py checks it).
 """
 
 import math
@@ -24,6 +26,12 @@ STATE_PERIOD_NS = 20e6
 PX4_POSITION = (12.0, -7.0, -4.04)
 PX4_YAW = math.radians(30.0)
 PX4_BOOTED_BEFORE_MS = 100_000
+# PX4's TIMESYNC request, this long after its HEARTBEAT and SYSTEM_TIME (not queued behind
+# them on the line).
+TIMESYNC_AFTER_NS = 0.5e6
+# PX4 uses a TIMESYNC answer only if it came back within this (src/lib/timesync/Timesync.hpp,
+# MAX_RTT_SAMPLE): the companion must answer within it.
+PX4_MAX_RTT_NS = 10e6
 KINDS = ("ardupilot", "px4")
 
 
@@ -33,6 +41,8 @@ class Autopilot:
     def __init__(self, kind):
         self.kind = kind
         self.mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
+        # PX4's TIMESYNC requests: (emulated time ns it sent one, its ts1).
+        self.timesync_requests = []
 
     def heartbeat(self):
         autopilot = mavlink.MAV_AUTOPILOT_PX4 if self.kind == "px4" else \
@@ -52,6 +62,11 @@ class Autopilot:
             if self.kind == "px4":
                 sends.append((t, self.mav.system_time_encode(
                     1_700_000_000_000_000 + int(t / 1e3), self._boot_ms(t)).pack(self.mav)))
+                # PX4 asks for the companion's time once a second (tc1 = 0, ts1 = its own).
+                at = t + TIMESYNC_AFTER_NS
+                ts1 = int(at) + PX4_BOOTED_BEFORE_MS * 1_000_000
+                self.timesync_requests.append((at, ts1))
+                sends.append((at, self.mav.timesync_encode(0, ts1).pack(self.mav)))
             t += HEARTBEAT_PERIOD_NS
         if self.kind == "px4":
             t = start_ns

@@ -20,7 +20,7 @@ import os
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .autopilot import Autopilot
+from .autopilot import PX4_MAX_RTT_NS, Autopilot
 from .flash import BANK_SIZE, SECTOR_SIZE
 
 FRAMES_DIR = os.path.join(os.path.dirname(__file__), "frames")
@@ -83,6 +83,19 @@ def position_problems(target, want, when=""):
             problems.append(f"LANDING_TARGET {axis} {getattr(target, axis):.2f} m{when}, "
                             f"expected {want[axis]:.2f} m")
     return problems
+
+
+def timed_messages(machine):
+    """(emulated time ns of its last byte, message) of everything the firmware sent, decoded
+    with pymavlink."""
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    out = []
+    for t, b in machine.uart.sent:
+        m = mav.parse_char(bytes([b]))
+        if m is not None and m.get_type() != "BAD_DATA":
+            out.append((t, m))
+    return out
 
 
 def sent_messages(machine, since_ns=0.0):
@@ -203,6 +216,35 @@ class Fil:
             print(f"  STATUSTEXT: {text}")
         problems = self._check_heartbeats(messages)
         problems += self._check_targets(messages)
+        problems += self._check_timesync_answers(machine)
+        return problems
+
+    def _check_timesync_answers(self, machine):
+        """Every TIMESYNC request of the autopilot (PX4's, once a second) answered with its
+        ts1 echoed and the firmware's own time in tc1, back within PX4's MAX_RTT_SAMPLE."""
+        requests = [(t, ts1) for t, ts1 in self.autopilot.timesync_requests
+                    if t < machine.time_ns - PX4_MAX_RTT_NS]
+        if not requests:
+            return []
+        answers = {m.ts1: (t, m.tc1) for t, m in timed_messages(machine)
+                   if m.get_type() == "TIMESYNC" and m.tc1 != 0}
+        problems, rtts = [], []
+        for sent, ts1 in requests:
+            if ts1 not in answers:
+                problems.append(f"the TIMESYNC request at {sent / 1e9:.3f} s was not answered")
+                continue
+            back, tc1 = answers[ts1]
+            rtts.append(back - sent)
+            if back - sent >= PX4_MAX_RTT_NS:
+                problems.append(f"the TIMESYNC request at {sent / 1e9:.3f} s was answered after "
+                                f"{(back - sent) / 1e6:.1f} ms (PX4 drops answers from "
+                                f"{PX4_MAX_RTT_NS / 1e6:g} ms)")
+            if not 0 < tc1 <= back:
+                problems.append(f"TIMESYNC answer tc1 {tc1} ns is not the firmware's time "
+                                f"(answered at {back:.0f} ns after reset)")
+        if rtts:
+            print(f"  TIMESYNC: {len(rtts)} of {len(requests)} requests answered, round trip "
+                  f"{min(rtts) / 1e6:.2f} to {max(rtts) / 1e6:.2f} ms")
         return problems
 
     def _check_heartbeats(self, messages):
