@@ -4,7 +4,7 @@ pymavlink) and where, given the frame's truth, it expects the firmware's LANDING
 - `ardupilot`: HEARTBEAT (MAV_AUTOPILOT_ARDUPILOTMEGA) at 1 Hz, nothing else: the ArduPilot
   profile needs no vehicle state (ArduPilot takes the pad in MAV_FRAME_BODY_FRD and applies
   its own attitude).
-- `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4), SYSTEM_TIME and a TIMESYNC request at 1 Hz,
+- `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4) and SYSTEM_TIME at 1 Hz, TIMESYNC requests at 10 Hz,
   ATTITUDE_QUATERNION and
   LOCAL_POSITION_NED at 50 Hz (what the firmware asks for with SET_MESSAGE_INTERVAL), the
   vehicle hovering level at a fixed point, heading 30 degrees, its clock 100 s ahead of the
@@ -26,8 +26,12 @@ STATE_PERIOD_NS = 20e6
 PX4_POSITION = (12.0, -7.0, -4.04)
 PX4_YAW = math.radians(30.0)
 PX4_BOOTED_BEFORE_MS = 100_000
-# PX4's TIMESYNC request, this long after its HEARTBEAT and SYSTEM_TIME (not queued behind
-# them on the line).
+# PX4's TIMESYNC requests: about 10 Hz, its onboard mode's rate (src/modules/mavlink/
+# mavlink_main.cpp, configure_streams_to_default), the first this long after the schedule's
+# start (not queued behind the HEARTBEAT and SYSTEM_TIME on the line). Not exactly 100 ms:
+# that is three frame periods, and every request would meet the frame processing at the same
+# point; 103.7 ms moves 3.7 ms further into a frame each time, so two seconds cover all of it.
+TIMESYNC_PERIOD_NS = 103.7e6
 TIMESYNC_AFTER_NS = 0.5e6
 # PX4 uses a TIMESYNC answer only if it came back within this (src/lib/timesync/Timesync.hpp,
 # MAX_RTT_SAMPLE): the companion must answer within it.
@@ -62,17 +66,19 @@ class Autopilot:
             if self.kind == "px4":
                 sends.append((t, self.mav.system_time_encode(
                     1_700_000_000_000_000 + int(t / 1e3), self._boot_ms(t)).pack(self.mav)))
-                # PX4 asks for the companion's time once a second (tc1 = 0, ts1 = its own).
-                at = t + TIMESYNC_AFTER_NS
-                ts1 = int(at) + PX4_BOOTED_BEFORE_MS * 1_000_000
-                self.timesync_requests.append((at, ts1))
-                sends.append((at, self.mav.timesync_encode(0, ts1).pack(self.mav)))
             t += HEARTBEAT_PERIOD_NS
         if self.kind == "px4":
             t = start_ns
             while t < end_ns:
                 sends += [(t, self._attitude(t)), (t, self._position(t))]
                 t += STATE_PERIOD_NS
+            # PX4 asks for the companion's time (tc1 = 0, ts1 = its own, ns).
+            t = start_ns + TIMESYNC_AFTER_NS
+            while t < end_ns:
+                ts1 = int(t) + PX4_BOOTED_BEFORE_MS * 1_000_000
+                self.timesync_requests.append((t, ts1))
+                sends.append((t, self.mav.timesync_encode(0, ts1).pack(self.mav)))
+                t += TIMESYNC_PERIOD_NS
         for at, data in sorted(sends, key=lambda send: send[0]):
             machine.uart.feed(data, at)
 

@@ -4,7 +4,9 @@
 //! flight controller as MAVLink. All algorithms live in `touchdown-core` (detector, pose,
 //! filter, the companion MAVLink state machine, the OV7725 and OV2640 drivers and the probe
 //! that tells them apart, the exposure loop, the parameter log format); this crate only owns
-//! hardware and wiring. Tasks, on one cooperative embassy executor:
+//! hardware and wiring. Tasks, on two embassy executors: [`link::task`] on an interrupt
+//! executor ([`LINK_EXECUTOR`]) that preempts the others, the rest cooperatively in thread
+//! mode:
 //!
 //! - [`vision::task`]: the camera (an OV7725 or an OV2640, whichever answers on the SCCB bus
 //!   at start) over DCMI + DMA into two frame buffers (capture of frame n+1 overlaps
@@ -53,7 +55,9 @@ mod watchdog;
 
 use defmt::{info, unwrap, warn};
 use defmt_rtt as _;
-use embassy_executor::Spawner;
+use embassy_executor::{InterruptExecutor, Spawner};
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::{InterruptExt, Priority};
 use panic_probe as _;
 use touchdown_core::companion::{Companion, CompanionConfig};
 use touchdown_core::params::{ParamId, PipelineSettings};
@@ -68,6 +72,30 @@ pub type Workspace = touchdown_core::detect::QvgaWorkspace;
 /// The detector's frame-sized work memory for this build's frame size.
 #[cfg(feature = "camera-vga")]
 pub type Workspace = touchdown_core::detect::VgaWorkspace;
+
+/// The link's executor: the MAVLink link preempts the thread-mode tasks, above all the vision
+/// task, whose frame is one long computation (a VGA frame about 10 ms) that never yields.
+/// On the thread executor the link would answer PX4's TIMESYNC requests only between frames:
+/// the emulated board measured round trips up to 9.9 ms at VGA, against PX4's limit of
+/// 10 ms (`MAX_RTT_SAMPLE`: slower answers are not used, and PX4 then cannot put our
+/// `time_usec` in its clock); LANDING_TARGETs and HEARTBEATs waited the same way. Its tasks
+/// share nothing with the others but [`channels`], whose mutexes are critical sections.
+static LINK_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
+
+/// The interrupt the link's executor runs in: SPDIF_RX's, a peripheral neither board uses
+/// (the executor pends it from software when a link task is woken).
+const LINK_IRQ: interrupt::Interrupt = interrupt::SPDIF_RX;
+
+/// Its priority: below the peripherals' (0, embassy's default: the UART's and the DMA's
+/// handlers, which wake the link, are never held up by it), above thread mode.
+const LINK_PRIORITY: Priority = Priority::P6;
+
+#[interrupt]
+unsafe fn SPDIF_RX() {
+    // SAFETY: the handler of LINK_IRQ, the executor's only caller, which `main` starts before
+    // it unmasks the interrupt (InterruptExecutor's contract).
+    unsafe { LINK_EXECUTOR.on_interrupt() }
+}
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
@@ -139,7 +167,9 @@ async fn main(spawner: Spawner) {
     spawner.spawn(unwrap!(watchdog::task(board.watchdog)));
     spawner.spawn(unwrap!(heartbeat::task(board.led)));
     spawner.spawn(unwrap!(param_store::task(flash, store)));
-    spawner.spawn(unwrap!(link::task(board.uart, companion)));
+    LINK_IRQ.set_priority(LINK_PRIORITY);
+    let link_spawner = LINK_EXECUTOR.start(LINK_IRQ);
+    link_spawner.spawn(unwrap!(link::task(board.uart, companion)));
     spawner.spawn(unwrap!(vision::task(
         sensor_pins,
         sccb,

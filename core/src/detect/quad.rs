@@ -541,7 +541,11 @@ mod tests {
                 })
                 .sum()
         };
-        for (x0, y0, w, h) in [(10, 20, 30, 25), (8000, 8000, 120, 100), (0, 8050, 100, 140)] {
+        for (x0, y0, w, h) in [
+            (10, 20, 30, 25),
+            (8000, 8000, 120, 100),
+            (0, 8050, 100, 140),
+        ] {
             let c = rectangle(x0, y0, w, h);
             let area = signed_area2(&c);
             assert_eq!(area, exact(&c), "rectangle at ({x0}, {y0})");
