@@ -1,18 +1,23 @@
 """The emulated flight controller on the firmware's UART: what it sends (generated with
 pymavlink) and where, given the frame's truth, it expects the firmware's LANDING_TARGET.
 
-- `ardupilot`: HEARTBEAT (MAV_AUTOPILOT_ARDUPILOTMEGA) at 1 Hz, nothing else: the ArduPilot
-  profile needs no vehicle state (ArduPilot takes the pad in MAV_FRAME_BODY_FRD and applies
-  its own attitude).
-- `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4) and SYSTEM_TIME at 1 Hz, TIMESYNC requests at 10 Hz,
-  ATTITUDE_QUATERNION and
-  LOCAL_POSITION_NED at 50 Hz (what the firmware asks for with SET_MESSAGE_INTERVAL), the
-  vehicle hovering level at a fixed point, heading 30 degrees, its clock 100 s ahead of the
+The vehicle it reports is the one the frame was rendered from: the truth file (make_frame.py)
+gives the camera's position over the pad and the vehicle's attitude at the frame (the frame
+was rendered with the nominal camera mount), so the attitude and position the firmware is
+told agree with what it sees. The world is then turned 30 degrees about the vertical and its
+local origin moved (LOCAL_ORIGIN_NED): a heading or an origin the firmware ignored would show.
+
+- `ardupilot`: HEARTBEAT (MAV_AUTOPILOT_ARDUPILOTMEGA) at 1 Hz and ATTITUDE_QUATERNION at
+  50 Hz (the rate the firmware asks for with SET_MESSAGE_INTERVAL; its rolling-shutter
+  correction and the pose's levelling use it). The ArduPilot profile needs no more: ArduPilot
+  takes the pad in MAV_FRAME_BODY_FRD and applies its own attitude.
+- `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4) and SYSTEM_TIME at 1 Hz, TIMESYNC requests at about
+  10 Hz, ATTITUDE_QUATERNION and LOCAL_POSITION_NED at 50 Hz, its clock 100 s ahead of the
   firmware's: PX4 takes a position only in MAV_FRAME_LOCAL_NED, so the firmware must turn the
   pad into the vehicle's local frame with this state (docs/interfaces.md, "MAVLink").
 The autopilot does not answer the firmware: its TIMESYNC requests go unanswered, and the
 firmware aligns the clocks on SYSTEM_TIME, as it does until a first answer. The firmware must
-answer PX4's TIMESYNC requests, within PX4's 10 ms (fil.py checks it).
+answer PX4's TIMESYNC requests quickly (fil.py checks it).
 """
 
 import math
@@ -22,10 +27,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 AUTOPILOT_SYSID = 1
 HEARTBEAT_PERIOD_NS = 1e9
 STATE_PERIOD_NS = 20e6
-# The PX4 vehicle: NED position (m), heading (rad), and how long it has been up (ms).
-PX4_POSITION = (12.0, -7.0, -4.04)
-PX4_YAW = math.radians(30.0)
-PX4_BOOTED_BEFORE_MS = 100_000
+# The world's turn about the vertical (rad) and where the pad lies in the local NED frame (m).
+WORLD_YAW = math.radians(30.0)
+LOCAL_ORIGIN_NED = (12.0, -7.0, 0.0)
+# How long the autopilot has been up when the firmware starts (ms: its clock).
+BOOTED_BEFORE_MS = 100_000
 # PX4's TIMESYNC requests: about 10 Hz, its onboard mode's rate (src/modules/mavlink/
 # mavlink_main.cpp, configure_streams_to_default), the first this long after the schedule's
 # start (not queued behind the HEARTBEAT and SYSTEM_TIME on the line). Not exactly 100 ms:
@@ -39,14 +45,40 @@ PX4_MAX_RTT_NS = 10e6
 KINDS = ("ardupilot", "px4")
 
 
-class Autopilot:
-    """One emulated flight controller of `kind` (KINDS)."""
+def quaternion_product(a, b):
+    """a * b for unit quaternions (w, x, y, z): the rotation b, then a."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
 
-    def __init__(self, kind):
+
+def rotate(q, v):
+    """v turned by the unit quaternion q = (w, x, y, z)."""
+    w, x, y, z = q
+    return (
+        (1 - 2 * (y * y + z * z)) * v[0] + 2 * (x * y - w * z) * v[1] + 2 * (x * z + w * y) * v[2],
+        2 * (x * y + w * z) * v[0] + (1 - 2 * (x * x + z * z)) * v[1] + 2 * (y * z - w * x) * v[2],
+        2 * (x * z - w * y) * v[0] + 2 * (y * z + w * x) * v[1] + (1 - 2 * (x * x + y * y)) * v[2],
+    )
+
+
+class Autopilot:
+    """One emulated flight controller of `kind` (KINDS) over the vehicle of the frame's
+    `truth` (read_truth: pad_cam_*, cam_*, veh_q*)."""
+
+    def __init__(self, kind, truth):
         self.kind = kind
+        self.truth = truth
         self.mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
         # PX4's TIMESYNC requests: (emulated time ns it sent one, its ts1).
         self.timesync_requests = []
+        turn = (math.cos(WORLD_YAW / 2), 0.0, 0.0, math.sin(WORLD_YAW / 2))
+        # Body FRD to local NED; the frame's NED has north = pad +y, east = pad +x.
+        self.attitude = quaternion_product(
+            turn, tuple(truth[f"veh_q{k}"] for k in "wxyz"))
+        camera_ned = (truth["cam_y"], truth["cam_x"], -truth["cam_z"])
+        self.position = tuple(o + c for o, c in zip(LOCAL_ORIGIN_NED, rotate(turn, camera_ned)))
 
     def heartbeat(self):
         autopilot = mavlink.MAV_AUTOPILOT_PX4 if self.kind == "px4" else \
@@ -67,15 +99,17 @@ class Autopilot:
                 sends.append((t, self.mav.system_time_encode(
                     1_700_000_000_000_000 + int(t / 1e3), self._boot_ms(t)).pack(self.mav)))
             t += HEARTBEAT_PERIOD_NS
+        t = start_ns
+        while t < end_ns:
+            sends.append((t, self._attitude(t)))
+            if self.kind == "px4":
+                sends.append((t, self._position(t)))
+            t += STATE_PERIOD_NS
         if self.kind == "px4":
-            t = start_ns
-            while t < end_ns:
-                sends += [(t, self._attitude(t)), (t, self._position(t))]
-                t += STATE_PERIOD_NS
             # PX4 asks for the companion's time (tc1 = 0, ts1 = its own, ns).
             t = start_ns + TIMESYNC_AFTER_NS
             while t < end_ns:
-                ts1 = int(t) + PX4_BOOTED_BEFORE_MS * 1_000_000
+                ts1 = int(t) + BOOTED_BEFORE_MS * 1_000_000
                 self.timesync_requests.append((t, ts1))
                 sends.append((t, self.mav.timesync_encode(0, ts1).pack(self.mav)))
                 t += TIMESYNC_PERIOD_NS
@@ -84,37 +118,36 @@ class Autopilot:
 
     @staticmethod
     def _boot_ms(t_ns):
-        return int(t_ns / 1e6) + PX4_BOOTED_BEFORE_MS
+        return int(t_ns / 1e6) + BOOTED_BEFORE_MS
 
     def _attitude(self, t_ns):
-        half = PX4_YAW / 2
+        w, x, y, z = self.attitude
         return self.mav.attitude_quaternion_encode(
-            self._boot_ms(t_ns), math.cos(half), 0.0, 0.0, math.sin(half), 0.0, 0.0, 0.0,
-            [0.0, 0.0, 0.0, 0.0]).pack(self.mav)
+            self._boot_ms(t_ns), w, x, y, z, 0.0, 0.0, 0.0, [0.0, 0.0, 0.0, 0.0]).pack(self.mav)
 
     def _position(self, t_ns):
-        north, east, down = PX4_POSITION
+        north, east, down = self.position
         return self.mav.local_position_ned_encode(
             self._boot_ms(t_ns), north, east, down, 0.0, 0.0, 0.0).pack(self.mav)
 
-    def expected_target(self, truth, scale=1.0):
-        """The pad centre as the firmware should report it for the frame's `truth` (the pad
-        printed at `scale` times its built size: the pad, as the firmware sees it, `scale`
-        times as far), with the frame it should use and the pad's distance.
+    def expected_target(self, scale=1.0):
+        """The pad centre as the firmware should report it (the pad printed at `scale` times
+        its built size: the pad, as the firmware sees it, `scale` times as far), with the
+        frame it should use and the pad's distance.
 
-        Through the camera mount (looking down, image top toward the nose): body x forward =
-        -camera y, body y right = camera x, body z down = camera z; angle_x/angle_y are the
-        target's angles from the optical axis along the image's x and y (unscaled). PX4: the
-        body vector turned by the heading and added to the vehicle's local position."""
+        Through the nominal camera mount (looking down, image top toward the nose): body x
+        forward = -camera y, body y right = camera x, body z down = camera z; angle_x/angle_y
+        are the target's angles from the optical axis along the image's x and y (unscaled).
+        PX4: the body vector turned into the local frame and added to the vehicle's position
+        (with `scale` 1, the pad's own position, LOCAL_ORIGIN_NED, up to rounding)."""
+        truth = self.truth
         cx, cy, cz = (scale * truth[k] for k in ("pad_cam_x", "pad_cam_y", "pad_cam_z"))
         body = (-cy, cx, cz)
         want = {"frame": mavlink.MAV_FRAME_BODY_FRD, "x": body[0], "y": body[1], "z": body[2],
                 "distance": math.sqrt(cx * cx + cy * cy + cz * cz),
                 "angle_x": math.atan2(cx, cz), "angle_y": math.atan2(cy, cz)}
         if self.kind == "px4":
-            c, s = math.cos(PX4_YAW), math.sin(PX4_YAW)
-            north, east, down = PX4_POSITION
-            want.update(frame=mavlink.MAV_FRAME_LOCAL_NED,
-                        x=north + c * body[0] - s * body[1],
-                        y=east + s * body[0] + c * body[1], z=down + body[2])
+            ned = rotate(self.attitude, body)
+            x, y, z = (p + d for p, d in zip(self.position, ned))
+            want.update(frame=mavlink.MAV_FRAME_LOCAL_NED, x=x, y=y, z=z)
         return want

@@ -2,13 +2,17 @@
 resampled from the simulated camera (its camera.toml: pinhole + OpenCV distortion) into the
 firmware's nominal OV7725 pinhole model (firmware/src/config.rs: f = 467 px at 640x480, half at
 QVGA, principal point at the centre), plus its truth: the pad centre in the camera frame
-(x right, y down, z forward), from frames.csv's camera pose in the pad frame.
+(x right, y down, z forward), from frames.csv's camera pose in the pad frame, with the
+camera's position and the vehicle's attitude (what the emulated autopilot reports).
 
     python3 -m emu.make_frame RECORDING_DIR INDEX OUT.pgm [qvga|vga]
 
 (VGA: the sensor's whole 640x480 frame; the firmware's DCMI crops it to 640x400 itself.)
 
-Pixels outside the simulated view are mid grey. Run once; the result is committed.
+Pixels outside the simulated view are mid grey. Run once; the result is committed. The
+committed frames come from `touchdown simulate --scenario descent --frames 480
+--mount-roll-deg 0 --mount-pitch-deg 0 --vibration-deg 0`, frame 479: on the nominal mount,
+so that the vehicle attitude in the truth is also the camera's.
 """
 
 import csv
@@ -79,13 +83,16 @@ def rotate_inverse(q, v):
 
 
 def truth_of(recording, index):
+    """The camera's position in the pad frame, the pad centre in the camera frame, and the
+    vehicle's body FRD to NED attitude (w, x, y, z; NED: north = pad +y, east = pad +x)."""
     with open(os.path.join(recording, "frames.csv")) as f:
         for row in csv.DictReader(f):
             if int(row["index"]) == index:
                 pos = [float(row[k]) for k in ("cam_x", "cam_y", "cam_z")]
                 q = [float(row[k]) for k in ("cam_qw", "cam_qx", "cam_qy", "cam_qz")]
                 pad = rotate_inverse(q, [-p for p in pos])
-                return pos, pad
+                vehicle = [float(row[k]) for k in ("veh_qw", "veh_qx", "veh_qy", "veh_qz")]
+                return pos, pad, vehicle
     raise KeyError(f"frame {index} not in frames.csv")
 
 
@@ -97,7 +104,7 @@ def main(argv):
     pixels = resample(cam, frame, size)
     with open(out, "wb") as f:
         f.write(b"P5\n%d %d\n255\n" % size + pixels)
-    pos, pad = truth_of(recording, index)
+    pos, pad, vehicle = truth_of(recording, index)
     with open(os.path.splitext(out)[0] + ".txt", "w") as f:
         f.write(f"# {os.path.basename(recording)} frame {index}, resampled to the firmware's "
                 f"{size[0]}x{size[1]} pinhole (f {FIRMWARE_F_VGA * size[0] / 640} px)\n")
@@ -105,6 +112,13 @@ def main(argv):
                 f"{math.sqrt(sum(p * p for p in pos)):.4f} m\n")
         for axis, value in zip("xyz", pad):
             f.write(f"pad_cam_{axis} = {value:.4f}\n")
+        f.write("# the camera in the pad frame (m), and the vehicle's body FRD to NED attitude at\n"
+                "# the frame (NED: north = pad +y, east = pad +x, down = pad -z): what the\n"
+                "# emulated autopilot reports (autopilot.py)\n")
+        for axis, value in zip("xyz", pos):
+            f.write(f"cam_{axis} = {value:.4f}\n")
+        for part, value in zip("wxyz", vehicle):
+            f.write(f"veh_q{part} = {value:.6f}\n")
 
 
 if __name__ == "__main__":

@@ -142,7 +142,7 @@ class PowerCycle:
         targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
         if not targets:
             return [f"no LANDING_TARGET {when}"]
-        want = self.autopilot.expected_target(self.fil.truth, scale=0.5)
+        want = self.autopilot.expected_target(scale=0.5)
         last = targets[-1]
         print(f"  LANDING_TARGET x{len(targets)} {when}, last: distance {last.distance:.2f} m "
               f"(for the pad at half size: {want['distance']:.2f} m), x {last.x:.2f} "
