@@ -86,14 +86,16 @@ static LINK_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
 /// (the executor pends it from software when a link task is woken).
 const LINK_IRQ: interrupt::Interrupt = interrupt::SPDIF_RX;
 
-/// Its priority: below the peripherals' (0, embassy's default: the UART's and the DMA's
-/// handlers, which wake the link, are never held up by it), above thread mode.
+/// Its priority: less urgent than the peripherals' (0: the NVIC's reset value, which
+/// embassy's drivers keep, and its DMA default), so the UART's and the DMA's handlers, which
+/// wake the link, are never held up by it; more urgent than thread mode.
 const LINK_PRIORITY: Priority = Priority::P6;
 
 #[interrupt]
 unsafe fn SPDIF_RX() {
-    // SAFETY: the handler of LINK_IRQ, the executor's only caller, which `main` starts before
-    // it unmasks the interrupt (InterruptExecutor's contract).
+    // SAFETY: InterruptExecutor's contract: this handler of LINK_IRQ is the only caller, and
+    // nothing but `LINK_EXECUTOR.start` unmasks the interrupt, after initialising the
+    // executor, so it never runs before `start`.
     unsafe { LINK_EXECUTOR.on_interrupt() }
 }
 
