@@ -33,6 +33,9 @@ readonly FIL_SECONDS="${EMU_FIL_SECONDS:-2}"
 # one per board (the OpenMV Cam's starts with foreign data in a parameter sector); the
 # others differ only in the camera and the clock.
 readonly POWER_CYCLE_VARIANTS=(nucleo-qvga openmv-qvga)
+# The variant whose autopilot line carries garbage before a quarter of its messages
+# (autopilot.py): the firmware must resynchronise and land as on a clean line.
+readonly LINE_NOISE_VARIANTS=(nucleo-qvga-480)
 # name board MHz camera cargo-features...
 readonly VARIANTS=(
     "nucleo-qvga nucleo 400 qvga"
@@ -96,6 +99,9 @@ for variant in "${VARIANTS[@]}"; do
     fi
     if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${POWER_CYCLE_VARIANTS[@]}"; then
         fil+=(--power-cycle)
+    fi
+    if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${LINE_NOISE_VARIANTS[@]}"; then
+        fil+=(--line-noise)
     fi
     emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" \
         "${fil[@]}" || failed=1

@@ -37,6 +37,8 @@ def parse(argv):
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
     parser.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot",
                         help="FIL: the flight controller on the UART (autopilot.py)")
+    parser.add_argument("--line-noise", action="store_true",
+                        help="FIL: garbage bytes before a quarter of the autopilot's messages")
     parser.add_argument("--power-cycle", action="store_true",
                         help="after FIL: set a parameter over MAVLink, power-cycle the chip "
                              "(its flash kept), read it back (power_cycle.py)")

@@ -15,12 +15,15 @@ local origin moved (LOCAL_ORIGIN_NED): a heading or an origin the firmware ignor
   10 Hz, ATTITUDE_QUATERNION and LOCAL_POSITION_NED at 50 Hz, its clock 100 s ahead of the
   firmware's: PX4 takes a position only in MAV_FRAME_LOCAL_NED, so the firmware must turn the
   pad into the vehicle's local frame with this state (docs/interfaces.md, "MAVLink").
-The autopilot does not answer the firmware: its TIMESYNC requests go unanswered, and the
+With `line_noise` (`--line-noise`) a quarter of its messages come after 1 to 40 bytes of
+garbage, often holding a MAVLink start byte: the firmware must resynchronise and lose only
+those messages. The autopilot does not answer the firmware: its TIMESYNC requests go unanswered, and the
 firmware aligns the clocks on SYSTEM_TIME, as it does until a first answer. The firmware must
 answer PX4's TIMESYNC requests quickly (fil.py checks it).
 """
 
 import math
+import random
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -32,6 +35,9 @@ WORLD_YAW = math.radians(30.0)
 LOCAL_ORIGIN_NED = (12.0, -7.0, 0.0)
 # How long the autopilot has been up when the firmware starts (ms: its clock).
 BOOTED_BEFORE_MS = 100_000
+# Line noise (`--line-noise`): the share of messages preceded by garbage, and its seed.
+LINE_NOISE_SHARE = 0.25
+LINE_NOISE_SEED = 7
 # PX4's TIMESYNC requests: about 10 Hz, its onboard mode's rate (src/modules/mavlink/
 # mavlink_main.cpp, configure_streams_to_default), the first this long after the schedule's
 # start (not queued behind the HEARTBEAT and SYSTEM_TIME on the line). Not exactly 100 ms:
@@ -67,8 +73,12 @@ class Autopilot:
     """One emulated flight controller of `kind` (KINDS) over the vehicle of the frame's
     `truth` (read_truth: pad_cam_*, cam_*, veh_q*)."""
 
-    def __init__(self, kind, truth):
+    def __init__(self, kind, truth, line_noise=False):
         self.kind = kind
+        # Garbage on the line between the messages (see `_noise`).
+        self.noise = random.Random(LINE_NOISE_SEED) if line_noise else None
+        # Messages fed, and garbage (messages preceded, bytes) put before them.
+        self.fed, self.garbled, self.garbage_bytes = 0, 0, 0
         self.truth = truth
         self.mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
         # PX4's TIMESYNC requests: (emulated time ns it sent one, its ts1).
@@ -114,7 +124,21 @@ class Autopilot:
                 sends.append((t, self.mav.timesync_encode(0, ts1).pack(self.mav)))
                 t += TIMESYNC_PERIOD_NS
         for at, data in sorted(sends, key=lambda send: send[0]):
-            machine.uart.feed(data, at)
+            machine.uart.feed(self._noise() + data, at)
+
+    def _noise(self):
+        """With line noise: before about one message in four, 1 to 40 random bytes, often
+        with a MAVLink start byte among them (a frame that starts and never ends, or whose CRC
+        fails); nothing otherwise."""
+        self.fed += 1
+        if self.noise is None or self.noise.random() > LINE_NOISE_SHARE:
+            return b""
+        garbage = bytearray(self.noise.randbytes(self.noise.randint(1, 40)))
+        if self.noise.random() < 0.5:
+            garbage[self.noise.randrange(len(garbage))] = self.noise.choice((0xFD, 0xFE))
+        self.garbled += 1
+        self.garbage_bytes += len(garbage)
+        return bytes(garbage)
 
     @staticmethod
     def _boot_ms(t_ns):

@@ -122,7 +122,7 @@ class Fil:
         self.frame = read_pgm(name)
         self.truth = read_truth(os.path.splitext(name)[0] + ".txt")
         self.board = board
-        self.autopilot = Autopilot(args.autopilot, self.truth)
+        self.autopilot = Autopilot(args.autopilot, self.truth, line_noise=args.line_noise)
 
     def chip_options(self):
         return {"frames": [self.frame]}
@@ -215,6 +215,10 @@ class Fil:
         counts = {}
         for m in messages:
             counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+        autopilot = self.autopilot
+        if autopilot.noise is not None:
+            print(f"  line noise: {autopilot.garbage_bytes} garbage bytes before "
+                  f"{autopilot.garbled} of the autopilot's {autopilot.fed} messages")
         print(f"  UART: {len(machine.uart.sent)} bytes at {machine.uart.baud():.0f} baud, "
               f"{len(messages)} MAVLink messages: {counts}")
         texts = sorted({m.text for m in messages if m.get_type() == "STATUSTEXT"})
