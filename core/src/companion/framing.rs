@@ -37,8 +37,11 @@
 //!   byte inside the payload of a known frame it cuts in two (about 1 in 128 such cuts): that
 //!   frame is lost.
 //! - MAVLink 1 (no flags byte to tell garbage from a frame, and a one-byte id, outside common
-//!   for about half of all byte values): counted once as unknown and scanned again from its
-//!   second byte.
+//!   for about half of all byte values): a known id whose declared length is not that
+//!   message's MAVLink 1 length is not a frame, and its start byte is dropped at the header,
+//!   without waiting for the length ([`v1_payload_len`]); an unknown id is counted once as
+//!   unknown, also at the header, and scanned again from its second byte. Either way a false
+//!   `0xFE` holds no frame behind it.
 //!
 //! One damaged frame counts once: a rejected candidate (bad CRC, unknown MAVLink 1 id, or an
 //! unknown MAVLink 2 id that is not skipped) that starts inside the declared length of the
@@ -166,6 +169,8 @@ enum Candidate {
     Incomplete,
     /// Not a frame: drop the start byte.
     Invalid,
+    /// A MAVLink 1 header of an id the dialect does not know, declaring `len` bytes.
+    UnknownV1 { len: usize },
     /// A complete frame of `len` bytes.
     Complete { len: usize },
 }
@@ -292,6 +297,7 @@ impl FrameParser {
                     self.stats.garbage_bytes = self.stats.garbage_bytes.saturating_add(1);
                     self.consume(1);
                 }
+                Candidate::UnknownV1 { len } => self.reject(len, Rejected::Unknown),
                 Candidate::Complete { len } => match check(self.data(), len) {
                     Check::Valid => {
                         self.stats.frames = self.stats.frames.saturating_add(1);
@@ -370,7 +376,19 @@ fn candidate(bytes: &[u8]) -> Candidate {
             };
             V2_HEADER_LEN + payload_len + 2 + signature
         }
-        STX_V1 => V1_HEADER_LEN + payload_len + 2,
+        STX_V1 => {
+            let Some(&id) = bytes.get(5) else {
+                return Candidate::Incomplete;
+            };
+            let len = V1_HEADER_LEN + payload_len + 2;
+            match v1_payload_len(u32::from(id)) {
+                Some(known) if known != payload_len => return Candidate::Invalid,
+                Some(_) => len,
+                // Nothing after the header can make it a frame we use (no CRC_EXTRA to check
+                // it by): decided now, not after its length has arrived.
+                None => return Candidate::UnknownV1 { len },
+            }
+        }
         _ => return Candidate::Invalid,
     };
     if bytes.len() < len {
@@ -378,6 +396,18 @@ fn candidate(bytes: &[u8]) -> Candidate {
     } else {
         Candidate::Complete { len }
     }
+}
+
+/// The payload length of message `id` in MAVLink 1, if the dialect knows it: its fields
+/// without the MAVLink 2 extensions, never truncated (MAVLink 1 has neither), so a frame of a
+/// known id declares exactly this. A false start (`0xFE` in garbage, or inside a payload)
+/// declares a random length: checked at the header, it is dropped at once instead of holding
+/// the frames behind it until that length has arrived (up to 263 bytes, tens of milliseconds
+/// of a busy link).
+fn v1_payload_len(id: u32) -> Option<usize> {
+    let message = MavMessage::default_message_from_id(id)?;
+    let mut payload = [0u8; MAX_PAYLOAD_LEN];
+    Some(message.ser(MavlinkVersion::V1, &mut payload))
 }
 
 /// Header fields of the frame at the start of `bytes`: (version, header length, message id).
@@ -496,6 +526,43 @@ mod tests {
         let mut out = [0u8; MAX_FRAME_LEN];
         out[..bytes.len()].copy_from_slice(bytes);
         (out, bytes.len())
+    }
+
+    /// A MAVLink 1 false start of a known id whose length is not that message's does not
+    /// hold the frame behind it: a heartbeat right after `0xFE 200 .. id 0` (HEARTBEAT's
+    /// MAVLink 1 length is 9) is handed out as soon as its last byte is in, not 208 bytes
+    /// later.
+    #[test]
+    fn a_false_mavlink1_start_is_dropped_at_its_header() {
+        assert_eq!(v1_payload_len(0), Some(9));
+        assert_eq!(v1_payload_len(149), Some(30)); // LANDING_TARGET without its extensions
+        let mut p = FrameParser::new();
+        let (a, n) = heartbeat_bytes(1);
+        let mut seen = 0;
+        p.push(&[0xFE, 200, 7, 1, 1, 0, 0x55], |_| seen += 1);
+        p.push(&a[..n], |f| {
+            assert_eq!(f.message_id, 0);
+            seen += 1;
+        });
+        assert_eq!(seen, 1, "{:?}", p.stats());
+        assert_eq!(p.buffered(), 0);
+        // Nor does one of an id the dialect does not know (180: ArduPilot's own range),
+        // counted once as unknown.
+        assert_eq!(v1_payload_len(180), None);
+        let mut p = FrameParser::new();
+        let mut seen = 0;
+        p.push(&[0xFE, 200, 7, 1, 1, 180, 0x55], |_| seen += 1);
+        p.push(&a[..n], |_| seen += 1);
+        assert_eq!(seen, 1, "{:?}", p.stats());
+        assert_eq!(p.stats().unknown, 1);
+        // A false start with the right length still waits for its CRC, as before: the frame
+        // behind it is found once the CRC has failed.
+        let mut p = FrameParser::new();
+        let mut seen = 0;
+        p.push(&[0xFE, 9, 7, 1, 1, 0, 0x55], |_| seen += 1);
+        p.push(&a[..n], |_| seen += 1);
+        p.push(&a[..n], |_| seen += 1);
+        assert_eq!(seen, 2, "{:?}", p.stats());
     }
 
     #[test]
