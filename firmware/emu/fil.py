@@ -1,12 +1,12 @@
 """Stage 2, firmware-in-the-loop: after the boot, the firmware runs against emulated hardware
 for a given emulated time: the OV7725 on the SCCB bus (probe, reset, configuration), the DCMI
-delivering a recorded frame with the firmware's pad in view (30 fps), and an ArduPilot
-autopilot on the UART sending HEARTBEAT at 1 Hz (generated with pymavlink). Everything the
-firmware transmits is decoded with pymavlink: its HEARTBEATs must be well-formed and about
-1 Hz, and its LANDING_TARGETs must agree with the frame's truth (distance and position). The
-frame is delivered at the brightness the firmware's exposure and gain registers give it,
-starting twice too bright (camera.py): the firmware's exposure loop must take its paper out
-of clipping.
+delivering a recorded frame with the firmware's pad in view (30 fps), and an ArduPilot or PX4
+autopilot on the UART (autopilot.py). Everything the firmware transmits is decoded with
+pymavlink: its HEARTBEATs must be well-formed and about 1 Hz, its LANDING_TARGETs must agree
+with the frame's truth in the profile's frame, and PX4's TIMESYNC requests must be answered
+quickly. The frame is delivered at the brightness the firmware's exposure and gain registers
+give it, starting twice too bright (camera.py): the firmware's exposure loop must take its
+paper out of clipping. Flash must be written only for a reason (flash.py).
 
 The frame (`frames/*.pgm` in this package, with its truth in the `.txt` beside it) was
 rendered by the simulator (`touchdown simulate`) and resampled into the firmware's own pinhole
@@ -105,12 +105,9 @@ def timed_messages(machine):
 
 
 def sent_messages(machine, since_ns=0.0):
-    """The MAVLink messages the firmware sent from emulated time `since_ns` on, decoded with
-    pymavlink (the reference decoder)."""
-    sent = bytes(b for t, b in machine.uart.sent if t >= since_ns)
-    mav = mavlink.MAVLink(None)
-    mav.robust_parsing = True
-    return [m for m in (mav.parse_buffer(sent) or []) if m.get_type() != "BAD_DATA"]
+    """The MAVLink messages the firmware finished sending from emulated time `since_ns` on
+    (timed_messages)."""
+    return [m for t, m in timed_messages(machine) if t >= since_ns]
 
 
 class Fil:
