@@ -13,10 +13,10 @@ must put the pad at half the distance (the angles stay).
 
 Checked, before the power cycle: a PARAM_VALUE with the new value answers the PARAM_SET; the
 LANDING_TARGETs after it are at half the truth's distance (x, y, z likewise); the firmware
-programs flash words in bank 2 after its save delay (and, on a board that starts with foreign
-data in a parameter sector, erased that sector at boot). After it: the boot test passes again;
-a PARAM_VALUE with the new value answers PARAM_REQUEST_READ; the LANDING_TARGETs are at half
-the distance.
+programs flash words after its save delay (flash.py fails a word programmed twice, or a
+store the flash interface would refuse). After it: the boot test passes again; a PARAM_VALUE
+with the new value answers PARAM_REQUEST_READ; the LANDING_TARGETs are at half the distance;
+the stack stays within its reserve.
 """
 
 import os
