@@ -36,6 +36,9 @@ readonly POWER_CYCLE_VARIANTS=(nucleo-qvga openmv-qvga)
 # The variant whose autopilot line carries garbage before a quarter of its messages
 # (autopilot.py): the firmware must resynchronise and land as on a clean line.
 readonly LINE_NOISE_VARIANTS=(nucleo-qvga-480)
+# The variant whose autopilot is an ArduPilot 4.7 that sets TD_PROFILE 3: LANDING_TARGETs in
+# LOCAL_FRD, levelled with the attitude.
+readonly LOCAL_FRD_VARIANTS=(openmv-vga)
 # name board MHz camera cargo-features...
 readonly VARIANTS=(
     "nucleo-qvga nucleo 400 qvga"
@@ -102,6 +105,9 @@ for variant in "${VARIANTS[@]}"; do
     fi
     if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${LINE_NOISE_VARIANTS[@]}"; then
         fil+=(--line-noise)
+    fi
+    if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${LOCAL_FRD_VARIANTS[@]}"; then
+        fil+=(--autopilot ardupilot-4.7)
     fi
     emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" \
         "${fil[@]}" || failed=1

@@ -35,7 +35,8 @@ def parse(argv):
                              "what the firmware wrote to flash")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
-    parser.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot",
+    parser.add_argument("--autopilot", choices=("ardupilot", "ardupilot-4.7", "px4"),
+                        default="ardupilot",
                         help="FIL: the flight controller on the UART (autopilot.py)")
     parser.add_argument("--line-noise", action="store_true",
                         help="FIL: garbage bytes before a quarter of the autopilot's messages")

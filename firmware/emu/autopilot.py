@@ -11,6 +11,9 @@ local origin moved (LOCAL_ORIGIN_NED): a heading or an origin the firmware ignor
   50 Hz (the rate the firmware asks for with SET_MESSAGE_INTERVAL; its rolling-shutter
   correction and the pose's levelling use it). The ArduPilot profile needs no more: ArduPilot
   takes the pad in MAV_FRAME_BODY_FRD and applies its own attitude.
+- `ardupilot-4.7`: the same, and at the start a PARAM_SET of TD_PROFILE 3 (the set-up guide's
+  step for ArduPilot 4.7 and later): the pad in MAV_FRAME_LOCAL_FRD, levelled with the
+  attitude and turned with the heading.
 - `px4`: HEARTBEAT (MAV_AUTOPILOT_PX4) and SYSTEM_TIME at 1 Hz, TIMESYNC requests at about
   10 Hz, ATTITUDE_QUATERNION and LOCAL_POSITION_NED at 50 Hz, its clock 100 s ahead of the
   firmware's: PX4 takes a position only in MAV_FRAME_LOCAL_NED, so the firmware must turn the
@@ -35,6 +38,8 @@ WORLD_YAW = math.radians(30.0)
 LOCAL_ORIGIN_NED = (12.0, -7.0, 0.0)
 # How long the autopilot has been up when the firmware starts (ms: its clock).
 BOOTED_BEFORE_MS = 100_000
+# The firmware's MAVLink ids (TD_SYSID / TD_COMPID defaults, docs/interfaces.md).
+FIRMWARE_SYSID, FIRMWARE_COMPID = 1, 191
 # Line noise (`--line-noise`): the share of messages preceded by garbage, and its seed.
 LINE_NOISE_SHARE = 0.25
 LINE_NOISE_SEED = 7
@@ -48,7 +53,7 @@ TIMESYNC_AFTER_NS = 0.5e6
 # PX4 uses a TIMESYNC answer only if it came back within this (src/lib/timesync/Timesync.hpp,
 # MAX_RTT_SAMPLE): the companion must answer within it.
 PX4_MAX_RTT_NS = 10e6
-KINDS = ("ardupilot", "px4")
+KINDS = ("ardupilot", "ardupilot-4.7", "px4")
 
 
 def quaternion_product(a, b):
@@ -75,6 +80,7 @@ class Autopilot:
 
     def __init__(self, kind, truth, line_noise=False):
         self.kind = kind
+        self.profile_set = False
         # Garbage on the line between the messages (see `_noise`).
         self.noise = random.Random(LINE_NOISE_SEED) if line_noise else None
         # Messages fed, and garbage (messages preceded, bytes) put before them.
@@ -97,11 +103,22 @@ class Autopilot:
             mavlink.MAV_TYPE_QUADROTOR, autopilot, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
             0, mavlink.MAV_STATE_ACTIVE).pack(self.mav)
 
+    def sets_parameters(self):
+        """Whether this autopilot changes a parameter of the firmware (which the firmware then
+        saves to flash)."""
+        return self.kind == "ardupilot-4.7"
+
     def feed(self, machine, start_ns, end_ns, extra=()):
         """Puts what the autopilot sends from `start_ns` to `end_ns`, and the `(time ns,
         bytes)` of `extra`, on the firmware's receive line, in time order (the line queues what
         it is fed)."""
         sends = list(extra)
+        if self.sets_parameters() and not self.profile_set:
+            # The set-up guide's step for ArduPilot 4.7 and later: TD_PROFILE 3 (LOCAL_FRD).
+            self.profile_set = True
+            sends.append((start_ns, self.mav.param_set_encode(
+                FIRMWARE_SYSID, FIRMWARE_COMPID, b"TD_PROFILE", 3.0,
+                mavlink.MAV_PARAM_TYPE_REAL32).pack(self.mav)))
         t = start_ns
         while t < end_ns:
             sends.append((t, self.heartbeat()))
@@ -174,4 +191,13 @@ class Autopilot:
             ned = rotate(self.attitude, body)
             x, y, z = (p + d for p, d in zip(self.position, ned))
             want.update(frame=mavlink.MAV_FRAME_LOCAL_NED, x=x, y=y, z=z)
+        elif self.kind == "ardupilot-4.7":
+            # Levelled: turned into NED with the whole attitude, then back by the heading alone.
+            north, east, down = rotate(self.attitude, body)
+            w, qx, qy, qz = self.attitude
+            heading = math.atan2(2 * (w * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+            c, s = math.cos(heading), math.sin(heading)
+            x, y = c * north + s * east, -s * north + c * east
+            want.update(frame=mavlink.MAV_FRAME_LOCAL_FRD, x=x, y=y, z=down,
+                        angle_x=math.atan2(y, down), angle_y=math.atan2(-x, down))
         return want

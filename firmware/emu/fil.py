@@ -143,14 +143,14 @@ class Fil:
         return problems
 
     def _check_flash(self, machine):
-        """Flash is written only for a reason: no parameter changed here, so nothing may be
-        programmed, and only a sector of foreign data (the OpenMV Cam's ROMFS) erased, once."""
+        """Flash is written only for a reason: unless the autopilot set a parameter, nothing may
+        be programmed; only a sector of foreign data (the OpenMV Cam's ROMFS) erased, once."""
         flash = machine.flash
         erased = [(bank, sector) for _, bank, sector in flash.erased]
         print(f"  flash: {len(flash.programmed)} flash word(s) programmed, sectors erased "
               f"(bank, sector): {erased or 'none'}")
         problems = []
-        if flash.programmed:
+        if flash.programmed and not self.autopilot.sets_parameters():
             problems.append(f"{len(flash.programmed)} flash word(s) programmed with no "
                             "parameter changed")
         want = []

@@ -25,6 +25,7 @@ import tomllib
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from . import memmap
+from .autopilot import FIRMWARE_COMPID, FIRMWARE_SYSID
 from .boot import report_stack, run_boot
 from .chip import build_chip
 from .fil import position_problems, sent_messages
@@ -33,8 +34,6 @@ PARAM = "TD_TAG_SIZE"
 # The firmware's built pad (firmware/src/config.rs: core's NESTED, which a host test keeps
 # identical to this file).
 PAD_FILE = os.path.join(os.path.dirname(__file__), "..", "..", "pads", "nested.toml")
-# Our MAVLink ids (TD_SYSID / TD_COMPID defaults, docs/interfaces.md).
-FIRMWARE_SYSID, FIRMWARE_COMPID = 1, 191
 # The save delay (core's SAVE_DEBOUNCE_US, 2 s) plus room for the flash words.
 SAVE_WAIT_NS = 2.6e9
 # Emulated time after the PARAM_SET and after the second boot before the checks.
