@@ -53,7 +53,6 @@ TIMESYNC_AFTER_NS = 0.5e6
 # PX4 uses a TIMESYNC answer only if it came back within this (src/lib/timesync/Timesync.hpp,
 # MAX_RTT_SAMPLE): the companion must answer within it.
 PX4_MAX_RTT_NS = 10e6
-KINDS = ("ardupilot", "ardupilot-4.7", "px4")
 
 
 def quaternion_product(a, b):
@@ -75,7 +74,7 @@ def rotate(q, v):
 
 
 class Autopilot:
-    """One emulated flight controller of `kind` (KINDS) over the vehicle of the frame's
+    """One emulated flight controller of `kind` ("ardupilot", "ardupilot-4.7" or "px4") over the vehicle of the frame's
     `truth` (read_truth: pad_cam_*, cam_*, veh_q*)."""
 
     def __init__(self, kind, truth, line_noise=False):

@@ -104,10 +104,9 @@ def timed_messages(machine):
     return out
 
 
-def sent_messages(machine, since_ns=0.0):
-    """The MAVLink messages the firmware finished sending from emulated time `since_ns` on
-    (timed_messages)."""
-    return [m for t, m in timed_messages(machine) if t >= since_ns]
+def messages_since(timed, since_ns):
+    """The messages of `timed` (timed_messages) finished from emulated time `since_ns` on."""
+    return [m for t, m in timed if t >= since_ns]
 
 
 class Fil:
@@ -208,7 +207,8 @@ class Fil:
               f"overruns; IWDG fed {machine.iwdg.feeds} times")
 
     def _check_link(self, machine):
-        messages = sent_messages(machine)
+        timed = timed_messages(machine)
+        messages = [m for _, m in timed]
         counts = {}
         for m in messages:
             counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
@@ -223,10 +223,10 @@ class Fil:
             print(f"  STATUSTEXT: {text}")
         problems = self._check_heartbeats(messages)
         problems += self._check_targets(messages)
-        problems += self._check_timesync_answers(machine)
+        problems += self._check_timesync_answers(machine, timed)
         return problems
 
-    def _check_timesync_answers(self, machine):
+    def _check_timesync_answers(self, machine, timed):
         """Every TIMESYNC request of the autopilot (PX4's, 10 a second) answered with its
         ts1 echoed and the firmware's own time in tc1, back within half PX4's MAX_RTT_SAMPLE
         (TIMESYNC_RTT_LIMIT_NS)."""
@@ -234,7 +234,7 @@ class Fil:
                     if t < machine.time_ns - PX4_MAX_RTT_NS]
         if not requests:
             return []
-        answers = {m.ts1: (t, m.tc1) for t, m in timed_messages(machine)
+        answers = {m.ts1: (t, m.tc1) for t, m in timed
                    if m.get_type() == "TIMESYNC" and m.tc1 != 0}
         problems, rtts = [], []
         for sent, ts1 in requests:

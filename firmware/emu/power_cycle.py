@@ -28,7 +28,7 @@ from . import memmap
 from .autopilot import FIRMWARE_COMPID, FIRMWARE_SYSID
 from .boot import report_stack, run_boot
 from .chip import build_chip
-from .fil import position_problems, sent_messages
+from .fil import messages_since, position_problems, timed_messages
 
 PARAM = "TD_TAG_SIZE"
 # The firmware's built pad (firmware/src/config.rs: core's NESTED, which a host test keeps
@@ -78,11 +78,12 @@ class PowerCycle:
         problems = [machine.failure] if machine.failure else []
         if machine.finished:
             problems.append(f"stopped early after PARAM_SET: {machine.finished}")
-        messages = sent_messages(machine, set_at)
+        timed = timed_messages(machine)
+        messages = messages_since(timed, set_at)
         for text in sorted({m.text for m in messages if m.get_type() == "STATUSTEXT"}):
             print(f"  STATUSTEXT: {text}")
         problems += self._check_value(messages, "PARAM_SET")
-        problems += self._check_targets(sent_messages(machine, set_at + SETTLE_NS),
+        problems += self._check_targets(messages_since(timed, set_at + SETTLE_NS),
                                         "after PARAM_SET")
         flash = machine.flash
         words = flash.programmed[written:]
@@ -119,8 +120,9 @@ class PowerCycle:
             return [f"after the power cycle: {machine.failure}"]
         if machine.finished:
             problems.append(f"after the power cycle: stopped early: {machine.finished}")
-        problems += self._check_value(sent_messages(machine, read_at), "PARAM_REQUEST_READ")
-        problems += self._check_targets(sent_messages(machine, start + 0.3e9),
+        timed = timed_messages(machine)
+        problems += self._check_value(messages_since(timed, read_at), "PARAM_REQUEST_READ")
+        problems += self._check_targets(messages_since(timed, start + 0.3e9),
                                         "after the power cycle")
         problems += [f"after the power cycle: {p}" for p in report_stack(machine)]
         return problems
