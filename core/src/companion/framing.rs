@@ -535,7 +535,7 @@ mod tests {
     fn a_false_mavlink1_start_is_dropped_at_its_header() {
         assert_eq!(v1_payload_len(0), Some(9));
         assert_eq!(v1_payload_len(149), Some(30)); // LANDING_TARGET without its extensions
-        // Every MAVLink 1 id with a length has a CRC_EXTRA: `check` never sees an unknown one.
+                                                   // Every MAVLink 1 id with a length has a CRC_EXTRA: `check` never sees an unknown one.
         for id in 0..=255u32 {
             if v1_payload_len(id).is_some() {
                 assert_ne!(MavMessage::extra_crc(id), 0, "id {id}");
