@@ -50,7 +50,10 @@ pub use axes::{
     camera_to_ned_matrix, distance, landing_angles, level_measurement, local_ned_position,
     ned_to_camera, Attitude, CameraMount, LandingAngles, RotationError,
 };
-pub use estimator::{EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate, PadEstimator};
+pub use estimator::{
+    level_covariance, EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate, PadEstimator,
+    ATTITUDE_NOISE_DEG,
+};
 pub use mount_calibration::{
     roll_pitch_aligning, MountCalibrationConfig, MountCalibrationMode, MountCalibrationStats,
     MountCalibrator, MountCorrection, MountEstimate, MountRefusal, FRAME_DECORRELATION_US,

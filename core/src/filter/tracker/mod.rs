@@ -219,6 +219,9 @@ pub enum ConfigError {
     InitialVelocity,
     /// `min_measurement_sigma` must be finite and >= 1 mm.
     MeasurementFloor,
+    /// The estimator's `attitude_noise_deg` must be finite and >= 0
+    /// ([`super::EstimatorConfig::attitude_noise_deg`]).
+    AttitudeNoise,
 }
 
 /// Where the tracker is in its lifecycle.
