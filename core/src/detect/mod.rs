@@ -50,8 +50,8 @@
 //! ([`DetectorConfig::work_budget_per_pixel`]), so no image, however hostile, costs more than
 //! the budget allows; the frame is then marked [`DetectStats::truncated`]. The prices of the
 //! steps (`WORK_*`) were measured on the Cortex-M7 benchmark (`bench/m7`), where one unit is
-//! 40 to 100 instructions (a contour step about 60 with its share of the neighbour probes,
-//! the screening and the pattern fit 60 to 100).
+//! 40 to 100 instructions (a contour step about 55 with its neighbourhood read, table
+//! look-up and share of the boundary's start, the screening and the pattern fit 60 to 100).
 //!
 //! ## Memory
 //! Frame-sized work memory is lent by the caller as [`Buffers`] (sized by
@@ -119,11 +119,12 @@ pub const WORK_FIT: u32 = 20;
 /// truncated, and the replayed VGA scenarios stay within it but for the busiest frames of
 /// `shadow` (a hard shadow edge across a pad on concrete: 2 frames cut at this budget with the
 /// former threshold, after their markers were found) and the markerless glare of `sun`.
-/// 0.22 would hold VGA uniform noise within twice the VGA landing frame once `threshold` took
-/// the VGA tile maxima from every other row (7.72 M against 3.90 M Cortex-M7 instructions;
-/// 8.37 M, 2.14 times, at 0.25), but it cut 5 of `shadow`'s 60 frames and 3 of `sun`'s with
-/// markers in them: a budget that trims real frames on our own renderer would trim more on
-/// busier real ground, so the ratio goal gives way to recall. A QVGA frame (19,200 units at
+/// 0.22 would hold VGA uniform noise within twice the VGA landing frame (7.18 M against
+/// 3.72 M Cortex-M7 instructions; 7.79 M, 2.09 times, at 0.25, since the contour step reads
+/// its neighbourhood at once and the binarisation compares four rows per threshold read), but
+/// it cut 5 of `shadow`'s 60 frames and 3 of `sun`'s with markers in them: a budget that trims
+/// real frames on our own renderer would trim more on busier real ground, so the ratio goal
+/// gives way to recall. A QVGA frame (19,200 units at
 /// 0.25) gets the floor, 24,000.
 pub const CAMERA_WORK_BUDGET: f32 = 0.25;
 /// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::offline`]: ten times the
@@ -259,7 +260,7 @@ pub struct DetectorConfig {
     /// relative to half the black/white contrast) for a detection to be reported.
     pub min_decision_margin: f32,
     /// Work allowed per frame, per pixel of the frame, in **work units**: bounds the time per
-    /// frame on any image. One unit is one contour-following step (about 70 Cortex-M7
+    /// frame on any image. One unit is one contour-following step (about 55 Cortex-M7
     /// instructions); screening a boundary for the quad fit costs one unit per [`WORK_SCREEN_PIXELS`] of
     /// it (and [`WORK_FIT`] plus one per pixel for the fit itself), a quick look at a candidate
     /// [`WORK_PRECHECK`] and refining and reading a

@@ -94,24 +94,6 @@ fn bytes_ge(a: u32, b: u32) -> u32 {
     (a | !b).wrapping_sub(!(differ >> 1) & LOW7) & HIGH
 }
 
-/// Which of eight pixels, two tiles' four each (packed little-endian in `first` and
-/// `second`, first pixel in the low byte), are below their tile's threshold, as a byte
-/// (first pixel = bit 0): [`bytes_ge`] per tile, then one multiplication gathers all eight
-/// flags.
-///
-/// The first tile's flags sit on bits 0, 8, 16, 24 and the second's on 4, 12, 20, 28; the
-/// multiplier `1 + 2^7 + 2^14 + 2^21` moves them to bits 21 to 28 in pixel order, and no two
-/// of the partial products (a flag bit plus a multiple of 7 up to 21) share a bit, so
-/// nothing carries into that window.
-#[inline(always)]
-fn darker_pair(first: u32, first_threshold: u8, second: u32, second_threshold: u8) -> u32 {
-    let broadcast = |threshold: u8| u32::from(threshold) * 0x0101_0101;
-    let at_least_first = bytes_ge(first, broadcast(first_threshold)) >> 7;
-    let at_least_second = bytes_ge(second, broadcast(second_threshold)) >> 3;
-    let darker = (at_least_first | at_least_second) ^ 0x1111_1111;
-    (darker.wrapping_mul(0x0020_4081) >> 21) & 0xFF
-}
-
 /// 0xFF in every byte where the byte of `a` >= that of `b` ([`bytes_ge`]), 0 elsewhere.
 #[inline(always)]
 fn ge_mask(a: u32, b: u32) -> u32 {
@@ -290,8 +272,71 @@ pub(crate) fn local_threshold(
     // tile row above; the vertical one also turns the window's extrema into thresholds (flat
     // tiles get 0, so no pixel there is dark).
     spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
-    let wpr = words_per_row(w);
-    for y in 0..h {
+    compare_with_thresholds(image, tmin, tw, bitmap);
+}
+
+/// The bitmap of `image` against the per-tile thresholds `tmin` (`tw` a row): a pixel is
+/// dark where it is below its tile's threshold.
+///
+/// A tile row's four pixel rows at once, 32 pixels (a bitmap word, eight tiles) a row at a
+/// time: the eight thresholds are read once for the four rows, and where all eight are 0
+/// (flat tiles) no pixel can be dark and the pixels are not even read; elsewhere each
+/// threshold is spread to the four bytes of a word once for the four rows and each tile's
+/// four pixels are compared with it at once ([`dark_bits`]). Partial words and a partial
+/// tile row at the end, one row and one pixel at a time.
+#[inline(always)]
+fn compare_with_thresholds(image: &GrayImage<'_>, tmin: &[u8], tw: usize, bitmap: &mut [u32]) {
+    let (w, h) = (image.width(), image.height());
+    let wpr = words_per_row(w).max(1);
+    let full = w / 32;
+    let whole_tile_rows = h / TILE;
+    let groups = bitmap
+        .chunks_exact_mut(TILE * wpr)
+        .zip(tmin.chunks_exact(tw.max(1)))
+        .take(whole_tile_rows)
+        .enumerate();
+    for (ty, (out, thresholds)) in groups {
+        let y0 = ty * TILE;
+        let rows = [
+            image.row(y0),
+            image.row(y0 + 1),
+            image.row(y0 + 2),
+            image.row(y0 + 3),
+        ];
+        let Some((o0, rest)) = out.split_at_mut_checked(wpr) else {
+            return;
+        };
+        let Some((o1, rest)) = rest.split_at_mut_checked(wpr) else {
+            return;
+        };
+        let Some((o2, o3)) = rest.split_at_mut_checked(wpr) else {
+            return;
+        };
+        let [r0, r1, r2, r3] = rows;
+        let columns = thresholds
+            .chunks_exact(32 / TILE)
+            .zip(r0.chunks_exact(32).zip(r1.chunks_exact(32)))
+            .zip(r2.chunks_exact(32).zip(r3.chunks_exact(32)))
+            .zip(o0.iter_mut().zip(o1.iter_mut()))
+            .zip(o2.iter_mut().zip(o3.iter_mut()));
+        for ((((eight, (p0, p1)), (p2, p3)), (w0, w1)), (w2, w3)) in columns {
+            let eight = <[u8; 8]>::try_from(eight).map_or(0, u64::from_le_bytes);
+            if eight == 0 {
+                (*w0, *w1, *w2, *w3) = (0, 0, 0, 0);
+                continue;
+            }
+            let spread = spread_thresholds(eight);
+            *w0 = dark_bits(p0, &spread);
+            *w1 = dark_bits(p1, &spread);
+            *w2 = dark_bits(p2, &spread);
+            *w3 = dark_bits(p3, &spread);
+        }
+        for (row, out) in rows.into_iter().zip([o0, o1, o2, o3]) {
+            partial_word(row, thresholds, full, out);
+        }
+    }
+    // The rows of a partial tile row at the bottom.
+    for y in whole_tile_rows * TILE..h {
         let row = image.row(y);
         let thresholds = tmin
             .get((y / TILE) * tw..(y / TILE) * tw + tw)
@@ -299,46 +344,82 @@ pub(crate) fn local_threshold(
         let Some(out) = bitmap.get_mut(y * wpr..y * wpr + wpr) else {
             return;
         };
-        // Whole words: 32 pixels = 8 tiles. Where all eight tiles are flat (threshold 0) no
-        // pixel can be dark and the pixels are not even read; elsewhere each tile's four
-        // pixels are compared with its threshold at once, in one 32-bit word.
-        let full = w / 32;
-        for ((pixels, tile_thresholds), word) in row
+        let words = row
             .chunks_exact(32)
             .zip(thresholds.chunks_exact(32 / TILE))
-            .zip(out.iter_mut())
-        {
-            // The eight thresholds in one 64-bit value (two word loads): zero when all eight
-            // tiles are flat.
-            let eight = <[u8; 8]>::try_from(tile_thresholds).map_or(0, u64::from_le_bytes);
-            if eight == 0 {
-                *word = 0;
-                continue;
-            }
-            let mut bits = 0u32;
-            for (pair, octet) in pixels.chunks_exact(2 * TILE).enumerate() {
-                if let [a0, a1, a2, a3, b0, b1, b2, b3] = *octet {
-                    let (first, second) = (
-                        u32::from_le_bytes([a0, a1, a2, a3]),
-                        u32::from_le_bytes([b0, b1, b2, b3]),
-                    );
-                    let thresholds = eight >> (16 * pair);
-                    let (t0, t1) = (thresholds as u8, (thresholds >> 8) as u8);
-                    bits |= darker_pair(first, t0, second, t1) << (2 * TILE * pair);
-                }
-            }
-            *word = bits;
+            .zip(out.iter_mut());
+        for ((pixels, eight), word) in words {
+            let eight = <[u8; 8]>::try_from(eight).map_or(0, u64::from_le_bytes);
+            *word = dark_bits(pixels, &spread_thresholds(eight));
         }
-        // The partial word at the end of the row.
-        if let Some(word) = out.get_mut(full) {
-            let start = full * 32;
-            let mut bits = 0u32;
-            for (i, &p) in row.get(start..).unwrap_or(&[]).iter().enumerate() {
-                let t = thresholds.get((start + i) / TILE).copied().unwrap_or(0);
-                bits |= ((p < t) as u32) << i;
-            }
-            *word = bits;
+        partial_word(row, thresholds, full, out);
+    }
+}
+
+/// Eight tiles' thresholds (one a byte of `eight`), each in the four bytes of a word.
+#[inline(always)]
+fn spread_thresholds(eight: u64) -> [u32; 8] {
+    core::array::from_fn(|i| u32::from((eight >> (8 * i)) as u8) * 0x0101_0101)
+}
+
+/// Per byte of two words of four bytes: bit 7 set where the byte of `a` < that of `b`,
+/// every other bit clear.
+///
+/// Four comparisons in one 32-bit word (SIMD within a register), because the Cortex-M7 has
+/// no byte-vector compare a compiler would use from stable Rust (its DSP instructions need
+/// `asm!`). Per byte, `a < b` exactly when `!a + b >= 256`, that is when the rounded-down
+/// mean of `!a` and `b` is at least 128. That mean is `(!a & b) + ((!a ^ b) >> 1)`, an
+/// addition that cannot carry out of a byte and a shift whose bits crossing into the next
+/// byte are masked off: four instructions (`eor`, `bic`, `bic` with a shifted operand,
+/// `add`), and the mask of bit 7 goes with the caller's next shift.
+#[inline(always)]
+fn bytes_lt(a: u32, b: u32) -> u32 {
+    (b & !a).wrapping_add(!((a ^ b) >> 1) & LOW7) & HIGH
+}
+
+/// The bitmap word of 32 pixels (`pixels`, eight tiles of four) against their tiles'
+/// thresholds (`spread`, [`spread_thresholds`]): bit `i` set where pixel `i` is below its
+/// tile's threshold (0 for a slice that is not 32 pixels).
+///
+/// Per tile [`bytes_lt`] on its four pixels as a word; then per two tiles one
+/// multiplication gathers the eight flags: the first tile's flags moved to bits 0, 8, 16, 24
+/// and the second's to 4, 12, 20, 28, the multiplier `1 + 2^7 + 2^14 + 2^21` moves them to
+/// bits 21 to 28 in pixel order, and no two of the partial products (a flag bit plus a
+/// multiple of 7 up to 21) share a bit, so nothing carries into that window.
+#[inline(always)]
+fn dark_bits(pixels: &[u8], spread: &[u32; 8]) -> u32 {
+    let Ok(pixels) = <&[u8; 32]>::try_from(pixels) else {
+        return 0;
+    };
+    let (tiles, _) = pixels.as_chunks::<TILE>();
+    let mut bits = 0;
+    for (pair, (tiles, spread)) in tiles
+        .chunks_exact(2)
+        .zip(spread.chunks_exact(2))
+        .enumerate()
+    {
+        if let ([first, second], [first_threshold, second_threshold]) = (tiles, spread) {
+            let first = bytes_lt(u32::from_le_bytes(*first), *first_threshold);
+            let second = bytes_lt(u32::from_le_bytes(*second), *second_threshold);
+            let flags = ((first >> 7) & 0x0101_0101) | ((second >> 3) & 0x1010_1010);
+            bits |= ((flags.wrapping_mul(0x0020_4081) >> 21) & 0xFF) << (8 * pair);
         }
+    }
+    bits
+}
+
+/// The partial word at the end of a row (`full` whole words before it), if any, one pixel
+/// at a time.
+#[inline(always)]
+fn partial_word(row: &[u8], thresholds: &[u8], full: usize, out: &mut [u32]) {
+    if let Some(word) = out.get_mut(full) {
+        let start = full * 32;
+        let mut bits = 0u32;
+        for (i, &p) in row.get(start..).unwrap_or(&[]).iter().enumerate() {
+            let t = thresholds.get((start + i) / TILE).copied().unwrap_or(0);
+            bits |= ((p < t) as u32) << i;
+        }
+        *word = bits;
     }
 }
 
@@ -661,34 +742,60 @@ mod tests {
         }
     }
 
+    /// Every pair of bytes, in every lane, with different bytes around it.
     #[test]
-    fn darker_pair_agrees_with_byte_comparisons() {
-        let levels = [0u8, 1, 2, 63, 64, 127, 128, 129, 191, 200, 254, 255];
-        for &t in &levels {
-            for &a in &levels {
-                for &b in &levels {
-                    for (c, d) in [(0u8, 255u8), (t, t.wrapping_sub(1)), (a, b), (255, 0)] {
-                        let expected = (a < t) as u32
-                            | ((b < t) as u32) << 1
-                            | ((c < t) as u32) << 2
-                            | ((d < t) as u32) << 3;
-                        let pixels = u32::from_le_bytes([a, b, c, d]);
-                        let other = pixels.rotate_left(8);
-                        let expected_other = (expected << 1 | expected >> 3) & 0xF;
-                        for u in [t, 0, 255, a] {
-                            let others = (other.to_le_bytes().map(|p| (p < u) as u32), u);
-                            let ([p0, p1, p2, p3], u) = others;
-                            let expected_u = p0 | p1 << 1 | p2 << 2 | p3 << 3;
-                            let got = darker_pair(pixels, t, other, u);
-                            assert_eq!(got & 0xF, expected, "{a} {b} {c} {d} < {t}");
-                            assert_eq!(got >> 4, expected_u, "{other:#x} < {u}");
-                        }
-                        let got = darker_pair(pixels, t, other, t);
-                        assert_eq!(got >> 4, expected_other, "{a} {b} {c} {d} < {t}");
-                    }
+    fn bytes_lt_agrees_with_bytes() {
+        for a in 0..=255u8 {
+            for b in 0..=255u8 {
+                for lane in 0..4 {
+                    let (x, y) = (u32::from(a) << (8 * lane), u32::from(b) << (8 * lane));
+                    let others = 0x5AFF_00A5 & !(0xFF << (8 * lane));
+                    let lt = bytes_lt(
+                        x | others,
+                        y | (others.rotate_left(8) & !(0xFF << (8 * lane))),
+                    );
+                    assert_eq!(
+                        lt >> (8 * lane + 7) & 1 == 1,
+                        a < b,
+                        "{a} < {b} lane {lane}"
+                    );
+                    assert_eq!(lt & !HIGH, 0);
                 }
             }
         }
+    }
+
+    #[test]
+    fn dark_bits_agree_with_byte_comparisons() {
+        let mut seed = 5u32;
+        let levels = [0u8, 1, 2, 63, 64, 127, 128, 129, 191, 200, 254, 255];
+        for round in 0..4000 {
+            let mut pixels = [0u8; 32];
+            for p in pixels.iter_mut() {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                *p = if round % 2 == 0 {
+                    levels[(seed >> 24) as usize % levels.len()]
+                } else {
+                    (seed >> 24) as u8
+                };
+            }
+            let mut eight = [0u8; 8];
+            for t in eight.iter_mut() {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                *t = levels[(seed >> 24) as usize % levels.len()];
+            }
+            let got = dark_bits(&pixels, &spread_thresholds(u64::from_le_bytes(eight)));
+            for (i, &p) in pixels.iter().enumerate() {
+                let dark = p < eight[i / TILE];
+                assert_eq!(
+                    got >> i & 1 == 1,
+                    dark,
+                    "pixel {i}: {p} < {}",
+                    eight[i / TILE]
+                );
+            }
+        }
+        assert_eq!(dark_bits(&[0u8; 31], &[u32::MAX; 8]), 0);
     }
 
     /// The word-at-a-time 3-wide filter equals the definition (edges repeat) on every row
