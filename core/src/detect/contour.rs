@@ -851,6 +851,20 @@ mod tests {
         }
     }
 
+    /// 3 rows of 2 words (64 x 3): a dark pixel at row 1, column `x`, and its neighbours dark
+    /// where `ring` has a bit (bit `d`: direction `d`).
+    fn ring_bitmap(x: usize, ring: u32) -> [u32; 6] {
+        let mut bm = [0u32; 6];
+        for d in 0..8 {
+            if (ring >> d) & 1 == 1 {
+                let (px, py) = ((x as isize + DX[d]) as usize, (1 + DY[d]) as usize);
+                set_bit(&mut bm, 2, px, py);
+            }
+        }
+        set_bit(&mut bm, 2, x, 1);
+        bm
+    }
+
     /// The search through the doubled move table equals the definition (the first dark one
     /// of the seven directions clockwise after `from`) for every neighbourhood, at columns
     /// inside a word and at both its edges.
@@ -860,14 +874,7 @@ mod tests {
         // 3 rows of 2 words (64 x 3): the pixel at row 1, column `x`.
         for x in [1usize, 17, 30, 31, 32, 33] {
             for ring in 0..256u32 {
-                let mut bm = [0u32; 6];
-                for d in 0..8 {
-                    if (ring >> d) & 1 == 1 {
-                        let (px, py) = ((x as isize + DX[d]) as usize, (1 + DY[d]) as usize);
-                        set_bit(&mut bm, 2, px, py);
-                    }
-                }
-                set_bit(&mut bm, 2, x, 1);
+                let bm = ring_bitmap(x, ring);
                 let mut visited = [0u32; 6];
                 let t = Tracer::new(&bm, &mut visited, 2, 1000);
                 for from in 0..8 {
@@ -893,14 +900,7 @@ mod tests {
         // 3 rows of 2 words (64 x 3): the pixel at row 1, column `x`.
         for x in [1usize, 2, 17, 29, 30, 31, 32, 33, 62] {
             for ring in 0..256u32 {
-                let mut bm = [0u32; 6];
-                for d in 0..8 {
-                    if (ring >> d) & 1 == 1 {
-                        let (px, py) = ((x as isize + DX[d]) as usize, (1 + DY[d]) as usize);
-                        set_bit(&mut bm, 2, px, py);
-                    }
-                }
-                set_bit(&mut bm, 2, x, 1);
+                let bm = ring_bitmap(x, ring);
                 let mut visited = [0u32; 6];
                 let mut t = Tracer::new(&bm, &mut visited, 2, 1000);
                 for d in 0..8 {

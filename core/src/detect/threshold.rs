@@ -674,18 +674,23 @@ fn pair_rows(
 mod tests {
     use super::*;
 
+    /// Two words with `a` and `b` in byte `lane` and different bytes around them.
+    fn lane_pair(a: u8, b: u8, lane: u32) -> (u32, u32) {
+        let others = 0x5AFF_00A5 & !(0xFF << (8 * lane));
+        (
+            u32::from(a) << (8 * lane) | others,
+            u32::from(b) << (8 * lane) | (others.rotate_left(8) & !(0xFF << (8 * lane))),
+        )
+    }
+
     /// Every pair of bytes, in every lane, with different bytes around it.
     #[test]
     fn bytes_ge_agrees_with_bytes() {
         for a in 0..=255u8 {
             for b in 0..=255u8 {
                 for lane in 0..4 {
-                    let (x, y) = (u32::from(a) << (8 * lane), u32::from(b) << (8 * lane));
-                    let others = 0x5AFF_00A5 & !(0xFF << (8 * lane));
-                    let ge = bytes_ge(
-                        x | others,
-                        y | (others.rotate_left(8) & !(0xFF << (8 * lane))),
-                    );
+                    let (x, y) = lane_pair(a, b, lane);
+                    let ge = bytes_ge(x, y);
                     assert_eq!(
                         ge >> (8 * lane + 7) & 1 == 1,
                         a >= b,
@@ -748,12 +753,8 @@ mod tests {
         for a in 0..=255u8 {
             for b in 0..=255u8 {
                 for lane in 0..4 {
-                    let (x, y) = (u32::from(a) << (8 * lane), u32::from(b) << (8 * lane));
-                    let others = 0x5AFF_00A5 & !(0xFF << (8 * lane));
-                    let lt = bytes_lt(
-                        x | others,
-                        y | (others.rotate_left(8) & !(0xFF << (8 * lane))),
-                    );
+                    let (x, y) = lane_pair(a, b, lane);
+                    let lt = bytes_lt(x, y);
                     assert_eq!(
                         lt >> (8 * lane + 7) & 1 == 1,
                         a < b,
