@@ -25,7 +25,8 @@
 //! exposure time stamp. Which axes the position is expressed in is the caller's choice and
 //! matters (a constant-velocity model only fits in axes that do not turn with the vehicle, see
 //! [`TrackerConfig::level`] and [`TrackerConfig::camera_frame`]): with the vehicle's attitude,
-//! rotate the camera-frame pose into level NED axes with [`level_measurement`] first.
+//! rotate the camera-frame pose into level NED axes with [`level_measurement`] first, and add
+//! the attitude's error to its covariance with [`level_covariance`].
 //!
 //! What flies is [`PadEstimator`]: two trackers (level NED axes with the attitude at each
 //! frame's exposure from [`VehicleState`], and the camera frame as the fallback), run by

@@ -14,8 +14,10 @@
 //!   landing: the constant-velocity model fits, with a small acceleration noise
 //!   ([`TrackerConfig::level`]). NED rather than the yaw-aligned LOCAL_FRD, because a yaw
 //!   rotation would turn a static pad in LOCAL_FRD. Rotate each camera-frame pose into this
-//!   frame with [`super::axes::level_measurement`] and convert the estimate back with the
-//!   functions of [`super::axes`] (body FRD for ArduPilot, absolute LOCAL_NED for PX4).
+//!   frame with [`super::axes::level_measurement`], add the error of the attitude it was
+//!   rotated with to its covariance ([`super::level_covariance`]: without it a far fix's
+//!   sideways shake reads as range), and convert the estimate back with the functions of
+//!   [`super::axes`] (body FRD for ArduPilot, absolute LOCAL_NED for PX4).
 //! - **Without attitude**: filter in the camera frame. Every tilt of the vehicle then moves
 //!   the pad in the image (1° at 20 m is 35 cm), which the model can only absorb as
 //!   acceleration noise, so [`TrackerConfig::camera_frame`] uses a much larger one and the
