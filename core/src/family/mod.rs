@@ -197,6 +197,34 @@ impl<'a> Family<'a> {
         }
     }
 
+    /// Every cell of code `id` at once, in one raster pass over the grid (where
+    /// [`Family::cell_is_white`] counts the data cells before its own, each time): row `r`'s
+    /// white cells as bits (bit `c` for column `c`) in `rows[r]`. `None` for an unknown id, a
+    /// grid wider than 32 cells, or `rows` shorter than the grid.
+    pub fn white_rows(&self, id: usize, rows: &mut [u32]) -> Option<()> {
+        let n = self.grid as usize;
+        let code = *self.codes.get(id)?;
+        if n > 32 {
+            return None;
+        }
+        let mut shift = self.bits as usize;
+        for (row, bits) in rows.get_mut(..n)?.iter_mut().enumerate() {
+            *bits = 0;
+            for col in 0..n {
+                let white = match self.role(row, col) {
+                    CellRole::Quiet | CellRole::InnerWhite => true,
+                    CellRole::Border => false,
+                    CellRole::Data => {
+                        shift = shift.checked_sub(1)?;
+                        (code >> shift) & 1 == 1
+                    }
+                };
+                *bits |= u32::from(white) << col;
+            }
+        }
+        Some(())
+    }
+
     /// Where the cell (row, col) of the canonical grid is found in a grid that was read with
     /// `rotation` quarter turns: `sampled[rotate_grid_index(r, c, k)] == canonical[r][c]`.
     #[inline]
@@ -438,6 +466,40 @@ pub fn max_correction_for(bits: u8, codes: usize, min_hamming: u8) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The rows at once are the cells one by one, for every shipped family (the reversed
+    /// ones, whose data lies outside the border, included) and ids across each; an unknown id
+    /// or a short output is refused.
+    #[test]
+    fn white_rows_are_the_cells_one_by_one() {
+        for family in tables::ALL {
+            let n = family.grid as usize;
+            let count = family.codes.len();
+            for id in [0, 1, count / 2, count - 1] {
+                let mut rows = [u32::MAX; 32];
+                assert_eq!(
+                    family.white_rows(id, &mut rows),
+                    Some(()),
+                    "{}",
+                    family.name
+                );
+                for (row, bits) in rows.iter().enumerate().take(n) {
+                    for col in 0..n {
+                        let one = family.cell_is_white(id, row, col);
+                        assert_eq!(
+                            Some(bits >> col & 1 == 1),
+                            one,
+                            "{} {id} ({row}, {col})",
+                            family.name
+                        );
+                    }
+                    assert_eq!(bits >> n, 0, "{} {id} row {row}", family.name);
+                }
+            }
+            assert_eq!(family.white_rows(count, &mut [0; 32]), None);
+            assert_eq!(family.white_rows(0, &mut [0; 32][..n - 1]), None);
+        }
+    }
 
     #[test]
     fn correction_bounds_of_the_shipped_families() {

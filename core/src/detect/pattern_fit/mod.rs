@@ -84,11 +84,12 @@ const DAMPING: f32 = 1e-3;
 pub const MAX_CORNER_SHIFT_PX: f32 = 0.6;
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 40 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
-/// qvga-far-1: one tag36h11 of 14 pixels): 1.48 million instructions for its pixels and five
-/// passes (1.41 million before the outside had a level per side), about 16,500 units (a fit
-/// never reads more pixels than there). It is charged before it starts and skipped when the
-/// frame's budget cannot pay for it.
-pub const WORK_PATTERN_FIT: u32 = 16_500;
+/// qvga-far-1: one tag36h11 of 14 pixels): about 0.90 million instructions for its pixels
+/// and five passes, 10,000 units at the 90 instructions a unit of the first measurement
+/// (1.48 million and 16,500 units while each pixel's two axes were built, cleared and copied
+/// by value and the pattern read cell by cell; a fit never reads more pixels than there). It
+/// is charged before it starts and skipped when the frame's budget cannot pay for it.
+pub const WORK_PATTERN_FIT: u32 = 10_000;
 /// Most cells per side of a family grid the fit models.
 const MAX_GRID: usize = 16;
 /// Blur range (pixels) a fit may end in: below, the pixel's own area; above, the marker is

@@ -3,7 +3,7 @@
 //! the model, and [`Pattern`] for what is known of a marker).
 //!
 //! Per pixel and pass the window's ends are rounded to whole cells by micromath's floor and
-//! ceiling, exact on the clamped values they get ([`Axis::new`]) and a third of libm's cost
+//! ceiling, exact on the clamped values they get ([`Axis::set`]) and a third of libm's cost
 //! on the Cortex-M7; the blur's `expf` (once per pass) stays libm's, micromath's `exp` being
 //! both less precise and dearer there.
 
@@ -42,13 +42,7 @@ impl Pattern {
         // a family without a quiet ring put a wrong edge into the model where the margin is
         // narrower (0.6 px off on 32-pixel ArUco markers drawn with a thin one).
         let mut white = [0u32; MAX_GRID];
-        for (row, bits) in white.iter_mut().enumerate().take(n) {
-            for col in 0..n {
-                if family.cell_is_white(usize::from(id), row, col)? {
-                    *bits |= 1 << col;
-                }
-            }
-        }
+        family.white_rows(usize::from(id), &mut white)?;
         let b = family.border_ring as f32;
         Some(Pattern {
             white,
@@ -165,11 +159,19 @@ const fn exp_series(x: f64) -> f64 {
 }
 
 /// The Gaussian's mass in one cell of an axis, and its derivatives.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy)]
 pub(super) struct Cell {
     mass: f32,
     d_pos: f32,
     d_width: f32,
+}
+
+impl Cell {
+    const ZERO: Cell = Cell {
+        mass: 0.0,
+        d_pos: 0.0,
+        d_width: 0.0,
+    };
 }
 
 /// Standard normal distribution and density at `z`. The density is interpolated linearly
@@ -196,7 +198,27 @@ impl Axis {
     /// where the window reaches the area's ends, and is whole otherwise: the mass a window
     /// leaves out is [`WINDOW_SIGMAS`] widths away, and it counts as outside level instead of
     /// its cells', an error below 0.3 % of the difference.
+    #[cfg(test)]
     pub(super) fn new(t: f32, width: f32, cells: usize) -> Option<Axis> {
+        let mut axis = Axis::EMPTY;
+        axis.set(t, width, cells).map(|()| axis)
+    }
+
+    /// An axis of no cells, to be [`Axis::set`].
+    pub(super) const EMPTY: Axis = Axis {
+        first: 0,
+        len: 0,
+        cells: [Cell::ZERO; MAX_WINDOW],
+        beyond_lo: Cell::ZERO,
+        beyond_hi: Cell::ZERO,
+    };
+
+    /// Makes this the axis at `t` ([`Axis::new`]) in place: `None` (and the axis unusable)
+    /// where there is none. In place because the fit takes two axes per pixel and pass:
+    /// built and returned by value, each was cleared and copied (128 bytes, twice), which
+    /// was a fifth of the fit's Cortex-M7 instructions. Only the first `len` cells are
+    /// written; nothing reads beyond them.
+    pub(super) fn set(&mut self, t: f32, width: f32, cells: usize) -> Option<()> {
         let inverse = 1.0 / width;
         let reach = WINDOW_SIGMAS * width;
         let (lo, hi) = (t - reach, t + reach);
@@ -212,33 +234,27 @@ impl Axis {
         if lo == f32::INFINITY || hi == f32::NEG_INFINITY || !inverse.is_finite() {
             return None;
         }
-        let mut axis = Axis {
-            first: 0,
-            len: 0,
-            cells: [Cell::default(); MAX_WINDOW],
-            beyond_lo: Cell::default(),
-            beyond_hi: Cell::default(),
-        };
         if last <= first {
             // Farther than the window from the known area: only the outside level of the
             // side the point is on.
             let whole = Cell {
                 mass: 1.0,
-                ..Cell::default()
+                ..Cell::ZERO
             };
-            if t < 0.0 {
-                axis.beyond_lo = whole;
+            let (below, above) = if t < 0.0 {
+                (whole, Cell::ZERO)
             } else {
-                axis.beyond_hi = whole;
-            }
-            return Some(axis);
+                (Cell::ZERO, whole)
+            };
+            (self.first, self.len, self.beyond_lo, self.beyond_hi) = (0, 0, below, above);
+            return Some(());
         }
         let (first, len) = (first as usize, (last - first) as usize);
         if len > MAX_WINDOW {
             return None;
         }
-        axis.first = first;
-        axis.len = len;
+        self.first = first;
+        self.len = len;
         let edge = |k: usize| {
             let z = ((first + k) as f32 - t) * inverse;
             let (cdf, pdf) = normal(z);
@@ -246,7 +262,7 @@ impl Axis {
         };
         let start = edge(0);
         let mut lower = start;
-        for (k, cell) in axis.cells.iter_mut().enumerate().take(len) {
+        for (k, cell) in self.cells.iter_mut().enumerate().take(len) {
             let upper = edge(k + 1);
             *cell = Cell {
                 mass: upper.0 - lower.0,
@@ -259,17 +275,17 @@ impl Axis {
         // beyond the window counts as at infinity.
         let below = if lo < 0.0 { start } else { (0.0, 0.0, 0.0) };
         let above = if hi > cells_f { lower } else { (1.0, 0.0, 0.0) };
-        axis.beyond_lo = Cell {
+        self.beyond_lo = Cell {
             mass: below.0,
             d_pos: -below.1 * inverse,
             d_width: -below.1 * below.2 * inverse,
         };
-        axis.beyond_hi = Cell {
+        self.beyond_hi = Cell {
             mass: 1.0 - above.0,
             d_pos: above.1 * inverse,
             d_width: above.1 * above.2 * inverse,
         };
-        Some(axis)
+        Some(())
     }
 
     /// The Gaussian's mass over the known area and its derivatives: all that is not

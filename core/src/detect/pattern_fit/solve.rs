@@ -66,16 +66,14 @@ pub(super) fn linearise(
         cost: 0.0,
         count: 0,
     };
+    // The pixel's two axes, rewritten in place for each pixel (see `Axis::set`).
+    let (mut au, mut av) = (Axis::EMPTY, Axis::EMPTY);
     for sample in &win.samples {
         let observed = f32::from(sample.value);
         let (x, y) = (sample.x, sample.y);
         let g = map.map(f32::from(x), f32::from(y))?;
-        let (Some(au), Some(av)) = (
-            Axis::new(g.x, blur, pattern.side),
-            Axis::new(g.y, blur, pattern.side),
-        ) else {
-            return None;
-        };
+        au.set(g.x, blur, pattern.side)?;
+        av.set(g.y, blur, pattern.side)?;
         let b = blurred(pattern, &au, &av, &outside);
         let e = observed - (black + contrast * b.value);
         normal.cost += e * e;
