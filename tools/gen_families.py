@@ -496,7 +496,7 @@ def build_family(
             raise GenError(f"{source}: two codes are equal or rotations of each other ({dist.witness})")
         rest = min_hamming(codes, layout, skip_self=symmetric)
         msg = (
-            f"{name} ({source}): code(s) {symmetric} equal their own rotation, so their "
+            f"{name} ({source}): code(s) `{symmetric}` equal their own rotation, so their "
             f"orientation is ambiguous; minimum distance 0 (without that: {rest.value}, "
             f"{rest.witness}), no error correction"
         )

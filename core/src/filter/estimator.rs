@@ -155,7 +155,7 @@ pub struct FrameEstimate {
     pub estimate: Option<PadEstimate>,
     /// A confident mount estimate, as the change to the mount in force, on the frame the
     /// calibrator first becomes confident and again only when it moves significantly
-    /// ([`super::mount_calibration`]); `None` on every other frame.
+    /// ([`super::MountCalibrator`]); `None` on every other frame.
     pub mount_correction: Option<MountCorrection>,
 }
 

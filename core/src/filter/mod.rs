@@ -64,7 +64,10 @@ pub use paper::{PaperConfig, PaperKalman};
 pub use tracker::{
     ConfigError, Estimate, RejectReason, TrackState, Tracker, TrackerConfig, UpdateOutcome,
 };
-pub use vehicle::{PositionSample, VehicleAtExposure, VehicleState, REBOOT_BACKWARDS_US};
+pub use vehicle::{
+    PositionSample, VehicleAtExposure, VehicleState, MAX_EXTRAPOLATION_US, MAX_GAP_US,
+    MAX_RATE_GAP_US, POSITION_HISTORY, REBOOT_BACKWARDS_US,
+};
 
 use nalgebra::{Matrix3, Vector3};
 

@@ -10,7 +10,7 @@ use super::{
 };
 use crate::{FrameTiming, Resolution};
 
-/// The sensor's PLL setting (COM4[7:6]).
+/// The sensor's PLL setting (`COM4[7:6]`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Pll {
@@ -37,7 +37,7 @@ impl Pll {
         }
     }
 
-    /// COM4[7:6].
+    /// `COM4[7:6]`.
     pub(super) const fn com4_bits(self) -> u8 {
         match self {
             Pll::Bypass => 0x00,
@@ -54,7 +54,7 @@ impl Pll {
 pub enum Prescaler {
     /// CLKRC bit 6: no division.
     Direct,
-    /// CLKRC[5:0] = n: divide by (n + 1) x 2.
+    /// `CLKRC[5:0]` = n: divide by (n + 1) x 2.
     Divide(u8),
 }
 

@@ -70,7 +70,7 @@ pub const FPS_TOLERANCE_PPM: u64 = 5_000;
 const COM7_RESET: u8 = 0x80;
 /// COM7 bit 6: QVGA.
 const COM7_QVGA: u8 = 0x40;
-/// COM7 bits [1:0] = 00: YUV output.
+/// COM7 bits `[1:0]` = 00: YUV output.
 const COM7_YUV: u8 = 0x00;
 /// COM3 bit 7: vertical flip.
 const COM3_VFLIP: u8 = 0x80;
@@ -84,7 +84,7 @@ const COM4_RESERVED: u8 = 0x01;
 const CLKRC_RESERVED: u8 = 0x80;
 /// CLKRC bit 6: feed the input clock to the PLL directly, no prescaler.
 const CLKRC_DIRECT: u8 = 0x40;
-/// Largest prescaler field value, CLKRC[5:0] (datasheet range 0..=31).
+/// Largest prescaler field value, `CLKRC[5:0]` (datasheet range 0..=31).
 const CLKRC_MAX_N: u8 = 31;
 /// COM8 with the sensor's AEC and AGC on: fast AEC/AGC (bit 7), unlimited AEC steps (bit 6),
 /// exposures shorter than a line allowed (bit 3: bright sun), AGC (bit 2), AWB (bit 1), AEC
@@ -93,7 +93,7 @@ const CLKRC_MAX_N: u8 = 31;
 const COM8_AUTO: u8 = 0xCF;
 /// COM8 for manual exposure: as [`COM8_AUTO`] without AGC (bit 2) and AEC (bit 0).
 const COM8_MANUAL: u8 = COM8_AUTO & !0x05;
-/// COM9 bits [6:4]: gain ceiling field.
+/// COM9 bits `[6:4]`: gain ceiling field.
 const COM9_CEILING_MASK: u8 = 0x70;
 /// DSP_CTRL4 = 0: the DSP outputs YUV/RGB (not raw Bayer).
 const DSP_CTRL4_YUV: u8 = 0x00;

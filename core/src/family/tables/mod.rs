@@ -51,7 +51,7 @@
 //!
 //! Notes from the generator:
 //! - aruco_5x5_50 (../shared/data/families/tagAruco5x5_50.txt): header says min_hamming 7, computed 8 (id 25 vs itself turned 1 quarter(s)); using 8
-//! - aruco_original (OpenCV 4.14.0 cv2.aruco.DICT_ARUCO_ORIGINAL (opencv-contrib-python)): code(s) [1023] equal their own rotation, so their orientation is ambiguous; minimum distance 0 (without that: 1, id 255 turned 2 quarter(s) vs id 1022), no error correction
+//! - aruco_original (OpenCV 4.14.0 cv2.aruco.DICT_ARUCO_ORIGINAL (opencv-contrib-python)): code(s) `[1023]` equal their own rotation, so their orientation is ambiguous; minimum distance 0 (without that: 1, id 255 turned 2 quarter(s) vs id 1022), no error correction
 
 use super::Family;
 
