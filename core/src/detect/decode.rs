@@ -658,9 +658,17 @@ fn precheck_sides<const N: usize>(
         }
         sum as f32 / (4 * N) as f32
     };
-    let (mut border, mut margin) = ([[0u8; N]; 4], [[0u8; N]; 4]);
-    let black = read_ring(0.5 / q, &mut border);
-    let white = read_ring(-0.5 / q, &mut margin);
+    // The border ring, then the margin: one call site, so the reads are inlined.
+    let mut rings = [[[0u8; N]; 4]; 2];
+    let mut means = [0.0f32; 2];
+    for ((ring, mean), d) in rings
+        .iter_mut()
+        .zip(means.iter_mut())
+        .zip([0.5 / q, -0.5 / q])
+    {
+        *mean = read_ring(d, ring);
+    }
+    let ([border, margin], [black, white]) = (rings, means);
     let contrast = white - black;
     if !(contrast >= f32::from(min_contrast) * 0.5) {
         return Precheck::NoBorder;
@@ -691,16 +699,16 @@ fn precheck_sides<const N: usize>(
         // A lattice over the data cells, which span 1..q-1 cells of the square.
         let (lo, hi) = (1.0 / q, 1.0 - 1.0 / q);
         let mut lattice = [0u8; FLAT_SAMPLES];
-        let (mut min, mut max) = (u8::MAX, u8::MIN);
+        let (mut min, mut max) = (u32::from(u8::MAX), 0u32);
         for j in 0..FLAT_SAMPLES {
             let t = lo + (hi - lo) * (j as f32 + 0.5) / FLAT_SAMPLES as f32;
             read.along(at(lo, t), at(hi, t), &mut lattice);
             for &z in lattice.iter() {
-                min = min.min(z);
-                max = max.max(z);
+                min = min.min(u32::from(z));
+                max = max.max(u32::from(z));
             }
         }
-        if f32::from(max.saturating_sub(min)) < FLAT_INTERIOR_SPREAD * contrast {
+        if (max.saturating_sub(min) as f32) < FLAT_INTERIOR_SPREAD * contrast {
             return Precheck::Flat;
         }
     }
