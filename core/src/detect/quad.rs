@@ -2,7 +2,8 @@
 //!
 //! The paper's step: Douglas-Peucker simplification of the closed boundary, keeping shapes
 //! with four corners. The closed curve is split at two far-apart points and each half is
-//! simplified with an explicit stack (no recursion) and a fixed vertex capacity. A corner
+//! simplified chord by chord along it, each vertex found inserted into a sorted list of
+//! fixed capacity (no recursion, no stack). A corner
 //! rounded by blur can come out as two vertices; the vertex that bends the outline least is
 //! then dropped while it stays within the tolerance.
 //!
