@@ -451,8 +451,8 @@ fn drop_least_bent(corners: &mut heapless::Vec<Point, MAX_VERTICES>, tolerance: 
 }
 
 /// Removes item `at` (there must be one), moving the later ones down by one: a loop over
-/// the few vertices, where `Vec::remove` called `memmove` (a third of [`drop_least_bent`]'s
-/// cost on a frame of noise, where most fits drop vertices).
+/// the few vertices, where `Vec::remove` called `memmove` (the calls were over a quarter of
+/// [`drop_least_bent`]'s cost on a frame of noise, where most fits drop vertices).
 fn remove<T: Copy, const N: usize>(items: &mut heapless::Vec<T, N>, at: usize) {
     let slice = items.as_mut_slice();
     for k in at + 1..slice.len() {
