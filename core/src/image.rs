@@ -125,6 +125,19 @@ impl<'a> GrayImage<'a> {
         self.data.get(yc * self.stride + xc).copied().unwrap_or(0)
     }
 
+    /// The pixel nearest (x, y) (`(x + 0.5)` truncated), for a caller that knows it lies
+    /// inside the image: none of [`GrayImage::pixel_clamped`]'s clamping, which was most of
+    /// the cost of a nearest-pixel read. Elsewhere it never panics, but reads another pixel
+    /// or 0.
+    #[inline]
+    pub(crate) fn nearest_inside(&self, x: f32, y: f32) -> u8 {
+        let (xi, yi) = ((x + 0.5) as usize, (y + 0.5) as usize);
+        self.data
+            .get(yi.wrapping_mul(self.stride).wrapping_add(xi))
+            .copied()
+            .unwrap_or(0)
+    }
+
     /// Bilinear interpolation at a sub-pixel position (pixel centres at integers); positions
     /// outside the image read the nearest edge pixel.
     #[inline]

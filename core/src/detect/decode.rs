@@ -590,8 +590,10 @@ pub(crate) enum Precheck {
 /// cells, would otherwise each spend the refinement (about 80,000 Cortex-M7 instructions for
 /// a small marker, several times that for a large one) only to be turned down by the read.
 ///
-/// Cheap on purpose, as it runs on every candidate (about 780 Cortex-M7 instructions with
-/// its rough quad, [`super::refine::rough_half_pixel_adjusted`]):
+/// Cheap on purpose, as it runs on every candidate (about 1,550 Cortex-M7 instructions with
+/// its rough quad, [`super::refine::rough_half_pixel_adjusted`], when it reads all 48
+/// points, as on the benchmark's frame of small dark squares; 2,140 before the reads went
+/// unclamped and unrolled):
 /// nearest pixels at positions blended bilinearly from the corners (no homography:
 /// perspective moves the samples along the ring or across the data area by a fraction of a
 /// cell, which changes neither test), up to four points along the middle half of each side
@@ -609,10 +611,27 @@ pub(crate) fn precheck(
     min_contrast: u8,
     flat_rejects: bool,
 ) -> Precheck {
-    let q = cells as f32;
-    if cells < 3 {
-        return Precheck::Candidate;
+    // One sample per cell of a side up to PRECHECK_RING_SAMPLES: the count a constant, so
+    // each side's reads unroll (cells < 3 has no border to judge; 3 is the one count below).
+    if cells >= PRECHECK_RING_SAMPLES {
+        precheck_sides::<PRECHECK_RING_SAMPLES>(image, cells, quad, min_contrast, flat_rejects)
+    } else if cells == 3 {
+        precheck_sides::<3>(image, cells, quad, min_contrast, flat_rejects)
+    } else {
+        Precheck::Candidate
     }
+}
+
+/// [`precheck`] with `N` samples along each side of the border ring and of the margin.
+#[inline(always)]
+fn precheck_sides<const N: usize>(
+    image: &GrayImage<'_>,
+    cells: usize,
+    quad: &[Point; 4],
+    min_contrast: u8,
+    flat_rejects: bool,
+) -> Precheck {
+    let q = cells as f32;
     let [p0, p1, p2, p3] = *quad;
     // (s, t) in 0..1 across the detected square (the border's outer edge), s along p0 -> p1.
     let at = |s: f32, t: f32| {
@@ -623,55 +642,35 @@ pub(crate) fn precheck(
             top.1 + (bottom.1 - top.1) * t,
         )
     };
-    // The nearest pixel ((x + 0.5) truncated: below -0.5 it clamps to the edge anyway).
-    let pixel = |p: Point| image.pixel_clamped((p.x + 0.5) as isize, (p.y + 0.5) as isize);
-    // `count` evenly spaced samples between a and b (mapping a line of the square, which the
-    // bilinear blend keeps straight along s or t), into `out` from index `k`. Kept as grey
-    // levels: arrays of bytes are zeroed in a few stores, where float ones took a memset
-    // call per quick look.
-    let along = |a: Point, b: Point, count: usize, out: &mut [u8], k: &mut usize, sum: &mut f32| {
-        let (dx, dy) = ((b.x - a.x) / count as f32, (b.y - a.y) / count as f32);
-        let mut p = Point::new(a.x + 0.5 * dx, a.y + 0.5 * dy);
-        for _ in 0..count {
-            let z = pixel(p);
-            *sum += f32::from(z);
-            if let Some(slot) = out.get_mut(*k) {
-                *slot = z;
-                *k += 1;
-            }
-            p = Point::new(p.x + dx, p.y + dy);
-        }
-    };
+    let read = NearestReads::new(image, quad, 0.5 / q);
     // The ring at depth `d` inside the edge (negative: outside), along the middle half of
-    // each side (clear of the corners, where rough corners are roughest).
-    let per_side = cells.min(PRECHECK_RING_SAMPLES);
-    let read_ring = |d: f32, out: &mut [u8; 4 * PRECHECK_RING_SAMPLES]| {
-        let (mut k, mut sum) = (0usize, 0.0f32);
+    // each side (clear of the corners, where rough corners are roughest), into `ring`: the
+    // mean.
+    let read_ring = |d: f32, ring: &mut [[u8; N]; 4]| {
         let (lo, hi) = (0.25, 0.75);
-        along(at(lo, d), at(hi, d), per_side, out, &mut k, &mut sum);
-        along(
-            at(1.0 - d, lo),
-            at(1.0 - d, hi),
-            per_side,
-            out,
-            &mut k,
-            &mut sum,
-        );
-        along(
-            at(lo, 1.0 - d),
-            at(hi, 1.0 - d),
-            per_side,
-            out,
-            &mut k,
-            &mut sum,
-        );
-        along(at(d, lo), at(d, hi), per_side, out, &mut k, &mut sum);
-        (sum / k.max(1) as f32, k)
+        let sides = [
+            (at(lo, d), at(hi, d)),
+            (at(1.0 - d, lo), at(1.0 - d, hi)),
+            (at(lo, 1.0 - d), at(hi, 1.0 - d)),
+            (at(d, lo), at(d, hi)),
+        ];
+        let mut sum = 0u32;
+        for (side, (a, b)) in ring.iter_mut().zip(sides) {
+            sum += read.along(a, b, side);
+        }
+        sum as f32 / (4 * N) as f32
     };
-    let mut border = [0u8; 4 * PRECHECK_RING_SAMPLES];
-    let mut margin = [0u8; 4 * PRECHECK_RING_SAMPLES];
-    let (black, n_border) = read_ring(0.5 / q, &mut border);
-    let (white, n_margin) = read_ring(-0.5 / q, &mut margin);
+    // The border ring, then the margin: one call site, so the reads are inlined.
+    let mut rings = [[[0u8; N]; 4]; 2];
+    let mut means = [0.0f32; 2];
+    for ((ring, mean), d) in rings
+        .iter_mut()
+        .zip(means.iter_mut())
+        .zip([0.5 / q, -0.5 / q])
+    {
+        *mean = read_ring(d, ring);
+    }
+    let ([border, margin], [black, white]) = (rings, means);
     let contrast = white - black;
     if !(contrast >= f32::from(min_contrast) * 0.5) {
         return Precheck::NoBorder;
@@ -683,16 +682,17 @@ pub(crate) fn precheck(
         let mid = 0.5 * (black + white);
         let light = border
             .iter()
-            .take(n_border)
+            .flatten()
             .filter(|&&z| f32::from(z) > mid)
             .count();
         let dark = margin
             .iter()
-            .take(n_margin)
+            .flatten()
             .filter(|&&z| f32::from(z) < mid)
             .count();
-        if light as f32 > PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * n_border as f32
-            || dark as f32 > PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * n_margin as f32
+        let samples = (4 * N) as f32;
+        if light as f32 > PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * samples
+            || dark as f32 > PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * samples
         {
             return Precheck::NoBorder;
         }
@@ -701,28 +701,93 @@ pub(crate) fn precheck(
         // A lattice over the data cells, which span 1..q-1 cells of the square.
         let (lo, hi) = (1.0 / q, 1.0 - 1.0 / q);
         let mut lattice = [0u8; FLAT_SAMPLES];
-        let (mut min, mut max) = (f32::MAX, f32::MIN);
+        let (mut min, mut max) = (u32::from(u8::MAX), 0u32);
         for j in 0..FLAT_SAMPLES {
             let t = lo + (hi - lo) * (j as f32 + 0.5) / FLAT_SAMPLES as f32;
-            let (mut k, mut sum) = (0usize, 0.0f32);
-            along(
-                at(lo, t),
-                at(hi, t),
-                FLAT_SAMPLES,
-                &mut lattice,
-                &mut k,
-                &mut sum,
-            );
-            for &z in lattice.iter().take(k) {
-                min = min.min(f32::from(z));
-                max = max.max(f32::from(z));
+            read.along(at(lo, t), at(hi, t), &mut lattice);
+            for &z in lattice.iter() {
+                min = min.min(u32::from(z));
+                max = max.max(u32::from(z));
             }
         }
-        if max - min < FLAT_INTERIOR_SPREAD * contrast {
+        if (max.saturating_sub(min) as f32) < FLAT_INTERIOR_SPREAD * contrast {
             return Precheck::Flat;
         }
     }
     Precheck::Candidate
+}
+
+/// [`precheck`]'s nearest-pixel reads along lines of a candidate.
+#[derive(Clone, Copy)]
+struct NearestReads<'a, 'i> {
+    image: &'a GrayImage<'i>,
+    /// Every read lies inside the image: none needs clamping.
+    inside: bool,
+}
+
+impl<'a, 'i> NearestReads<'a, 'i> {
+    /// Reads around `quad` reaching `reach` (a fraction of its sides) beyond it.
+    ///
+    /// The reads lie in the square widened by `reach` on every side, which the bilinear
+    /// blend of the corners maps within `2 * reach * (1 + reach)` times the extent of the
+    /// corners' bounding box beyond it, in each coordinate (below `3 * reach` for a reach up to
+    /// a half; [`precheck`]'s is at most 1/6): when that stays inside the image
+    /// (every candidate but those at the frame's edge), no read needs clamping, which was a
+    /// third of the cost of a read.
+    #[inline(always)]
+    fn new(image: &'a GrayImage<'i>, quad: &[Point; 4], reach: f32) -> Self {
+        let [a, b, c, d] = *quad;
+        let (x0, x1) = (
+            a.x.min(b.x).min(c.x.min(d.x)),
+            a.x.max(b.x).max(c.x.max(d.x)),
+        );
+        let (y0, y1) = (
+            a.y.min(b.y).min(c.y.min(d.y)),
+            a.y.max(b.y).max(c.y.max(d.y)),
+        );
+        let (mx, my) = (3.0 * reach * (x1 - x0), 3.0 * reach * (y1 - y0));
+        // Up to the last pixel's centre: (x + 0.5) truncates to it.
+        let (w, h) = (
+            image.width().saturating_sub(1) as f32,
+            image.height().saturating_sub(1) as f32,
+        );
+        let inside = x0 - mx >= 0.0 && y0 - my >= 0.0 && x1 + mx <= w && y1 + my <= h;
+        NearestReads { image, inside }
+    }
+
+    /// `out.len()` evenly spaced samples between a and b (the middle of `out.len()` equal
+    /// parts: a line of the square, which the bilinear blend keeps straight along s or t),
+    /// nearest pixels ((x + 0.5) truncated: below -0.5 it clamps to the edge anyway), into
+    /// `out`; returns their sum. Kept as grey levels: arrays of bytes are zeroed in a few
+    /// stores, where float ones took a memset call per quick look.
+    #[inline(always)]
+    fn along(self, a: Point, b: Point, out: &mut [u8]) -> u32 {
+        let count = out.len() as f32;
+        let step = ((b.x - a.x) / count, (b.y - a.y) / count);
+        let start = Point::new(a.x + 0.5 * step.0, a.y + 0.5 * step.1);
+        let image = self.image;
+        if self.inside {
+            read_line(start, step, out, |p| image.nearest_inside(p.x, p.y))
+        } else {
+            read_line(start, step, out, |p| {
+                image.pixel_clamped((p.x + 0.5) as isize, (p.y + 0.5) as isize)
+            })
+        }
+    }
+}
+
+/// The pixels `pixel` gives at `start`, `start + step`, ... into `out`, and their sum.
+#[inline(always)]
+fn read_line(start: Point, step: (f32, f32), out: &mut [u8], pixel: impl Fn(Point) -> u8) -> u32 {
+    let mut p = start;
+    let mut sum = 0u32;
+    for slot in out.iter_mut() {
+        let z = pixel(p);
+        sum += u32::from(z);
+        *slot = z;
+        p = Point::new(p.x + step.0, p.y + step.1);
+    }
+    sum
 }
 
 /// Whether `family` decodes an all-black or an all-white grid (within its correction

@@ -2,7 +2,8 @@
 //!
 //! The paper's step: Douglas-Peucker simplification of the closed boundary, keeping shapes
 //! with four corners. The closed curve is split at two far-apart points and each half is
-//! simplified with an explicit stack (no recursion) and a fixed vertex capacity. A corner
+//! simplified chord by chord along it, each vertex found inserted into a sorted list of
+//! fixed capacity (no recursion, no stack). A corner
 //! rounded by blur can come out as two vertices; the vertex that bends the outline least is
 //! then dropped while it stays within the tolerance.
 //!
@@ -46,12 +47,6 @@ fn pt(p: Pixel) -> Point {
     Point::new(p.x as f32, p.y as f32)
 }
 
-#[inline]
-fn at(contour: &[Pixel], t: usize) -> Point {
-    let n = contour.len().max(1);
-    contour.get(t % n).copied().map(pt).unwrap_or_default()
-}
-
 /// The square of the distance from `p` to the line through `a` and `b` (of the distance to
 /// `a` when they coincide). Squared: the fit only compares these (with each other and with a
 /// limit), and a square root is software on the Cortex-M7 (libm's `sqrtf`, 52 instructions;
@@ -70,9 +65,17 @@ fn cross(o: Point, a: Point, b: Point) -> f32 {
     (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x)
 }
 
-/// Twice the signed area of the boundary polygon: positive when it runs clockwise on
-/// screen (an outer boundary), negative for a hole.
+/// [`signed_area2_i32`] widened, for the tests' exact 64-bit sums.
+#[cfg(test)]
 pub(crate) fn signed_area2(contour: &[Pixel]) -> i64 {
+    i64::from(signed_area2_i32(contour))
+}
+
+/// Twice the signed area of the boundary polygon: positive when it runs clockwise on
+/// screen (an outer boundary), negative for a hole. An `i32`, which it fits (below): the
+/// screening converts it to `f32` in one instruction, where an `i64` took a software
+/// conversion (about 35 Cortex-M7 instructions per screened boundary).
+fn signed_area2_i32(contour: &[Pixel]) -> i32 {
     // The shoelace sum in wrapping 32-bit arithmetic: its partial sums may wrap, but the
     // total, twice the area of a polygon inside a frame of at most `image::MAX_DIMENSION`
     // pixels a side (2 * 8192^2 < 2^31), fits an i32, so modulo 2^32 it comes out exact.
@@ -94,7 +97,7 @@ pub(crate) fn signed_area2(contour: &[Pixel]) -> i64 {
             .wrapping_sub(x.wrapping_mul(py));
         (px, py) = (x, y);
     }
-    i64::from(acc)
+    acc
 }
 
 /// The boundary at positions `from..to` counted from index 0 of `contour` and wrapping
@@ -117,10 +120,10 @@ fn wrapped_span(contour: &[Pixel], from: usize, to: usize) -> (&[Pixel], &[Pixel
 /// lies farthest from the chord between them, if it is farther than `tolerance`.
 ///
 /// Integer arithmetic on the pixel coordinates (this loop is most of the fit's time on a
-/// noisy frame): the distance is compared as the cross product against `tolerance` times the
-/// chord length, so there is no division per point. The products fit in `i32` because the
-/// boundary lies in a frame of at most [`crate::image::MAX_DIMENSION`] pixels a side: each
-/// is below 8192^2 and their difference below 2^31.
+/// noisy frame): the distance is compared as the cross product against the tolerance times
+/// the chord length, so there is no division per point. The products fit in `i32` because
+/// the boundary lies in a frame of at most [`crate::image::MAX_DIMENSION`] pixels a side:
+/// each is below 8192^2 and their difference below 2^31.
 fn farthest_from_chord(
     contour: &[Pixel],
     origin: usize,
@@ -137,20 +140,41 @@ fn farthest_from_chord(
     let (a, b) = (pixel(origin + i), pixel(origin + j));
     let (ax, ay) = (i32::from(a.x), i32::from(a.y));
     let (dx, dy) = (i32::from(b.x) - ax, i32::from(b.y) - ay);
-    // Distance to the chord's line, scaled by its length; to `a` itself (squared) when the
-    // chord is a single point (a thin boundary coming back to the same pixel).
-    let degenerate = dx == 0 && dy == 0;
-    let measure = |p: &Pixel| {
-        let (ex, ey) = (i32::from(p.x) - ax, i32::from(p.y) - ay);
-        if degenerate {
-            ex.wrapping_mul(ex).wrapping_add(ey.wrapping_mul(ey))
-        } else {
-            ex.wrapping_mul(dy)
-                .wrapping_sub(ey.wrapping_mul(dx))
-                .wrapping_abs()
-        }
-    };
     let (first, second) = wrapped_span(contour, origin + i + 1, origin + j);
+    let (best, k, limit2) = if dx == 0 && dy == 0 {
+        // The chord is a single point (a thin boundary coming back to the same pixel): the
+        // distance to it, squared.
+        let measure = |p: &Pixel| {
+            let (ex, ey) = (i32::from(p.x) - ax, i32::from(p.y) - ay);
+            ex.wrapping_mul(ex).wrapping_add(ey.wrapping_mul(ey))
+        };
+        let (best, k) = farthest_of(first, second, measure);
+        (best, k, tolerance * tolerance * tolerance * tolerance)
+    } else {
+        // The distance to the chord's line scaled by its length, as x dy - y dx less the
+        // chord's own value: a multiply and a multiply-subtract a point.
+        let c = ax.wrapping_mul(dy).wrapping_sub(ay.wrapping_mul(dx));
+        let measure = |p: &Pixel| {
+            i32::from(p.x)
+                .wrapping_mul(dy)
+                .wrapping_sub(i32::from(p.y).wrapping_mul(dx))
+                .wrapping_sub(c)
+                .wrapping_abs()
+        };
+        let (best, k) = farthest_of(first, second, measure);
+        let (fx, fy) = (dx as f32, dy as f32);
+        (best, k, tolerance * tolerance * (fx * fx + fy * fy))
+    };
+    // Squared on both sides: no square root per chord.
+    let best2 = (best as f32) * (best as f32);
+    (best2 > limit2).then_some(i + 1 + k)
+}
+
+/// The largest `measure` over the points of `first` then `second` (above 0) and the first
+/// position at which it is reached, counted from the start of `first`; (0, 0) when none is
+/// above 0.
+#[inline(always)]
+fn farthest_of(first: &[Pixel], second: &[Pixel], measure: impl Fn(&Pixel) -> i32) -> (i32, usize) {
     let mut best = (0i32, 0usize);
     for (k, p) in first.iter().enumerate() {
         let m = measure(p);
@@ -164,55 +188,55 @@ fn farthest_from_chord(
             best = (m, first.len() + k);
         }
     }
-    // Squared on both sides: no square root per chord.
-    let best2 = (best.0 as f32) * (best.0 as f32);
-    let limit2 = if degenerate {
-        tolerance * tolerance * tolerance * tolerance
-    } else {
-        let (fx, fy) = (dx as f32, dy as f32);
-        tolerance * tolerance * (fx * fx + fy * fy)
-    };
-    (best2 > limit2).then_some(i + 1 + best.1)
+    best
 }
 
 /// Douglas-Peucker vertices of the closed boundary, as positions `t` along it counted from
-/// `origin`; `None` when it needs more than [`MAX_VERTICES`].
+/// `origin`, ascending (the first `count` of the array); `None` when it needs more than
+/// [`MAX_VERTICES`]. Positions are kept as `u16` (a boundary holds at most
+/// [`super::MAX_CONTOUR_POINTS`] points): the array is then zeroed in three stores, where
+/// one of `usize` took a memset call per fit.
+///
+/// The chords are taken in order along the boundary, each vertex found inserted after the
+/// start of its chord and the chord up to it taken next: the vertices stay sorted (no sort,
+/// no stack), and each chord is measured once, as with a stack. The vertex set does not
+/// depend on the order (a chord's vertex depends on its ends only), nor does running out of
+/// room (more than [`MAX_VERTICES`] vertices in all).
 fn simplify(
     contour: &[Pixel],
     origin: usize,
     split: usize,
     tolerance: f32,
-) -> Option<heapless::Vec<usize, MAX_VERTICES>> {
+) -> Option<([u16; MAX_VERTICES], usize)> {
     let n = contour.len();
-    let mut vertices: heapless::Vec<usize, MAX_VERTICES> = heapless::Vec::new();
-    vertices.push(0).ok()?;
-    vertices.push(split).ok()?;
-    let mut stack: heapless::Vec<(usize, usize), MAX_VERTICES> = heapless::Vec::new();
-    stack.push((0, split)).ok()?;
-    stack.push((split, n)).ok()?;
-    while let Some((i, j)) = stack.pop() {
-        if let Some(t) = farthest_from_chord(contour, origin, i, j, tolerance) {
-            vertices.push(t).ok()?;
-            stack.push((i, t)).ok()?;
-            stack.push((t, j)).ok()?;
-        }
+    let mut vertices = [0u16; MAX_VERTICES];
+    let mut count = 0usize;
+    for t in [0, split] {
+        *vertices.get_mut(count)? = u16::try_from(t).ok()?;
+        count += 1;
     }
-    sort_short(&mut vertices);
-    Some(vertices)
-}
-
-/// Ascending insertion sort of a short vertex list (at most [`MAX_VERTICES`]). Used instead
-/// of `sort_unstable`, whose order-violation panic path the optimiser cannot remove (the
-/// no-panic link check, nopanic/, needs every panic path gone).
-fn sort_short(v: &mut [usize]) {
-    for i in 1..v.len() {
-        for j in (1..=i).rev() {
-            match v.get_mut(j - 1..=j) {
-                Some([a, b]) if *a > *b => core::mem::swap(a, b),
-                _ => break,
+    // The chord from vertex k to the next one (to the end, back at 0, after the last).
+    let mut k = 0;
+    while k < count {
+        let i = usize::from(vertices.get(k).copied()?);
+        let j = vertices
+            .get(k + 1)
+            .filter(|_| k + 1 < count)
+            .map_or(n, |&t| usize::from(t));
+        match farthest_from_chord(contour, origin, i, j, tolerance) {
+            Some(t) if count < MAX_VERTICES => {
+                // Insert after vertex k, moving the later ones up by one.
+                let mut carry = u16::try_from(t).ok()?;
+                for slot in vertices.iter_mut().take(count + 1).skip(k + 1) {
+                    carry = core::mem::replace(slot, carry);
+                }
+                count += 1;
             }
+            Some(_) => return None,
+            None => k += 1,
         }
     }
+    Some((vertices, count))
 }
 
 /// Most points [`roughly_convex`] samples along a boundary.
@@ -229,7 +253,7 @@ const CONVEXITY_MAX_CONCAVE_SIN2: f32 = 0.75;
 /// Whether the boundary, sampled at up to [`CONVEXITY_SAMPLES`] evenly spaced points, turns
 /// one way only (up to digitisation): a quad's outline does, the outline of a noise blob or
 /// of texture almost never. `clockwise` is the orientation of a convex outline (the sign of
-/// [`signed_area2`]).
+/// [`signed_area2_i32`]).
 ///
 /// This is the cheap test in front of Douglas-Peucker: it costs a few hundred instructions
 /// whatever the boundary's length, while the fit scans the boundary five to eight times. On a
@@ -313,7 +337,7 @@ pub(crate) fn screen(
     if (n as f32) < 2.8 * min_edge || contour.len() < 8 {
         return None;
     }
-    let area2 = signed_area2(contour);
+    let area2 = signed_area2_i32(contour);
     if area2 == 0 {
         return None;
     }
@@ -413,8 +437,8 @@ fn drop_least_bent(corners: &mut heapless::Vec<Point, MAX_VERTICES>, tolerance: 
         if bent > 4.0 * tolerance * tolerance || least >= corners.len() || least >= bends.len() {
             return false;
         }
-        corners.remove(least);
-        bends.remove(least);
+        remove(corners, least);
+        remove(&mut bends, least);
         let m = corners.len();
         for k in [(least + m - 1) % m, least % m] {
             let b = bend(corners, k);
@@ -424,6 +448,21 @@ fn drop_least_bent(corners: &mut heapless::Vec<Point, MAX_VERTICES>, tolerance: 
         }
     }
     true
+}
+
+/// Removes item `at` (there must be one), moving the later ones down by one: a loop over
+/// the few vertices, where `Vec::remove` called `memmove` (the calls were over a quarter of
+/// [`drop_least_bent`]'s cost on a frame of noise, where most fits drop vertices).
+fn remove<T: Copy, const N: usize>(items: &mut heapless::Vec<T, N>, at: usize) {
+    let slice = items.as_mut_slice();
+    for k in at + 1..slice.len() {
+        if let Some(&item) = slice.get(k) {
+            if let Some(slot) = slice.get_mut(k - 1) {
+                *slot = item;
+            }
+        }
+    }
+    items.pop();
 }
 
 /// The Douglas-Peucker fit of a screened boundary: a convex quad with sides of at least
@@ -436,21 +475,34 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
         split,
     } = *screened;
     let tolerance = (TOLERANCE_PER_PIXEL * length as f32).max(MIN_TOLERANCE);
-    let vertices = simplify(contour, origin, split, tolerance)?;
-    // (Filled by pushes and emptied by checked removals: `collect` and `remove` into a
-    // heapless vector have panic paths the no-panic check would find.)
-    let mut corners: heapless::Vec<Point, MAX_VERTICES> = heapless::Vec::new();
-    for &t in vertices.iter() {
-        let _ = corners.push(at(contour, origin + t));
-    }
-    // Most boundaries come out of Douglas-Peucker with four vertices.
-    if corners.len() > 4 && !drop_least_bent(&mut corners, tolerance) {
-        return None;
-    }
-    let [c0, c1, c2, c3] = corners.as_slice() else {
-        return None;
+    let (vertices, count) = simplify(contour, origin, split, tolerance)?;
+    let n = contour.len();
+    let corner = |t: u16| {
+        // Positions are below n, `origin` too: one subtraction wraps them.
+        let t = origin + usize::from(t);
+        let t = if t >= n { t - n } else { t };
+        contour.get(t).copied().map(pt).unwrap_or_default()
     };
-    let mut corners = [*c0, *c1, *c2, *c3];
+    let mut corners = match (count, vertices) {
+        // Most boundaries come out of Douglas-Peucker with four vertices.
+        (4, [t0, t1, t2, t3, ..]) => [corner(t0), corner(t1), corner(t2), corner(t3)],
+        (5.., _) => {
+            // (Filled by pushes and emptied by checked removals: `collect` and `remove` into
+            // a heapless vector have panic paths the no-panic check would find.)
+            let mut corners: heapless::Vec<Point, MAX_VERTICES> = heapless::Vec::new();
+            for &t in vertices.iter().take(count) {
+                let _ = corners.push(corner(t));
+            }
+            if !drop_least_bent(&mut corners, tolerance) {
+                return None;
+            }
+            let [c0, c1, c2, c3] = corners.as_slice() else {
+                return None;
+            };
+            [*c0, *c1, *c2, *c3]
+        }
+        _ => return None,
+    };
     // Clockwise on screen.
     let orientation: f32 = (0..4)
         .map(|k| {
