@@ -478,8 +478,8 @@ pub struct Page {
 
 /// The drawing cut into pages of `paper`, row by row.
 ///
-/// Each page prints, inside a [`PAGE_MARGIN_MM`] edge, the part of the drawing it covers;
-/// neighbours share a [`PAGE_OVERLAP_MM`] band. Alignment crosses are part of the drawing, in
+/// Each page prints, inside a `PAGE_MARGIN_MM` edge, the part of the drawing it covers;
+/// neighbours share a `PAGE_OVERLAP_MM` band. Alignment crosses are part of the drawing, in
 /// the middle of every band (two per shared edge), so each appears on both pages at the same
 /// place on the pad: laying one page over the other until they coincide joins them without
 /// a shift or a turn. The crosses are in the labels' light grey, which the detector reads as

@@ -70,6 +70,8 @@ pub struct SimulateArgs {
     pub seed: u64,
 
     /// Recording directory to write [default: sim-<SCENARIO>]
+    // The doc comment is clap's help text, printed verbatim: `<SCENARIO>` stays as it is.
+    #[allow(rustdoc::invalid_html_tags)]
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
 

@@ -2,7 +2,7 @@
 //!
 //! Per camera pose, every pixel corner's ray ([`RayMap`]) is sent to the ground through one
 //! homography (normalised image coordinates to pad-plane points). A pixel whose footprint is
-//! uniform ([`World::footprint`]) costs one texture look-up at its centre, with the texture
+//! uniform (`World::footprint`) costs one texture look-up at its centre, with the texture
 //! filtered to the footprint's size; any other pixel (marker edges, the sheet's edge, the
 //! shadow boundary, the occluder, the horizon) averages `s x s` sub-samples placed as in the
 //! test renderer ("n-rooks" within an s x s stratification, so an edge lands within

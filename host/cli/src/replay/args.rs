@@ -138,6 +138,8 @@ pub struct ReplayArgs {
     pub exposure: Option<String>,
 
     /// Directory for the figures [default: replay-<NAME>]
+    // The doc comment is clap's help text, printed verbatim: `<NAME>` stays as it is.
+    #[allow(rustdoc::invalid_html_tags)]
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
 

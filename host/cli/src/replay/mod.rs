@@ -4,7 +4,7 @@
 //! replay's setup (`--json`, submodule `json`), and write figures ([`crate::plot`]).
 //!
 //! ## One path for both inputs
-//! An [`Input`] (submodule `input`) yields frames, either decoded from a recording
+//! An `Input` (submodule `input`) yields frames, either decoded from a recording
 //! ([`RecordingReader`](touchdown_formats::recording::RecordingReader)) or rendered by the
 //! [`Simulator`](touchdown_sim::Simulator); after that, everything is the same. Frames are produced on
 //! a second thread, a couple ahead, while this one runs the methods on the previous frame,

@@ -59,7 +59,7 @@ pub struct LandingConfig {
     /// Camera frames per second.
     pub fps: f64,
     /// Render at 320x240 instead of the landing scenario's 640x480 (same lens), with
-    /// [`QVGA_SUPERSAMPLING`].
+    /// `QVGA_SUPERSAMPLING`.
     pub qvga: bool,
     /// Rendering threads per frame.
     pub threads: usize,

@@ -1,5 +1,6 @@
-//! The replay in flight: the board's pipeline and [`Companion`] against a simulated autopilot
-//! that speaks MAVLink bytes, under an error model, and the target scored as the autopilot
+//! The replay in flight: the board's pipeline and
+//! [`Companion`](touchdown_core::companion::Companion) against a simulated autopilot that
+//! speaks MAVLink bytes, under an error model, and the target scored as the autopilot
 //! reconstructs it.
 //!
 //! What this module offers: the error sources ([`ErrorModel`], drawn as a [`Realisation`]),

@@ -13,7 +13,7 @@ pub const ARDUPILOT_MAX_LAG_S: f64 = 0.25;
 /// The time (µs, same clock as `receipt_us`) of the inertial history entry ArduPilot turns a
 /// LANDING_TARGET received at `receipt_us` with: the measurement is consumed at the next
 /// 400 Hz update, whose history holds `max(round(lag * 400), 1)` entries, the newest being
-/// that update's, and the oldest ([0]) is used: `size - 1` ticks before the update. With
+/// that update's, and the oldest (`[0]`) is used: `size - 1` ticks before the update. With
 /// `lag_s = 0` the receipt time itself.
 pub fn ardupilot_attitude_time_us(receipt_us: u64, lag_s: f64) -> u64 {
     if lag_s <= 0.0 {

@@ -29,7 +29,7 @@
 //!
 //! The pieces: the private submodule `raster` turns a scene into pixels (area sampling,
 //! compositing, blur, quantisation); the sensor noise and the ground texture come from
-//! [`crate::noise`], the 3x3 (homography and rotation) arithmetic from [`crate::math`], both
+//! `crate::noise`, the 3x3 (homography and rotation) arithmetic from [`crate::math`], both
 //! shared with the simulator.
 //!
 //! The landing simulator ([`crate`]) renders whole flights with the same sampling
