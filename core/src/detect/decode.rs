@@ -446,11 +446,22 @@ fn read_robust_counted<M: CellMap>(
         return None;
     }
 
+    // Quiet cells are not read: they count as the white ring's mean (the white ring next to
+    // the border is read, as samples). Stored once in `values`, where nothing else reads them,
+    // so the sharpening below looks its neighbours up without asking each one's role.
+    let white_mean = white.mean();
+    for ring in (0..family.quiet_rings as isize).filter(|&ring| ring != b) {
+        for_ring(n, ring, |r, c| {
+            if let Some(slot) = values.get_mut(r as usize * n + c as usize) {
+                *slot = white_mean;
+            }
+        });
+    }
+
     // Data cells, sharpened against their neighbours: at one or two pixels per cell the
     // optics and the sampling spread each cell into the next, and a small Laplacian term
     // undoes part of that (AprilTag 3's decode_sharpening does the same). `shift` moves
     // every sample point by that many cells (see the registration check below).
-    let white_mean = white.mean();
     let read_data = |shift: (f32, f32), values: &mut [f32; MAX_GRID * MAX_GRID]| {
         for r in 0..n {
             for c in 0..n {
@@ -471,12 +482,10 @@ fn read_robust_counted<M: CellMap>(
             if r < 0 || c < 0 || r >= n as isize || c >= n as isize {
                 return own;
             }
-            let (ru, cu) = (r as usize, c as usize);
-            match family.role(ru, cu) {
-                // Quiet cells are not stored: the white ring next to the border is, as samples.
-                CellRole::Quiet => white_mean,
-                _ => values.get(ru * n + cu).copied().unwrap_or(own),
-            }
+            values
+                .get(r as usize * n + c as usize)
+                .copied()
+                .unwrap_or(own)
         };
         let own = values.get(r * n + c).copied().unwrap_or(0.0);
         let (ri, ci) = (r as isize, c as isize);
