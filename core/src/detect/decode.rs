@@ -462,16 +462,16 @@ fn read_robust_counted<M: CellMap>(
     // optics and the sampling spread each cell into the next, and a small Laplacian term
     // undoes part of that (AprilTag 3's decode_sharpening does the same). `shift` moves
     // every sample point by that many cells (see the registration check below).
+    // The data cells, asked of the family once: the passes below (the read, the decisions,
+    // the registration check, the codes) each asked every cell's role.
+    let data = data_cells(family)?;
     let read_data = |shift: (f32, f32), values: &mut [f32; MAX_GRID * MAX_GRID]| {
-        for r in 0..n {
-            for c in 0..n {
-                if family.role(r, c) == CellRole::Data {
-                    let (u, v) = (c as f32 + 0.5 + shift.0, r as f32 + 0.5 + shift.1);
-                    let z = read_cell(image, h, u, v, multi)?;
-                    if let Some(slot) = values.get_mut(r * n + c) {
-                        *slot = z;
-                    }
-                }
+        for &(r, c) in &data {
+            let (r, c) = (r as usize, c as usize);
+            let (u, v) = (c as f32 + 0.5 + shift.0, r as f32 + 0.5 + shift.1);
+            let z = read_cell(image, h, u, v, multi)?;
+            if let Some(slot) = values.get_mut(r * n + c) {
+                *slot = z;
             }
         }
         Some(())
@@ -502,22 +502,18 @@ fn read_robust_counted<M: CellMap>(
     let mut data_count = 0usize;
     // Cells too close to their threshold, or (below) unstable under a shifted grid.
     let mut uncertain_cells = [false; MAX_GRID * MAX_GRID];
-    for r in 0..n {
-        for c in 0..n {
-            if family.role(r, c) != CellRole::Data {
-                continue;
-            }
-            let d = decide(&values, r, c);
-            if let Some(cell) = cells.get_mut(r * n + c) {
-                *cell = d > 0.0;
-            }
-            let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
-            if let Some(flag) = uncertain_cells.get_mut(r * n + c) {
-                *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
-            }
-            margin_sum += cell_margin;
-            data_count += 1;
+    for &(r, c) in &data {
+        let (r, c) = (r as usize, c as usize);
+        let d = decide(&values, r, c);
+        if let Some(cell) = cells.get_mut(r * n + c) {
+            *cell = d > 0.0;
         }
+        let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
+        if let Some(flag) = uncertain_cells.get_mut(r * n + c) {
+            *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
+        }
+        margin_sum += cell_margin;
+        data_count += 1;
     }
     // Registration check for families where a few misread cells make another code: a grid
     // laid half a cell off (a blurred, steep marker whose short edges are a pixel off) reads
@@ -533,17 +529,13 @@ fn read_robust_counted<M: CellMap>(
             (0.0, -REGISTRATION_SHIFT),
         ] {
             read_data(shift, &mut shifted)?;
-            for r in 0..n {
-                for c in 0..n {
-                    if family.role(r, c) != CellRole::Data {
-                        continue;
-                    }
-                    let bit = decide(&shifted, r, c) > 0.0;
-                    let k = r * n + c;
-                    if cells.get(k).copied() != Some(bit) {
-                        if let Some(flag) = uncertain_cells.get_mut(k) {
-                            *flag = true;
-                        }
+            for &(r, c) in &data {
+                let (r, c) = (r as usize, c as usize);
+                let bit = decide(&shifted, r, c) > 0.0;
+                let k = r * n + c;
+                if cells.get(k).copied() != Some(bit) {
+                    if let Some(flag) = uncertain_cells.get_mut(k) {
+                        *flag = true;
                     }
                 }
             }
@@ -557,11 +549,72 @@ fn read_robust_counted<M: CellMap>(
     }
     Some(GridRead {
         h: grid,
-        readings: family.codes_of_grid(cells.get(..n * n)?),
+        readings: codes_of_data_cells(family, cells.get(..n * n)?, &data),
         margin,
         contrast,
         uncertain,
     })
+}
+
+/// The data cells of a grid, (row, column) in row-major order: the order of a code's bits.
+type DataCells = heapless::Vec<(u8, u8), { MAX_GRID * MAX_GRID }>;
+
+/// `family`'s data cells; `None` for a grid larger than [`MAX_GRID`] (only a hand-built,
+/// invalid family), whose cells a read cannot hold.
+fn data_cells(family: &Family<'_>) -> Option<DataCells> {
+    let n = family.grid as usize;
+    if n > MAX_GRID {
+        return None;
+    }
+    // A cell's role depends on its ring only (the distance to the nearest side, the lesser
+    // of its row's and its column's): the roles of the rings, asked once each along the
+    // diagonal (cell (k, k) lies on ring k), as a mask.
+    let depth = |i: usize| i.min(n - 1 - i);
+    let mut data_rings = 0u32;
+    for ring in 0..n.div_ceil(2) {
+        if family.role(ring, ring) == CellRole::Data {
+            data_rings |= 1 << ring;
+        }
+    }
+    let mut data = DataCells::new();
+    for r in 0..n {
+        for c in 0..n {
+            if (data_rings >> depth(r).min(depth(c))) & 1 != 0 {
+                // n <= MAX_GRID: every cell fits, and its row and column a byte.
+                let _ = data.push((r as u8, c as u8));
+            }
+        }
+    }
+    Some(data)
+}
+
+/// [`Family::codes_of_grid`] over the data cells `data` of `family` (from [`data_cells`]):
+/// the same codes, without asking every cell's role again. One rotation at a time, so that
+/// a code's two words stay in registers (the four codes at once were spilled on every bit),
+/// each with its own index ([`Family::rotate_grid_index`] for rows and columns below `n`).
+fn codes_of_data_cells(family: &Family<'_>, cells: &[bool], data: &[(u8, u8)]) -> [u64; 4] {
+    let n = family.grid as usize;
+    let last = n.saturating_sub(1);
+    [
+        code_of(cells, data, |r, c| r * n + c),
+        code_of(cells, data, |r, c| c * n + (last - r)),
+        code_of(cells, data, |r, c| (last - r) * n + (last - c)),
+        code_of(cells, data, |r, c| (last - c) * n + r),
+    ]
+}
+
+/// The code of the bits of `cells` at `index(row, column)` of each data cell in turn.
+#[inline(always)]
+fn code_of(cells: &[bool], data: &[(u8, u8)], index: impl Fn(usize, usize) -> usize) -> u64 {
+    let mut code = 0u64;
+    for &(r, c) in data {
+        let bit = cells
+            .get(index(r as usize, c as usize))
+            .copied()
+            .unwrap_or(false);
+        code = (code << 1) | bit as u64;
+    }
+    code
 }
 
 /// Largest spread of a candidate's data cells, as a fraction of its black-to-white contrast,
@@ -770,5 +823,38 @@ fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
     }
     for r in (lo + 1..hi).rev() {
         f(r, lo);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::family::tables;
+
+    /// The read's codes from its data-cell list are the family's own, in every built-in
+    /// family (normal and reversed), on pseudo-random grids.
+    #[test]
+    fn codes_of_data_cells_are_the_familys_codes_of_the_grid() {
+        let mut seed = 0x2545_f491u32;
+        for family in tables::ALL {
+            let n = family.grid as usize;
+            let data = data_cells(family).unwrap();
+            assert_eq!(data.len(), family.bits as usize, "{}", family.name);
+            for _ in 0..50 {
+                let cells: [bool; MAX_GRID * MAX_GRID] = core::array::from_fn(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 17;
+                    seed ^= seed << 5;
+                    seed & 1 == 1
+                });
+                let cells = &cells[..n * n];
+                assert_eq!(
+                    codes_of_data_cells(family, cells, &data),
+                    family.codes_of_grid(cells),
+                    "{}",
+                    family.name
+                );
+            }
+        }
     }
 }
