@@ -118,6 +118,7 @@ impl Across {
 
 /// The edge point across `across` from `p` (the centroid of the profile's rising gradient
 /// lobe, dark to light) and the profile's contrast.
+#[inline(always)]
 fn edge_point(image: &GrayImage<'_>, p: Point, across: &Across) -> Option<(Point, f32)> {
     // The profile reaches a whole cell (2 * radius) each way, so that the blurred lobe is
     // whole wherever the edge lies within the boundary pixel. It cannot meet another rising
