@@ -478,21 +478,20 @@ fn read_robust_counted<M: CellMap>(
     };
     // The sharpened reading of data cell (r, c) minus its threshold.
     let decide = |values: &[f32; MAX_GRID * MAX_GRID], r: usize, c: usize| -> f32 {
-        let value_at = |r: isize, c: isize, own: f32| -> f32 {
-            if r < 0 || c < 0 || r >= n as isize || c >= n as isize {
-                return own;
+        // A neighbour outside the grid counts as the cell itself (r and c are below n).
+        let k = r * n + c;
+        let own = values.get(k).copied().unwrap_or(0.0);
+        let value_at = |inside: bool, k: usize| -> f32 {
+            if inside {
+                values.get(k).copied().unwrap_or(own)
+            } else {
+                own
             }
-            values
-                .get(r as usize * n + c as usize)
-                .copied()
-                .unwrap_or(own)
         };
-        let own = values.get(r * n + c).copied().unwrap_or(0.0);
-        let (ri, ci) = (r as isize, c as isize);
-        let neighbours = value_at(ri - 1, ci, own)
-            + value_at(ri + 1, ci, own)
-            + value_at(ri, ci - 1, own)
-            + value_at(ri, ci + 1, own);
+        let neighbours = value_at(r > 0, k.wrapping_sub(n))
+            + value_at(r + 1 < n, k + n)
+            + value_at(c > 0, k.wrapping_sub(1))
+            + value_at(c + 1 < n, k + 1);
         let z = own + DECODE_SHARPENING * (4.0 * own - neighbours);
         z - threshold(c as f32 + 0.5, r as f32 + 0.5)
     };
@@ -541,7 +540,11 @@ fn read_robust_counted<M: CellMap>(
             }
         }
     }
-    let uncertain = uncertain_cells.iter().filter(|&&f| f).count();
+    // Only data cells are ever flagged: counted over them, not the whole array.
+    let uncertain = data
+        .iter()
+        .filter(|&&(r, c)| uncertain_cells.get(r as usize * n + c as usize) == Some(&true))
+        .count();
     let uncertain = u8::try_from(uncertain).unwrap_or(u8::MAX);
     let margin = margin_sum / data_count.max(1) as f32;
     if margin < config.min_decision_margin {
