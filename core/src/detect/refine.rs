@@ -256,12 +256,17 @@ fn profile_samples(radius: f32) -> usize {
 
 /// Weighted total least squares line through points.
 fn fit_line(points: &[(Point, f32)]) -> Option<Line> {
-    let wsum: f32 = points.iter().map(|(_, w)| w).sum();
+    // One pass for the three sums (each still added up in the points' order).
+    let (mut wsum, mut wx, mut wy) = (0.0f32, 0.0f32, 0.0f32);
+    for (p, w) in points {
+        wsum += w;
+        wx += p.x * w;
+        wy += p.y * w;
+    }
     if points.len() < 3 || !(wsum > 0.0) {
         return None;
     }
-    let mx = points.iter().map(|(p, w)| p.x * w).sum::<f32>() / wsum;
-    let my = points.iter().map(|(p, w)| p.y * w).sum::<f32>() / wsum;
+    let (mx, my) = (wx / wsum, wy / wsum);
     let (mut sxx, mut sxy, mut syy) = (0.0f32, 0.0f32, 0.0f32);
     for (p, w) in points {
         let (dx, dy) = (p.x - mx, p.y - my);
