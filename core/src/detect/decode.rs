@@ -564,6 +564,7 @@ type DataCells = heapless::Vec<(u8, u8), { MAX_GRID * MAX_GRID }>;
 
 /// `family`'s data cells; `None` for a grid larger than [`MAX_GRID`] (only a hand-built,
 /// invalid family), whose cells a read cannot hold.
+#[inline(always)] // returned by value, its 516 bytes were copied on every read
 fn data_cells(family: &Family<'_>) -> Option<DataCells> {
     let n = family.grid as usize;
     if n > MAX_GRID {
