@@ -580,12 +580,29 @@ fn data_cells(family: &Family<'_>) -> Option<DataCells> {
             data_rings |= 1 << ring;
         }
     }
+    let is_data = |ring: usize| (data_rings >> ring) & 1 != 0;
     let mut data = DataCells::new();
+    // n <= MAX_GRID: every cell fits, and its row and column a byte.
+    let mut push = |r: usize, c: usize| {
+        let _ = data.push((r as u8, c as u8));
+    };
     for r in 0..n {
-        for c in 0..n {
-            if (data_rings >> depth(r).min(depth(c))) & 1 != 0 {
-                // n <= MAX_GRID: every cell fits, and its row and column a byte.
-                let _ = data.push((r as u8, c as u8));
+        // Along row r (ring dr), columns nearer a side than the row lie on their own rings,
+        // the others on the row's: a run of cells of one role.
+        let dr = depth(r);
+        for c in 0..dr {
+            if is_data(c) {
+                push(r, c);
+            }
+        }
+        if is_data(dr) {
+            for c in dr..n - dr {
+                push(r, c);
+            }
+        }
+        for c in n - dr..n {
+            if is_data(n - 1 - c) {
+                push(r, c);
             }
         }
     }
