@@ -670,8 +670,8 @@ pub(crate) enum Precheck {
 /// a dark border ring in a light margin, and (when `flat_rejects`, i.e. no family searched
 /// decodes a uniform grid, see [`uniform_grid_decodes`]) is the interior more than one flat
 /// tone? A frame tiled with dark squares, or the dark blobs inside a marker's own data
-/// cells, would otherwise each spend the refinement (about 80,000 Cortex-M7 instructions for
-/// a small marker, several times that for a large one) only to be turned down by the read.
+/// cells, would otherwise each spend the refinement (about 55,000 Cortex-M7 instructions for
+/// a 24-pixel marker, several times that for a large one) only to be turned down by the read.
 ///
 /// Cheap on purpose, as it runs on every candidate (about 780 Cortex-M7 instructions with
 /// its rough quad, [`super::refine::rough_half_pixel_adjusted`]):

@@ -46,8 +46,8 @@ use crate::geometry::cyclic;
 use crate::geometry::Point;
 use crate::image::{GrayImage, WalkStep, WALK_SAMPLE_SCALE};
 
-/// Most edge points per edge. Each is a profile of up to 17 bilinear samples (about 1,500
-/// Cortex-M7 instructions); sixteen along an edge put the fitted line within a few
+/// Most edge points per edge. Each is a profile of up to 17 bilinear samples (about 1,200
+/// Cortex-M7 instructions; 830 for 11); sixteen along an edge put the fitted line within a few
 /// hundredths of a pixel (each point is good to about a tenth), and more only cost time:
 /// with 32, refining a large marker's corners was most of a frame's detection time.
 const MAX_SAMPLES: usize = 16;
