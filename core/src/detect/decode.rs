@@ -446,44 +446,52 @@ fn read_robust_counted<M: CellMap>(
         return None;
     }
 
+    // Quiet cells are not read: they count as the white ring's mean (the white ring next to
+    // the border is read, as samples). Stored once in `values`, where nothing else reads them,
+    // so the sharpening below looks its neighbours up without asking each one's role.
+    let white_mean = white.mean();
+    for ring in (0..family.quiet_rings as isize).filter(|&ring| ring != b) {
+        for_ring(n, ring, |r, c| {
+            if let Some(slot) = values.get_mut(r as usize * n + c as usize) {
+                *slot = white_mean;
+            }
+        });
+    }
+
     // Data cells, sharpened against their neighbours: at one or two pixels per cell the
     // optics and the sampling spread each cell into the next, and a small Laplacian term
     // undoes part of that (AprilTag 3's decode_sharpening does the same). `shift` moves
     // every sample point by that many cells (see the registration check below).
-    let white_mean = white.mean();
+    // The data cells, asked of the family once: the passes below (the read, the decisions,
+    // the registration check, the codes) each asked every cell's role.
+    let data = data_cells(family)?;
     let read_data = |shift: (f32, f32), values: &mut [f32; MAX_GRID * MAX_GRID]| {
-        for r in 0..n {
-            for c in 0..n {
-                if family.role(r, c) == CellRole::Data {
-                    let (u, v) = (c as f32 + 0.5 + shift.0, r as f32 + 0.5 + shift.1);
-                    let z = read_cell(image, h, u, v, multi)?;
-                    if let Some(slot) = values.get_mut(r * n + c) {
-                        *slot = z;
-                    }
-                }
+        for &(r, c) in &data {
+            let (r, c) = (r as usize, c as usize);
+            let (u, v) = (c as f32 + 0.5 + shift.0, r as f32 + 0.5 + shift.1);
+            let z = read_cell(image, h, u, v, multi)?;
+            if let Some(slot) = values.get_mut(r * n + c) {
+                *slot = z;
             }
         }
         Some(())
     };
     // The sharpened reading of data cell (r, c) minus its threshold.
     let decide = |values: &[f32; MAX_GRID * MAX_GRID], r: usize, c: usize| -> f32 {
-        let value_at = |r: isize, c: isize, own: f32| -> f32 {
-            if r < 0 || c < 0 || r >= n as isize || c >= n as isize {
-                return own;
-            }
-            let (ru, cu) = (r as usize, c as usize);
-            match family.role(ru, cu) {
-                // Quiet cells are not stored: the white ring next to the border is, as samples.
-                CellRole::Quiet => white_mean,
-                _ => values.get(ru * n + cu).copied().unwrap_or(own),
+        // A neighbour outside the grid counts as the cell itself (r and c are below n).
+        let k = r * n + c;
+        let own = values.get(k).copied().unwrap_or(0.0);
+        let value_at = |inside: bool, k: usize| -> f32 {
+            if inside {
+                values.get(k).copied().unwrap_or(own)
+            } else {
+                own
             }
         };
-        let own = values.get(r * n + c).copied().unwrap_or(0.0);
-        let (ri, ci) = (r as isize, c as isize);
-        let neighbours = value_at(ri - 1, ci, own)
-            + value_at(ri + 1, ci, own)
-            + value_at(ri, ci - 1, own)
-            + value_at(ri, ci + 1, own);
+        let neighbours = value_at(r > 0, k.wrapping_sub(n))
+            + value_at(r + 1 < n, k + n)
+            + value_at(c > 0, k.wrapping_sub(1))
+            + value_at(c + 1 < n, k + 1);
         let z = own + DECODE_SHARPENING * (4.0 * own - neighbours);
         z - threshold(c as f32 + 0.5, r as f32 + 0.5)
     };
@@ -493,22 +501,18 @@ fn read_robust_counted<M: CellMap>(
     let mut data_count = 0usize;
     // Cells too close to their threshold, or (below) unstable under a shifted grid.
     let mut uncertain_cells = [false; MAX_GRID * MAX_GRID];
-    for r in 0..n {
-        for c in 0..n {
-            if family.role(r, c) != CellRole::Data {
-                continue;
-            }
-            let d = decide(&values, r, c);
-            if let Some(cell) = cells.get_mut(r * n + c) {
-                *cell = d > 0.0;
-            }
-            let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
-            if let Some(flag) = uncertain_cells.get_mut(r * n + c) {
-                *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
-            }
-            margin_sum += cell_margin;
-            data_count += 1;
+    for &(r, c) in &data {
+        let (r, c) = (r as usize, c as usize);
+        let d = decide(&values, r, c);
+        if let Some(cell) = cells.get_mut(r * n + c) {
+            *cell = d > 0.0;
         }
+        let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
+        if let Some(flag) = uncertain_cells.get_mut(r * n + c) {
+            *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
+        }
+        margin_sum += cell_margin;
+        data_count += 1;
     }
     // Registration check for families where a few misread cells make another code: a grid
     // laid half a cell off (a blurred, steep marker whose short edges are a pixel off) reads
@@ -524,23 +528,23 @@ fn read_robust_counted<M: CellMap>(
             (0.0, -REGISTRATION_SHIFT),
         ] {
             read_data(shift, &mut shifted)?;
-            for r in 0..n {
-                for c in 0..n {
-                    if family.role(r, c) != CellRole::Data {
-                        continue;
-                    }
-                    let bit = decide(&shifted, r, c) > 0.0;
-                    let k = r * n + c;
-                    if cells.get(k).copied() != Some(bit) {
-                        if let Some(flag) = uncertain_cells.get_mut(k) {
-                            *flag = true;
-                        }
+            for &(r, c) in &data {
+                let (r, c) = (r as usize, c as usize);
+                let bit = decide(&shifted, r, c) > 0.0;
+                let k = r * n + c;
+                if cells.get(k).copied() != Some(bit) {
+                    if let Some(flag) = uncertain_cells.get_mut(k) {
+                        *flag = true;
                     }
                 }
             }
         }
     }
-    let uncertain = uncertain_cells.iter().filter(|&&f| f).count();
+    // Only data cells are ever flagged: counted over them, not the whole array.
+    let uncertain = data
+        .iter()
+        .filter(|&&(r, c)| uncertain_cells.get(r as usize * n + c as usize) == Some(&true))
+        .count();
     let uncertain = u8::try_from(uncertain).unwrap_or(u8::MAX);
     let margin = margin_sum / data_count.max(1) as f32;
     if margin < config.min_decision_margin {
@@ -548,11 +552,90 @@ fn read_robust_counted<M: CellMap>(
     }
     Some(GridRead {
         h: grid,
-        readings: family.codes_of_grid(cells.get(..n * n)?),
+        readings: codes_of_data_cells(family, cells.get(..n * n)?, &data),
         margin,
         contrast,
         uncertain,
     })
+}
+
+/// The data cells of a grid, (row, column) in row-major order: the order of a code's bits.
+type DataCells = heapless::Vec<(u8, u8), { MAX_GRID * MAX_GRID }>;
+
+/// `family`'s data cells; `None` for a grid larger than [`MAX_GRID`] (only a hand-built,
+/// invalid family), whose cells a read cannot hold.
+#[inline(always)] // returned by value, its 516 bytes were copied on every read
+fn data_cells(family: &Family<'_>) -> Option<DataCells> {
+    let n = family.grid as usize;
+    if n > MAX_GRID {
+        return None;
+    }
+    // A cell's role depends on its ring only (the distance to the nearest side, the lesser
+    // of its row's and its column's): the roles of the rings, asked once each along the
+    // diagonal (cell (k, k) lies on ring k), as a mask.
+    let depth = |i: usize| i.min(n - 1 - i);
+    let mut data_rings = 0u32;
+    for ring in 0..n.div_ceil(2) {
+        if family.role(ring, ring) == CellRole::Data {
+            data_rings |= 1 << ring;
+        }
+    }
+    let is_data = |ring: usize| (data_rings >> ring) & 1 != 0;
+    let mut data = DataCells::new();
+    // n <= MAX_GRID: every cell fits, and its row and column a byte.
+    let mut push = |r: usize, c: usize| {
+        let _ = data.push((r as u8, c as u8));
+    };
+    for r in 0..n {
+        // Along row r (ring dr), columns nearer a side than the row lie on their own rings,
+        // the others on the row's: a run of cells of one role.
+        let dr = depth(r);
+        for c in 0..dr {
+            if is_data(c) {
+                push(r, c);
+            }
+        }
+        if is_data(dr) {
+            for c in dr..n - dr {
+                push(r, c);
+            }
+        }
+        for c in n - dr..n {
+            if is_data(n - 1 - c) {
+                push(r, c);
+            }
+        }
+    }
+    Some(data)
+}
+
+/// [`Family::codes_of_grid`] over the data cells `data` of `family` (from [`data_cells`]):
+/// the same codes, without asking every cell's role again. One rotation at a time, so that
+/// a code's two words stay in registers (the four codes at once were spilled on every bit),
+/// each with its own index ([`Family::rotate_grid_index`] for rows and columns below `n`).
+fn codes_of_data_cells(family: &Family<'_>, cells: &[bool], data: &[(u8, u8)]) -> [u64; 4] {
+    let n = family.grid as usize;
+    let last = n.saturating_sub(1);
+    [
+        code_of(cells, data, |r, c| r * n + c),
+        code_of(cells, data, |r, c| c * n + (last - r)),
+        code_of(cells, data, |r, c| (last - r) * n + (last - c)),
+        code_of(cells, data, |r, c| (last - c) * n + r),
+    ]
+}
+
+/// The code of the bits of `cells` at `index(row, column)` of each data cell in turn.
+#[inline(always)]
+fn code_of(cells: &[bool], data: &[(u8, u8)], index: impl Fn(usize, usize) -> usize) -> u64 {
+    let mut code = 0u64;
+    for &(r, c) in data {
+        let bit = cells
+            .get(index(r as usize, c as usize))
+            .copied()
+            .unwrap_or(false);
+        code = (code << 1) | bit as u64;
+    }
+    code
 }
 
 /// Largest spread of a candidate's data cells, as a fraction of its black-to-white contrast,
@@ -587,8 +670,8 @@ pub(crate) enum Precheck {
 /// a dark border ring in a light margin, and (when `flat_rejects`, i.e. no family searched
 /// decodes a uniform grid, see [`uniform_grid_decodes`]) is the interior more than one flat
 /// tone? A frame tiled with dark squares, or the dark blobs inside a marker's own data
-/// cells, would otherwise each spend the refinement (about 80,000 Cortex-M7 instructions for
-/// a small marker, several times that for a large one) only to be turned down by the read.
+/// cells, would otherwise each spend the refinement (about 55,000 Cortex-M7 instructions for
+/// a 24-pixel marker, several times that for a large one) only to be turned down by the read.
 ///
 /// Cheap on purpose, as it runs on every candidate (about 1,550 Cortex-M7 instructions with
 /// its rough quad, [`super::refine::rough_half_pixel_adjusted`], when it reads all 48
@@ -826,5 +909,38 @@ fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
     }
     for r in (lo + 1..hi).rev() {
         f(r, lo);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::family::tables;
+
+    /// The read's codes from its data-cell list are the family's own, in every built-in
+    /// family (normal and reversed), on pseudo-random grids.
+    #[test]
+    fn codes_of_data_cells_are_the_familys_codes_of_the_grid() {
+        let mut seed = 0x2545_f491u32;
+        for family in tables::ALL {
+            let n = family.grid as usize;
+            let data = data_cells(family).unwrap();
+            assert_eq!(data.len(), family.bits as usize, "{}", family.name);
+            for _ in 0..50 {
+                let cells: [bool; MAX_GRID * MAX_GRID] = core::array::from_fn(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 17;
+                    seed ^= seed << 5;
+                    seed & 1 == 1
+                });
+                let cells = &cells[..n * n];
+                assert_eq!(
+                    codes_of_data_cells(family, cells, &data),
+                    family.codes_of_grid(cells),
+                    "{}",
+                    family.name
+                );
+            }
+        }
     }
 }

@@ -44,10 +44,10 @@ use super::quad::Quad;
 use crate::camera::CameraModel;
 use crate::geometry::cyclic;
 use crate::geometry::Point;
-use crate::image::GrayImage;
+use crate::image::{GrayImage, WalkStep, WALK_SAMPLE_SCALE};
 
-/// Most edge points per edge. Each is a profile of up to 17 bilinear samples (about 1,500
-/// Cortex-M7 instructions); sixteen along an edge put the fitted line within a few
+/// Most edge points per edge. Each is a profile of up to 17 bilinear samples (about 1,200
+/// Cortex-M7 instructions; 830 for 11); sixteen along an edge put the fitted line within a few
 /// hundredths of a pixel (each point is good to about a tenth), and more only cost time:
 /// with 32, refining a large marker's corners was most of a frame's detection time.
 const MAX_SAMPLES: usize = 16;
@@ -94,47 +94,80 @@ fn outward_normal_by(a: Point, b: Point, root: impl Fn(f32) -> f32) -> Option<Po
     (len > 1e-3).then(|| Point::new(dy / len, -dx / len))
 }
 
-/// The edge point along `n` from `p` (the centroid of the profile's rising gradient lobe,
-/// dark to light: light outside for an outer boundary, inside for a hole) and the profile's
-/// contrast.
-fn edge_point(
-    image: &GrayImage<'_>,
-    p: Point,
+/// How the profiles across one edge are read: along the unit normal `n`, dark to light
+/// (`sign` 1: light outside, as for an outer boundary; -1: light inside, a hole), `steps`
+/// half pixels each way, with the half-pixel step in [`GrayImage::bilinear_walk`]'s fixed
+/// point (converted once for the edge's points).
+struct Across {
     n: Point,
     sign: f32,
-    radius: f32,
-) -> Option<(Point, f32)> {
+    steps: usize,
+    step: Option<WalkStep>,
+}
+
+impl Across {
+    fn new(n: Point, sign: f32, radius: f32) -> Self {
+        Across {
+            n,
+            sign,
+            steps: profile_steps(radius),
+            step: WalkStep::new(0.5 * n.x, 0.5 * n.y),
+        }
+    }
+}
+
+/// The edge point across `across` from `p` (the centroid of the profile's rising gradient
+/// lobe, dark to light) and the profile's contrast.
+#[inline(always)]
+fn edge_point(image: &GrayImage<'_>, p: Point, across: &Across) -> Option<(Point, f32)> {
     // The profile reaches a whole cell (2 * radius) each way, so that the blurred lobe is
     // whole wherever the edge lies within the boundary pixel. It cannot meet another rising
     // edge: inwards lies the rest of the dark border cell, outwards the light margin.
-    let steps = profile_steps(radius);
+    let Across { n, sign, steps, .. } = *across;
     let count = 2 * steps + 1;
     let centre = 0.5 * sign; // the pixel-centre boundary lies half a pixel off the edge
 
     // Offsets along `n` from `p`: multiples of a half pixel, exact in f32 (so stepping them
     // by 0.5 gives the same values as computing each).
     let first_offset = centre + (0.0 - steps as f32) * 0.5;
-    let last_offset = centre + steps as f32 * 0.5;
-    let inside = |o: f32| image.bilinear_inside(p.x + o * n.x, p.y + o * n.y);
-    let mut rise = heapless::Vec::new();
-    let (lo, hi, peak) = if inside(first_offset) && inside(last_offset) {
-        // Both ends inside, so every sample between them is: no test per sample.
-        read_profile(count, first_offset, &mut rise, |o| {
-            sign * image.sample_inside(p.x + o * n.x, p.y + o * n.y)
-        })
+    let start = (p.x + first_offset * n.x, p.y + first_offset * n.y);
+    // The samples as integers, WALK_SAMPLE_SCALE per grey level.
+    let mut profile = Profile::new();
+    let walk = across
+        .step
+        .as_ref()
+        .and_then(|step| image.bilinear_walk(start, step, count));
+    match walk {
+        // Inside the image (all but profiles at the frame's border): in fixed point.
+        Some(mut walk) => read_profile(count, &mut profile, || walk.next_sample()),
+        None => {
+            let mut o = first_offset;
+            read_profile(count, &mut profile, || {
+                let s = image.sample(p.x + o * n.x, p.y + o * n.y);
+                o += 0.5;
+                Some((s * WALK_SAMPLE_SCALE) as i32)
+            })
+        }
+    }
+    if profile.len() < count {
+        return None;
+    }
+    // Dark to light: the differences are taken the other way round for a hole.
+    let mut rise = Rises::new();
+    let (lo, hi, peak) = if sign < 0.0 {
+        profile_extremes::<true>(&profile, &mut rise)
     } else {
-        read_profile(count, first_offset, &mut rise, |o| {
-            sign * image.sample(p.x + o * n.x, p.y + o * n.y)
-        })
+        profile_extremes::<false>(&profile, &mut rise)
     };
-    if hi - lo < MIN_STEP {
+    let contrast = (hi - lo) as f32 * (1.0 / WALK_SAMPLE_SCALE);
+    if contrast < MIN_STEP {
         return None;
     }
     // The lobe: the differences around the steepest rise that stay above a tenth of it.
     // The floor keeps sensor noise on the plateaus out of the centroid, and subtracting it
     // from every weight keeps the lobe's own tails symmetric.
-    let floor = 0.1 * peak.0;
-    let weight = |j: usize| rise.get(j).map_or(0.0, |g| g - floor);
+    let floor = 0.1 * peak.0 as f32;
+    let weight = |j: usize| rise.get(j).map_or(0.0, |&g| g as f32 - floor);
     let mut first = peak.1;
     while first > 0 && weight(first - 1) > 0.0 {
         first -= 1;
@@ -153,35 +186,50 @@ fn edge_point(
         return None;
     }
     let o = centre + (msum / wsum + 0.5 - steps as f32) * 0.5;
-    Some((Point::new(p.x + o * n.x, p.y + o * n.y), hi - lo))
+    Some((Point::new(p.x + o * n.x, p.y + o * n.y), contrast))
 }
 
-/// Differences between neighbouring samples of an edge profile: `rise[j]` lies between
-/// samples j and j + 1.
-type Rises = heapless::Vec<f32, { MAX_PROFILE - 1 }>;
+/// The samples of an edge profile (a vector, so nothing is zeroed first: a profile is read
+/// for every edge point of every candidate).
+type Profile = heapless::Vec<i32, MAX_PROFILE>;
 
-/// Reads an edge profile of `count` samples (at most `MAX_PROFILE`), sample `j` by
-/// `sample` at offset `first + j / 2`: its differences into `rise` (a vector, so nothing
-/// is zeroed first: a profile is read for every edge point of every candidate; the
-/// samples themselves are not kept), and returns the samples' lowest and highest values
-/// and the steepest rise with its index (the first of equals).
+/// Reads an edge profile of `count` samples (at most `MAX_PROFILE`), one per call of
+/// `next` until it has none, into `profile`. A loop of its own: with the extremes'
+/// bookkeeping in it, the walk's registers were spilled on every sample.
 #[inline(always)]
-fn read_profile(
-    count: usize,
-    first: f32,
+fn read_profile(count: usize, profile: &mut Profile, mut next: impl FnMut() -> Option<i32>) {
+    let count = count.min(MAX_PROFILE);
+    while profile.len() < count {
+        let Some(s) = next() else {
+            break;
+        };
+        if profile.push(s).is_err() {
+            break;
+        }
+    }
+}
+
+/// Differences between neighbouring samples of an edge profile, dark to light: `rise[j]`
+/// lies between samples j and j + 1.
+type Rises = heapless::Vec<i32, { MAX_PROFILE - 1 }>;
+
+/// The lowest and the highest of a profile's samples (grey levels times
+/// [`WALK_SAMPLE_SCALE`], at most 255 apart: no difference overflows), its differences into
+/// `rise` (each sample minus the one before, or the other way round when `FLIP`: a loop for
+/// each, as a multiplication by the sign cost a test per sample), and the steepest of them
+/// with its index (the first of equals).
+#[inline(always)]
+fn profile_extremes<const FLIP: bool>(
+    profile: &[i32],
     rise: &mut Rises,
-    sample: impl Fn(f32) -> f32,
-) -> (f32, f32, (f32, usize)) {
-    let mut o = first;
-    let mut last = sample(o);
-    let (mut lo, mut hi) = (last, last);
-    let mut peak = (f32::MIN, 0usize);
-    let rises = count.clamp(1, MAX_PROFILE) - 1;
-    // The vector's length counts the samples (one register fewer in the loop).
-    while rise.len() < rises {
-        o += 0.5;
-        let s = sample(o);
-        let g = s - last;
+) -> (i32, i32, (i32, usize)) {
+    let Some((&first, rest)) = profile.split_first() else {
+        return (0, 0, (i32::MIN, 0));
+    };
+    let (mut lo, mut hi, mut last) = (first, first, first);
+    let mut peak = (i32::MIN, 0usize);
+    for &s in rest.iter().take(MAX_PROFILE - 1) {
+        let g = if FLIP { last - s } else { s - last };
         if g > peak.0 {
             peak = (g, rise.len());
         }
@@ -208,12 +256,17 @@ fn profile_samples(radius: f32) -> usize {
 
 /// Weighted total least squares line through points.
 fn fit_line(points: &[(Point, f32)]) -> Option<Line> {
-    let wsum: f32 = points.iter().map(|(_, w)| w).sum();
+    // One pass for the three sums (each still added up in the points' order).
+    let (mut wsum, mut wx, mut wy) = (0.0f32, 0.0f32, 0.0f32);
+    for (p, w) in points {
+        wsum += w;
+        wx += p.x * w;
+        wy += p.y * w;
+    }
     if points.len() < 3 || !(wsum > 0.0) {
         return None;
     }
-    let mx = points.iter().map(|(p, w)| p.x * w).sum::<f32>() / wsum;
-    let my = points.iter().map(|(p, w)| p.y * w).sum::<f32>() / wsum;
+    let (mx, my) = (wx / wsum, wy / wsum);
     let (mut sxx, mut sxy, mut syy) = (0.0f32, 0.0f32, 0.0f32);
     for (p, w) in points {
         let (dx, dy) = (p.x - mx, p.y - my);
@@ -348,10 +401,11 @@ fn refine_straight(
         let Some(n) = outward_normal(a, b) else {
             return fallback();
         };
+        let across = Across::new(n, sign, radius);
         let mut points: heapless::Vec<(Point, f32), MAX_SAMPLES> = heapless::Vec::new();
         for p in edge_sample_points(a, b, radius) {
             *samples = samples.saturating_add(profile_samples(radius) as u32);
-            if let Some(found) = edge_point(image, p, n, sign, radius) {
+            if let Some(found) = edge_point(image, p, &across) {
                 let _ = points.push(found);
             }
         }
@@ -427,7 +481,7 @@ fn refine_corners_through_lens(
             let Some((p, n_frame, stretch)) = through_lens(camera, q, n) else {
                 continue;
             };
-            if let Some((found, w)) = edge_point(image, p, n_frame, sign, radius) {
+            if let Some((found, w)) = edge_point(image, p, &Across::new(n_frame, sign, radius)) {
                 let offset = ((found.x - p.x) * n_frame.x + (found.y - p.y) * n_frame.y) / stretch;
                 let _ = points.push((Point::new(q.x + offset * n.x, q.y + offset * n.y), w));
             }
