@@ -23,7 +23,7 @@
 
 use touchdown_core::detect::{
     DetectStats, Detection, Detector, DetectorConfig, Method, MAX_DETECTIONS, MAX_FAMILIES,
-    MIN_WORK_BUDGET,
+    MIN_WORK_BUDGET, WORK_SCAN_WORD, WORK_THRESHOLD_BLOCK, WORK_TRACE_START,
 };
 use touchdown_core::family::{tables, Family};
 use touchdown_eval::workspace::HostWorkspace;
@@ -162,6 +162,56 @@ fn all_black_and_all_white() {
         "white",
     );
     assert_eq!((stats.contours, stats.trace_steps), (0, 0));
+}
+
+/// The budget pays for all the work an image can add, not only for the steps after the
+/// binarisation: the 32 x 4 blocks the binarisation compared (`WORK_THRESHOLD_BLOCK` each)
+/// and the scan's words with a start to test (`WORK_SCAN_WORD`) come out of it before a
+/// boundary is followed. A checkerboard of 8-pixel squares has contrast in every block and
+/// fits the budget; a frame of noise too large for the budget to pay for its blocks follows
+/// no boundary at all and says it was cut.
+#[test]
+fn the_binarisation_and_the_scan_are_paid_from_the_budget() {
+    let mut workspace = HostWorkspace::new();
+    let mut detector = Detector::new(DetectorConfig::default());
+    let (w, h) = (320, 240);
+    let checker = frame_from(w, h, |x, y| if (x / 8 + y / 8) % 2 == 0 { 40 } else { 210 });
+    let (_, stats) = detect_bounded(
+        &mut detector,
+        &mut workspace,
+        &checker,
+        tables::DEFAULT,
+        "checker 8",
+    );
+    assert!(!stats.truncated, "{stats:?}");
+    let blocks = (w / 32 * (h / 4)) as u32;
+    assert!(stats.contours > 0, "{stats:?}");
+    assert!(
+        stats.work
+            >= blocks * WORK_THRESHOLD_BLOCK
+                + stats.trace_steps
+                + stats.contours * WORK_TRACE_START
+                // at least the word of the first start (starts may share a word)
+                + WORK_SCAN_WORD,
+        "{stats:?}"
+    );
+    // 1600 x 1200 noise at no budget but the floor: 60,000 blocks cost more than it.
+    let config = DetectorConfig {
+        work_budget_per_pixel: 0.0,
+        ..DetectorConfig::default()
+    };
+    let mut detector = Detector::new(config);
+    let noise = frame_from(1600, 1200, |x, y| (hash(x, y, 7) % 256) as u8);
+    let (_, stats) = detect_bounded(
+        &mut detector,
+        &mut workspace,
+        &noise,
+        tables::DEFAULT,
+        "noise",
+    );
+    const { assert!(1600 / 32 * (1200 / 4) * WORK_THRESHOLD_BLOCK > MIN_WORK_BUDGET) };
+    assert!(stats.truncated, "{stats:?}");
+    assert_eq!((stats.contours, stats.trace_steps), (0, 0), "{stats:?}");
 }
 
 #[test]

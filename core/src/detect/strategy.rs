@@ -4,7 +4,10 @@
 //! Separate from the entry in the parent module so the shared steps read without the
 //! methods' choices, and the choices of each method sit together.
 
-use super::{contour, decode, quad, refine, threshold, Candidates, DetectorConfig, WORK_PRECHECK};
+use super::{
+    contour, decode, quad, refine, threshold, Candidates, DetectorConfig, WORK_PRECHECK,
+    WORK_THRESHOLD_BLOCK,
+};
 use crate::camera::CameraModel;
 use crate::family::Family;
 use crate::geometry::{cyclic, Point};
@@ -18,14 +21,16 @@ use crate::image::GrayImage;
 /// [`paper`](super::paper).
 pub(super) trait Strategy {
     /// Step 1: the bitmap whose boundaries are traced. `tiles` is the frame's scratch memory
-    /// ([`Buffers::tiles`](super::Buffers::tiles)).
+    /// ([`Buffers::tiles`](super::Buffers::tiles)). Returns the work units of the part of its
+    /// cost that depends on the image (charged to the frame's budget; the part that is the
+    /// same for every frame of a size is not).
     fn binarise(
         &self,
         image: &GrayImage<'_>,
         config: &DetectorConfig,
         bitmap: &mut [u32],
         tiles: &mut [u8],
-    );
+    ) -> u32;
     /// Which boundaries of the bitmap start a trace when searching for `families`.
     fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule;
     /// Whether `quad` can be a marker of `family`.
@@ -94,14 +99,19 @@ impl Strategy for Robust {
         config: &DetectorConfig,
         bitmap: &mut [u32],
         tiles: &mut [u8],
-    ) {
+    ) -> u32 {
         let max_rows = threshold::MaxRows::for_frame(image.width(), image.height());
         match self.level {
             ThresholdLevel::MidLevel => {
-                threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles);
+                let compared =
+                    threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles);
+                compared.saturating_mul(WORK_THRESHOLD_BLOCK)
             }
+            // Every pixel is compared, whatever the image: a cost of the frame's size. (The
+            // second look runs on a region around a lost pad, not a whole frame.)
             ThresholdLevel::Ratio => {
                 threshold::ratio_threshold(image, config.min_contrast, bitmap, tiles);
+                0
             }
         }
     }

@@ -193,16 +193,22 @@ impl MaxRows {
 
 /// Binarises `image` into `bitmap` (dark = 1) with a tile-local threshold, the tile maxima
 /// taken over `max_rows`. `tiles` holds at least `2 * ceil(w/4) * ceil(h/4)` bytes.
+///
+/// Returns the blocks of 32 x 4 pixels that had a tile with contrast: their pixels were
+/// compared, where a block of flat tiles is written without being read. That part of the
+/// cost depends on the image (all of a frame of noise, a fifth of a landing frame), so the
+/// detector charges it to the frame's work budget ([`super::WORK_THRESHOLD_BLOCK`]); the
+/// rest (the tile extrema) is the same for every frame of a size.
 pub(crate) fn local_threshold(
     image: &GrayImage<'_>,
     min_contrast: u8,
     max_rows: MaxRows,
     bitmap: &mut [u32],
     tiles: &mut [u8],
-) {
+) -> u32 {
     let (w, h) = (image.width(), image.height());
     let Some((tw, th, tmin, tmax)) = tile_grids(w, h, tiles) else {
-        return;
+        return 0;
     };
     // Tile extrema, one tile row at a time: a tile's four rows are four 32-bit words, which
     // are reduced to a per-byte min and max word in registers (SWAR, see `byte_min_max`),
@@ -272,11 +278,13 @@ pub(crate) fn local_threshold(
     // tile row above; the vertical one also turns the window's extrema into thresholds (flat
     // tiles get 0, so no pixel there is dark).
     spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
-    compare_with_thresholds(image, tmin, tw, bitmap);
+    compare_with_thresholds(image, tmin, tw, bitmap)
 }
 
 /// The bitmap of `image` against the per-tile thresholds `tmin` (`tw` a row): a pixel is
-/// dark where it is below its tile's threshold.
+/// dark where it is below its tile's threshold. Returns the blocks of 32 x 4 pixels whose
+/// pixels were compared (those with a tile of contrast; a partial tile row at the bottom
+/// counts as blocks of 32 x 1).
 ///
 /// A tile row's four pixel rows at once, 32 pixels (a bitmap word, eight tiles) a row at a
 /// time: the eight thresholds are read once for the four rows, and where all eight are 0
@@ -285,8 +293,14 @@ pub(crate) fn local_threshold(
 /// four pixels are compared with it at once ([`dark_bits`]). Partial words and a partial
 /// tile row at the end, one row and one pixel at a time.
 #[inline(always)]
-fn compare_with_thresholds(image: &GrayImage<'_>, tmin: &[u8], tw: usize, bitmap: &mut [u32]) {
+fn compare_with_thresholds(
+    image: &GrayImage<'_>,
+    tmin: &[u8],
+    tw: usize,
+    bitmap: &mut [u32],
+) -> u32 {
     let (w, h) = (image.width(), image.height());
+    let mut compared = 0u32;
     let wpr = words_per_row(w).max(1);
     let full = w / 32;
     let whole_tile_rows = h / TILE;
@@ -304,13 +318,13 @@ fn compare_with_thresholds(image: &GrayImage<'_>, tmin: &[u8], tw: usize, bitmap
             image.row(y0 + 3),
         ];
         let Some((o0, rest)) = out.split_at_mut_checked(wpr) else {
-            return;
+            return compared;
         };
         let Some((o1, rest)) = rest.split_at_mut_checked(wpr) else {
-            return;
+            return compared;
         };
         let Some((o2, o3)) = rest.split_at_mut_checked(wpr) else {
-            return;
+            return compared;
         };
         let [r0, r1, r2, r3] = rows;
         let columns = thresholds
@@ -325,6 +339,7 @@ fn compare_with_thresholds(image: &GrayImage<'_>, tmin: &[u8], tw: usize, bitmap
                 (*w0, *w1, *w2, *w3) = (0, 0, 0, 0);
                 continue;
             }
+            compared += 1;
             let spread = spread_thresholds(eight);
             *w0 = dark_bits(p0, &spread);
             *w1 = dark_bits(p1, &spread);
@@ -342,7 +357,7 @@ fn compare_with_thresholds(image: &GrayImage<'_>, tmin: &[u8], tw: usize, bitmap
             .get((y / TILE) * tw..(y / TILE) * tw + tw)
             .unwrap_or(&[]);
         let Some(out) = bitmap.get_mut(y * wpr..y * wpr + wpr) else {
-            return;
+            return compared;
         };
         let words = row
             .chunks_exact(32)
@@ -350,10 +365,12 @@ fn compare_with_thresholds(image: &GrayImage<'_>, tmin: &[u8], tw: usize, bitmap
             .zip(out.iter_mut());
         for ((pixels, eight), word) in words {
             let eight = <[u8; 8]>::try_from(eight).map_or(0, u64::from_le_bytes);
+            compared += u32::from(eight != 0);
             *word = dark_bits(pixels, &spread_thresholds(eight));
         }
         partial_word(row, thresholds, full, out);
     }
+    compared
 }
 
 /// Eight tiles' thresholds (one a byte of `eight`), each in the four bytes of a word.
@@ -902,6 +919,45 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The binarisation counts the 32 x 4 blocks it compared, which the detector charges: a
+    /// flat frame none, one dark speck the blocks its tiles' 3 x 3 windows reach (the tile's
+    /// own block and the one below; the next word's tiles are all flat), and each partial
+    /// row of a partial tile row at the bottom as a block of its own.
+    #[test]
+    fn compared_blocks_are_counted() {
+        let (w, h) = (64usize, 8usize);
+        let mut px = [200u8; 64 * 8];
+        let img = GrayImage::new(&px, w, h).unwrap();
+        let mut bitmap = [0u32; 2 * 8];
+        let mut tiles = [0u8; 2 * 16 * 2];
+        assert_eq!(
+            local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles),
+            0
+        );
+        px[2 * w + 1] = 20;
+        let img = GrayImage::new(&px, w, h).unwrap();
+        assert_eq!(
+            local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles),
+            2
+        );
+        assert_eq!(bitmap[2 * 2], 1 << 1, "the speck is dark");
+        // Two more rows: a third tile row of two rows, compared row by row.
+        let (w, h) = (64usize, 10usize);
+        let mut px = [200u8; 64 * 10];
+        px[2 * w + 1] = 20;
+        px[9 * w + 40] = 20;
+        let img = GrayImage::new(&px, w, h).unwrap();
+        let mut bitmap = [0u32; 2 * 10];
+        let mut tiles = [0u8; 2 * 16 * 3];
+        // Tile rows 0 and 1 of word 0 (the first speck), tile rows 1 and 2 of word 1 (the
+        // second: tile row 1 a block, tile row 2 two rows of one word each).
+        // (The second speck's tile is column 10: its window, 9 to 11, stays in word 1.)
+        assert_eq!(
+            local_threshold(&img, 20, MaxRows::All, &mut bitmap, &mut tiles),
+            2 + 1 + 2
+        );
     }
 
     #[test]
