@@ -16,7 +16,7 @@
 
 use super::{lens, DetectorConfig};
 use crate::camera::CameraModel;
-use crate::family::{CellRole, Decoded, Family, MAX_GRID};
+use crate::family::{Decoded, Family, MAX_GRID};
 use crate::geometry::cyclic;
 use crate::geometry::{Homography, Point};
 use crate::image::GrayImage;
@@ -464,7 +464,7 @@ fn read_robust_counted<M: CellMap>(
     // every sample point by that many cells (see the registration check below).
     // The data cells, asked of the family once: the passes below (the read, the decisions,
     // the registration check, the codes) each asked every cell's role.
-    let data = data_cells(family)?;
+    let data = family.data_cells()?;
     let read_data = |shift: (f32, f32), values: &mut [f32; MAX_GRID * MAX_GRID]| {
         for &(r, c) in &data {
             let (r, c) = (r as usize, c as usize);
@@ -552,90 +552,11 @@ fn read_robust_counted<M: CellMap>(
     }
     Some(GridRead {
         h: grid,
-        readings: codes_of_data_cells(family, cells.get(..n * n)?, &data),
+        readings: family.codes_of_data_cells(cells.get(..n * n)?, &data),
         margin,
         contrast,
         uncertain,
     })
-}
-
-/// The data cells of a grid, (row, column) in row-major order: the order of a code's bits.
-type DataCells = heapless::Vec<(u8, u8), { MAX_GRID * MAX_GRID }>;
-
-/// `family`'s data cells; `None` for a grid larger than [`MAX_GRID`] (only a hand-built,
-/// invalid family), whose cells a read cannot hold.
-#[inline(always)] // returned by value, its 516 bytes were copied on every read
-fn data_cells(family: &Family<'_>) -> Option<DataCells> {
-    let n = family.grid as usize;
-    if n > MAX_GRID {
-        return None;
-    }
-    // A cell's role depends on its ring only (the distance to the nearest side, the lesser
-    // of its row's and its column's): the roles of the rings, asked once each along the
-    // diagonal (cell (k, k) lies on ring k), as a mask.
-    let depth = |i: usize| i.min(n - 1 - i);
-    let mut data_rings = 0u32;
-    for ring in 0..n.div_ceil(2) {
-        if family.role(ring, ring) == CellRole::Data {
-            data_rings |= 1 << ring;
-        }
-    }
-    let is_data = |ring: usize| (data_rings >> ring) & 1 != 0;
-    let mut data = DataCells::new();
-    // n <= MAX_GRID: every cell fits, and its row and column a byte.
-    let mut push = |r: usize, c: usize| {
-        let _ = data.push((r as u8, c as u8));
-    };
-    for r in 0..n {
-        // Along row r (ring dr), columns nearer a side than the row lie on their own rings,
-        // the others on the row's: a run of cells of one role.
-        let dr = depth(r);
-        for c in 0..dr {
-            if is_data(c) {
-                push(r, c);
-            }
-        }
-        if is_data(dr) {
-            for c in dr..n - dr {
-                push(r, c);
-            }
-        }
-        for c in n - dr..n {
-            if is_data(n - 1 - c) {
-                push(r, c);
-            }
-        }
-    }
-    Some(data)
-}
-
-/// [`Family::codes_of_grid`] over the data cells `data` of `family` (from [`data_cells`]):
-/// the same codes, without asking every cell's role again. One rotation at a time, so that
-/// a code's two words stay in registers (the four codes at once were spilled on every bit),
-/// each with its own index ([`Family::rotate_grid_index`] for rows and columns below `n`).
-fn codes_of_data_cells(family: &Family<'_>, cells: &[bool], data: &[(u8, u8)]) -> [u64; 4] {
-    let n = family.grid as usize;
-    let last = n.saturating_sub(1);
-    [
-        code_of(cells, data, |r, c| r * n + c),
-        code_of(cells, data, |r, c| c * n + (last - r)),
-        code_of(cells, data, |r, c| (last - r) * n + (last - c)),
-        code_of(cells, data, |r, c| (last - c) * n + r),
-    ]
-}
-
-/// The code of the bits of `cells` at `index(row, column)` of each data cell in turn.
-#[inline(always)]
-fn code_of(cells: &[bool], data: &[(u8, u8)], index: impl Fn(usize, usize) -> usize) -> u64 {
-    let mut code = 0u64;
-    for &(r, c) in data {
-        let bit = cells
-            .get(index(r as usize, c as usize))
-            .copied()
-            .unwrap_or(false);
-        code = (code << 1) | bit as u64;
-    }
-    code
 }
 
 /// Largest spread of a candidate's data cells, as a fraction of its black-to-white contrast,
@@ -909,38 +830,5 @@ fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
     }
     for r in (lo + 1..hi).rev() {
         f(r, lo);
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::family::tables;
-
-    /// The read's codes from its data-cell list are the family's own, in every built-in
-    /// family (normal and reversed), on pseudo-random grids.
-    #[test]
-    fn codes_of_data_cells_are_the_familys_codes_of_the_grid() {
-        let mut seed = 0x2545_f491u32;
-        for family in tables::ALL {
-            let n = family.grid as usize;
-            let data = data_cells(family).unwrap();
-            assert_eq!(data.len(), family.bits as usize, "{}", family.name);
-            for _ in 0..50 {
-                let cells: [bool; MAX_GRID * MAX_GRID] = core::array::from_fn(|_| {
-                    seed ^= seed << 13;
-                    seed ^= seed >> 17;
-                    seed ^= seed << 5;
-                    seed & 1 == 1
-                });
-                let cells = &cells[..n * n];
-                assert_eq!(
-                    codes_of_data_cells(family, cells, &data),
-                    family.codes_of_grid(cells),
-                    "{}",
-                    family.name
-                );
-            }
-        }
     }
 }

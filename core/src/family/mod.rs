@@ -48,6 +48,10 @@ pub use parse::{parse_family, FamilyError, FamilyErrorKind, FamilyHeader};
 /// Largest grid (cells per side) a family may have.
 pub const MAX_GRID: usize = 16;
 
+/// The data cells of a grid, (row, column) in row-major order: the order of a code's bits
+/// ([`Family::data_cells`]).
+pub(crate) type DataCells = heapless::Vec<(u8, u8), { MAX_GRID * MAX_GRID }>;
+
 /// Largest number of data bits per code.
 pub const MAX_BITS: usize = 64;
 
@@ -259,6 +263,71 @@ impl<'a> Family<'a> {
         out
     }
 
+    /// The data cells, (row, column) in row-major order: the order of a code's bits. `None`
+    /// for a grid larger than [`MAX_GRID`] (only a hand-built, invalid family). A reader that
+    /// asks for them once and walks the list (the detector's read, several passes a
+    /// candidate) does not ask every cell's [`Family::role`] each time.
+    #[inline(always)] // returned by value, its 516 bytes were copied on every read
+    pub(crate) fn data_cells(&self) -> Option<DataCells> {
+        let n = self.grid as usize;
+        if n > MAX_GRID {
+            return None;
+        }
+        // A cell's role depends on its ring only (the distance to the nearest side, the
+        // lesser of its row's and its column's): the roles of the rings, asked once each
+        // along the diagonal (cell (k, k) lies on ring k), as a mask.
+        let depth = |i: usize| i.min(n - 1 - i);
+        let mut data_rings = 0u32;
+        for ring in 0..n.div_ceil(2) {
+            if self.role(ring, ring) == CellRole::Data {
+                data_rings |= 1 << ring;
+            }
+        }
+        let is_data = |ring: usize| (data_rings >> ring) & 1 != 0;
+        let mut data = DataCells::new();
+        // n <= MAX_GRID: every cell fits, and its row and column a byte.
+        let mut push = |r: usize, c: usize| {
+            let _ = data.push((r as u8, c as u8));
+        };
+        for r in 0..n {
+            // Along row r (ring dr), columns nearer a side than the row lie on their own
+            // rings, the others on the row's: a run of cells of one role.
+            let dr = depth(r);
+            for c in 0..dr {
+                if is_data(c) {
+                    push(r, c);
+                }
+            }
+            if is_data(dr) {
+                for c in dr..n - dr {
+                    push(r, c);
+                }
+            }
+            for c in n - dr..n {
+                if is_data(n - 1 - c) {
+                    push(r, c);
+                }
+            }
+        }
+        Some(data)
+    }
+
+    /// [`Family::codes_of_grid`] over the data cells `data` (from [`Family::data_cells`]):
+    /// the same codes, without asking every cell's role again. One rotation at a time, so
+    /// that a code's two words stay in registers (the four codes at once were spilled on
+    /// every bit), each with its own index ([`Family::rotate_grid_index`] for rows and
+    /// columns below `n`).
+    pub(crate) fn codes_of_data_cells(&self, cells: &[bool], data: &[(u8, u8)]) -> [u64; 4] {
+        let n = self.grid as usize;
+        let last = n.saturating_sub(1);
+        [
+            code_of(cells, data, |r, c| r * n + c),
+            code_of(cells, data, |r, c| c * n + (last - r)),
+            code_of(cells, data, |r, c| (last - r) * n + (last - c)),
+            code_of(cells, data, |r, c| (last - c) * n + r),
+        ]
+    }
+
     /// Rotates a code by `rotation` quarter turns (used for distance computations).
     pub fn rotate_code(&self, code: u64, rotation: u8) -> u64 {
         let n = self.grid as usize;
@@ -463,9 +532,50 @@ pub fn max_correction_for(bits: u8, codes: usize, min_hamming: u8) -> u8 {
     chosen
 }
 
+/// The code of the bits of `cells` at `index(row, column)` of each data cell in turn.
+#[inline(always)]
+fn code_of(cells: &[bool], data: &[(u8, u8)], index: impl Fn(usize, usize) -> usize) -> u64 {
+    let mut code = 0u64;
+    for &(r, c) in data {
+        let bit = cells
+            .get(index(r as usize, c as usize))
+            .copied()
+            .unwrap_or(false);
+        code = (code << 1) | bit as u64;
+    }
+    code
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The codes from the data-cell list are those of the whole grid, in every built-in
+    /// family (normal and reversed), on pseudo-random grids.
+    #[test]
+    fn codes_of_data_cells_are_the_familys_codes_of_the_grid() {
+        let mut seed = 0x2545_f491u32;
+        for family in tables::ALL {
+            let n = family.grid as usize;
+            let data = family.data_cells().unwrap();
+            assert_eq!(data.len(), family.bits as usize, "{}", family.name);
+            for _ in 0..50 {
+                let cells: [bool; MAX_GRID * MAX_GRID] = core::array::from_fn(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 17;
+                    seed ^= seed << 5;
+                    seed & 1 == 1
+                });
+                let cells = &cells[..n * n];
+                assert_eq!(
+                    family.codes_of_data_cells(cells, &data),
+                    family.codes_of_grid(cells),
+                    "{}",
+                    family.name
+                );
+            }
+        }
+    }
 
     /// The rows at once are the cells one by one, for every shipped family (the reversed
     /// ones, whose data lies outside the border, included) and ids across each; an unknown id
