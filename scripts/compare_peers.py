@@ -23,14 +23,17 @@ cannot affect another's timing):
 - AprilTag 3 (pupil_apriltags): the right family, quad_decimate 1 and 2, refine_edges on,
   nthreads 1;
 - OpenCV ArUco (cv2.aruco.ArucoDetector) with the matching DICT_APRILTAG_* / DICT_* dictionary
-  and default parameters (no corner refinement), and again with CORNER_REFINE_SUBPIX.
+  and default parameters (no corner refinement), and again with CORNER_REFINE_SUBPIX; one
+  thread (`cv2.setNumThreads(1)`: OpenCV otherwise spreads the thresholding over every core,
+  and the other two detectors run on one).
 
 Timing: every detector is given the decoded grey image (file decoding is never timed) and
 runs it `--repeats` times in a row (default 10) in one warm process; the median is that
 round's time. The detectors take turns for `--rounds` rounds (default 5), and an image's
 time is the FASTEST of its rounds (load only adds time), so that a spell of load on the
 machine does not land on one detector's runs alone (single runs of this script on a shared
-2-core machine moved touchdown's total between 16 and 24 ms, and the ratios by a third). Times are wall-clock milliseconds on this machine, single-threaded.
+2-core machine moved touchdown's total between 16 and 24 ms, and the ratios by a third).
+Times are wall-clock milliseconds on this machine, every detector on one thread.
 
 Per image the table gives each detector's time, its recall (expected markers found with the
 right id / expected; where reference corners exist a detection must also lie on the marker,
@@ -104,6 +107,8 @@ def worker_main(args):
     else:
         import cv2
 
+        # Single-threaded like the other two (its default is one thread per core).
+        cv2.setNumThreads(1)
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, OPENCV_DICTIONARIES[args.family]))
         params = cv2.aruco.DetectorParameters()
         if args.subpix:
