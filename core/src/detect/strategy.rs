@@ -103,8 +103,18 @@ impl Strategy for Robust {
         let max_rows = threshold::MaxRows::for_frame(image.width(), image.height());
         match self.level {
             ThresholdLevel::MidLevel => {
-                let compared =
-                    threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles);
+                // The same bitmap and count either way; each target the faster of the two.
+                let compared = if cfg!(target_pointer_width = "64") {
+                    threshold::local_threshold_vectorised(
+                        image,
+                        config.min_contrast,
+                        max_rows,
+                        bitmap,
+                        tiles,
+                    )
+                } else {
+                    threshold::local_threshold(image, config.min_contrast, max_rows, bitmap, tiles)
+                };
                 compared.saturating_mul(WORK_THRESHOLD_BLOCK)
             }
             // Every pixel is compared, whatever the image: a cost of the frame's size. (The
