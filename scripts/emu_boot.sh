@@ -29,16 +29,20 @@ readonly OUT="${TARGET_DIR}/emu"
 
 readonly FIL_SECONDS="${EMU_FIL_SECONDS:-2}"
 
-# The variants whose FIL ends with the parameter power cycle (firmware/emu/power_cycle.py):
-# one per board (the OpenMV Cam's starts with foreign data in a parameter sector); the
-# others differ only in the camera and the clock.
-readonly POWER_CYCLE_VARIANTS=(nucleo-qvga openmv-qvga)
-# The variant whose autopilot line carries garbage before a quarter of its messages
-# (autopilot.py): the firmware must resynchronise and land as on a clean line.
-readonly LINE_NOISE_VARIANTS=(nucleo-qvga-480)
-# The variant whose autopilot is an ArduPilot 4.7 that sets TD_PROFILE 3: LANDING_TARGETs in
-# LOCAL_FRD, levelled with the attitude.
-readonly LOCAL_FRD_VARIANTS=(openmv-vga)
+# What a variant's FIL does beyond landing against an emulated ArduPilot on a clean line:
+# - `--power-cycle`: ends with the parameter power cycle (firmware/emu/power_cycle.py), on
+#   one variant per board (the OpenMV Cam's starts with foreign data in a parameter sector);
+# - `--line-noise`: the autopilot line carries garbage before a quarter of its messages
+#   (autopilot.py): the firmware must resynchronise and land as on a clean line;
+# - `--autopilot ardupilot-4.7`: an ArduPilot 4.7 that sets TD_PROFILE 3, LANDING_TARGETs in
+#   LOCAL_FRD, levelled with the attitude.
+# The other variants differ only in the camera and the clock.
+declare -rA FIL_EXTRAS=(
+    [nucleo-qvga]="--power-cycle"
+    [openmv-qvga]="--power-cycle"
+    [nucleo-qvga-480]="--line-noise"
+    [openmv-vga]="--autopilot ardupilot-4.7"
+)
 # name board MHz camera cargo-features...
 readonly VARIANTS=(
     "nucleo-qvga nucleo 400 qvga"
@@ -98,16 +102,8 @@ for variant in "${VARIANTS[@]}"; do
     fi
     fil=()
     if [ "${FIL_SECONDS}" != 0 ]; then
-        fil=(--fil "${FIL_SECONDS}" --camera "${v[3]}")
-    fi
-    if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${POWER_CYCLE_VARIANTS[@]}"; then
-        fil+=(--power-cycle)
-    fi
-    if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${LINE_NOISE_VARIANTS[@]}"; then
-        fil+=(--line-noise)
-    fi
-    if [ "${FIL_SECONDS}" != 0 ] && selected "${v[0]}" "${LOCAL_FRD_VARIANTS[@]}"; then
-        fil+=(--autopilot ardupilot-4.7)
+        read -r -a extras <<<"${FIL_EXTRAS[${v[0]}]:-}"
+        fil=(--fil "${FIL_SECONDS}" --camera "${v[3]}" "${extras[@]}")
     fi
     emulate "${OUT}/${v[0]}" --board "${v[1]}" --cpu-mhz "${v[2]}" --label "${v[0]}" \
         "${fil[@]}" || failed=1
