@@ -9,10 +9,14 @@
 //! families and the firmware's configuration, the pad fix on a one-marker pad of the marker
 //! `bench/m7` fixes on, and the estimator), `target+encode` (the companion's LANDING_TARGET
 //! of that estimate and draining its MAVLink output), then `frame`: both, as the camera board
-//! runs them. Speed
-//! goals are judged on the instruction counts of `scripts/m7_check.sh`; these host timings
-//! are for profiling and for the side-by-side with AprilTag 3 and OpenCV
-//! (`scripts/compare_peers.py`).
+//! runs them. Then `detect/IMAGE`: the detector alone (`touchdown detect`'s settings,
+//! tag36h11), warm, on the larger images of the side-by-side with AprilTag 3 and OpenCV
+//! (`scripts/compare_peers.py`): AprilTag 3's three test photos (799 x 533), ViSP's
+//! 1920 x 1080 benchmark frame and its AprilTag.png, read from the shared data
+//! (`$TOUCHDOWN_DATA` or `shared/data` beside the repository; skipped when absent). Speed
+//! goals on the board are judged on the instruction counts of `scripts/m7_check.sh`; these
+//! host timings are for profiling and for A/B comparisons of the host's detector, steadier
+//! than the side-by-side's subprocess runs (`-- detect/` runs only these).
 
 use std::hint::black_box;
 use std::path::Path;
@@ -20,13 +24,14 @@ use std::path::Path;
 use criterion::{criterion_group, criterion_main, Criterion};
 use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::{Companion, CompanionConfig, Profile, MAX_FRAME_LEN};
+use touchdown_core::detect::{Detector, DetectorConfig};
 use touchdown_core::family::tables;
 use touchdown_core::filter::{FrameEstimate, VehicleState};
 use touchdown_core::pad::{PadLayout, PadMarker};
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::workspace::HostWorkspace;
-use touchdown_formats::image_io::GrayFrame;
+use touchdown_formats::image_io::{load_gray, GrayFrame};
 use touchdown_formats::pgm::parse_pgm;
 
 /// The benchmark frames (committed with the M7 benchmark), each with the tag36h11 id its pad
@@ -151,5 +156,42 @@ fn stages(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, stages);
+/// The shared data's images of `detect/...`, relative to its directory.
+const PHOTOS: [&str; 5] = [
+    "apriltag-test/33369213973_9d9bb4cc96_c.jpg",
+    "apriltag-test/34085369442_304b6bafd9_c.jpg",
+    "apriltag-test/34139872896_defdb2f8d9_c.jpg",
+    "visp-apriltag/benchmark-1920x1080/tag36_11_1920x1080.png",
+    "visp-apriltag/AprilTag.png",
+];
+
+fn photos(c: &mut Criterion) {
+    let Some(data) = touchdown_host_tests::shared_data_or_skip() else {
+        return;
+    };
+    let families = [&tables::TAG36H11];
+    let mut detector = Detector::new(DetectorConfig::offline());
+    let mut workspace = HostWorkspace::new();
+    for relative in PHOTOS {
+        let path = data.join(relative);
+        let frame = load_gray(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let image = frame.view();
+        let name = Path::new(relative)
+            .file_stem()
+            .and_then(|stem| stem.to_str())
+            .unwrap_or(relative);
+        let found = workspace
+            .detect(&mut detector, &image, &families)
+            .expect("the buffers fit the image");
+        assert!(!found.is_empty(), "{relative}: its markers are found");
+        c.bench_function(&format!("detect/{name}"), |b| {
+            b.iter(|| {
+                let mut buffers = workspace.buffers(frame.width, frame.height);
+                black_box(detector.detect(black_box(&image), &families, &mut buffers)).is_ok()
+            })
+        });
+    }
+}
+
+criterion_group!(benches, stages, photos);
 criterion_main!(benches);
