@@ -46,9 +46,11 @@
 //! host tools reproduce what flies). It binarises AprilTag's 799 x 533 photos and a 1920 x 1080
 //! frame 1.6 to 1.8 times as fast on x86-64. Which one runs is chosen by
 //! `target_pointer_width` where the detector calls it; the tests hold both to the
-//! pixel-by-pixel definition. The M7's way is the earlier code, unchanged: sharing more of it
-//! with the host's (one comparison loop generic over the block's kernel) cost the M7 frames up
-//! to 0.9 % more instructions.
+//! pixel-by-pixel definition. The two share the partial tiles, the comparison loop (generic
+//! over the kernel of a 32 x 4 block: [`dark_block`] or [`Vectorised::dark_block`]) and the
+//! bottom rows; the shared loop costs the M7's frames 0.2-0.3 % more instructions than its
+//! own copy did (QVGA landing 1.084 M against 1.082 M, VGA 3.747 M against 3.737 M), the
+//! price of one comparison loop instead of two.
 //!
 //! Bitmap layout: row `y` starts at word `y * words_per_row(width)`; pixel `x` is bit `x % 32`
 //! of word `x / 32` (least significant bit = leftmost pixel), so "left neighbour" is a shift.
@@ -248,15 +250,7 @@ pub(crate) fn local_threshold(
         .zip(tmax.chunks_exact_mut(tw))
         .enumerate()
     {
-        // The last tile row may be short: repeating its last row leaves min and max as is.
-        let y0 = ty * TILE;
-        let last = h.saturating_sub(1);
-        let rows = [
-            image.row(y0),
-            image.row((y0 + 1).min(last)),
-            image.row((y0 + 2).min(last)),
-            image.row((y0 + 3).min(last)),
-        ];
+        let rows = tile_row_pixels(image, ty);
         let [r0, r1, r2, r3] = rows;
         let word = |q: &[u8]| match *q {
             [p0, p1, p2, p3] => u32::from_le_bytes([p0, p1, p2, p3]),
@@ -285,22 +279,7 @@ pub(crate) fn local_threshold(
                 }
             }
         }
-        // A partial tile at the end of the rows (width not a multiple of the tile): all its
-        // rows for both, the few pixels cost little.
-        let start = (w / TILE) * TILE;
-        if start < w {
-            let (mut mn, mut mx) = (255u8, 0u8);
-            for row in rows {
-                for &p in row.get(start..).unwrap_or(&[]) {
-                    mn = mn.min(p);
-                    mx = mx.max(p);
-                }
-            }
-            if let (Some(lo), Some(hi)) = (mins.last_mut(), maxs.last_mut()) {
-                *lo = mn;
-                *hi = mx;
-            }
-        }
+        partial_tile_extrema(rows, w, mins, maxs);
         spread_along(mins, byte_min, u8::min);
         spread_along(maxs, byte_max, u8::max);
     }
@@ -308,7 +287,42 @@ pub(crate) fn local_threshold(
     // tile row above; the vertical one also turns the window's extrema into thresholds (flat
     // tiles get 0, so no pixel there is dark).
     spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
-    compare_with_thresholds(image, tmin, tw, bitmap)
+    compare_with_thresholds(image, tmin, tw, bitmap, dark_block)
+}
+
+/// The four pixel rows of tile row `ty`. The last tile row may be short: its last row
+/// stands in for the missing ones, which leaves its tiles' minima and maxima as they are.
+#[inline(always)]
+fn tile_row_pixels<'i>(image: &GrayImage<'i>, ty: usize) -> [&'i [u8]; 4] {
+    let y0 = ty * TILE;
+    let last = image.height().saturating_sub(1);
+    [
+        image.row(y0),
+        image.row((y0 + 1).min(last)),
+        image.row((y0 + 2).min(last)),
+        image.row((y0 + 3).min(last)),
+    ]
+}
+
+/// The extrema of the partial tile at the end of a tile row (`rows`, its four pixel rows;
+/// width `w` not a multiple of the tile) into the last bytes of `mins` and `maxs`: all its
+/// rows for both, whatever [`MaxRows`] (the few pixels cost little).
+#[inline(always)]
+fn partial_tile_extrema(rows: [&[u8]; 4], w: usize, mins: &mut [u8], maxs: &mut [u8]) {
+    let start = (w / TILE) * TILE;
+    if start < w {
+        let (mut mn, mut mx) = (255u8, 0u8);
+        for row in rows {
+            for &p in row.get(start..).unwrap_or(&[]) {
+                mn = mn.min(p);
+                mx = mx.max(p);
+            }
+        }
+        if let (Some(lo), Some(hi)) = (mins.last_mut(), maxs.last_mut()) {
+            *lo = mn;
+            *hi = mx;
+        }
+    }
 }
 
 /// The bitmap of `image` against the per-tile thresholds `tmin` (`tw` a row): a pixel is
@@ -318,16 +332,17 @@ pub(crate) fn local_threshold(
 ///
 /// A tile row's four pixel rows at once, 32 pixels (a bitmap word, eight tiles) a row at a
 /// time: the eight thresholds are read once for the four rows, and where all eight are 0
-/// (flat tiles) no pixel can be dark and the pixels are not even read; elsewhere each
-/// threshold is spread to the four bytes of a word once for the four rows and each tile's
-/// four pixels are compared with it at once ([`dark_bits`]). Partial words and a partial
-/// tile row at the end, one row and one pixel at a time.
+/// (flat tiles) no pixel can be dark and the pixels are not even read; elsewhere
+/// `dark_block` compares the block's four rows with them ([`dark_block`] on the Cortex-M7,
+/// [`Vectorised::dark_block`] on 64-bit hosts). Partial words and a partial tile row at the
+/// end, one row and one pixel at a time ([`compare_bottom_rows`]).
 #[inline(always)]
 fn compare_with_thresholds(
     image: &GrayImage<'_>,
     tmin: &[u8],
     tw: usize,
     bitmap: &mut [u32],
+    dark_block: impl Fn([&[u8]; 4], u64) -> [u32; 4],
 ) -> u32 {
     let (w, h) = (image.width(), image.height());
     let mut compared = 0u32;
@@ -347,13 +362,7 @@ fn compare_with_thresholds(
             image.row(y0 + 2),
             image.row(y0 + 3),
         ];
-        let Some((o0, rest)) = out.split_at_mut_checked(wpr) else {
-            return compared;
-        };
-        let Some((o1, rest)) = rest.split_at_mut_checked(wpr) else {
-            return compared;
-        };
-        let Some((o2, o3)) = rest.split_at_mut_checked(wpr) else {
+        let Some([o0, o1, o2, o3]) = four_rows(out, wpr) else {
             return compared;
         };
         let [r0, r1, r2, r3] = rows;
@@ -370,18 +379,39 @@ fn compare_with_thresholds(
                 continue;
             }
             compared += 1;
-            let spread = spread_thresholds(eight);
-            *w0 = dark_bits(p0, &spread);
-            *w1 = dark_bits(p1, &spread);
-            *w2 = dark_bits(p2, &spread);
-            *w3 = dark_bits(p3, &spread);
+            [*w0, *w1, *w2, *w3] = dark_block([p0, p1, p2, p3], eight);
         }
         for (row, out) in rows.into_iter().zip([o0, o1, o2, o3]) {
             partial_word(row, thresholds, full, out);
         }
     }
-    // The rows of a partial tile row at the bottom.
-    for y in whole_tile_rows * TILE..h {
+    compare_bottom_rows(image, tmin, tw, bitmap, compared)
+}
+
+/// The first four rows of `wpr` words of `out` (a tile row of the bitmap).
+#[inline(always)]
+fn four_rows(out: &mut [u32], wpr: usize) -> Option<[&mut [u32]; 4]> {
+    let (o0, rest) = out.split_at_mut_checked(wpr)?;
+    let (o1, rest) = rest.split_at_mut_checked(wpr)?;
+    let (o2, o3) = rest.split_at_mut_checked(wpr)?;
+    Some([o0, o1, o2, o3])
+}
+
+/// The rows of a partial tile row at the bottom of the bitmap, one row and 32 pixels at a
+/// time ([`dark_bits`]), for both ways of comparing; returns `compared` plus the words
+/// compared (each a block of its own).
+#[inline(always)]
+fn compare_bottom_rows(
+    image: &GrayImage<'_>,
+    tmin: &[u8],
+    tw: usize,
+    bitmap: &mut [u32],
+    mut compared: u32,
+) -> u32 {
+    let (w, h) = (image.width(), image.height());
+    let wpr = words_per_row(w).max(1);
+    let full = w / 32;
+    for y in h / TILE * TILE..h {
         let row = image.row(y);
         let thresholds = tmin
             .get((y / TILE) * tw..(y / TILE) * tw + tw)
@@ -403,85 +433,20 @@ fn compare_with_thresholds(
     compared
 }
 
-/// [`compare_with_thresholds`] with [`Vectorised::dark_block`] for the blocks of 32 x 4
-/// pixels. A copy: the two as one function generic over the block's comparison cost the
-/// Cortex-M7 frames up to 0.9 % more instructions (the compiler allocates the registers of
-/// the inlined whole differently).
+/// The bitmap words of a block of 32 x 4 pixels (`rows`, 32 pixels each) against the
+/// thresholds of its eight tiles (one a byte of `eight`), four pixels a 32-bit word: each
+/// threshold spread to a word once for the four rows ([`spread_thresholds`]), each row's
+/// tiles compared by [`dark_bits`].
 #[inline(always)]
-fn compare_with_thresholds_vectorised(
-    image: &GrayImage<'_>,
-    tmin: &[u8],
-    tw: usize,
-    bitmap: &mut [u32],
-) -> u32 {
-    let (w, h) = (image.width(), image.height());
-    let mut compared = 0u32;
-    let wpr = words_per_row(w).max(1);
-    let full = w / 32;
-    let whole_tile_rows = h / TILE;
-    let groups = bitmap
-        .chunks_exact_mut(TILE * wpr)
-        .zip(tmin.chunks_exact(tw.max(1)))
-        .take(whole_tile_rows)
-        .enumerate();
-    for (ty, (out, thresholds)) in groups {
-        let y0 = ty * TILE;
-        let rows = [
-            image.row(y0),
-            image.row(y0 + 1),
-            image.row(y0 + 2),
-            image.row(y0 + 3),
-        ];
-        let Some((o0, rest)) = out.split_at_mut_checked(wpr) else {
-            return compared;
-        };
-        let Some((o1, rest)) = rest.split_at_mut_checked(wpr) else {
-            return compared;
-        };
-        let Some((o2, o3)) = rest.split_at_mut_checked(wpr) else {
-            return compared;
-        };
-        let [r0, r1, r2, r3] = rows;
-        let columns = thresholds
-            .chunks_exact(32 / TILE)
-            .zip(r0.chunks_exact(32).zip(r1.chunks_exact(32)))
-            .zip(r2.chunks_exact(32).zip(r3.chunks_exact(32)))
-            .zip(o0.iter_mut().zip(o1.iter_mut()))
-            .zip(o2.iter_mut().zip(o3.iter_mut()));
-        for ((((eight, (p0, p1)), (p2, p3)), (w0, w1)), (w2, w3)) in columns {
-            let eight = <[u8; 8]>::try_from(eight).map_or(0, u64::from_le_bytes);
-            if eight == 0 {
-                (*w0, *w1, *w2, *w3) = (0, 0, 0, 0);
-                continue;
-            }
-            compared += 1;
-            [*w0, *w1, *w2, *w3] = Vectorised::dark_block([p0, p1, p2, p3], eight);
-        }
-        for (row, out) in rows.into_iter().zip([o0, o1, o2, o3]) {
-            partial_word(row, thresholds, full, out);
-        }
-    }
-    // The rows of a partial tile row at the bottom.
-    for y in whole_tile_rows * TILE..h {
-        let row = image.row(y);
-        let thresholds = tmin
-            .get((y / TILE) * tw..(y / TILE) * tw + tw)
-            .unwrap_or(&[]);
-        let Some(out) = bitmap.get_mut(y * wpr..y * wpr + wpr) else {
-            return compared;
-        };
-        let words = row
-            .chunks_exact(32)
-            .zip(thresholds.chunks_exact(32 / TILE))
-            .zip(out.iter_mut());
-        for ((pixels, eight), word) in words {
-            let eight = <[u8; 8]>::try_from(eight).map_or(0, u64::from_le_bytes);
-            compared += u32::from(eight != 0);
-            *word = dark_bits(pixels, &spread_thresholds(eight));
-        }
-        partial_word(row, thresholds, full, out);
-    }
-    compared
+fn dark_block(rows: [&[u8]; 4], eight: u64) -> [u32; 4] {
+    let spread = spread_thresholds(eight);
+    let [p0, p1, p2, p3] = rows;
+    [
+        dark_bits(p0, &spread),
+        dark_bits(p1, &spread),
+        dark_bits(p2, &spread),
+        dark_bits(p3, &spread),
+    ]
 }
 
 /// Eight tiles' thresholds (one a byte of `eight`), each in the four bytes of a word.
@@ -575,37 +540,14 @@ pub(crate) fn local_threshold_vectorised(
         .zip(tmax.chunks_exact_mut(tw))
         .enumerate()
     {
-        // The last tile row may be short: repeating its last row leaves min and max as is.
-        let y0 = ty * TILE;
-        let last = h.saturating_sub(1);
-        let rows = [
-            image.row(y0),
-            image.row((y0 + 1).min(last)),
-            image.row((y0 + 2).min(last)),
-            image.row((y0 + 3).min(last)),
-        ];
+        let rows = tile_row_pixels(image, ty);
         Vectorised::tile_row_extrema(rows, mins, maxs, max_rows);
-        // A partial tile at the end of the rows: all its rows for both (as in
-        // `local_threshold_swar`).
-        let start = (w / TILE) * TILE;
-        if start < w {
-            let (mut mn, mut mx) = (255u8, 0u8);
-            for row in rows {
-                for &p in row.get(start..).unwrap_or(&[]) {
-                    mn = mn.min(p);
-                    mx = mx.max(p);
-                }
-            }
-            if let (Some(lo), Some(hi)) = (mins.last_mut(), maxs.last_mut()) {
-                *lo = mn;
-                *hi = mx;
-            }
-        }
+        partial_tile_extrema(rows, w, mins, maxs);
         spread_along(mins, byte_min, u8::min);
         spread_along(maxs, byte_max, u8::max);
     }
     Vectorised::spread_down_to_thresholds(tmin, tmax, tw, th, min_contrast);
-    compare_with_thresholds_vectorised(image, tmin, tw, bitmap)
+    compare_with_thresholds(image, tmin, tw, bitmap, Vectorised::dark_block)
 }
 
 /// The steps of [`local_threshold_vectorised`].
