@@ -38,9 +38,19 @@
 //! ([`clear_border`]); nothing on them could be decoded anyway, since a marker needs its
 //! light margin.
 //!
+//! Where the boundary runs straight along a row (a marker's top and bottom edges), the walk
+//! takes the run's steps at once on 64-bit targets: the run's length is a count of ones in
+//! the row's words it has read anyway (`Rows::run`), its pixels are stored and marked as
+//! the steps would have, and the walk goes on from the run's end. Same pixels, same steps
+//! charged; a 1920 x 1080 frame of a checkerboard, 78 % of whose steps are such runs, is
+//! detected a fifth faster on an x86-64 host. The Cortex-M7 walks step by step: working
+//! out the run's length at every step cost it more instructions than the runs saved.
+//!
 //! Every step marks the pixel in the `visited` bitmap, so no boundary is followed twice, and
 //! draws from the frame's work budget (one unit per step), so the time per frame is bounded on any image: a
 //! frame the budget cannot cover ends with [`Trace::OutOfBudget`] rather than a long stall.
+
+use core::hint::select_unpredictable;
 
 /// A boundary pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -49,6 +59,12 @@ pub(crate) struct Pixel {
     pub x: u16,
     pub y: u16,
 }
+
+/// The shortest run along a row ([`Rows::run`]) the walk takes at once. Shorter ones are
+/// walked step by step: on a ragged boundary runs of one or two are common, and the branch
+/// past them stays predictable (on one of AprilTag's textured test photos 4 % of the steps
+/// start a run of three or more, 10 % one of one or two).
+const MIN_RUN: usize = 3;
 
 /// Neighbour offsets, clockwise on screen (y down) starting east.
 const DX: [isize; 8] = [1, 1, 0, -1, -1, -1, 0, 1];
@@ -218,7 +234,7 @@ impl<'b> Tracer<'b> {
         let start_rel = start.wrapping_sub(stride);
         // The first step: the first dark neighbour clockwise from the light west one, as
         // after a step north (`NEXT`); none for an isolated pixel.
-        let first = match walk.look(start_rel) {
+        let first = match walk.look(start_rel).map(|rows| rows.neighbourhood()) {
             Some(neighbourhood) if neighbourhood & !CENTRE == 0 => None,
             Some(neighbourhood) => Some(walk.next(6, neighbourhood)),
             None => {
@@ -239,7 +255,9 @@ impl<'b> Tracer<'b> {
                 None => Trace::TooLong,
             };
         };
-        let (mut rel, mut xy, mut d) = (start_rel, start_xy, first);
+        // The walk's state: at the pixel `xy` (position `rel`), to step in direction `d`, the
+        // `run` steps after that one going the same way along the row.
+        let (mut rel, mut xy, mut d, mut run) = (start_rel, start_xy, first, 0);
         // Dense phase: while the buffer has room and the budget lasts, every step is stored
         // at `out[len]` and neither the spacing nor the budget needs a look (most boundaries
         // end here). At `dense_end` the general loop below takes over, from the top of the
@@ -247,17 +265,34 @@ impl<'b> Tracer<'b> {
         // arrives on it, so a pixel the dense phase reached but did not store is marked, as
         // the general loop would mark it before anything else.
         let dense_end = capacity.min(limit);
+        let dense_out = out.get_mut(..dense_end).unwrap_or(&mut []);
+        let mut len = 0;
         let mut dense = None;
-        let mut slots = out.get_mut(..dense_end).unwrap_or(&mut []).iter_mut();
-        for slot in slots.by_ref() {
+        while let Some(slot) = dense_out.get_mut(len) {
             *slot = Pixel {
                 x: xy as u16,
                 y: (xy >> 16) as u16,
             };
+            len += 1;
+            if run >= MIN_RUN {
+                // The steps after this one along the same row, at once.
+                let run = run.min(dense_end - len);
+                walk.mark_run(rel, d, run);
+                let slots = dense_out.get_mut(len..len + run).unwrap_or(&mut []);
+                for slot in slots {
+                    xy = xy.wrapping_add(step_xy(d));
+                    *slot = Pixel {
+                        x: xy as u16,
+                        y: (xy >> 16) as u16,
+                    };
+                }
+                len += run;
+                rel = walk.along(rel, d, run);
+            }
             xy = xy.wrapping_add(step_xy(d));
             rel = walk.advance(rel, xy, d);
             match walk.arrive(rel, d) {
-                Some(next) if xy != start_xy || next != first => d = next,
+                Some((next, after)) if xy != start_xy || next != first => (d, run) = (next, after),
                 _ => {
                     dense = Some(());
                     break;
@@ -265,61 +300,51 @@ impl<'b> Tracer<'b> {
             }
         }
         // Steps taken (and pixels stored) in the dense phase.
-        let mut len = dense_end - slots.len();
         let dense = dense.map(|()| Trace::Closed {
             points: len,
             length: len,
         });
-        // Pixels stored, and steps per stored pixel minus one (a power of two minus one).
-        let (mut stored, mut spacing_mask) = (len, 0usize);
+        let mut thinned = Thinned {
+            stored: len,
+            spacing_mask: 0,
+        };
         let result = if let Some(closed) = dense {
             closed
         } else {
             loop {
                 walk.mark(rel);
-                if len & spacing_mask == 0 {
-                    let slot = match out.get_mut(stored) {
-                        Some(slot) => Some(slot),
-                        // Full: keep every second pixel and store at half the rate. `len` is a
-                        // multiple of the new spacing too when the buffer fills (at a multiple
-                        // of twice the old spacing, for an even `capacity` as the detector's).
-                        None if capacity >= 2 => {
-                            thin_out(out);
-                            stored = capacity / 2;
-                            spacing_mask = 2 * spacing_mask + 1;
-                            out.get_mut(stored).filter(|_| len & spacing_mask == 0)
-                        }
-                        None => None,
-                    };
-                    if let Some(slot) = slot {
-                        *slot = Pixel {
-                            x: xy as u16,
-                            y: (xy >> 16) as u16,
-                        };
-                        stored += 1;
-                    }
-                }
+                thinned.record(out, len, xy);
                 len += 1;
                 if len > limit {
                     break Trace::OutOfBudget;
                 }
+                if run >= MIN_RUN {
+                    let run = run.min(limit - len);
+                    walk.mark_run(rel, d, run);
+                    for _ in 0..run {
+                        xy = xy.wrapping_add(step_xy(d));
+                        thinned.record(out, len, xy);
+                        len += 1;
+                    }
+                    rel = walk.along(rel, d, run);
+                }
                 xy = xy.wrapping_add(step_xy(d));
                 rel = walk.advance(rel, xy, d);
                 // There is always a dark neighbour: the pixel just left.
-                let Some(next) = walk.arrive(rel, d) else {
+                let Some((next, after)) = walk.arrive(rel, d) else {
                     break Trace::Closed {
-                        points: stored,
+                        points: thinned.stored,
                         length: len,
                     };
                 };
                 // Jacob's criterion: back at the start and about to leave it the same way.
                 if xy == start_xy && next == first {
                     break Trace::Closed {
-                        points: stored,
+                        points: thinned.stored,
                         length: len,
                     };
                 }
-                d = next;
+                (d, run) = (next, after);
             }
         };
         let steps = match result {
@@ -479,6 +504,32 @@ impl<'w> Walk<'w> {
         rel.wrapping_add_signed(self.moves.get(d & 7).copied().unwrap_or(0))
     }
 
+    /// The position `run` steps in direction `d` (east or west) from position `rel`.
+    #[inline(always)]
+    fn along(&self, rel: usize, d: usize, run: usize) -> usize {
+        if d == 0 {
+            rel.wrapping_add(run)
+        } else {
+            rel.wrapping_sub(run)
+        }
+    }
+
+    /// Marks the `run` pixels after position `rel` in direction `d` (east or west), those a
+    /// run ([`Rows::run`]) leaves from, all in the word of `rel`.
+    #[inline(always)]
+    fn mark_run(&mut self, rel: usize, d: usize, run: usize) {
+        let (i, b) = (rel / 32, rel % 32);
+        let bits = 1u64.checked_shl(run as u32).map_or(u64::MAX, |bit| bit - 1);
+        let mask = if d == 0 {
+            bits << (b + 1)
+        } else {
+            bits << b.saturating_sub(run)
+        };
+        if let Some(word) = self.seen.get_mut(i) {
+            *word |= mask as u32;
+        }
+    }
+
     /// Marks the pixel at position `rel` as on a followed boundary.
     #[inline(always)]
     fn mark(&mut self, rel: usize) {
@@ -500,23 +551,28 @@ impl<'w> Walk<'w> {
 
     /// Marks the pixel at position `rel`, which the walk reached by a step in direction `d`,
     /// and returns the direction of the next step: the first dark neighbour clockwise from
-    /// the light one the last search saw ([`next_dark`]; `None` for none).
+    /// the light one the last search saw ([`next_dark`]; `None` for none), and how many of
+    /// the steps after it go the same way along the row ([`Rows::run`]; 0 for a pixel
+    /// probed one neighbour at a time).
     #[inline(always)]
-    fn arrive(&mut self, rel: usize, d: usize) -> Option<usize> {
+    fn arrive(&mut self, rel: usize, d: usize) -> Option<(usize, usize)> {
         match self.look(rel) {
-            Some(neighbourhood) => Some(self.next(d, neighbourhood)),
+            Some(rows) => {
+                let next = self.next(d, rows.neighbourhood());
+                Some((next, rows.run(next)))
+            }
             None => {
                 self.mark(rel);
-                self.probe(rel, (d + 6 - (d & 1)) & 7)
+                self.probe(rel, (d + 6 - (d & 1)) & 7).map(|next| (next, 0))
             }
         }
     }
 
-    /// The 3 x 3 neighbourhood of the pixel at position `rel` ([`NEIGHBOURHOOD_BIT`]),
-    /// marking the pixel; `None` (and nothing marked) for a pixel in the first or last
-    /// column of a word or outside the windows.
+    /// The rows of the pixel at position `rel` around it, marking the pixel; `None` (and
+    /// nothing marked) for a pixel in the first or last column of a word or outside the
+    /// windows.
     #[inline(always)]
-    fn look(&mut self, rel: usize) -> Option<usize> {
+    fn look(&mut self, rel: usize) -> Option<Rows> {
         // The shift that brings the west neighbour to bit 0: below 30 when all three
         // columns are in the pixel's word.
         let west = rel.wrapping_sub(1) % 32;
@@ -526,8 +582,12 @@ impl<'w> Walk<'w> {
         let rows = self.up.iter().zip(self.mid).zip(self.down);
         let (((&up, &mid), &down), seen) = rows.zip(self.seen.iter_mut()).nth(rel / 32)?;
         *seen |= 2 << west;
-        let neighbourhood = (up >> west) & 7 | ((mid >> west) & 7) << 3 | ((down >> west) & 7) << 6;
-        Some(neighbourhood as usize)
+        Some(Rows {
+            up,
+            mid,
+            down,
+            west,
+        })
     }
 
     /// The direction of the step after one in direction `d` onto a pixel with
@@ -543,6 +603,49 @@ impl<'w> Walk<'w> {
     #[inline(always)]
     fn probe(&self, rel: usize, from: usize) -> Option<usize> {
         next_dark(self.bitmap, self.moves, rel.wrapping_add(self.stride), from)
+    }
+}
+
+/// A pixel's word of the rows above, at and below it ([`Walk::look`]), and the shift that
+/// brings its west neighbour to bit 0 (below 30: all three columns are in the words).
+struct Rows {
+    up: u32,
+    mid: u32,
+    down: u32,
+    west: usize,
+}
+
+impl Rows {
+    /// The pixel's 3 x 3 neighbourhood ([`NEIGHBOURHOOD_BIT`]).
+    #[inline(always)]
+    fn neighbourhood(&self) -> usize {
+        let column = |row: u32| ((row >> self.west) & 7) as usize;
+        column(self.up) | column(self.mid) << 3 | column(self.down) << 6
+    }
+
+    /// A run along the row: how many of the steps after the pixel's next one, in direction
+    /// `d`, go the same way, within the pixel's word (0 unless `d` is east or west, and 0
+    /// on 32-bit targets, see the module docs).
+    ///
+    /// A pixel reached by a step east steps east again when its north-east neighbour is
+    /// light and its east one dark (its search starts past the north neighbour, which the
+    /// step before saw light); one reached going west steps west again when its south-west
+    /// neighbour is light and its west one dark. So the run is a count of ones in the
+    /// word `row & !above` (or `row & !below`), from the words already read for the
+    /// neighbourhood, a few instructions off the walk's chain of dependent loads.
+    #[inline(always)]
+    fn run(&self, d: usize) -> usize {
+        if !cfg!(target_pointer_width = "64") {
+            return 0;
+        }
+        // The pixel is at bit `west + 1`; going east, the first pixel that may go on is two
+        // to its east; going west, two to its west (bit `west - 1`, moved to bit 63).
+        let east = (u64::from(self.mid & !self.up) >> (self.west + 3)).trailing_ones();
+        let west = ((u64::from(self.mid & !self.down) << 32) << (32 - self.west)).leading_ones();
+        // Which way the walk goes on a ragged boundary is not predictable: a branch on it
+        // is mispredicted often (the whole detection of a textured photo was 10 % slower).
+        let run = select_unpredictable(d == 4, west, 0);
+        select_unpredictable(d == 0, east, run) as usize
     }
 }
 
@@ -572,6 +675,48 @@ fn next_dark(bitmap: &[u32], moves: &[isize; 16], bit: usize, from: usize) -> Op
     run.iter()
         .position(|&m| dark(bitmap, bit.wrapping_add_signed(m)))
         .map(|i| (first + i) & 7)
+}
+
+/// The pixels a walk stores once its boundary has outgrown the output buffer: every
+/// `spacing_mask + 1`-th step (see [`Tracer::trace`]).
+struct Thinned {
+    /// Pixels stored.
+    stored: usize,
+    /// Steps per stored pixel minus one (a power of two minus one).
+    spacing_mask: usize,
+}
+
+impl Thinned {
+    /// Stores the pixel at packed `(x, y)` `xy`, the walk's step `len`, if the spacing
+    /// keeps it; when `out` is full, first keeps every second pixel and halves the rate.
+    #[inline(always)]
+    fn record(&mut self, out: &mut [Pixel], len: usize, xy: u32) {
+        if len & self.spacing_mask != 0 {
+            return;
+        }
+        let capacity = out.len();
+        let slot = match out.get_mut(self.stored) {
+            Some(slot) => Some(slot),
+            // Full: keep every second pixel and store at half the rate. `len` is a multiple
+            // of the new spacing too when the buffer fills (at a multiple of twice the old
+            // spacing, for an even `capacity` as the detector's).
+            None if capacity >= 2 => {
+                thin_out(out);
+                self.stored = capacity / 2;
+                self.spacing_mask = 2 * self.spacing_mask + 1;
+                out.get_mut(self.stored)
+                    .filter(|_| len & self.spacing_mask == 0)
+            }
+            None => None,
+        };
+        if let Some(slot) = slot {
+            *slot = Pixel {
+                x: xy as u16,
+                y: (xy >> 16) as u16,
+            };
+            self.stored += 1;
+        }
+    }
 }
 
 /// Keeps every second pixel of a full output buffer, in order, in its first half.
@@ -966,7 +1111,11 @@ mod tests {
                         .map(|i| (from + i) % 8)
                         .find(|&e| get_bit(&bm, 2, x as isize + DX[e], 1 + DY[e], 64, 3));
                     let mut walk = Walk::new(&mut t);
-                    assert_eq!(walk.arrive(x, d), expected, "x {x}, ring {ring:08b}, d {d}");
+                    assert_eq!(
+                        walk.arrive(x, d).map(|(next, _)| next),
+                        expected,
+                        "x {x}, ring {ring:08b}, d {d}"
+                    );
                 }
                 if ring != 0 {
                     assert_eq!(t.visited_word(2 + x / 32), 1 << (x % 32), "marked");
@@ -975,22 +1124,93 @@ mod tests {
         }
     }
 
-    /// On random bitmaps (every pixel a start), the walk visits the pixels the definition
-    /// does: Moore tracing one probe at a time, stopped by Jacob's criterion.
-    #[test]
-    fn traces_match_probing_one_neighbour_at_a_time() {
+    /// The definition of a walk from the start (x, y) of a 70 x 12 bitmap of three words a
+    /// row: Moore tracing one probe at a time, stopped by Jacob's criterion.
+    fn probed_walk(bm: &[u32; 36], x: usize, y: usize) -> heapless::Vec<Pixel, 512> {
+        let wpr = 3;
+        let probe = Tracer::new(bm, &mut [0u32; 36], wpr, 0).moves;
+        let next = |bit: usize, from: usize| next_dark(bm, &probe, bit, from);
+        let start = y * wpr * 32 + x;
+        let mut expected = heapless::Vec::new();
+        let (mut bit, mut d) = (start, next(start, WEST));
+        let first = d;
+        while let Some(dir) = d {
+            let stride = wpr * 32;
+            let (px, py) = (bit % stride, bit / stride);
+            expected
+                .push(Pixel {
+                    x: px as u16,
+                    y: py as u16,
+                })
+                .unwrap();
+            bit = bit.wrapping_add_signed(probe[dir]);
+            let n = next(bit, (dir + 6 - (dir & 1)) & 7);
+            if bit == start && n == first {
+                break;
+            }
+            d = n;
+        }
+        if first.is_none() {
+            expected
+                .push(Pixel {
+                    x: x as u16,
+                    y: y as u16,
+                })
+                .unwrap();
+        }
+        expected
+    }
+
+    /// Random 70 x 12 bitmaps with a light border, `round` choosing the kind: noise of 35 to
+    /// 64 % dark (ragged boundaries), or overlapping dark and light rectangles (long straight
+    /// runs along the rows, across the words' edges: the walk's runs, see `Rows::run`).
+    fn random_bitmap(round: u32, seed: &mut u32) -> [u32; 36] {
         let (w, h, wpr) = (70usize, 12usize, 3usize);
-        let mut seed = 3u32;
-        for round in 0..300 {
-            let mut bm = [0u32; 3 * 12];
+        let mut random = |below: u32| {
+            *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (*seed >> 8) % below
+        };
+        let mut bm = [0u32; 36];
+        if round.is_multiple_of(2) {
             for y in 1..h - 1 {
                 for x in 1..w - 1 {
-                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                    if (seed >> 24) % 100 < 35 + round % 30 {
+                    if random(100) < 35 + round % 30 {
                         set_bit(&mut bm, wpr, x, y);
                     }
                 }
             }
+            return bm;
+        }
+        for rectangle in 0..2 + random(5) {
+            let (x0, y0) = (1 + random(66) as usize, 1 + random(9) as usize);
+            let (x1, y1) = (
+                (x0 + 2 + random(60) as usize).min(w - 1),
+                (y0 + 1 + random(8) as usize).min(h - 1),
+            );
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let bit = 1 << (x % 32);
+                    let word = &mut bm[y * wpr + x / 32];
+                    *word = if rectangle % 3 == 2 {
+                        *word & !bit
+                    } else {
+                        *word | bit
+                    };
+                }
+            }
+        }
+        bm
+    }
+
+    /// On random bitmaps (every pixel a start), the walk visits the pixels the definition
+    /// does ([`probed_walk`]), marks them all, and stores them thinned out evenly when the
+    /// buffer is short; a budget shorter than the boundary stops it after that many steps.
+    #[test]
+    fn traces_match_probing_one_neighbour_at_a_time() {
+        let (w, h, wpr) = (70usize, 12usize, 3usize);
+        let mut seed = 3u32;
+        for round in 0..400 {
+            let bm = random_bitmap(round, &mut seed);
             for (y, x) in (1..h - 1).flat_map(|y| (1..w - 1).map(move |x| (y, x))) {
                 let dark = |x: usize, y: usize| bm[y * wpr + x / 32] >> (x % 32) & 1 == 1;
                 if !dark(x, y) || dark(x - 1, y) {
@@ -1000,43 +1220,47 @@ mod tests {
                 let mut t = Tracer::new(&bm, &mut visited, wpr, 10_000);
                 let mut out = [Pixel::default(); 512];
                 let got = t.trace(x, y, &mut out);
-                // The definition.
-                let probe = Tracer::new(&bm, &mut [0u32; 3 * 12], wpr, 0).moves;
-                let next = |bit: usize, from: usize| next_dark(&bm, &probe, bit, from);
-                let start = y * wpr * 32 + x;
-                let mut expected = heapless::Vec::<Pixel, 512>::new();
-                let (mut bit, mut d) = (start, next(start, WEST));
-                let first = d;
-                while let Some(dir) = d {
-                    let stride = wpr * 32;
-                    let (px, py) = (bit % stride, bit / stride);
-                    expected
-                        .push(Pixel {
-                            x: px as u16,
-                            y: py as u16,
-                        })
-                        .unwrap();
-                    bit = bit.wrapping_add_signed(probe[dir]);
-                    let n = next(bit, (dir + 6 - (dir & 1)) & 7);
-                    if bit == start && n == first {
-                        break;
-                    }
-                    d = n;
-                }
-                if first.is_none() {
-                    expected
-                        .push(Pixel {
-                            x: x as u16,
-                            y: y as u16,
-                        })
-                        .unwrap();
-                }
+                let expected = probed_walk(&bm, x, y);
                 let n = expected.len();
                 assert_eq!(got, closed(n), "round {round} at ({x}, {y})");
                 assert_eq!(out[..n], expected[..], "round {round} at ({x}, {y})");
                 for p in &expected {
                     let word = t.visited_word(p.y as usize * wpr + p.x as usize / 32);
                     assert_eq!(word >> (p.x % 32) & 1, 1, "unmarked {p:?}");
+                }
+                // A short buffer: every `spacing`-th pixel, the smallest power of two
+                // that fits.
+                let mut short = [Pixel::default(); 8];
+                let mut visited = [0u32; 36];
+                let mut t = Tracer::new(&bm, &mut visited, wpr, 10_000);
+                let got = t.trace(x, y, &mut short);
+                let spacing = (0..10)
+                    .map(|k| 1 << k)
+                    .find(|s| n.div_ceil(*s) <= 8)
+                    .unwrap();
+                let points = n.div_ceil(spacing);
+                assert_eq!(
+                    got,
+                    Trace::Closed { points, length: n },
+                    "round {round} at ({x}, {y})"
+                );
+                let thinned = expected.iter().step_by(spacing);
+                assert!(
+                    short[..points].iter().eq(thinned),
+                    "round {round} at ({x}, {y})"
+                );
+                // A budget of fewer steps than the boundary's.
+                if n > 2 {
+                    let budget = n as u32 / 2;
+                    let mut visited = [0u32; 36];
+                    let mut t = Tracer::new(&bm, &mut visited, wpr, budget);
+                    let (mut dense, mut short) = ([Pixel::default(); 512], [Pixel::default(); 4]);
+                    assert_eq!(t.trace(x, y, &mut dense), Trace::OutOfBudget);
+                    assert_eq!(t.steps(), budget, "round {round} at ({x}, {y})");
+                    let mut visited = [0u32; 36];
+                    let mut t = Tracer::new(&bm, &mut visited, wpr, budget);
+                    assert_eq!(t.trace(x, y, &mut short), Trace::OutOfBudget);
+                    assert_eq!(t.steps(), budget, "round {round} at ({x}, {y})");
                 }
             }
         }
