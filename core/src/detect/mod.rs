@@ -610,18 +610,13 @@ impl Detector {
             }
             let above = y.checked_sub(1).map_or(&[][..], row_words);
             let below = row_words(y + 1);
-            for (k, &dark) in row.iter().enumerate() {
-                if dark == 0 {
-                    continue;
-                }
-                // Every start has a light west neighbour and is not on a followed boundary:
-                // most dark words (the insides of runs, edges already followed) have none,
-                // and then the six words above and below are not read.
-                let left = word(row, k.wrapping_sub(1));
-                let light_west = dark & !((dark << 1) | (left >> 31));
-                if light_west & !tracer.visited_word(y * wpr + k) == 0 {
-                    continue;
-                }
+            // Every start has a light west neighbour and is not on a followed boundary: most
+            // dark words (the insides of runs, edges already followed) have none, and are
+            // passed by a tight loop of their own (`Tracer::next_start_word`); the six words
+            // above and below are read only for the others.
+            let mut from = 0;
+            while let Some((k, left, dark)) = tracer.next_start_word(row, y * wpr, from) {
+                from = k + 1;
                 if !tracer.charge(WORK_SCAN_WORD) {
                     stats.truncated = true;
                     break 'scan;
