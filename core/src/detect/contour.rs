@@ -312,7 +312,10 @@ impl<'b> Tracer<'b> {
             };
             len += 1;
             if run >= MIN_RUN {
-                // The steps after this one along the same row, at once.
+                // The steps after this one along the same row, at once. None of them can
+                // end the walk: Jacob's criterion needs the start, whose west neighbour is
+                // light, and every pixel a run passes has a dark one (going east it came from
+                // there, going west it goes there).
                 let run = run.min(dense_end - len);
                 walk.mark_run(rel, d, run);
                 let slots = dense_out.get_mut(len..len + run).unwrap_or(&mut []);
