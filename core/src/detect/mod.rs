@@ -125,8 +125,8 @@ pub const WORK_FIT: u32 = 20;
 /// units per pixel, but for `shadow` (a hard shadow edge across a pad on concrete): its 20 m
 /// frames use 0.25-0.26 with the far marker's pattern fit, which at 0.25 would no longer be
 /// paid for, and 3 of its 60 frames are cut after their markers were found (as they were at
-/// 0.25 before the charges). At 0.28 VGA uniform noise costs 7.27 M Cortex-M7 instructions,
-/// 1.94 times the VGA landing frame (3.74 M). A QVGA frame (21,504 units at 0.28) gets the
+/// 0.25 before the charges). At 0.28 VGA uniform noise costs 7.28 M Cortex-M7 instructions,
+/// 1.96 times the VGA landing frame (3.72 M). A QVGA frame (21,504 units at 0.28) gets the
 /// floor, [`MIN_WORK_BUDGET`].
 pub const CAMERA_WORK_BUDGET: f32 = 0.28;
 /// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::offline`]: fourteen times
@@ -162,8 +162,8 @@ pub const WORK_PER_SAMPLE_X2: u32 = 3;
 /// Smallest work budget of a frame, whatever its size: the budget of a QVGA frame. The
 /// benchmark's QVGA frame of the nested pad with all six markers in view (`qvga-multi-6`,
 /// textured ground) uses 22,885 units, 92 % of it; a frame that spends all of it on
-/// uniform noise or marker look-alikes costs 1.90 to 1.91 times the QVGA landing frame on
-/// the Cortex-M7 (2.08 M instructions at most, against 1.09 M; `scripts/m7_check.sh`).
+/// uniform noise or marker look-alikes costs 1.91 to 1.92 times the QVGA landing frame on
+/// the Cortex-M7 (2.08 M instructions at most, against 1.08 M; `scripts/m7_check.sh`).
 pub const MIN_WORK_BUDGET: u32 = 25_000;
 
 /// Sizes of the caller-provided buffers for a frame size.
@@ -603,18 +603,18 @@ impl Detector {
         let binarised = tracer.charge(binarise_work);
         'scan: for y in (0..height).take_while(|_| binarised) {
             let row = row_words(y);
-            // Most rows of a frame have no dark pixel: a tight test of the whole row is a few
-            // instructions a word, where the scan below keeps its state in memory.
-            if row.iter().all(|&dark| dark == 0) {
+            // Most rows of a frame have no dark pixel: a tight test of the row is a few
+            // instructions a word. The search for starts goes on from its first dark word.
+            let Some(first_dark) = row.iter().position(|&dark| dark != 0) else {
                 continue;
-            }
+            };
             let above = y.checked_sub(1).map_or(&[][..], row_words);
             let below = row_words(y + 1);
             // Every start has a light west neighbour and is not on a followed boundary: most
             // dark words (the insides of runs, edges already followed) have none, and are
             // passed by a tight loop of their own (`Tracer::next_start_word`); the six words
             // above and below are read only for the others.
-            let mut from = 0;
+            let mut from = first_dark;
             while let Some((k, left, dark)) = tracer.next_start_word(row, y * wpr, from) {
                 from = k + 1;
                 if !tracer.charge(WORK_SCAN_WORD) {
