@@ -17,6 +17,7 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 mod connect;
+pub mod gcs;
 
 use super::{CliError, Outcome};
 use crate::companion::endpoint::EndpointSpec;
@@ -196,6 +197,24 @@ pub struct SitlArgs {
     #[arg(long, value_name = "LAT,LON,ALT", help_heading = "A running SITL",
           value_parser = parse_pad_at, allow_hyphen_values = true)]
     pub pad_at: Option<[f64; 3]>,
+
+    /// With a running SITL: fly the whole rehearsal from its ground-station port too
+    /// (tcp:HOST:PORT, udp:HOST:PORT or udpin:ADDR:PORT; ArduPilot SITL tcp:127.0.0.1:5760,
+    /// PX4 SITL udpin:0.0.0.0:14550): set the precision-landing parameters, arm, take off to
+    /// --height, fly --offset from the pad, land, and watch until the autopilot disarms
+    #[arg(long, value_name = "ADDRESS", help_heading = "A running SITL",
+          value_parser = gcs::parse_gcs)]
+    pub gcs: Option<EndpointSpec>,
+
+    /// With --gcs on ArduPilot SITL: its wind turbulence, SIM_WIND_TURB, m/s (--wind-mps
+    /// and --wind-profile set SIM_WIND_SPD and SIM_WIND_T; PX4's SIH has no wind)
+    #[arg(
+        long,
+        value_name = "MPS",
+        default_value_t = 0.0,
+        help_heading = "A running SITL"
+    )]
+    pub turbulence: f64,
 }
 
 fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {
@@ -242,6 +261,7 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
         ("--offset", args.offset),
         ("--wind-mps", args.wind_mps),
         ("--gust-mps", args.gust_mps),
+        ("--turbulence", args.turbulence),
     ] {
         if !non_negative(v) {
             return Err(CliError(format!("{flag} must be a number >= 0")));
@@ -484,9 +504,10 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
     if let Some(endpoint) = args.sitl_endpoint() {
         return connect::run(args, endpoint, params, out, err);
     }
-    if args.pad_at.is_some() {
+    if args.pad_at.is_some() || args.gcs.is_some() {
         return Err(CliError::new(
-            "--pad-at places the pad for a running SITL: give --tcp, --udp or --udp-listen",
+            "--pad-at and --gcs are for a running SITL: give the board's link too, \
+             --tcp, --udp or --udp-listen",
         ));
     }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());

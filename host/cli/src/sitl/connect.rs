@@ -45,6 +45,7 @@ use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::Simulator;
 
+use super::gcs::{self, Flight, GcsLink};
 use crate::companion::endpoint::{Endpoint, EndpointSpec};
 use crate::companion::interrupt;
 use crate::CliError;
@@ -63,8 +64,15 @@ pub const LANDED_HOLD_S: f64 = 1.0;
 const LANDED_SPEED_MPS: f64 = 0.2;
 /// A frame is rendered this long before it is processed, seconds.
 pub const FRAME_DELAY_S: f64 = 0.05;
-/// Below this height no frame is rendered (the pad fills the lens), metres.
-const MIN_RENDER_HEIGHT_M: f64 = 0.2;
+/// Below this height no frame is rendered, metres: under the camera's height with the vehicle
+/// resting on the pad ([`GEAR_HEIGHT_M`]), so that the board keeps looking (and sending) after
+/// touchdown, as it would on the vehicle, while the autopilot finishes its landing.
+const MIN_RENDER_HEIGHT_M: f64 = 0.05;
+/// After touchdown, the body origin this far above the pad plane again is a re-take-off, m.
+const RETAKEOFF_HEIGHT_M: f64 = 0.8;
+/// The landing's frames are late when they reach the companion more than this after their
+/// exposure, on average, seconds: the run then says it does not keep pace.
+pub const LAG_WARNING_S: f64 = 0.1;
 /// Ground-truth rate asked for, µs between samples (50 Hz).
 const TRUTH_INTERVAL_US: u32 = 20_000;
 /// ArduPilot's ground truth, SIM_STATE (its own entry in ArduPilot's message-id map, beside
@@ -85,8 +93,16 @@ pub struct ConnectConfig {
     pub landing: LandingConfig,
     /// The pad's origin: latitude and longitude (degrees), altitude AMSL (metres).
     pub pad_at: Option<[f64; 3]>,
-    /// Give up after this long, seconds.
+    /// Give up after this long, seconds (with a rehearsal: after the landing command).
     pub max_time_s: f64,
+}
+
+/// A whole rehearsal: the ground station's link and the flight it flies.
+pub struct Rehearsal {
+    /// The ground-station link, prepared ([`gcs::prepare`]).
+    pub link: GcsLink,
+    /// The flight.
+    pub flight: Flight,
 }
 
 /// A ground-truth sample as the SITL sent it, in its geodetic terms.
@@ -183,10 +199,22 @@ pub struct ConnectedOutcome {
     pub run_s: f64,
     /// Why the run ended early (a lost link, a signal), if it did.
     pub stopped: Option<String>,
+    /// Frames the frame rate asked for that were not rendered, the loop being busy.
+    pub frames_skipped: usize,
+    /// From a frame's exposure to its estimate reaching the companion, seconds: mean, max.
+    pub lag_s: Option<(f64, f64)>,
+    /// The vehicle rose again after touchdown (seconds, run clock).
+    pub retakeoff_s: Option<f64>,
 }
 
-/// Flies one landing against the SITL at `config.endpoint`; progress lines go to `err`.
-pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutcome, CliError> {
+/// Flies one landing against the SITL at `config.endpoint`; progress lines go to `err`. With a
+/// `rehearsal` the ground station flies the vehicle too, and the run ends when the autopilot
+/// has disarmed after the landing; without one it ends at touchdown.
+pub fn fly(
+    config: &ConnectConfig,
+    mut rehearsal: Option<&mut Rehearsal>,
+    err: &mut dyn Write,
+) -> Result<ConnectedOutcome, CliError> {
     let scenario = closed_loop::scene(&config.landing).map_err(CliError)?;
     let mut simulator = Simulator::new(scenario).with_threads(config.landing.threads);
     let camera = simulator.scenario.camera.model;
@@ -229,6 +257,10 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
     let mut next_frame_s = 0.0;
     let start = Instant::now();
     let now_s = || start.elapsed().as_secs_f64();
+    if let Some(r) = rehearsal.as_deref_mut() {
+        r.link.set_clock_zero(start);
+    }
+    let (mut lag_sum, mut lag_max, mut lag_count) = (0.0, 0.0_f64, 0usize);
 
     let _ = writeln!(
         err,
@@ -237,7 +269,11 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
     'run: loop {
         let t = now_s();
         outcome.run_s = t;
-        if t > config.max_time_s {
+        let landing_s = match rehearsal.as_deref() {
+            Some(r) => r.flight.landing_started_s(),
+            None => Some(0.0),
+        };
+        if landing_s.is_some_and(|l| t - l > config.max_time_s) {
             break;
         }
         if let Some(signal) = interrupt::received() {
@@ -293,13 +329,25 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
             );
         }
         // The landing's state from the newest truth.
-        if let Some(state) = truth.at(t) {
+        let now_truth = truth.at(t).map(|state| {
+            let speed = truth.at(t - 0.1).map_or(0.0, |before| {
+                (state.position - before.position).norm() / 0.1
+            });
+            (state, speed)
+        });
+        if let Some((state, speed)) = now_truth {
             let height = state.position.z;
             airborne |= height > AIRBORNE_HEIGHT_M;
-            let resting = truth.at(t - 0.1).is_some_and(|before| {
-                (state.position - before.position).norm() / 0.1 < LANDED_SPEED_MPS
-            });
-            if airborne && height < LANDED_HEIGHT_M && resting {
+            if let Some(td) = outcome.touchdown {
+                if height > RETAKEOFF_HEIGHT_M && outcome.retakeoff_s.is_none() {
+                    outcome.retakeoff_s = Some(t);
+                    let _ = writeln!(
+                        err,
+                        "{t:7.2} s  the vehicle rose again after its touchdown at {:.2} s",
+                        td.t_s
+                    );
+                }
+            } else if airborne && height < LANDED_HEIGHT_M && speed < LANDED_SPEED_MPS {
                 let (since, at) = *on_ground_since.get_or_insert((t, state.position));
                 if t - since >= LANDED_HOLD_S {
                     outcome.touchdown = Some(ConnectedTouchdown {
@@ -307,15 +355,33 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
                         north_m: at.y,
                         east_m: at.x,
                     });
-                    break;
+                    if rehearsal.is_none() {
+                        break;
+                    }
+                    let _ = writeln!(
+                        err,
+                        "{since:7.2} s  touchdown {:.1} cm from the pad centre",
+                        100.0 * at.y.hypot(at.x)
+                    );
                 }
             } else {
                 on_ground_since = None;
             }
         }
+        if let Some(r) = rehearsal.as_deref_mut() {
+            if r.flight
+                .poll(&mut r.link, t, now_truth, pad_at, err)?
+                .is_some()
+            {
+                break;
+            }
+        }
         // A frame when one is due and the truth covers its time.
         let frame_s = t - FRAME_DELAY_S;
         if t >= next_frame_s && !truth.is_empty() && frame_s > 0.0 {
+            if next_frame_s > 0.0 {
+                outcome.frames_skipped += ((t - next_frame_s) / frame_period_s).floor() as usize;
+            }
             next_frame_s = (next_frame_s + frame_period_s).max(t);
             let high_enough = truth
                 .at(frame_s)
@@ -334,7 +400,12 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
                 let report = pipeline.process(&image, t_us, companion.vehicle(), &mut buffers);
                 outcome.frames += 1;
                 outcome.frames_with_fix += usize::from(report.fix.is_some());
-                companion.on_estimate(&report.estimate, (now_s() * 1e6) as u64);
+                let handed_s = now_s();
+                companion.on_estimate(&report.estimate, (handed_s * 1e6) as u64);
+                let lag = handed_s - frame_s;
+                lag_sum += lag;
+                lag_max = lag_max.max(lag);
+                lag_count += 1;
             }
         }
         while let Some(n) = companion.poll_transmit((now_s() * 1e6) as u64, &mut tx) {
@@ -347,7 +418,25 @@ pub fn fly(config: &ConnectConfig, err: &mut dyn Write) -> Result<ConnectedOutco
         outcome.targets_sent = sent;
         std::thread::sleep(TICK);
     }
+    outcome.lag_s = (lag_count > 0).then(|| (lag_sum / lag_count as f64, lag_max));
     Ok(outcome)
+}
+
+/// The JSON record of a rehearsal's ground-station part (keys in docs/interfaces.md).
+#[derive(Debug, serde::Serialize)]
+struct RehearsalJson {
+    autopilot: &'static str,
+    params_changed: Vec<String>,
+    rebooted: bool,
+    armed_s: Option<f64>,
+    landing_command_s: Option<f64>,
+    landing_start_north_m: Option<f64>,
+    landing_start_east_m: Option<f64>,
+    landing_height_m: Option<f64>,
+    start_held: bool,
+    landing_to_touchdown_s: Option<f64>,
+    disarmed_s: Option<f64>,
+    autopilot_messages: Vec<(f64, String)>,
 }
 
 /// The JSON record of a connected landing (keys in docs/interfaces.md).
@@ -364,9 +453,37 @@ struct ConnectedJson {
     truth_samples: usize,
     frames: usize,
     frames_with_fix: usize,
+    frames_skipped: usize,
+    lag_ms_mean: Option<f64>,
+    lag_ms_max: Option<f64>,
     targets_sent: u32,
+    retakeoff_s: Option<f64>,
     run_s: f64,
     stopped: Option<String>,
+    rehearsal: Option<RehearsalJson>,
+}
+
+/// The rehearsal's plan from the command line: the start point at `--offset` on a bearing
+/// the seed picks (golden-ratio steps, so that consecutive seeds spread around the pad), the
+/// wind from `--wind-mps`, `--wind-profile` and `--turbulence`, from a seeded direction.
+fn plan(args: &super::SitlArgs) -> gcs::Plan {
+    let golden = 0.618_033_988_749_895;
+    let bearing = ((args.seed as f64) * golden).fract() * std::f64::consts::TAU;
+    let wind_from = ((args.seed as f64 + 0.5) * golden).fract() * 360.0;
+    gcs::Plan {
+        height_m: args.height,
+        start_north_m: args.offset * bearing.cos(),
+        start_east_m: args.offset * bearing.sin(),
+        wind: Some(gcs::SitlWind {
+            speed_mps: args.wind_mps as f32,
+            from_deg: wind_from.round() as f32,
+            profile: match args.wind_profile {
+                super::WindProfileArg::Uniform => 1.0,
+                super::WindProfileArg::Sitl => 0.0,
+            },
+            turbulence_mps: args.turbulence as f32,
+        }),
+    }
 }
 
 /// `touchdown sitl` against a running SITL: flies, prints the outcome (text or `--json`).
@@ -398,9 +515,32 @@ pub(super) fn run(
         pad_at: args.pad_at,
         max_time_s: args.max_time,
     };
-    let o = fly(&config, err)?;
+    let mut rehearsal = None;
+    let mut prepared = gcs::Prepared::default();
+    if let Some(spec) = &args.gcs {
+        let plan = plan(args);
+        let (link, p) = gcs::prepare(spec, &plan, err)?;
+        prepared = p;
+        rehearsal = Some(Rehearsal {
+            link,
+            flight: Flight::new(plan),
+        });
+    }
+    let o = fly(&config, rehearsal.as_mut(), err)?;
     let td = o.touchdown;
     let horizontal = td.map(|t| 100.0 * t.north_m.hypot(t.east_m));
+    let log = rehearsal.as_ref().map(|r| r.flight.log.clone());
+    let landing_to_touchdown = log.as_ref().and_then(|l| Some(td?.t_s - l.landing_s?));
+    if let Some((mean, _)) = o.lag_s.filter(|(mean, _)| *mean > LAG_WARNING_S) {
+        let _ = writeln!(
+            err,
+            "warning: the frames do not keep pace: {:.0} ms from exposure to target on average \
+             (over {:.0} ms), {} frames skipped; try --qvga or a lower --fps",
+            1e3 * mean,
+            1e3 * LAG_WARNING_S,
+            o.frames_skipped
+        );
+    }
     let text = if args.json {
         let json = ConnectedJson {
             autopilot: "sitl",
@@ -414,9 +554,30 @@ pub(super) fn run(
             truth_samples: o.truth_samples,
             frames: o.frames,
             frames_with_fix: o.frames_with_fix,
+            frames_skipped: o.frames_skipped,
+            lag_ms_mean: o.lag_s.map(|(m, _)| 1e3 * m),
+            lag_ms_max: o.lag_s.map(|(_, m)| 1e3 * m),
             targets_sent: o.targets_sent,
+            retakeoff_s: o.retakeoff_s,
             run_s: o.run_s,
             stopped: o.stopped.clone(),
+            rehearsal: rehearsal
+                .as_ref()
+                .zip(log.as_ref())
+                .map(|(r, l)| RehearsalJson {
+                    autopilot: r.link.autopilot.name(),
+                    params_changed: prepared.changed.clone(),
+                    rebooted: prepared.rebooted,
+                    armed_s: l.armed_s,
+                    landing_command_s: l.landing_s,
+                    landing_start_north_m: l.landing_start_ne.map(|p| p.0),
+                    landing_start_east_m: l.landing_start_ne.map(|p| p.1),
+                    landing_height_m: l.landing_height_m,
+                    start_held: l.start_held,
+                    landing_to_touchdown_s: landing_to_touchdown,
+                    disarmed_s: l.disarmed_s,
+                    autopilot_messages: r.link.texts.clone(),
+                }),
         };
         let mut line = serde_json::to_string(&json).map_err(CliError::new)?;
         line.push('\n');
@@ -428,14 +589,38 @@ pub(super) fn run(
             endpoint.describe(),
             o.truth_samples
         );
+        if let (Some(r), Some(l)) = (&rehearsal, &log) {
+            t.push_str(&format!(
+                "  {:>7}  armed ({}{})\n",
+                seconds(l.armed_s),
+                r.link.autopilot.name(),
+                if prepared.rebooted {
+                    ", rebooted once for its parameters"
+                } else {
+                    ""
+                }
+            ));
+            t.push_str(&format!(
+                "  {:>7}  landing commanded{}\n",
+                seconds(l.landing_s),
+                match (l.landing_start_ne, l.landing_height_m) {
+                    (Some((n, e)), Some(h)) => format!(
+                        " at {h:.1} m, {:.2} m off the pad (north {n:+.2}, east {e:+.2} m)",
+                        n.hypot(e)
+                    ),
+                    _ => String::new(),
+                }
+            ));
+        }
         t.push_str(&format!(
             "  {:>7}  first LANDING_TARGET sent\n",
             seconds(o.first_target_s)
         ));
         match (td, horizontal) {
             (Some(td), Some(h)) => t.push_str(&format!(
-                "  {:>7}  touchdown\ntouchdown: {h:.1} cm from the pad centre (north {:+.1}, east {:+.1} cm)\n",
+                "  {:>7}  touchdown{}\ntouchdown: {h:.1} cm from the pad centre (north {:+.1}, east {:+.1} cm)\n",
                 seconds(Some(td.t_s)),
+                landing_to_touchdown.map_or(String::new(), |d| format!(" ({d:.1} s after the landing command)")),
                 100.0 * td.north_m,
                 100.0 * td.east_m
             )),
@@ -445,20 +630,47 @@ pub(super) fn run(
                 o.stopped.as_deref().map_or(String::new(), |s| format!(" ({s})"))
             )),
         }
+        if let Some(l) = &log {
+            t.push_str(&format!("  {:>7}  disarmed\n", seconds(l.disarmed_s)));
+        }
+        if let Some(r) = o.retakeoff_s {
+            t.push_str(&format!("  {r:>7.2}  rose again after touchdown\n"));
+        }
         t.push_str(&format!(
-            "frames {} ({} with a pad fix), LANDING_TARGETs sent {}\n",
-            o.frames, o.frames_with_fix, o.targets_sent
+            "frames {} ({} with a pad fix, {} skipped), LANDING_TARGETs sent {}{}\n",
+            o.frames,
+            o.frames_with_fix,
+            o.frames_skipped,
+            o.targets_sent,
+            o.lag_s.map_or(String::new(), |(mean, max)| format!(
+                "; lag from exposure to target {:.0} ms mean, {:.0} ms max",
+                1e3 * mean,
+                1e3 * max
+            ))
         ));
         t
     };
     out.write_all(text.as_bytes())
         .map_err(|e| CliError(format!("cannot write to stdout: {e}")))?;
+    let disarmed = log.as_ref().is_none_or(|l| l.disarmed_s.is_some());
     match (td, o.stopped) {
-        (Some(_), _) => Ok(super::Outcome::Success),
-        (None, Some(reason)) => Err(CliError(reason)),
-        (None, None) => Err(CliError(format!(
-            "no touchdown within --max-time {:.0} s",
+        (_, Some(reason)) => Err(CliError(reason)),
+        (Some(_), None) if o.retakeoff_s.is_some() => Err(CliError::new(
+            "the vehicle took off again after its touchdown",
+        )),
+        (Some(_), None) if !disarmed => Err(CliError(format!(
+            "the autopilot did not disarm within --max-time {:.0} s of the landing command",
             args.max_time
+        ))),
+        (Some(_), None) => Ok(super::Outcome::Success),
+        (None, None) => Err(CliError(format!(
+            "no touchdown within --max-time {:.0} s{}",
+            args.max_time,
+            if rehearsal.is_some() {
+                " of the landing command"
+            } else {
+                ""
+            }
         ))),
     }
 }
