@@ -583,58 +583,66 @@ pub(super) fn run(
         line.push('\n');
         line
     } else {
-        let seconds = |v: Option<f64>| v.map_or("-".to_string(), |s| format!("{s:.2}"));
         let mut t = format!(
             "{}: {} ground-truth samples; timeline, s from the start of the run:\n",
             endpoint.describe(),
             o.truth_samples
         );
+        // The events in the order they happened (a rehearsal's board sends its first
+        // target during the climb, long before the landing).
+        let mut events: Vec<(f64, String)> = Vec::new();
         if let (Some(r), Some(l)) = (&rehearsal, &log) {
-            t.push_str(&format!(
-                "  {:>7}  armed ({}{})\n",
-                seconds(l.armed_s),
-                r.link.autopilot.name(),
-                if prepared.rebooted {
+            if let Some(a) = l.armed_s {
+                let reboot = if prepared.rebooted {
                     ", rebooted once for its parameters"
                 } else {
                     ""
-                }
-            ));
-            t.push_str(&format!(
-                "  {:>7}  landing commanded{}\n",
-                seconds(l.landing_s),
-                match (l.landing_start_ne, l.landing_height_m) {
+                };
+                events.push((a, format!("armed ({}{reboot})", r.link.autopilot.name())));
+            }
+            if let Some(s) = l.landing_s {
+                let from = match (l.landing_start_ne, l.landing_height_m) {
                     (Some((n, e)), Some(h)) => format!(
                         " at {h:.1} m, {:.2} m off the pad (north {n:+.2}, east {e:+.2} m)",
                         n.hypot(e)
                     ),
                     _ => String::new(),
-                }
-            ));
+                };
+                events.push((s, format!("landing commanded{from}")));
+            }
+            if let Some(d) = l.disarmed_s {
+                events.push((d, "disarmed".into()));
+            }
         }
-        t.push_str(&format!(
-            "  {:>7}  first LANDING_TARGET sent\n",
-            seconds(o.first_target_s)
-        ));
+        if let Some(f) = o.first_target_s {
+            events.push((f, "first LANDING_TARGET sent".into()));
+        }
+        if let Some(td) = td {
+            let after = landing_to_touchdown.map_or(String::new(), |d| {
+                format!(" ({d:.1} s after the landing command)")
+            });
+            events.push((td.t_s, format!("touchdown{after}")));
+        }
+        if let Some(r) = o.retakeoff_s {
+            events.push((r, "rose again after touchdown".into()));
+        }
+        events.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (s, what) in &events {
+            t.push_str(&format!("  {s:>7.2}  {what}\n"));
+        }
         match (td, horizontal) {
             (Some(td), Some(h)) => t.push_str(&format!(
-                "  {:>7}  touchdown{}\ntouchdown: {h:.1} cm from the pad centre (north {:+.1}, east {:+.1} cm)\n",
-                seconds(Some(td.t_s)),
-                landing_to_touchdown.map_or(String::new(), |d| format!(" ({d:.1} s after the landing command)")),
+                "touchdown: {h:.1} cm from the pad centre (north {:+.1}, east {:+.1} cm)\n",
                 100.0 * td.north_m,
                 100.0 * td.east_m
             )),
             _ => t.push_str(&format!(
                 "no touchdown in {:.0} s{}\n",
                 o.run_s,
-                o.stopped.as_deref().map_or(String::new(), |s| format!(" ({s})"))
+                o.stopped
+                    .as_deref()
+                    .map_or(String::new(), |s| format!(" ({s})"))
             )),
-        }
-        if let Some(l) = &log {
-            t.push_str(&format!("  {:>7}  disarmed\n", seconds(l.disarmed_s)));
-        }
-        if let Some(r) = o.retakeoff_s {
-            t.push_str(&format!("  {r:>7.2}  rose again after touchdown\n"));
         }
         t.push_str(&format!(
             "frames {} ({} with a pad fix, {} skipped), LANDING_TARGETs sent {}{}\n",

@@ -57,8 +57,9 @@ const ARMING_PATIENCE_S: f64 = 180.0;
 const TAKEOFF_PATIENCE_S: f64 = 90.0;
 /// The move to the start point may take this long before the landing starts anyway, s.
 const MOVE_PATIENCE_S: f64 = 60.0;
-/// At the start point: within this distance of it, horizontally, metres...
-const START_TOLERANCE_M: f64 = 0.3;
+/// At the start point: within this distance of it, horizontally, metres (PX4 may hold its
+/// own set point tens of centimetres off in truth)...
+const START_TOLERANCE_M: f64 = 1.0;
 /// ... slower than this, m/s ...
 const START_SPEED_MPS: f64 = 0.2;
 /// ... for this long, seconds.
