@@ -215,6 +215,11 @@ pub struct SitlArgs {
         help_heading = "A running SITL"
     )]
     pub turbulence: f64,
+
+    /// With --gcs: turn to this heading (degrees from north) at the start point before the
+    /// landing [default: the heading the vehicle has]
+    #[arg(long, value_name = "DEG", help_heading = "A running SITL", allow_hyphen_values = true)]
+    pub yaw: Option<f64>,
 }
 
 fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {
@@ -272,6 +277,9 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
     }
     if !positive(args.max_time) {
         return Err(CliError("--max-time must be a number > 0".into()));
+    }
+    if args.yaw.is_some_and(|y| !y.is_finite() || y.abs() > 360.0) {
+        return Err(CliError("--yaw must be a heading within -360..360 degrees".into()));
     }
     if args.seeds == 0 {
         return Err(CliError("--seeds must be at least 1".into()));
@@ -504,9 +512,9 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
     if let Some(endpoint) = args.sitl_endpoint() {
         return connect::run(args, endpoint, params, out, err);
     }
-    if args.pad_at.is_some() || args.gcs.is_some() {
+    if args.pad_at.is_some() || args.gcs.is_some() || args.yaw.is_some() {
         return Err(CliError::new(
-            "--pad-at and --gcs are for a running SITL: give the board's link too, \
+            "--pad-at, --gcs and --yaw are for a running SITL: give the board's link too, \
              --tcp, --udp or --udp-listen",
         ));
     }

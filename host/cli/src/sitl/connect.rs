@@ -474,6 +474,7 @@ fn plan(args: &super::SitlArgs) -> gcs::Plan {
         height_m: args.height,
         start_north_m: args.offset * bearing.cos(),
         start_east_m: args.offset * bearing.sin(),
+        yaw_deg: args.yaw,
         wind: Some(gcs::SitlWind {
             speed_mps: args.wind_mps as f32,
             from_deg: wind_from.round() as f32,

@@ -62,8 +62,10 @@ const MOVE_PATIENCE_S: f64 = 60.0;
 const START_TOLERANCE_M: f64 = 1.0;
 /// ... slower than this, m/s ...
 const START_SPEED_MPS: f64 = 0.2;
-/// ... for this long, seconds.
+/// ... for this long, seconds, and turned to the heading asked for within this, degrees.
 const START_HOLD_S: f64 = 3.0;
+/// See [`START_HOLD_S`].
+const START_HEADING_DEG: f64 = 5.0;
 /// Commands not yet taken are sent again after this long, seconds.
 const RETRY_S: f64 = 2.0;
 /// After the autopilot disarms the run watches this much longer (a re-take-off shows), s.
@@ -133,6 +135,8 @@ pub struct Plan {
     pub start_north_m: f64,
     /// See `start_north_m`.
     pub start_east_m: f64,
+    /// The heading to turn to at the start point, degrees from north (`None`: as it is).
+    pub yaw_deg: Option<f64>,
     /// ArduPilot SITL's wind: mean speed (m/s), direction it blows from (degrees), profile
     /// (SIM_WIND_T) and turbulence (SIM_WIND_TURB, m/s). PX4's SIH has no wind.
     pub wind: Option<SitlWind>,
@@ -891,9 +895,17 @@ impl Flight {
                 settled_s,
             } => {
                 let (north, east) = (self.plan.start_north_m, self.plan.start_east_m);
+                let heading_ok = |s: &TrueState| {
+                    self.plan.yaw_deg.is_none_or(|want| {
+                        let heading = s.body_to_ned[(1, 0)].atan2(s.body_to_ned[(0, 0)]);
+                        let off = (heading.to_degrees() - want).rem_euclid(360.0);
+                        off.min(360.0 - off) < START_HEADING_DEG
+                    })
+                };
                 let at_start = truth.is_some_and(|(s, speed)| {
                     (s.position.y - north).hypot(s.position.x - east) < START_TOLERANCE_M
                         && speed < START_SPEED_MPS
+                        && heading_ok(&s)
                 });
                 let settled_s = if at_start {
                     settled_s.or(Some(t))
@@ -1023,12 +1035,16 @@ impl Flight {
                         | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE,
                 );
                 ignore.remove(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_FORCE_SET);
+                if self.plan.yaw_deg.is_some() {
+                    ignore.remove(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE);
+                }
                 link.send(&MavMessage::SET_POSITION_TARGET_GLOBAL_INT(
                     SET_POSITION_TARGET_GLOBAL_INT_DATA {
                         time_boot_ms: 0,
                         lat_int: lat,
                         lon_int: lon,
                         alt: self.plan.height_m as f32,
+                        yaw: self.plan.yaw_deg.unwrap_or(0.0).to_radians() as f32,
                         type_mask: ignore,
                         target_system: link.system_id,
                         target_component: 1,
@@ -1047,7 +1063,11 @@ impl Flight {
                     // MAV_DO_REPOSITION_FLAGS_CHANGE_MODE: into PX4's hold mode at the point.
                     param2: 1.0,
                     param3: 0.0,
-                    param4: f32::NAN,
+                    // The heading in radians, NaN: as PX4's yaw mode has it.
+                    param4: self
+                        .plan
+                        .yaw_deg
+                        .map_or(f32::NAN, |d| d.to_radians() as f32),
                     x: lat,
                     y: lon,
                     z: alt as f32,
@@ -1139,6 +1159,7 @@ mod tests {
             height_m: 12.0,
             start_north_m: 1.0,
             start_east_m: 2.0,
+            yaw_deg: None,
             wind: Some(SitlWind {
                 speed_mps: 3.0,
                 from_deg: 90.0,
