@@ -218,7 +218,12 @@ pub struct SitlArgs {
 
     /// With --gcs: turn to this heading (degrees from north) at the start point before the
     /// landing [default: the heading the vehicle has]
-    #[arg(long, value_name = "DEG", help_heading = "A running SITL", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "DEG",
+        help_heading = "A running SITL",
+        allow_hyphen_values = true
+    )]
     pub yaw: Option<f64>,
 }
 
@@ -279,7 +284,9 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
         return Err(CliError("--max-time must be a number > 0".into()));
     }
     if args.yaw.is_some_and(|y| !y.is_finite() || y.abs() > 360.0) {
-        return Err(CliError("--yaw must be a heading within -360..360 degrees".into()));
+        return Err(CliError(
+            "--yaw must be a heading within -360..360 degrees".into(),
+        ));
     }
     if args.seeds == 0 {
         return Err(CliError("--seeds must be at least 1".into()));
