@@ -63,6 +63,17 @@ impl RowPoses {
     }
 }
 
+/// Which pixels are sub-sampled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sampling {
+    /// Only the pixels whose footprint is not uniform (`World::footprint`); the renderer's.
+    Adaptive,
+    /// Every pixel, uniform or not: the reference the adaptive sampling is tested against
+    /// (a uniform footprint's sub-samples all see the same albedo and light, so the two
+    /// differ only where a mixed footprint was taken for a uniform one).
+    Exhaustive,
+}
+
 /// Renders the mean radiance of each row over its poses into a `width x height` buffer.
 pub fn render_radiance(
     world: &World,
@@ -72,6 +83,30 @@ pub fn render_radiance(
     poses: &RowPoses,
     supersampling: usize,
     threads: usize,
+) -> Vec<f32> {
+    render_radiance_sampled(
+        world,
+        rays,
+        width,
+        height,
+        poses,
+        supersampling,
+        threads,
+        Sampling::Adaptive,
+    )
+}
+
+/// [`render_radiance`] with the pixels to sub-sample chosen by `sampling`.
+#[allow(clippy::too_many_arguments)]
+pub fn render_radiance_sampled(
+    world: &World,
+    rays: &RayMap,
+    width: usize,
+    height: usize,
+    poses: &RowPoses,
+    supersampling: usize,
+    threads: usize,
+    sampling: Sampling,
 ) -> Vec<f32> {
     let mut out = vec![0.0f32; width * height];
     if width == 0 || height == 0 || poses.row(0).is_empty() {
@@ -93,11 +128,19 @@ pub fn render_radiance(
                         rows,
                         &poses.poses,
                         supersampling,
+                        sampling,
                         chunk,
                     ),
-                    Some(_) => {
-                        render_band_rolling(world, rays, width, y0, poses, supersampling, chunk)
-                    }
+                    Some(_) => render_band_rolling(
+                        world,
+                        rays,
+                        width,
+                        y0,
+                        poses,
+                        supersampling,
+                        sampling,
+                        chunk,
+                    ),
                 }
             };
             if threads == 1 {
@@ -121,10 +164,12 @@ fn render_band_global(
     rows: usize,
     poses: &[CameraPose],
     supersampling: usize,
+    sampling: Sampling,
     chunk: &mut [f32],
 ) {
     let weight = 1.0 / poses.len() as f32;
     let mut scratch = vec![0.0f32; chunk.len()];
+    let mut row_scratch = RowScratch::default();
     let mut top: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
     let mut bottom: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
     for pose in poses {
@@ -145,7 +190,9 @@ fn render_band_global(
                 &top,
                 &bottom,
                 supersampling,
+                sampling,
                 row_out,
+                &mut row_scratch,
             );
             std::mem::swap(&mut top, &mut bottom);
         }
@@ -157,6 +204,7 @@ fn render_band_global(
 
 /// A band of rows each exposed over its own poses (a rolling shutter): row by row, each
 /// pose's homography mapping the row's top and bottom pixel corners.
+#[allow(clippy::too_many_arguments)]
 fn render_band_rolling(
     world: &World,
     rays: &RayMap,
@@ -164,9 +212,11 @@ fn render_band_rolling(
     y0: usize,
     poses: &RowPoses,
     supersampling: usize,
+    sampling: Sampling,
     chunk: &mut [f32],
 ) {
     let mut scratch = vec![0.0f32; width];
+    let mut row_scratch = RowScratch::default();
     let mut top: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
     let mut bottom: Vec<Option<(f64, f64)>> = Vec::with_capacity(width + 1);
     for (r, row_out) in chunk.chunks_mut(width).enumerate() {
@@ -186,7 +236,9 @@ fn render_band_rolling(
                 &top,
                 &bottom,
                 supersampling,
+                sampling,
                 &mut scratch,
+                &mut row_scratch,
             );
             for (o, s) in row_out.iter_mut().zip(&scratch) {
                 *o += weight * s;
@@ -217,6 +269,28 @@ fn ground(h: &[[f64; 3]; 3], ray: [f64; 2]) -> Option<(f64, f64)> {
     apply_homography(h, ray[0], ray[1])
 }
 
+/// What a pixel of a row still needs once its footprint is known: the ground's texture at
+/// [`RowScratch::points`], then either only the light or its sub-samples.
+#[derive(Debug, Clone, Copy)]
+enum Pending {
+    /// Uniform bare ground under this illumination.
+    Ground(f64),
+    /// Mixed: sub-sampled with the texture as every sub-sample's bare-ground albedo.
+    Mixed,
+}
+
+/// Buffers reused from row to row: the pixels of a row that wait for the ground's texture,
+/// which is looked up for all of them at once ([`crate::texture::GroundTexture::albedo_batch`]).
+#[derive(Debug, Default)]
+pub(crate) struct RowScratch {
+    /// Pixel and what it needs.
+    pending: Vec<(usize, Pending)>,
+    /// Where the texture is wanted: `[x, y, footprint_m]`.
+    points: Vec<[f64; 3]>,
+    /// The texture there.
+    albedo: Vec<f32>,
+}
+
 /// The radiance of pixel row `y` through `h`, from the ground points of its top and bottom
 /// pixel corners.
 #[allow(clippy::too_many_arguments)]
@@ -229,11 +303,15 @@ fn shade_row(
     top: &[Option<(f64, f64)>],
     bottom: &[Option<(f64, f64)>],
     supersampling: usize,
+    sampling: Sampling,
     out: &mut [f32],
+    scratch: &mut RowScratch,
 ) {
     let s = supersampling.max(1);
     let fine = 1.0 / (s * s) as f64;
     let corner = |row: &[Option<(f64, f64)>], i: usize| row.get(i).copied().flatten();
+    scratch.pending.clear();
+    scratch.points.clear();
     for (x, o) in out.iter_mut().enumerate().take(width) {
         let corners = [
             corner(top, x),
@@ -241,40 +319,63 @@ fn shade_row(
             corner(bottom, x + 1),
             corner(bottom, x),
         ];
-        *o = match corners {
+        match corners {
             [Some(a), Some(b), Some(c), Some(d)] => {
                 let quad = [a, b, c, d];
+                let uniform = match sampling {
+                    Sampling::Adaptive => {
+                        (world.footprint(&quad), world.footprint_illumination(&quad))
+                    }
+                    Sampling::Exhaustive => (Footprint::Mixed, None),
+                };
+                match uniform {
+                    (Footprint::Uniform(Some(albedo)), Some(light)) => {
+                        *o = (f64::from(albedo) * light) as f32;
+                        continue;
+                    }
+                    (Footprint::Uniform(None), Some(light)) => {
+                        scratch.pending.push((x, Pending::Ground(light)));
+                    }
+                    _ => scratch.pending.push((x, Pending::Mixed)),
+                }
                 let centre = (
                     0.25 * (a.0 + b.0 + c.0 + d.0),
                     0.25 * (a.1 + b.1 + c.1 + d.1),
                 );
-                let footprint_m = dist(a, b).max(dist(a, d)).max(dist(b, c));
-                let ground_albedo = || world.ground.albedo(centre.0, centre.1, footprint_m);
-                match (world.footprint(&quad), world.footprint_illumination(&quad)) {
-                    (Footprint::Uniform(albedo), Some(light)) => {
-                        let albedo = albedo.unwrap_or_else(ground_albedo);
-                        (f64::from(albedo) * light) as f32
-                    }
-                    _ => supersample(world, rays, h, x, y, s, fine, ground_albedo()),
-                }
+                // The longest of three sides; one square root (it keeps the order).
+                let footprint_m = dist2(a, b).max(dist2(a, d)).max(dist2(b, c)).sqrt();
+                scratch.points.push([centre.0, centre.1, footprint_m]);
             }
             // Part of the footprint sees the sky (or lies outside the lens model): per
             // sample, with the texture taken where the pixel does see the ground.
-            _ => {
-                let texture = corners
-                    .iter()
-                    .flatten()
-                    .next()
-                    .map_or(0.0, |p| world.ground.albedo(p.0, p.1, 1.0));
-                supersample(world, rays, h, x, y, s, fine, texture)
-            }
+            _ => match corners.iter().flatten().next() {
+                Some(p) => {
+                    scratch.pending.push((x, Pending::Mixed));
+                    scratch.points.push([p.0, p.1, 1.0]);
+                }
+                None => *o = supersample(world, rays, h, x, y, s, fine, 0.0),
+            },
+        }
+    }
+    scratch.albedo.resize(scratch.points.len(), 0.0);
+    world
+        .ground
+        .albedo_batch(&scratch.points, &mut scratch.albedo);
+    for (&(x, pending), &albedo) in scratch.pending.iter().zip(&scratch.albedo) {
+        let Some(o) = out.get_mut(x) else {
+            continue;
+        };
+        *o = match pending {
+            Pending::Ground(light) => (f64::from(albedo) * light) as f32,
+            Pending::Mixed => supersample(world, rays, h, x, y, s, fine, albedo),
         };
     }
 }
 
+/// Squared distance.
 #[inline]
-fn dist(a: (f64, f64), b: (f64, f64)) -> f64 {
-    ((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)).sqrt()
+fn dist2(a: (f64, f64), b: (f64, f64)) -> f64 {
+    (a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)
 }
 
 /// Mean radiance of `s x s` sub-samples of pixel `(x, y)`.

@@ -267,16 +267,57 @@ pub fn expose(
             } else {
                 e
             };
-            (sensor.black_level + e * grey_per_electron)
-                .round()
-                .clamp(0.0, 255.0) as u8
+            quantise(sensor.black_level + e * grey_per_electron)
         })
         .collect()
+}
+
+/// `v.round().clamp(0.0, 255.0) as u8` without the library call `round` is on the baseline
+/// x86-64 target (it has no rounding instruction), the same value for every `v`: halves
+/// away from zero, NaN to 0.
+#[inline]
+fn quantise(v: f64) -> u8 {
+    // Clamped first to a range where the truncation is exact; the rounding of a value
+    // beyond 0..255 lands beyond it too, so the final clamp is unchanged. NaN stays NaN.
+    let c = v.clamp(-1.0, 256.0);
+    let t = c as i64 as f64;
+    let rounded = if c - t >= 0.5 {
+        t + 1.0
+    } else if t - c >= 0.5 {
+        t - 1.0
+    } else {
+        t
+    };
+    rounded.clamp(0.0, 255.0) as u8
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quantise_rounds_as_round_does() {
+        let mut values = vec![
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -0.5,
+            -0.49999999999999994,
+            0.49999999999999994,
+            0.5,
+            1.5,
+            2.5,
+            254.5,
+            254.49999999999997,
+            255.5,
+            1e300,
+            -1e300,
+        ];
+        values.extend((-4000..300_000).map(|k| f64::from(k) * 0.000_913_7));
+        for v in values {
+            assert_eq!(quantise(v), v.round().clamp(0.0, 255.0) as u8, "{v}");
+        }
+    }
 
     #[test]
     fn defocus_grows_near_the_camera() {

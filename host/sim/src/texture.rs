@@ -41,6 +41,10 @@ const JOINT_PERIOD_M: f64 = 3.0;
 const JOINT_WIDTH_M: f64 = 0.012;
 const JOINT_ALBEDO: f64 = 0.18;
 
+/// Points per batch of [`GroundTexture::albedo_batch`]: enough to keep the look-ups of
+/// several points in flight, few enough for the sums to stay in the L1 cache.
+const BATCH: usize = 64;
+
 /// Lattice cells per side of the value table (a power of two).
 const LATTICE: usize = 256;
 
@@ -157,6 +161,70 @@ impl GroundTexture {
         for band in bands {
             value += band.amplitude * self.band(band, x, y, inv_footprint);
         }
+        self.finish(value, x, y, footprint)
+    }
+
+    /// [`GroundTexture::albedo`] of many footprints at once, the same values to the bit:
+    /// `out[i]` for `points[i] = [x, y, footprint_m]`. An octave at a time over a batch of
+    /// points, so that the table look-ups of different points overlap instead of each point
+    /// waiting on its own, octave after octave.
+    pub fn albedo_batch(&self, points: &[[f64; 3]], out: &mut [f32]) {
+        for (points, out) in points.chunks(BATCH).zip(out.chunks_mut(BATCH)) {
+            self.albedo_chunk(points, out);
+        }
+    }
+
+    fn albedo_chunk(&self, points: &[[f64; 3]], out: &mut [f32]) {
+        let (mean, bands) = self.recipe();
+        let n = points.len().min(out.len()).min(BATCH);
+        let mut value = [mean; BATCH];
+        let mut total = [0.0f64; BATCH];
+        let mut inv_footprint = [0.0f64; BATCH];
+        for (inv, p) in inv_footprint.iter_mut().zip(points).take(n) {
+            *inv = 1.0 / p[2].max(1e-6);
+        }
+        for band in bands {
+            total.fill(0.0);
+            // The loop of `band`, turned inside out: the octaves outside, the points inside.
+            let mut weight_sum = 0.0;
+            let mut scale = band.coarsest;
+            let mut inv_scale = 1.0 / band.coarsest;
+            let mut amplitude = 1.0;
+            let mut octave = band.salt << 8;
+            while scale >= band.finest * 0.999 {
+                weight_sum += amplitude;
+                for ((t, p), inv) in total.iter_mut().zip(points).zip(&inv_footprint).take(n) {
+                    // `keep` only falls with the octave: once it is 0 for a point, `band`
+                    // would stop adding to it, as this does.
+                    let keep = (scale * inv - 1.0).clamp(0.0, 1.0);
+                    if keep > 0.0 {
+                        *t += amplitude
+                            * keep
+                            * self.octave(octave, p[0] * inv_scale, p[1] * inv_scale);
+                    }
+                }
+                scale *= 0.5;
+                inv_scale *= 2.0;
+                amplitude *= band.persistence;
+                octave += 1;
+            }
+            for (v, t) in value.iter_mut().zip(&total).take(n) {
+                *v += band.amplitude
+                    * if weight_sum > 0.0 {
+                        t / weight_sum
+                    } else {
+                        0.0
+                    };
+            }
+        }
+        for ((o, &v), p) in out.iter_mut().zip(&value).zip(points).take(n) {
+            *o = self.finish(v, p[0], p[1], p[2].max(1e-6));
+        }
+    }
+
+    /// The joints (concrete) over the band sum `value`, clamped to an albedo.
+    #[inline]
+    fn finish(&self, mut value: f64, x: f64, y: f64, footprint: f64) -> f32 {
         if self.kind == GroundKind::Concrete {
             let coverage = joint_coverage(x, footprint).max(joint_coverage(y, footprint));
             value += coverage * (JOINT_ALBEDO - value);

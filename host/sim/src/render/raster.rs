@@ -244,28 +244,54 @@ pub(crate) fn gaussian_blur(buffer: &mut [f32], w: usize, h: usize, sigma: f64) 
     kernel.iter_mut().for_each(|k| *k /= sum);
     let mut scratch = vec![0.0f32; w * h];
     let clamp = |v: isize, len: usize| v.clamp(0, len as isize - 1) as usize;
+    let r = radius as usize;
     for y in 0..h {
-        for x in 0..w {
+        let (Some(row), Some(out_row)) = (
+            buffer.get(y * w..(y + 1) * w),
+            scratch.get_mut(y * w..(y + 1) * w),
+        ) else {
+            continue;
+        };
+        for (x, out) in out_row.iter_mut().enumerate() {
+            // Away from the edges the taps are the window itself: no clamping (the same sum,
+            // in the same order, as the clamped one).
+            let window = if x >= r {
+                row.get(x - r..x + r + 1)
+            } else {
+                None
+            };
             let mut acc = 0.0;
-            for (k, weight) in kernel.iter().enumerate() {
-                let sx = clamp(x as isize + k as isize - radius, w);
-                acc += weight * buffer.get(y * w + sx).copied().unwrap_or(0.0);
+            match window {
+                Some(window) => {
+                    for (weight, v) in kernel.iter().zip(window) {
+                        acc += weight * v;
+                    }
+                }
+                None => {
+                    for (k, weight) in kernel.iter().enumerate() {
+                        let sx = clamp(x as isize + k as isize - radius, w);
+                        acc += weight * row.get(sx).copied().unwrap_or(0.0);
+                    }
+                }
             }
-            if let Some(out) = scratch.get_mut(y * w + x) {
-                *out = acc;
-            }
+            *out = acc;
         }
     }
+    // Columns a row at a time: every output row is the kernel's weighted sum of whole input
+    // rows, added tap by tap in the kernel's order, as the per-pixel sum does.
+    let mut acc = vec![0.0f32; w];
     for y in 0..h {
-        for x in 0..w {
-            let mut acc = 0.0;
-            for (k, weight) in kernel.iter().enumerate() {
-                let sy = clamp(y as isize + k as isize - radius, h);
-                acc += weight * scratch.get(sy * w + x).copied().unwrap_or(0.0);
+        acc.fill(0.0);
+        for (k, weight) in kernel.iter().enumerate() {
+            let sy = clamp(y as isize + k as isize - radius, h);
+            if let Some(src) = scratch.get(sy * w..(sy + 1) * w) {
+                for (a, v) in acc.iter_mut().zip(src) {
+                    *a += weight * v;
+                }
             }
-            if let Some(out) = buffer.get_mut(y * w + x) {
-                *out = acc;
-            }
+        }
+        if let Some(out) = buffer.get_mut(y * w..(y + 1) * w) {
+            out.copy_from_slice(&acc);
         }
     }
 }
