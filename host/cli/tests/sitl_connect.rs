@@ -28,7 +28,6 @@ use touchdown_core::companion::mavlink::dialects::common::{
     MavBool, MavCmd, MavFrame, MavMessage, ATTITUDE_QUATERNION_DATA, SIM_STATE_DATA,
     SYSTEM_TIME_DATA, TIMESYNC_DATA,
 };
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::FrameParser;
 
 /// The pad's origin (ArduPilot SITL's default home, CMAC).
@@ -43,20 +42,6 @@ const GEAR_M: f64 = 0.1;
 /// The scripted vehicle's height over the pad at `t` seconds.
 fn height(t: f64) -> f64 {
     (START_HEIGHT_M - (t - HOVER_S).max(0.0)).max(GEAR_M)
-}
-
-fn frame(seq: &mut u8, msg: &MavMessage) -> Vec<u8> {
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(
-        MavHeader {
-            system_id: 1,
-            component_id: 1,
-            sequence: *seq,
-        },
-        msg,
-    );
-    *seq = seq.wrapping_add(1);
-    raw.raw_bytes().to_vec()
 }
 
 #[test]
@@ -142,7 +127,7 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
             next_second += 1.0;
             out.extend(common::ardupilot_heartbeat(seq));
             seq = seq.wrapping_add(1);
-            out.extend(frame(
+            out.extend(common::autopilot_frame(
                 &mut seq,
                 &MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
                     time_unix_usec: 0,
@@ -153,7 +138,7 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
         let sample_due = t >= next_sample;
         if sample_due {
             next_sample += 0.02;
-            out.extend(frame(
+            out.extend(common::autopilot_frame(
                 &mut seq,
                 &MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
                     time_boot_ms: boot_ms,
@@ -164,7 +149,7 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
             ));
         }
         if sample_due && truth_asked {
-            out.extend(frame(
+            out.extend(common::autopilot_frame(
                 &mut seq,
                 &MavMessage::SIM_STATE(SIM_STATE_DATA {
                     q1: half_cos,
@@ -224,7 +209,7 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
                     }
                 });
                 for answer in answers {
-                    out.extend(frame(&mut seq, &answer));
+                    out.extend(common::autopilot_frame(&mut seq, &answer));
                 }
             }
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}

@@ -23,7 +23,6 @@ use touchdown_core::companion::mavlink::dialects::common::{
     MavAutopilot, MavMessage, MavModeFlag, MavParamType, MavState, MavType, HEARTBEAT_DATA,
     PARAM_VALUE_DATA,
 };
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_core::companion::FrameParser;
 
 /// How the stand-in behaves.
@@ -58,22 +57,8 @@ impl StandIn {
     }
 }
 
-fn frame(seq: &mut u8, msg: &MavMessage) -> Vec<u8> {
-    let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(
-        MavHeader {
-            system_id: 1,
-            component_id: 1,
-            sequence: *seq,
-        },
-        msg,
-    );
-    *seq = seq.wrapping_add(1);
-    raw.raw_bytes().to_vec()
-}
-
 fn param_value(seq: &mut u8, name: &str, value: f32) -> Vec<u8> {
-    frame(
+    common::autopilot_frame(
         seq,
         &MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
             param_value: value,
@@ -101,7 +86,7 @@ fn serve(mut stream: TcpStream, mut standin: StandIn) {
             } else {
                 MavModeFlag::empty()
             };
-            let hb = frame(
+            let hb = common::autopilot_frame(
                 &mut seq,
                 &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
                     custom_mode: 0,

@@ -1,4 +1,4 @@
-//! What the companion tests share: the autopilot's HEARTBEAT as bytes, and a scratch
+//! What the companion tests share: the autopilot's frames (a HEARTBEAT) as bytes, and a scratch
 //! directory under the target directory (not /tmp, where every run would leave one more).
 //! Each test binary includes this module with `mod common;`.
 
@@ -11,11 +11,6 @@ use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 
 /// An ArduCopter HEARTBEAT (system 1, component 1) as MAVLink 2 bytes, sequence `seq`.
 pub fn ardupilot_heartbeat(seq: u8) -> Vec<u8> {
-    let header = MavHeader {
-        system_id: 1,
-        component_id: 1,
-        sequence: seq,
-    };
     let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: 0,
         mavtype: MavType::MAV_TYPE_QUADROTOR,
@@ -24,8 +19,22 @@ pub fn ardupilot_heartbeat(seq: u8) -> Vec<u8> {
         system_status: MavState::MAV_STATE_ACTIVE,
         mavlink_version: 3,
     });
+    autopilot_frame(&mut { seq }, &msg)
+}
+
+/// `msg` as the autopilot (system 1, component 1) sends it, MAVLink 2, sequence `*seq`, which
+/// then steps on.
+pub fn autopilot_frame(seq: &mut u8, msg: &MavMessage) -> Vec<u8> {
     let mut raw = MAVLinkV2MessageRaw::new();
-    raw.serialize_message(header, &msg);
+    raw.serialize_message(
+        MavHeader {
+            system_id: 1,
+            component_id: 1,
+            sequence: *seq,
+        },
+        msg,
+    );
+    *seq = seq.wrapping_add(1);
     raw.raw_bytes().to_vec()
 }
 
