@@ -126,10 +126,14 @@ pub enum ParamId {
     CamPosY,
     /// The same, body z (down), metres.
     CamPosZ,
+    /// PX4 profile: below this camera height over the pad the LOCAL_NED point is shifted
+    /// against the vehicle's measured offset from the pad (the outer loop,
+    /// `companion::shift`), metres; 0 turns it off.
+    Px4OuterLoopAlt,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 19;
+pub const PARAM_COUNT: usize = 20;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -319,6 +323,19 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "camera position below the vehicle origin, m (PX4 profile; ArduPilot: PLND_CAM_POS_Z)",
     },
+    // PX4's outer loop (appended). PX4 flies on its own estimate, which can sit tens of cm
+    // from its setpoint (companion::shift); 8 m leaves the loop, at its 0.3 /s, some ten
+    // seconds of PX4's descent (MPC_LAND_ALT1/ALT2 speeds) before the pad leaves the view
+    // near 1 m, and keeps it out of the approach at the usual 10 m and more. 0 turns it off.
+    ParamDef {
+        name: "TD_PX4_OL_ALT",
+        kind: ParamKind::Real,
+        default: 8.0,
+        min: 0.0,
+        max: 50.0,
+        zero_is_unset: false,
+        help: "PX4 profile: below this camera height over the pad, shift the target to cancel PX4's steady offset, m (0 off)",
+    },
 ];
 
 impl ParamId {
@@ -343,6 +360,7 @@ impl ParamId {
         ParamId::CamPosX,
         ParamId::CamPosY,
         ParamId::CamPosZ,
+        ParamId::Px4OuterLoopAlt,
     ];
 
     /// The id at table `index`.
