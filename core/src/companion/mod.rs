@@ -115,7 +115,7 @@ pub use mavlink;
 pub use framing::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
 pub use mavlink::dialects::common::MavSeverity;
 pub use profile::{Profile, ProfileSetting};
-pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig};
+pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig, ShiftMeasurement};
 pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
 

@@ -69,7 +69,7 @@ impl State {
                         );
                         // The pad from the vehicle's origin, as the point itself adds it.
                         let from_origin = l.attitude.body_to_ned(&cam) + l.estimate.position;
-                        let shift = self.px4_shift_at(t, &from_origin, l.estimate.position.z);
+                        let shift = self.px4_shift_at(t, &from_origin, &l.estimate);
                         fields.map(|mut f| {
                             f.position.x += shift.x;
                             f.position.y += shift.y;
@@ -148,13 +148,13 @@ impl State {
     }
 
     /// The outer loop's shift for a PX4 target exposed at `t_us` with the pad at `from_origin`
-    /// (NED axes, metres) from the vehicle's origin and `height` (m) below the camera
-    /// ([`super::shift`]).
+    /// (NED axes, metres) from the vehicle's origin, `level` the estimate (the pad's depth
+    /// below the camera, its velocity against the vehicle) ([`super::shift`]).
     fn px4_shift_at(
         &mut self,
         t_us: u64,
         from_origin: &Vector3<f32>,
-        height: f32,
+        level: &Estimate,
     ) -> nalgebra::Vector2<f32> {
         let active = self
             .autopilot_mode
@@ -163,9 +163,12 @@ impl State {
             &self.config.px4_shift,
             self.params.get(ParamId::Px4OuterLoopAlt),
             active,
-            t_us,
-            nalgebra::Vector2::new(from_origin.x, from_origin.y),
-            height,
+            &super::shift::ShiftMeasurement {
+                exposure_us: t_us,
+                offset_ne: nalgebra::Vector2::new(from_origin.x, from_origin.y),
+                rate_ne: nalgebra::Vector2::new(level.velocity.x, level.velocity.y),
+                height_m: level.position.z,
+            },
         )
     }
 

@@ -224,7 +224,7 @@ mod tests {
         let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
         assert_eq!((seq, report.applied), (12, 19));
         let mut want = saved;
-        want.set(ParamId::Px4OuterLoopAlt, 8.0).unwrap();
+        want.set(ParamId::Px4OuterLoopAlt, 0.0).unwrap();
         assert_eq!(p, want);
     }
 
