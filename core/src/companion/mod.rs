@@ -103,6 +103,7 @@ mod framing;
 mod mount;
 mod profile;
 mod receive;
+mod shift;
 mod state;
 mod stats;
 mod target;
@@ -114,6 +115,7 @@ pub use mavlink;
 pub use framing::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
 pub use mavlink::dialects::common::MavSeverity;
 pub use profile::{Profile, ProfileSetting};
+pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig, ShiftMeasurement};
 pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
 
@@ -200,6 +202,8 @@ pub struct CompanionConfig {
     pub max_target_latency_us: u64,
     /// The autopilot counts as gone after this long without any message from it, µs.
     pub autopilot_timeout_us: u64,
+    /// The PX4 profile's outer loop (TD_PX4_OL_ALT; [`ShiftConfig`]).
+    pub px4_shift: ShiftConfig,
 }
 
 impl Default for CompanionConfig {
@@ -215,6 +219,7 @@ impl Default for CompanionConfig {
             param_stream_interval_us: 20_000,
             max_target_latency_us: 100_000,
             autopilot_timeout_us: 3_000_000,
+            px4_shift: ShiftConfig::default(),
         }
     }
 }
@@ -332,6 +337,10 @@ struct State {
     autopilot_rx_us: Option<u64>,
     /// The profile the latched autopilot's HEARTBEAT asks for (TD_PROFILE auto).
     detected: Option<Profile>,
+    /// The latched autopilot's mode from its HEARTBEAT: custom mode enabled, `custom_mode`.
+    autopilot_mode: Option<(bool, u32)>,
+    /// The PX4 profile's outer loop.
+    shift: PadShift,
     /// The auto profile last announced by STATUSTEXT.
     announced: Option<Profile>,
     next_heartbeat_us: u64,
@@ -388,6 +397,8 @@ impl Companion {
                 autopilot: None,
                 autopilot_rx_us: None,
                 detected: None,
+                autopilot_mode: None,
+                shift: PadShift::new(),
                 announced: None,
                 next_heartbeat_us: 0,
                 next_timesync_us: 0,
@@ -478,6 +489,12 @@ impl Companion {
     /// our clock): what the estimator reads each frame at its exposure.
     pub fn vehicle(&self) -> &VehicleState {
         &self.state.vehicle
+    }
+
+    /// The PX4 profile's outer loop: the shift (north, east, metres) added to the LOCAL_NED
+    /// point now (zero when off, inactive or under another profile).
+    pub fn px4_shift(&self) -> nalgebra::Vector2<f32> {
+        self.state.shift.shift()
     }
 
     /// True while the autopilot has been heard within the autopilot timeout.

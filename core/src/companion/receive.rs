@@ -13,7 +13,7 @@ use super::{
 use crate::filter::Attitude;
 use crate::filter::PositionSample;
 use crate::params::{self, ParamId};
-use mavlink::dialects::common::{MavAutopilot, MavCmd, MavMessage, MavResult};
+use mavlink::dialects::common::{MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult};
 use nalgebra::Vector3;
 
 impl State {
@@ -40,6 +40,8 @@ impl State {
         self.timesync.reset();
         // Counted in the state: the estimator restarts its level track when it sees it.
         self.vehicle.on_reboot();
+        // A new local frame: the shift measured in the old one means nothing there.
+        self.shift.reset();
         self.next_timesync_us = now_us;
         for s in &mut self.streams {
             s.last_rx_us = None;
@@ -76,6 +78,10 @@ impl State {
             if is_autopilot {
                 self.autopilot = Some((frame.system_id, frame.component_id));
                 self.detected = Profile::from_autopilot(h.autopilot);
+                let custom = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED);
+                self.autopilot_mode = Some((custom, h.custom_mode));
                 self.refresh_profile();
             }
         }

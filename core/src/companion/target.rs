@@ -30,6 +30,7 @@ impl State {
             self.on_mount_correction(c);
         }
         if !frame.fix_found {
+            self.shift.on_gap(&self.config.px4_shift, frame.exposure_us);
             return TargetOutcome::NoFix;
         }
         self.stats.frames_with_fix = self.stats.frames_with_fix.saturating_add(1);
@@ -57,14 +58,26 @@ impl State {
             (Profile::Px4, _) => {
                 let estimate = frame.estimate.as_ref();
                 match estimate.and_then(|e| Some((e, e.level?, e.vehicle_position?))) {
-                    Some((e, l, pos)) => profile::px4_fields(
-                        &pos.position,
-                        &l.estimate.position,
-                        &l.attitude,
-                        &self.camera_position(),
-                        e.orientation_ned.unwrap_or(UNKNOWN_Q),
-                    ),
+                    Some((e, l, pos)) => {
+                        let cam = self.camera_position();
+                        let fields = profile::px4_fields(
+                            &pos.position,
+                            &l.estimate.position,
+                            &l.attitude,
+                            &cam,
+                            e.orientation_ned.unwrap_or(UNKNOWN_Q),
+                        );
+                        // The pad from the vehicle's origin, as the point itself adds it.
+                        let from_origin = l.attitude.body_to_ned(&cam) + l.estimate.position;
+                        let shift = self.px4_shift_at(t, &from_origin, &l.estimate);
+                        fields.map(|mut f| {
+                            f.position.x += shift.x;
+                            f.position.y += shift.y;
+                            f
+                        })
+                    }
                     None => {
+                        self.shift.on_gap(&self.config.px4_shift, t);
                         // Which of the two is missing: the vehicle state at the exposure, or
                         // (with it) a confirmed, fresh level estimate.
                         let at = self.vehicle.at(t);
@@ -132,6 +145,31 @@ impl State {
             }
         }
         TargetOutcome::TargetQueued
+    }
+
+    /// The outer loop's shift for a PX4 target exposed at `t_us` with the pad at `from_origin`
+    /// (NED axes, metres) from the vehicle's origin, `level` the estimate (the pad's depth
+    /// below the camera, its velocity against the vehicle) ([`super::shift`]).
+    fn px4_shift_at(
+        &mut self,
+        t_us: u64,
+        from_origin: &Vector3<f32>,
+        level: &Estimate,
+    ) -> nalgebra::Vector2<f32> {
+        let active = self
+            .autopilot_mode
+            .is_some_and(|(custom, mode)| super::shift::px4_mode_lands_on_target(custom, mode));
+        self.shift.update(
+            &self.config.px4_shift,
+            self.params.get(ParamId::Px4OuterLoopAlt),
+            active,
+            &super::shift::ShiftMeasurement {
+                exposure_us: t_us,
+                offset_ne: nalgebra::Vector2::new(from_origin.x, from_origin.y),
+                rate_ne: nalgebra::Vector2::new(level.velocity.x, level.velocity.y),
+                height_m: level.position.z,
+            },
+        )
     }
 
     /// TD_CAM_POS_X/Y/Z: the camera's position on the vehicle, body FRD, metres.

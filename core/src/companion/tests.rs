@@ -523,3 +523,77 @@ fn a_requested_stream_is_asked_for_until_it_flows_in_the_one_sequence() {
     }
     assert_eq!(c.request_stream(999, 50_000), Err(StreamError::Full));
 }
+
+fn px4_heartbeat(c: &mut Companion, custom_mode: u32, now_us: u64) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let data = HEARTBEAT_DATA {
+        custom_mode,
+        mavtype: MavType::MAV_TYPE_QUADROTOR,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    };
+    let n = framing::write_v2_frame(&mut out, 0, 1, 1, &data).unwrap();
+    c.receive(&out[..n], now_us);
+}
+
+/// The LOCAL_NED point sent for `frame` now (draining everything else).
+fn px4_point(c: &mut Companion, frame: &FrameEstimate, now_us: u64) -> Option<Vector3<f32>> {
+    let outcome = c.on_estimate(frame, now_us);
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut parser = FrameParser::new();
+    let mut point = None;
+    while let Some(n) = c.poll_transmit(now_us, &mut out) {
+        parser.push(&out[..n], |f| {
+            if let Ok(MavMessage::LANDING_TARGET(t)) = f.decode() {
+                point = Some(Vector3::new(t.x, t.y, t.z));
+            }
+        });
+    }
+    assert_eq!(outcome == TargetOutcome::TargetQueued, point.is_some());
+    point
+}
+
+/// PX4 in Precision Land with the vehicle sitting 30 cm south of the pad: the point sent moves
+/// north by the integral of the offset (0.15 /s), only in a landing mode, and TD_PX4_OL_ALT 0
+/// turns it off; targets keep coming with the camera 12 cm over the pad (at rest on it).
+#[test]
+fn px4_outer_loop_shifts_the_point_in_precision_land_only() {
+    use crate::filter::Attitude;
+    const PRECLAND: u32 = (9 << 24) | (4 << 16);
+    const LOITER: u32 = (3 << 24) | (4 << 16);
+    let att = Attitude::from_euler(0.0, 0.0, 0.4).unwrap();
+    let vehicle = Vector3::new(-0.3, 0.0, -4.0);
+    let rel = Vector3::new(0.3, 0.0, 4.0);
+    let fly = |mode: u32, alt: f32, seconds: u64, height: f32| {
+        let mut c = Companion::new(CompanionConfig::default());
+        c.set_param(ParamId::Px4OuterLoopAlt, alt).unwrap();
+        let mut last = None;
+        for k in 0..seconds * 30 {
+            let t = 1_000_000 + k * 33_333;
+            px4_heartbeat(&mut c, mode, t);
+            let mut rel = rel;
+            rel.z = height;
+            last = px4_point(&mut c, &frame_at(t, rel, att, Some(vehicle)), t + 1000);
+        }
+        (last.expect("a target"), c.px4_shift())
+    };
+    let (plain, s0) = fly(LOITER, 8.0, 2, 4.0);
+    assert_eq!(s0, nalgebra::Vector2::zeros());
+    assert!(
+        (plain - Vector3::new(0.0, 0.0, 0.0)).amax() < 1e-5,
+        "{plain}"
+    );
+    let (shifted, s1) = fly(PRECLAND, 8.0, 2, 4.0);
+    // About 0.15 /s * 0.3 m * 2 s north, nothing east or down.
+    assert!((s1.x - 0.09).abs() < 0.005 && s1.y == 0.0, "{s1}");
+    assert!((shifted - plain - Vector3::new(s1.x, s1.y, 0.0)).amax() < 1e-5);
+    let (off, s2) = fly(PRECLAND, 0.0, 2, 4.0);
+    assert_eq!((off, s2), (plain, nalgebra::Vector2::zeros()));
+    // Resting on the pad: still sent (PX4 must not lose the target before it has landed),
+    // the shift held (below the floor).
+    let (rest, s3) = fly(PRECLAND, 8.0, 2, 0.12);
+    assert_eq!(s3, nalgebra::Vector2::zeros());
+    assert!(rest.iter().all(|v| v.is_finite()));
+}

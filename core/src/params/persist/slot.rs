@@ -142,12 +142,12 @@ mod tests {
         assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 19 parameters (TD_CAM_POS_X/Y/Z
-        // appended to the 16 of the mount's firmware, whose 384-byte slots, like the 13
-        // parameters' 320-byte ones, still read back) take 14 words: 292 slots per sector
-        // after the first boot's free word.
-        assert_eq!(SLOT_LEN, 448);
-        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 292);
+        // Format 2: a header word and the sequence number more; 20 parameters (TD_PX4_OL_ALT
+        // appended to the 19 of the camera position's firmware, whose 448-byte slots, like the
+        // 16 parameters' 384-byte and the 13 parameters' 320-byte ones, still read back) take
+        // 15 words: 273 slots per sector after the first boot's free word.
+        assert_eq!(SLOT_LEN, 480);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 273);
     }
 
     /// A format-2 slot of an older firmware whose table ended after `records` parameters, in
@@ -213,15 +213,31 @@ mod tests {
     }
 
     #[test]
+    fn a_slot_of_the_nineteen_parameter_firmware_imports_with_the_outer_loop_default() {
+        use crate::params::ParamId;
+        let mut saved = values(7);
+        saved.set(ParamId::CamPosX, 0.15).unwrap();
+        saved.set(ParamId::Px4OuterLoopAlt, 3.0).unwrap();
+        // 19 records (388 bytes) took 14 words (448 bytes).
+        let slot = older_slot(&saved, 12, 19, 14);
+        let slot = &slot[..448];
+        let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied), (12, 19));
+        let mut want = saved;
+        want.set(ParamId::Px4OuterLoopAlt, 0.0).unwrap();
+        assert_eq!(p, want);
+    }
+
+    #[test]
     fn slot_layout() {
-        assert_eq!(SLOT_LEN, 448);
+        assert_eq!(SLOT_LEN, 480);
         let mut slot = [0u8; SLOT_LEN];
         encode_v2(&values(3), 0x0102_0304, &mut slot);
         let mut other = [0u8; SLOT_LEN];
         encode_v2(&values(4), 7, &mut other);
         // The first word is the same in every slot (see the module documentation).
         assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
-        assert_eq!(&slot[..6], b"TDSL\x02\x0e");
+        assert_eq!(&slot[..6], b"TDSL\x02\x0f");
         assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
         assert_eq!(slot[32..36], [4, 3, 2, 1]);
         // The export blob starts mid-word, so it can never pass for a format-1 slot.

@@ -179,11 +179,11 @@ fn a_failed_erase_is_retried_by_the_next_save_and_spares_the_newest_slot() {
     assert_eq!(TwoSectors::open(&m).0, values(i));
 }
 
-/// The firmware's geometry: 128 KiB sectors of 292 slots.
+/// The firmware's geometry: 128 KiB sectors of 273 slots.
 #[test]
-fn real_sectors_hold_292_slots_each_and_alternate() {
+fn real_sectors_hold_273_slots_each_and_alternate() {
     const SECTOR: u32 = 128 * 1024;
-    const SLOTS: usize = 292;
+    const SLOTS: usize = 273;
     assert_eq!((SECTOR as usize - FLASH_WORD) / SLOT_LEN, SLOTS);
     let mut m = Model::new(SECTOR as usize);
     let (_, mut store) = TwoSectors::boot(&mut m);

@@ -13,6 +13,7 @@ use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
 use touchdown_sim::{SimFrame, Simulator};
 
 use super::land::{LandController, LandParams};
+use super::px4::{Px4Params, Px4PrecLand, Px4State};
 use super::vehicle::{Vehicle, VehicleParams};
 use super::wind::{Wind, WindProfile};
 use crate::flight::{
@@ -67,9 +68,24 @@ pub struct LandingConfig {
     pub max_flight_s: f64,
     /// The vehicle.
     pub vehicle: VehicleParams,
-    /// The LAND mode.
+    /// The LAND mode (ArduPilot).
     pub land: LandParams,
+    /// Which autopilot flies the landing.
+    pub autopilot: Autopilot,
 }
+
+/// The autopilot of the closed loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Autopilot {
+    /// ArduPilot's precision LAND ([`super::land`], [`LandingConfig::land`]), BODY_FRD targets.
+    ArduPilot,
+    /// PX4's Precision Land ([`super::px4`]), LOCAL_NED targets; its HEARTBEAT reports
+    /// AUTO.PRECLAND.
+    Px4(Px4Params),
+}
+
+/// PX4's `custom_mode` for AUTO.PRECLAND (main mode 4 in bits 16-23, sub-mode 9 above).
+pub const PX4_MODE_PRECLAND: u32 = (9 << 24) | (4 << 16);
 
 impl LandingConfig {
     /// Issue 15's landing: from 20 m, 2 m off the pad, 2 m/s of mean wind and 3 m/s gusts,
@@ -92,6 +108,7 @@ impl LandingConfig {
             max_flight_s: 90.0,
             vehicle: VehicleParams::typical(),
             land: LandParams::ardupilot(),
+            autopilot: Autopilot::ArduPilot,
         }
     }
 }
@@ -129,8 +146,13 @@ pub struct LandingOutcome {
     pub first_target_s: Option<f64>,
     /// When the LAND mode first steered on a target (its pad estimate), seconds.
     pub acquired_s: Option<f64>,
-    /// When the slow descent (below LAND_ALT_LOW) began, seconds.
+    /// When the slow descent (below LAND_ALT_LOW) began, seconds (PX4: when the descent
+    /// above the target began).
     pub low_s: Option<f64>,
+    /// PX4: when it declared the target lost while landing (and climbed away), seconds.
+    pub lost_s: Option<f64>,
+    /// PX4: the board's outer-loop shift when the last target was sent, north and east, m.
+    pub last_shift_ne: (f64, f64),
     /// When the last target was received, seconds.
     pub last_target_s: Option<f64>,
     /// The height of the camera then, metres.
@@ -149,10 +171,17 @@ pub struct LandingOutcome {
     pub flight_s: f64,
 }
 
+/// The autopilot's mode in the air.
+#[allow(clippy::large_enum_variant)]
+enum Mode {
+    ArduPilot(LandController),
+    Px4(Px4PrecLand),
+}
+
 /// The flight's moving parts.
 struct Air {
     vehicle: Vehicle,
-    land: LandController,
+    land: Mode,
     wind: Wind,
     wind_profile: WindProfile,
     truth: TruthTable,
@@ -165,13 +194,22 @@ impl Air {
     fn fly_to(&mut self, until_s: f64, errors: &crate::flight::Realisation) {
         while self.t_s < until_s - 1e-9 && self.touchdown.is_none() {
             let own = PAD_NED + self.vehicle.position_ned + errors.position_error(self.t_s);
-            let command = self.land.command(
-                self.t_s,
-                STEP_S,
-                &own,
-                &self.vehicle.velocity_ned,
-                self.vehicle.height_m(),
-            );
+            let command = match &mut self.land {
+                Mode::ArduPilot(land) => land.command(
+                    self.t_s,
+                    STEP_S,
+                    &own,
+                    &self.vehicle.velocity_ned,
+                    self.vehicle.height_m(),
+                ),
+                Mode::Px4(px4) => px4.command(
+                    self.t_s,
+                    STEP_S,
+                    &own,
+                    &self.vehicle.velocity_ned,
+                    self.vehicle.height_m(),
+                ),
+            };
             let before = self.vehicle;
             let wind = self.wind.at(self.t_s) * self.wind_profile.scale(self.vehicle.height_m());
             self.vehicle.step(STEP_S, &command, &wind);
@@ -276,8 +314,15 @@ pub fn fly(
     let selected = families::resolve_pad(&pad).map_err(|e| e.to_string())?;
     let views: Vec<_> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<_> = views.iter().collect();
-    let mut setup = FlightSetup::new(AutopilotKind::ArduPilot, config.model);
+    let kind = match config.autopilot {
+        Autopilot::ArduPilot => AutopilotKind::ArduPilot,
+        Autopilot::Px4(_) => AutopilotKind::Px4,
+    };
+    let mut setup = FlightSetup::new(kind, config.model);
     setup.seed = config.seed;
+    if kind == AutopilotKind::Px4 {
+        setup.autopilot_mode = Some(PX4_MODE_PRECLAND);
+    }
     setup.params = config.params.clone();
     let mut experiment =
         Experiment::in_flight(camera, &family_refs, layout, &[Method::ours()], &setup)
@@ -298,7 +343,16 @@ pub fn fly(
         .clone();
     let mut air = Air {
         vehicle,
-        land: LandController::new(config.land, &(PAD_NED + start + errors.position_error(0.0))),
+        land: match config.autopilot {
+            Autopilot::ArduPilot => Mode::ArduPilot(LandController::new(
+                config.land,
+                &(PAD_NED + start + errors.position_error(0.0)),
+            )),
+            Autopilot::Px4(params) => Mode::Px4(Px4PrecLand::new(
+                params,
+                &(PAD_NED + start + errors.position_error(0.0)),
+            )),
+        },
         wind: Wind::new(
             config.wind_mps,
             config.gust_mps,
@@ -319,6 +373,8 @@ pub fn fly(
         first_target_s: None,
         acquired_s: None,
         low_s: None,
+        lost_s: None,
+        last_shift_ne: (0.0, 0.0),
         last_target_s: None,
         last_target_height_m: None,
         longest_gap_s: 0.0,
@@ -371,6 +427,8 @@ pub fn fly(
             outcome.first_target_s.get_or_insert(receipt_s);
             outcome.last_target_s = Some(receipt_s);
             outcome.last_target_height_m = Some(frame.truth.position[2]);
+            let shift = flight.companion.px4_shift();
+            outcome.last_shift_ne = (f64::from(shift.x), f64::from(shift.y));
         }
         if let Some(reconstructed) = result.reconstructed {
             // The pad in its local frame: its position estimate at the measurement's time
@@ -382,12 +440,16 @@ pub fn fly(
             let relative = relative_ned(&reconstructed.value);
             let pad_ned = own.position_ned + relative;
             outcome.targets_received += 1;
-            air.land.measure(
-                air.t_s,
-                reconstructed.t_us as f64 * 1e-6,
-                &pad_ned,
-                relative.z,
-            );
+            match &mut air.land {
+                Mode::ArduPilot(land) => land.measure(
+                    air.t_s,
+                    reconstructed.t_us as f64 * 1e-6,
+                    &pad_ned,
+                    relative.z,
+                ),
+                // PX4 stamps it with the converted time_usec and uses it at once.
+                Mode::Px4(px4) => px4.measure(reconstructed.t_us as f64 * 1e-6, &pad_ned),
+            }
         }
     }
     // Past the last frame (the pad too close to see, or the time limit) it flies on.
@@ -397,9 +459,20 @@ pub fn fly(
     let flight = experiment.flight_run(0).ok_or("no flight")?;
     outcome.targets_sent = flight.companion.stats().landing_targets;
     outcome.touchdown = air.touchdown;
-    outcome.acquired_s = air.land.acquired_s;
-    outcome.low_s = air.land.low_s;
-    outcome.longest_gap_s = air.land.longest_gap_s;
+    match &air.land {
+        Mode::ArduPilot(land) => {
+            outcome.acquired_s = land.acquired_s;
+            outcome.low_s = land.low_s;
+            outcome.longest_gap_s = land.longest_gap_s;
+        }
+        Mode::Px4(px4) => {
+            outcome.acquired_s = px4.approach_s;
+            outcome.low_s = px4.descend_s;
+            outcome.longest_gap_s = px4.longest_gap_s;
+            outcome.lost_s = px4.lost_s;
+            debug_assert!(px4.state != Px4State::Start || px4.targets_used == 0);
+        }
+    }
     outcome.flight_s = air.touchdown.map_or(air.t_s, |t| t.t_s);
     Ok(outcome)
 }

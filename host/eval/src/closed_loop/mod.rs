@@ -31,9 +31,11 @@
 
 pub mod land;
 mod landing;
+pub mod px4;
 pub mod vehicle;
 pub mod wind;
 
 pub use landing::{
-    fly, local_trajectory, scene, LandingConfig, LandingOutcome, Touchdown, LOOKAHEAD_S, STEP_S,
+    fly, local_trajectory, scene, Autopilot, LandingConfig, LandingOutcome, Touchdown, LOOKAHEAD_S,
+    STEP_S,
 };

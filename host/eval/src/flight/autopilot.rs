@@ -174,6 +174,9 @@ pub struct SimAutopilot {
     pub pad_ned: Vector3<f64>,
     /// LANDING_TARGETs heard and not yet taken.
     pub received: Vec<ReceivedTarget>,
+    /// The HEARTBEAT's `custom_mode`, with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED (`None`: 0,
+    /// no flag).
+    pub mode: Option<u32>,
     seq: u8,
     parser: FrameParser,
     intervals_us: [Option<u64>; 2],
@@ -187,12 +190,18 @@ pub struct SimAutopilot {
 }
 
 impl SimAutopilot {
+    /// The same, reporting `mode` in its HEARTBEAT ([`SimAutopilot::mode`]).
+    pub fn with_mode(self, mode: Option<u32>) -> Self {
+        SimAutopilot { mode, ..self }
+    }
+
     /// An autopilot that has asked and been asked nothing yet.
     pub fn new(kind: AutopilotKind, pad_ned: Vector3<f64>) -> Self {
         SimAutopilot {
             kind,
             pad_ned,
             received: Vec::new(),
+            mode: None,
             seq: 0,
             parser: FrameParser::new(),
             intervals_us: [None; 2],
@@ -243,10 +252,13 @@ impl SimAutopilot {
                 AutopilotKind::Px4 => MavAutopilot::MAV_AUTOPILOT_PX4,
             };
             let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-                custom_mode: 0,
+                custom_mode: self.mode.unwrap_or(0),
                 mavtype: MavType::MAV_TYPE_QUADROTOR,
                 autopilot,
-                base_mode: MavModeFlag::empty(),
+                base_mode: match self.mode {
+                    Some(_) => MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                    None => MavModeFlag::empty(),
+                },
                 system_status: MavState::MAV_STATE_ACTIVE,
                 mavlink_version: 3,
             });

@@ -49,6 +49,10 @@ pub struct FlightSetup {
     pub params: Vec<(String, f32)>,
     /// The camera mount the paper's method believes (the board's is its pipeline's).
     pub paper_mount: touchdown_core::filter::CameraMount,
+    /// The `custom_mode` the autopilot's HEARTBEAT reports (with MAV_MODE_FLAG_CUSTOM_MODE_ENABLED);
+    /// `None`: none (a scripted flight does not fly to our targets). The closed loop's PX4
+    /// reports AUTO.PRECLAND.
+    pub autopilot_mode: Option<u32>,
 }
 
 impl FlightSetup {
@@ -60,6 +64,7 @@ impl FlightSetup {
             seed: 1,
             params: Vec::new(),
             paper_mount: touchdown_core::filter::CameraMount::downward(),
+            autopilot_mode: None,
         }
     }
 }
@@ -99,7 +104,7 @@ impl FlightRun {
     pub fn new(setup: &FlightSetup) -> Result<Self, String> {
         Ok(FlightRun {
             companion: board_companion(&setup.params)?,
-            autopilot: SimAutopilot::new(setup.autopilot, PAD_NED),
+            autopilot: SimAutopilot::new(setup.autopilot, PAD_NED).with_mode(setup.autopilot_mode),
             errors: Realisation::new(setup.model, setup.seed),
             clock: BoardClock {
                 offset_us: BOARD_OFFSET_US,
