@@ -119,6 +119,25 @@ case "$autopilot" in
         sitl_pid=$!
         links=(--udp "127.0.0.1:$((14580 + instance))" --udp-local-port "$((14540 + instance))"
             --gcs "udp:127.0.0.1:$((18570 + instance))")
+        # PX4 instance N is MAVLink system N + 1: the board takes its profile only from the
+        # HEARTBEAT of system TD_SYSID.
+        if [ "$instance" -ne 0 ]; then
+            sysid="TD_SYSID=$((instance + 1))"
+            args=()
+            merged=""
+            while [ $# -gt 0 ]; do
+                if [ "$1" = --board-params ] && [ $# -gt 1 ]; then
+                    args+=("$1" "$2,${sysid}")
+                    merged=1
+                    shift 2
+                else
+                    args+=("$1")
+                    shift
+                fi
+            done
+            [ -n "$merged" ] || args+=(--board-params "$sysid")
+            set -- "${args[@]}"
+        fi
         ;;
 esac
 
