@@ -1,0 +1,402 @@
+//! The flight of a rehearsal as a state machine, polled by the board's loop on every tick:
+//! arm (retried while the autopilot refuses), take off, fly to the start point, land in the
+//! mode that uses targets, and watch until the autopilot disarms.
+
+use std::io::Write;
+
+use touchdown_core::companion::mavlink::dialects::common::{
+    MavCmd, MavFrame, MavMessage, PositionTargetTypemask, COMMAND_INT_DATA,
+    SET_POSITION_TARGET_GLOBAL_INT_DATA,
+};
+use touchdown_eval::flight::TrueState;
+
+use super::{
+    offset_lat_lon, px4_precland_mode, Autopilot, GcsLink, Plan, COPTER_GUIDED, COPTER_LAND,
+};
+use crate::CliError;
+
+/// Arming is retried (the estimator and GPS need their time after boot) for this long, s.
+const ARMING_PATIENCE_S: f64 = 180.0;
+/// The climb to `--height` may take this long, s.
+const TAKEOFF_PATIENCE_S: f64 = 90.0;
+/// The move to the start point may take this long before the landing starts anyway, s.
+const MOVE_PATIENCE_S: f64 = 60.0;
+/// At the start point: within this distance of it, horizontally, metres (PX4 may hold its
+/// own set point tens of centimetres off in truth)...
+const START_TOLERANCE_M: f64 = 1.0;
+/// ... slower than this, m/s ...
+const START_SPEED_MPS: f64 = 0.2;
+/// ... for this long, seconds, and turned to the heading asked for within this, degrees.
+const START_HOLD_S: f64 = 3.0;
+/// See [`START_HOLD_S`].
+const START_HEADING_DEG: f64 = 5.0;
+/// Commands not yet taken are sent again after this long, seconds.
+const RETRY_S: f64 = 2.0;
+/// After the autopilot disarms the run watches this much longer (a re-take-off shows), s.
+const AFTER_DISARM_S: f64 = 2.0;
+
+/// Where the flight is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    /// Switching to the take-off mode and arming, retried until the autopilot takes it.
+    Arming { next_try_s: f64 },
+    /// Armed; the take-off command sent (again every [`RETRY_S`] until it climbs).
+    TakingOff { since_s: f64, next_try_s: f64 },
+    /// Flying to the start point; `settled_s` since when it has held there.
+    Moving {
+        since_s: f64,
+        next_try_s: f64,
+        settled_s: Option<f64>,
+    },
+    /// The landing commanded at `since_s`; the mode asked for again until it shows.
+    Landing { since_s: f64, next_try_s: f64 },
+    /// Disarmed at `at_s`.
+    Disarmed { at_s: f64 },
+}
+
+/// What the flight saw, for the report.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FlightLog {
+    /// Seconds (run clock) when the vehicle armed.
+    pub armed_s: Option<f64>,
+    /// When it reached the take-off height.
+    pub climbed_s: Option<f64>,
+    /// When the landing command was taken.
+    pub landing_s: Option<f64>,
+    /// Where the vehicle was then, metres north and east of the pad (truth).
+    pub landing_start_ne: Option<(f64, f64)>,
+    /// Its height over the pad then (truth), metres.
+    pub landing_height_m: Option<f64>,
+    /// When the autopilot disarmed after the landing.
+    pub disarmed_s: Option<f64>,
+    /// Whether the start point was reached and held before the landing began.
+    pub start_held: bool,
+}
+
+/// The flight's state machine (see the module documentation).
+pub struct Flight {
+    plan: Plan,
+    stage: Stage,
+    /// The pad's origin, latitude and longitude in degrees and AMSL altitude in metres.
+    pad: Option<[f64; 3]>,
+    /// PX4: the take-off altitude AMSL in its own estimate.
+    target_amsl_m: Option<f64>,
+    /// What happened when.
+    pub log: FlightLog,
+}
+
+/// Why [`Flight::poll`] says the flight is over.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FlightEnd {
+    /// The autopilot disarmed after the landing, and the watch after it is over.
+    Disarmed,
+}
+
+impl Flight {
+    /// A flight to fly `plan`.
+    pub fn new(plan: Plan) -> Self {
+        Flight {
+            plan,
+            stage: Stage::Arming { next_try_s: 0.0 },
+            pad: None,
+            target_amsl_m: None,
+            log: FlightLog::default(),
+        }
+    }
+
+    /// The landing's start on the run's clock, once commanded: `--max-time` counts from it.
+    pub fn landing_started_s(&self) -> Option<f64> {
+        self.log.landing_s
+    }
+
+    /// One step: reads the link, and sends what the stage needs. `truth` is the vehicle's
+    /// true state in the pad frame (x east, y north, z up), `pad` the pad's geodetic origin.
+    pub fn poll(
+        &mut self,
+        link: &mut GcsLink,
+        t: f64,
+        truth: Option<(TrueState, f64)>,
+        pad: Option<[f64; 3]>,
+        err: &mut dyn Write,
+    ) -> Result<Option<FlightEnd>, CliError> {
+        link.pump(err)?;
+        self.pad = self.pad.or(pad);
+        let autopilot = link.autopilot;
+        match self.stage {
+            Stage::Arming { next_try_s } => {
+                if link.status.armed {
+                    self.log.armed_s = Some(t);
+                    let _ = writeln!(
+                        err,
+                        "{t:7.2} s  armed; taking off to {:.1} m",
+                        self.plan.height_m
+                    );
+                    self.stage = Stage::TakingOff {
+                        since_s: t,
+                        next_try_s: t,
+                    };
+                } else if t > ARMING_PATIENCE_S {
+                    return Err(CliError(format!(
+                        "{} never armed in {ARMING_PATIENCE_S:.0} s (estimator or GPS not ready?){}",
+                        autopilot.name(),
+                        last_refusal(link)
+                    )));
+                } else if t >= next_try_s && self.pad.is_some() {
+                    if autopilot == Autopilot::ArduPilot && link.status.custom_mode != COPTER_GUIDED
+                    {
+                        link.set_mode(COPTER_GUIDED)?;
+                    } else {
+                        link.command(
+                            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                        )?;
+                    }
+                    self.stage = Stage::Arming {
+                        next_try_s: t + RETRY_S,
+                    };
+                }
+            }
+            Stage::TakingOff {
+                since_s,
+                next_try_s,
+            } => {
+                let height = truth.map(|(s, _)| s.position.z);
+                if height.is_some_and(|h| h >= self.plan.height_m - 0.5) {
+                    self.log.climbed_s = Some(t);
+                    let _ = writeln!(
+                        err,
+                        "{t:7.2} s  at {:.1} m; flying to {:+.2} m north, {:+.2} m east of the pad",
+                        height.unwrap_or_default(),
+                        self.plan.start_north_m,
+                        self.plan.start_east_m
+                    );
+                    self.stage = Stage::Moving {
+                        since_s: t,
+                        next_try_s: t,
+                        settled_s: None,
+                    };
+                } else if !link.status.armed {
+                    // ArduPilot disarms a vehicle that does not take off within seconds.
+                    self.stage = Stage::Arming { next_try_s: t };
+                } else if t - since_s > TAKEOFF_PATIENCE_S {
+                    return Err(CliError(format!(
+                        "{} did not climb to {:.1} m in {TAKEOFF_PATIENCE_S:.0} s{}",
+                        autopilot.name(),
+                        self.plan.height_m,
+                        last_refusal(link)
+                    )));
+                } else if t >= next_try_s && height.is_some_and(|h| h < 1.0) {
+                    self.take_off(link)?;
+                    self.stage = Stage::TakingOff {
+                        since_s,
+                        next_try_s: t + RETRY_S,
+                    };
+                }
+            }
+            Stage::Moving {
+                since_s,
+                next_try_s,
+                settled_s,
+            } => {
+                let (north, east) = (self.plan.start_north_m, self.plan.start_east_m);
+                let heading_ok = |s: &TrueState| {
+                    self.plan.yaw_deg.is_none_or(|want| {
+                        let heading = s.body_to_ned[(1, 0)].atan2(s.body_to_ned[(0, 0)]);
+                        let off = (heading.to_degrees() - want).rem_euclid(360.0);
+                        off.min(360.0 - off) < START_HEADING_DEG
+                    })
+                };
+                let at_start = truth.is_some_and(|(s, speed)| {
+                    (s.position.y - north).hypot(s.position.x - east) < START_TOLERANCE_M
+                        && speed < START_SPEED_MPS
+                        && heading_ok(&s)
+                });
+                let settled_s = if at_start {
+                    settled_s.or(Some(t))
+                } else {
+                    None
+                };
+                let held = settled_s.is_some_and(|s| t - s >= START_HOLD_S);
+                if held || t - since_s > MOVE_PATIENCE_S {
+                    self.log.start_held = held;
+                    if !held {
+                        let _ = writeln!(
+                            err,
+                            "{t:7.2} s  not settled at the start point in {MOVE_PATIENCE_S:.0} s: landing from here"
+                        );
+                    }
+                    self.log.landing_start_ne = truth.map(|(s, _)| (s.position.y, s.position.x));
+                    self.log.landing_height_m = truth.map(|(s, _)| s.position.z);
+                    self.land(link)?;
+                    self.log.landing_s = Some(t);
+                    let _ = writeln!(
+                        err,
+                        "{t:7.2} s  landing ({})",
+                        match autopilot {
+                            Autopilot::ArduPilot => "LAND",
+                            Autopilot::Px4 => "Precision Land",
+                        }
+                    );
+                    self.stage = Stage::Landing {
+                        since_s: t,
+                        next_try_s: t + RETRY_S,
+                    };
+                } else {
+                    let next_try_s = if t >= next_try_s {
+                        self.go_to_start(link)?;
+                        t + RETRY_S
+                    } else {
+                        next_try_s
+                    };
+                    self.stage = Stage::Moving {
+                        since_s,
+                        next_try_s,
+                        settled_s,
+                    };
+                }
+            }
+            Stage::Landing {
+                since_s,
+                next_try_s,
+            } => {
+                let wanted = match autopilot {
+                    Autopilot::ArduPilot => COPTER_LAND,
+                    Autopilot::Px4 => px4_precland_mode(),
+                };
+                if !link.status.armed {
+                    self.log.disarmed_s = Some(t);
+                    let _ = writeln!(err, "{t:7.2} s  disarmed");
+                    self.stage = Stage::Disarmed { at_s: t };
+                } else if link.status.custom_mode != wanted && t >= next_try_s {
+                    // Once: a mode the autopilot left by itself (a PX4 fallback to LAND)
+                    // is part of what the rehearsal shows, not something to fight.
+                    if t - since_s < 10.0 {
+                        self.land(link)?;
+                    }
+                    self.stage = Stage::Landing {
+                        since_s,
+                        next_try_s: t + RETRY_S,
+                    };
+                }
+            }
+            Stage::Disarmed { at_s } => {
+                if link.status.armed {
+                    // Re-armed by the autopilot itself: watch on.
+                    self.stage = Stage::Landing {
+                        since_s: t,
+                        next_try_s: f64::INFINITY,
+                    };
+                } else if t - at_s >= AFTER_DISARM_S {
+                    return Ok(Some(FlightEnd::Disarmed));
+                }
+            }
+        }
+        Ok(None)
+    }
+
+    fn take_off(&mut self, link: &mut GcsLink) -> Result<(), CliError> {
+        match link.autopilot {
+            // GUIDED take-off: param 7 is the height above home.
+            Autopilot::ArduPilot => link.command(
+                MavCmd::MAV_CMD_NAV_TAKEOFF,
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, self.plan.height_m as f32],
+            ),
+            // PX4: param 7 is AMSL, in its own estimate; latitude and longitude unset keep
+            // the vehicle where it is.
+            Autopilot::Px4 => {
+                let base = link.status.altitude_m.unwrap_or(0.0);
+                let target = *self.target_amsl_m.get_or_insert(base + self.plan.height_m);
+                link.command(
+                    MavCmd::MAV_CMD_NAV_TAKEOFF,
+                    [0.0, 0.0, 0.0, f32::NAN, f32::NAN, f32::NAN, target as f32],
+                )
+            }
+        }
+    }
+
+    /// The start point as latitude and longitude (1e-7 degrees).
+    fn start_lat_lon(&self) -> Option<(i32, i32)> {
+        let pad = self.pad?;
+        let (lat, lon) = offset_lat_lon(
+            pad[0],
+            pad[1],
+            self.plan.start_north_m,
+            self.plan.start_east_m,
+        );
+        Some(((lat * 1e7).round() as i32, (lon * 1e7).round() as i32))
+    }
+
+    fn go_to_start(&mut self, link: &mut GcsLink) -> Result<(), CliError> {
+        let Some((lat, lon)) = self.start_lat_lon() else {
+            return Ok(());
+        };
+        match link.autopilot {
+            Autopilot::ArduPilot => {
+                let mut ignore = PositionTargetTypemask::all();
+                ignore.remove(
+                    PositionTargetTypemask::POSITION_TARGET_TYPEMASK_X_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE
+                        | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE,
+                );
+                ignore.remove(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_FORCE_SET);
+                if self.plan.yaw_deg.is_some() {
+                    ignore.remove(PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_IGNORE);
+                }
+                link.send(&MavMessage::SET_POSITION_TARGET_GLOBAL_INT(
+                    SET_POSITION_TARGET_GLOBAL_INT_DATA {
+                        time_boot_ms: 0,
+                        lat_int: lat,
+                        lon_int: lon,
+                        alt: self.plan.height_m as f32,
+                        yaw: self.plan.yaw_deg.unwrap_or(0.0).to_radians() as f32,
+                        type_mask: ignore,
+                        target_system: link.system_id,
+                        target_component: 1,
+                        coordinate_frame: MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                        ..SET_POSITION_TARGET_GLOBAL_INT_DATA::DEFAULT
+                    },
+                ))
+            }
+            Autopilot::Px4 => {
+                let alt = self
+                    .target_amsl_m
+                    .or(link.status.altitude_m)
+                    .unwrap_or(f64::NAN);
+                link.send(&MavMessage::COMMAND_INT(COMMAND_INT_DATA {
+                    param1: -1.0,
+                    // MAV_DO_REPOSITION_FLAGS_CHANGE_MODE: into PX4's hold mode at the point.
+                    param2: 1.0,
+                    param3: 0.0,
+                    // The heading in radians, NaN: as PX4's yaw mode has it.
+                    param4: self
+                        .plan
+                        .yaw_deg
+                        .map_or(f32::NAN, |d| d.to_radians() as f32),
+                    x: lat,
+                    y: lon,
+                    z: alt as f32,
+                    command: MavCmd::MAV_CMD_DO_REPOSITION,
+                    target_system: link.system_id,
+                    target_component: 1,
+                    frame: MavFrame::MAV_FRAME_GLOBAL,
+                    current: 0,
+                    autocontinue: 0,
+                }))
+            }
+        }
+    }
+
+    fn land(&mut self, link: &mut GcsLink) -> Result<(), CliError> {
+        match link.autopilot {
+            Autopilot::ArduPilot => link.set_mode(COPTER_LAND),
+            Autopilot::Px4 => link.set_mode(px4_precland_mode()),
+        }
+    }
+}
+
+/// The autopilot's last STATUSTEXT, as the reason it refused: ": last message \"...\"".
+fn last_refusal(link: &GcsLink) -> String {
+    link.texts
+        .last()
+        .map_or(String::new(), |(_, t)| format!(": last message \"{t}\""))
+}

@@ -1,0 +1,569 @@
+//! The ground station's link to the autopilot: the socket, the autopilot's identity and what
+//! it last reported, its parameters read and written (in each autopilot's encoding), and
+//! [`prepare`]: connect, identify, set the recipe, reboot once where it is needed.
+
+use std::collections::HashMap;
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use touchdown_core::companion::mavlink::dialects::common::{
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
+    MavType, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
+};
+use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::FrameParser;
+
+use super::{recipe, Autopilot, Plan};
+use crate::companion::endpoint::{Endpoint, EndpointSpec};
+use crate::CliError;
+
+/// Our system id: the ground station's customary 255.
+const GCS_SYSTEM_ID: u8 = 255;
+/// Our component id: MAV_COMP_ID_MISSIONPLANNER.
+const GCS_COMPONENT_ID: u8 = 190;
+/// How long a connection to a SITL that is not there yet is retried.
+const CONNECT_PATIENCE: Duration = Duration::from_secs(10);
+/// How long to wait for the autopilot's first HEARTBEAT.
+const HEARTBEAT_PATIENCE: Duration = Duration::from_secs(30);
+/// How long a rebooting SITL may take to answer again.
+const REBOOT_PATIENCE: Duration = Duration::from_secs(60);
+/// A parameter read or write is retried this often, each try waiting [`PARAM_TRY`].
+const PARAM_TRIES: u32 = 3;
+/// See [`PARAM_TRIES`].
+const PARAM_TRY: Duration = Duration::from_millis(1500);
+
+/// The vehicle as the ground-station link reports it.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Status {
+    /// HEARTBEAT: armed.
+    pub armed: bool,
+    /// HEARTBEAT: the flight mode.
+    pub custom_mode: u32,
+    /// GLOBAL_POSITION_INT: the autopilot's own altitude AMSL, metres.
+    pub altitude_m: Option<f64>,
+}
+
+/// A parameter as the autopilot last reported it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ParamValue {
+    value: f32,
+    kind: MavParamType,
+}
+
+/// The ground station's link: the socket, the autopilot's identity and what it last said.
+pub struct GcsLink {
+    spec: EndpointSpec,
+    endpoint: Endpoint,
+    parser: FrameParser,
+    sequence: u8,
+    /// The autopilot's system id (from its first HEARTBEAT).
+    pub(super) system_id: u8,
+    /// Which autopilot.
+    pub autopilot: Autopilot,
+    /// What it last reported.
+    pub status: Status,
+    params: HashMap<String, ParamValue>,
+    acks: Vec<(MavCmd, MavResult)>,
+    /// Its STATUSTEXTs, with the run's seconds when they came.
+    pub texts: Vec<(f64, String)>,
+    next_heartbeat: Instant,
+    /// The run's clock offset: [`GcsLink::texts`] are stamped in the board loop's seconds.
+    clock_zero: Instant,
+}
+
+impl GcsLink {
+    fn describe(&self) -> String {
+        format!("--gcs {}", describe_spec(&self.spec))
+    }
+
+    /// Stamps the autopilot's STATUSTEXTs in seconds from `zero` from now on.
+    pub fn set_clock_zero(&mut self, zero: Instant) {
+        self.clock_zero = zero;
+    }
+
+    /// Reads what arrived and sends our HEARTBEAT once a second; STATUSTEXTs are echoed to
+    /// `err` as they come.
+    pub fn pump(&mut self, err: &mut dyn Write) -> Result<(), CliError> {
+        let mut rx = [0u8; 4096];
+        let mut messages = Vec::new();
+        let parser = &mut self.parser;
+        let system_id = self.system_id;
+        let drained = self.endpoint.drain(&mut rx, |bytes| {
+            parser.push(bytes, |frame| {
+                if frame.system_id == system_id && frame.component_id == 1 {
+                    if let Ok(message) = frame.decode() {
+                        messages.push(message);
+                    }
+                }
+            });
+        });
+        for message in messages {
+            self.take(&message, err);
+        }
+        if let Err(lost) = drained {
+            return Err(CliError(format!("{}: {lost}", self.describe())));
+        }
+        self.heartbeat_when_due()
+    }
+
+    /// Our HEARTBEAT, once a second: it tells a UDP autopilot where we are, and an
+    /// autopilot's ground-station failsafe that we are there.
+    fn heartbeat_when_due(&mut self) -> Result<(), CliError> {
+        if Instant::now() >= self.next_heartbeat {
+            self.next_heartbeat = Instant::now() + Duration::from_secs(1);
+            self.send(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: MavType::MAV_TYPE_GCS,
+                autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+                base_mode: MavModeFlag::empty(),
+                system_status: MavState::MAV_STATE_ACTIVE,
+                mavlink_version: 3,
+            }))?;
+        }
+        Ok(())
+    }
+
+    fn take(&mut self, message: &MavMessage, err: &mut dyn Write) {
+        match message {
+            MavMessage::HEARTBEAT(h) => {
+                self.status.armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.status.custom_mode = h.custom_mode;
+            }
+            MavMessage::GLOBAL_POSITION_INT(g) => {
+                self.status.altitude_m = Some(f64::from(g.alt) * 1e-3);
+            }
+            MavMessage::PARAM_VALUE(v) => {
+                let name = touchdown_core::params::name_str(&v.param_id[..]).to_string();
+                self.params.insert(
+                    name,
+                    ParamValue {
+                        value: v.param_value,
+                        kind: v.param_type,
+                    },
+                );
+            }
+            MavMessage::COMMAND_ACK(a) => self.acks.push((a.command, a.result)),
+            MavMessage::STATUSTEXT(s) => {
+                let text = touchdown_core::params::name_str(&s.text[..]).to_string();
+                let t = self.clock_zero.elapsed().as_secs_f64();
+                if s.severity as u8 <= MavSeverity::MAV_SEVERITY_INFO as u8 {
+                    let _ = writeln!(err, "{t:7.2} s  {}: {text}", self.autopilot.name());
+                }
+                self.texts.push((t, text));
+            }
+            _ => {}
+        }
+    }
+
+    pub(super) fn send(&mut self, message: &MavMessage) -> Result<(), CliError> {
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(
+            MavHeader {
+                system_id: GCS_SYSTEM_ID.into(),
+                component_id: GCS_COMPONENT_ID,
+                sequence: self.sequence,
+            },
+            message,
+        );
+        self.sequence = self.sequence.wrapping_add(1);
+        self.endpoint
+            .send(raw.raw_bytes())
+            .map(|_| ())
+            .map_err(|e| CliError(format!("{}: {e}", self.describe())))
+    }
+
+    /// Sends COMMAND_LONG `command` with its seven parameters.
+    pub fn command(&mut self, command: MavCmd, p: [f32; 7]) -> Result<(), CliError> {
+        self.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command,
+            target_system: self.system_id,
+            target_component: 1,
+            confirmation: 0,
+        }))
+    }
+
+    /// The newest answer to `command` since the last call, taken off the list.
+    pub fn take_ack(&mut self, command: MavCmd) -> Option<MavResult> {
+        let k = self.acks.iter().rposition(|(c, _)| *c == command)?;
+        let (_, result) = self.acks.remove(k);
+        self.acks.retain(|(c, _)| *c != command);
+        Some(result)
+    }
+
+    /// Asks for a message stream on this link (MAV_CMD_SET_MESSAGE_INTERVAL).
+    fn request_stream(&mut self, message_id: u32, interval_us: f32) -> Result<(), CliError> {
+        self.command(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [message_id as f32, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+    }
+
+    /// Switches the flight mode (MAV_CMD_DO_SET_MODE with a custom mode).
+    pub fn set_mode(&mut self, custom_mode: u32) -> Result<(), CliError> {
+        let custom = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED.bits() as f32;
+        let p = match self.autopilot {
+            Autopilot::ArduPilot => [custom, custom_mode as f32, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Autopilot::Px4 => [
+                custom,
+                ((custom_mode >> 16) & 0xFF) as f32,
+                ((custom_mode >> 24) & 0xFF) as f32,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        };
+        self.command(MavCmd::MAV_CMD_DO_SET_MODE, p)
+    }
+
+    /// Pumps the link until `done` gives a value or `patience` runs out (`None`).
+    fn wait<T>(
+        &mut self,
+        patience: Duration,
+        err: &mut dyn Write,
+        mut done: impl FnMut(&mut GcsLink) -> Option<T>,
+    ) -> Result<Option<T>, CliError> {
+        let until = Instant::now() + patience;
+        loop {
+            self.pump(err)?;
+            if let Some(v) = done(self) {
+                return Ok(Some(v));
+            }
+            if Instant::now() >= until {
+                return Ok(None);
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// The parameter's value as the autopilot reports it; `None` when it never answers
+    /// (ArduPilot and PX4 say nothing of a name they do not have).
+    fn read_param(
+        &mut self,
+        name: &str,
+        err: &mut dyn Write,
+    ) -> Result<Option<ParamValue>, CliError> {
+        self.params.remove(name);
+        for _ in 0..PARAM_TRIES {
+            self.send(&MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+                param_index: -1,
+                target_system: self.system_id,
+                target_component: 1,
+                param_id: name.into(),
+            }))?;
+            if let Some(v) = self.wait(PARAM_TRY, err, |l| l.params.get(name).copied())? {
+                return Ok(Some(v));
+            }
+        }
+        Ok(None)
+    }
+
+    /// Sets `name` to `value` in the autopilot's encoding of `kind` and returns what the
+    /// autopilot answers it holds afterwards.
+    fn write_param(
+        &mut self,
+        name: &str,
+        value: f32,
+        kind: MavParamType,
+        err: &mut dyn Write,
+    ) -> Result<Option<f32>, CliError> {
+        let wire = encode_param(self.autopilot, value, kind);
+        for _ in 0..PARAM_TRIES {
+            self.params.remove(name);
+            self.send(&MavMessage::PARAM_SET(PARAM_SET_DATA {
+                param_value: wire,
+                target_system: self.system_id,
+                target_component: 1,
+                param_id: name.into(),
+                param_type: kind,
+            }))?;
+            if let Some(v) = self.wait(PARAM_TRY, err, |l| l.params.get(name).copied())? {
+                return Ok(Some(decode_param(self.autopilot, v.value, v.kind)));
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// A parameter's value on the wire: ArduPilot casts integers to the float
+/// (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST); PX4 sends their bits in it
+/// (PARAM_ENCODE_BYTEWISE).
+fn encode_param(autopilot: Autopilot, value: f32, kind: MavParamType) -> f32 {
+    match (autopilot, kind) {
+        (Autopilot::Px4, MavParamType::MAV_PARAM_TYPE_INT32) => {
+            f32::from_bits((value.round() as i32) as u32)
+        }
+        (
+            Autopilot::Px4,
+            MavParamType::MAV_PARAM_TYPE_UINT8 | MavParamType::MAV_PARAM_TYPE_INT8,
+        ) => f32::from_bits(u32::from(value.round() as i8 as u8)),
+        _ => value,
+    }
+}
+
+/// The inverse of [`encode_param`].
+fn decode_param(autopilot: Autopilot, wire: f32, kind: MavParamType) -> f32 {
+    match (autopilot, kind) {
+        (Autopilot::Px4, MavParamType::MAV_PARAM_TYPE_INT32) => wire.to_bits() as i32 as f32,
+        (
+            Autopilot::Px4,
+            MavParamType::MAV_PARAM_TYPE_UINT8 | MavParamType::MAV_PARAM_TYPE_INT8,
+        ) => (wire.to_bits() & 0xFF) as u8 as i8 as f32,
+        _ => wire,
+    }
+}
+
+/// Whether two parameter values are the same setting (a float parameter comes back in f32).
+fn same_value(a: f32, b: f32) -> bool {
+    (a - b).abs() <= 1e-4 * a.abs().max(1.0)
+}
+
+fn describe_spec(spec: &EndpointSpec) -> String {
+    match spec {
+        EndpointSpec::TcpClient(a) => format!("tcp:{a}"),
+        EndpointSpec::UdpClient { remote, .. } => format!("udp:{remote}"),
+        EndpointSpec::UdpListen(a) => format!("udpin:{a}"),
+        other => other.describe(),
+    }
+}
+
+/// Opens the link, retrying a refused TCP connection for [`CONNECT_PATIENCE`] (a SITL that is
+/// still starting, or rebooting).
+fn open(spec: &EndpointSpec, patience: Duration) -> Result<Endpoint, CliError> {
+    let until = Instant::now() + patience;
+    loop {
+        match Endpoint::open(spec) {
+            Ok(e) => return Ok(e),
+            Err(e) if Instant::now() < until => {
+                let _ = e;
+                std::thread::sleep(Duration::from_millis(250));
+            }
+            Err(e) => {
+                return Err(CliError(format!(
+                    "--gcs {}: {e} (is the SITL running?)",
+                    describe_spec(spec)
+                )))
+            }
+        }
+    }
+}
+
+/// Connects and waits for the autopilot's HEARTBEAT (system 1..254, component 1).
+fn connect(spec: &EndpointSpec, connect_patience: Duration) -> Result<GcsLink, CliError> {
+    let endpoint = open(spec, connect_patience)?;
+    let now = Instant::now();
+    let mut link = GcsLink {
+        spec: spec.clone(),
+        endpoint,
+        parser: FrameParser::new(),
+        sequence: 0,
+        system_id: 0,
+        autopilot: Autopilot::ArduPilot,
+        status: Status::default(),
+        params: HashMap::new(),
+        acks: Vec::new(),
+        texts: Vec::new(),
+        next_heartbeat: now,
+        clock_zero: now,
+    };
+    // Until the autopilot is known the parser hands out every sender's frames.
+    let until = Instant::now() + HEARTBEAT_PATIENCE;
+    let mut rx = [0u8; 4096];
+    loop {
+        let mut found = None;
+        let parser = &mut link.parser;
+        let drained = link.endpoint.drain(&mut rx, |bytes| {
+            parser.push(bytes, |frame| {
+                if let (1, Ok(MavMessage::HEARTBEAT(h))) = (frame.component_id, frame.decode()) {
+                    let autopilot = match h.autopilot {
+                        MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Some(Autopilot::ArduPilot),
+                        MavAutopilot::MAV_AUTOPILOT_PX4 => Some(Autopilot::Px4),
+                        _ => None,
+                    };
+                    if let Some(a) = autopilot {
+                        found.get_or_insert((frame.system_id, a, h));
+                    }
+                }
+            });
+        });
+        if let Err(lost) = drained {
+            return Err(CliError(format!("{}: {lost}", link.describe())));
+        }
+        if let Some((system_id, autopilot, h)) = found {
+            link.system_id = system_id;
+            link.autopilot = autopilot;
+            link.status.armed = h
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+            link.status.custom_mode = h.custom_mode;
+            return Ok(link);
+        }
+        if Instant::now() >= until {
+            return Err(CliError(format!(
+                "{}: no autopilot HEARTBEAT in {} s (is it the SITL's ground-station port?)",
+                link.describe(),
+                HEARTBEAT_PATIENCE.as_secs()
+            )));
+        }
+        link.heartbeat_when_due()?;
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// What [`prepare`] did to the autopilot's parameters.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Prepared {
+    /// `NAME=VALUE` of each parameter changed.
+    pub changed: Vec<String>,
+    /// Whether the autopilot was rebooted.
+    pub rebooted: bool,
+}
+
+/// Connects to the ground-station port, identifies the autopilot, sets the recipe's
+/// parameters and reboots once if one of them needs it. The vehicle must be disarmed.
+pub fn prepare(
+    spec: &EndpointSpec,
+    plan: &Plan,
+    err: &mut dyn Write,
+) -> Result<(GcsLink, Prepared), CliError> {
+    let mut link = connect(spec, CONNECT_PATIENCE)?;
+    let _ = writeln!(
+        err,
+        "{}: {} (system {})",
+        link.describe(),
+        link.autopilot.name(),
+        link.system_id
+    );
+    if link.status.armed {
+        return Err(CliError(format!(
+            "{}: the vehicle is armed: start the rehearsal on the ground, disarmed",
+            link.describe()
+        )));
+    }
+    let settings = recipe(link.autopilot, plan);
+    let mut prepared = Prepared::default();
+    let mut reboot = false;
+    for s in &settings {
+        let Some(current) = link.read_param(s.name, err)? else {
+            if s.optional {
+                let _ = writeln!(
+                    err,
+                    "{}: no parameter {} in this version: left out",
+                    link.describe(),
+                    s.name
+                );
+                continue;
+            }
+            return Err(CliError(format!(
+                "{}: the autopilot has no parameter {} (a {} build without it?)",
+                link.describe(),
+                s.name,
+                link.autopilot.name()
+            )));
+        };
+        let held = decode_param(link.autopilot, current.value, current.kind);
+        if same_value(held, s.value) {
+            continue;
+        }
+        match link.write_param(s.name, s.value, current.kind, err)? {
+            Some(v) if same_value(v, s.value) => {}
+            Some(v) => {
+                return Err(CliError(format!(
+                    "{}: the autopilot refused {} = {} (it keeps {v})",
+                    link.describe(),
+                    s.name,
+                    s.value
+                )))
+            }
+            None => {
+                return Err(CliError(format!(
+                    "{}: no answer to setting {} = {}",
+                    link.describe(),
+                    s.name,
+                    s.value
+                )))
+            }
+        }
+        prepared.changed.push(format!("{}={}", s.name, s.value));
+        reboot |= s.needs_reboot;
+    }
+    if !prepared.changed.is_empty() {
+        let _ = writeln!(
+            err,
+            "{}: set {}",
+            link.describe(),
+            prepared.changed.join(", ")
+        );
+    }
+    if reboot {
+        let _ = writeln!(
+            err,
+            "{}: rebooting (the precision-landing backend is created at boot)",
+            link.describe()
+        );
+        link.command(
+            MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )?;
+        // The SITL closes its ports as it restarts; what it says meanwhile does not matter.
+        let _ = link.wait(Duration::from_secs(2), err, |l| {
+            l.take_ack(MavCmd::MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN)
+                .filter(|r| *r != MavResult::MAV_RESULT_ACCEPTED)
+        });
+        drop(link);
+        std::thread::sleep(Duration::from_secs(1));
+        link = connect(spec, REBOOT_PATIENCE)?;
+        prepared.rebooted = true;
+        for s in &settings {
+            let Some(v) = link.read_param(s.name, err)? else {
+                if s.optional {
+                    continue;
+                }
+                return Err(CliError(format!(
+                    "{}: parameter {} gone after the reboot",
+                    link.describe(),
+                    s.name
+                )));
+            };
+            let held = decode_param(link.autopilot, v.value, v.kind);
+            if !same_value(held, s.value) {
+                return Err(CliError(format!(
+                    "{}: {} = {held} after the reboot, not {} (not saved?)",
+                    link.describe(),
+                    s.name,
+                    s.value
+                )));
+            }
+        }
+    }
+    // The autopilot's own altitude, for PX4's take-off and reposition in AMSL.
+    link.request_stream(33, 200_000.0)?;
+    Ok((link, prepared))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn px4_integers_go_bytewise_and_ardupilot_ones_as_floats() {
+        let int = MavParamType::MAV_PARAM_TYPE_INT32;
+        let wire = encode_param(Autopilot::Px4, 2.0, int);
+        assert_eq!(wire.to_bits(), 2);
+        assert_eq!(decode_param(Autopilot::Px4, wire, int), 2.0);
+        assert_eq!(encode_param(Autopilot::Px4, -3.0, int).to_bits() as i32, -3);
+        assert_eq!(encode_param(Autopilot::ArduPilot, 2.0, int), 2.0);
+        let real = MavParamType::MAV_PARAM_TYPE_REAL32;
+        assert_eq!(encode_param(Autopilot::Px4, 0.5, real), 0.5);
+        assert_eq!(decode_param(Autopilot::Px4, 0.5, real), 0.5);
+    }
+}

@@ -1,0 +1,254 @@
+//! `touchdown sitl --gcs`: the ground station's half of a rehearsal against a running SITL.
+//!
+//! What a user would otherwise do by hand in Mission Planner, QGroundControl or a script:
+//! set the autopilot's precision-landing parameters, reboot once where the autopilot creates
+//! its precision-landing backend only at boot (ArduPilot's `PLND_TYPE`), wait for its
+//! estimator, arm, take off to `--height`, fly `--offset` away from the pad and start the
+//! landing in the mode that uses landing targets, then watch until the autopilot disarms.
+//!
+//! Two halves, because the board's link must not exist while the autopilot reboots and must
+//! run beside the flight:
+//! - [`prepare`], before the board's link opens: connect, identify the autopilot by its
+//!   HEARTBEAT, set the parameters of [`recipe`], reboot and reconnect if one of them needs it.
+//! - [`Flight`], polled by the board's loop on every tick: the flight itself as a state
+//!   machine driven by the autopilot's own replies (HEARTBEAT mode and arming state,
+//!   COMMAND_ACK, STATUSTEXT) and by the SITL's ground truth (heights and positions).
+//!
+//! What each autopilot needs comes from its own code (docs/setup-ardupilot.md,
+//! docs/setup-px4.md): ArduCopter takes off in GUIDED and lands in LAND, which uses
+//! precision landing when `PLND_ENABLED`; PX4's LAND ignores targets, its Precision Land mode
+//! (AUTO / PRECLAND) uses them. Every failure the user can meet (no SITL on the port, no
+//! HEARTBEAT, a parameter refused, an estimator never ready, a vehicle that never arms)
+//! ends the run with one line saying which.
+
+//!
+//! One module per half: [`link`] (the socket, the parameters, [`prepare`]) and [`flight`]
+//! (the flight's state machine); this one holds what both share: the autopilot, its modes,
+//! the plan and the parameter recipe.
+
+use crate::companion::endpoint::EndpointSpec;
+
+mod flight;
+mod link;
+
+pub use flight::{Flight, FlightEnd, FlightLog};
+pub use link::{prepare, GcsLink, Prepared, Status};
+
+/// The autopilot at the other end, from its HEARTBEAT.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Autopilot {
+    /// ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA).
+    ArduPilot,
+    /// PX4 (MAV_AUTOPILOT_PX4).
+    Px4,
+}
+
+impl Autopilot {
+    /// Its name in messages and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Autopilot::ArduPilot => "ArduPilot",
+            Autopilot::Px4 => "PX4",
+        }
+    }
+}
+
+/// ArduCopter's flight modes used here (HEARTBEAT `custom_mode`).
+const COPTER_GUIDED: u32 = 4;
+/// See [`COPTER_GUIDED`].
+const COPTER_LAND: u32 = 9;
+/// PX4's main mode AUTO (bits 16-23 of `custom_mode`) ...
+const PX4_MAIN_AUTO: u32 = 4;
+/// ... and its sub mode PRECLAND (bits 24-31).
+const PX4_SUB_PRECLAND: u32 = 9;
+
+/// The `custom_mode` PX4 reports in Precision Land.
+fn px4_precland_mode() -> u32 {
+    (PX4_MAIN_AUTO << 16) | (PX4_SUB_PRECLAND << 24)
+}
+
+/// One autopilot parameter a rehearsal sets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamSetting {
+    /// Its name.
+    pub name: &'static str,
+    /// Its value.
+    pub value: f32,
+    /// Takes effect only after a reboot.
+    pub needs_reboot: bool,
+    /// Absent in some versions: skipped (with a line) instead of an error.
+    pub optional: bool,
+}
+
+const fn setting(name: &'static str, value: f32) -> ParamSetting {
+    ParamSetting {
+        name,
+        value,
+        needs_reboot: false,
+        optional: false,
+    }
+}
+
+/// What the rehearsal is asked to fly, besides the autopilot's own settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// Take-off height above the pad, metres.
+    pub height_m: f64,
+    /// Where the landing starts, metres north and east of the pad.
+    pub start_north_m: f64,
+    /// See `start_north_m`.
+    pub start_east_m: f64,
+    /// The heading to turn to at the start point, degrees from north (`None`: as it is).
+    pub yaw_deg: Option<f64>,
+    /// ArduPilot SITL's wind: mean speed (m/s), direction it blows from (degrees), profile
+    /// (SIM_WIND_T) and turbulence (SIM_WIND_TURB, m/s). PX4's SIH has no wind.
+    pub wind: Option<SitlWind>,
+}
+
+/// ArduPilot SITL's wind parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SitlWind {
+    /// SIM_WIND_SPD, m/s.
+    pub speed_mps: f32,
+    /// SIM_WIND_DIR, degrees, where it comes from.
+    pub from_deg: f32,
+    /// SIM_WIND_T: 0 square law below SIM_WIND_T_ALT, 1 the same at every height.
+    pub profile: f32,
+    /// SIM_WIND_TURB, m/s.
+    pub turbulence_mps: f32,
+}
+
+/// The parameters our setup pages ask for on `autopilot`, in the order they must be set
+/// (an enable parameter before the group it reveals), then the SITL's wind.
+pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
+    let mut list = match autopilot {
+        // docs/setup-ardupilot.md, section 3.
+        Autopilot::ArduPilot => vec![
+            setting("PLND_ENABLED", 1.0),
+            ParamSetting {
+                needs_reboot: true,
+                ..setting("PLND_TYPE", 1.0)
+            },
+            setting("PLND_EST_TYPE", 1.0),
+            ParamSetting {
+                needs_reboot: true,
+                optional: true,
+                ..setting("PLND_ORIENT", 25.0)
+            },
+            setting("PLND_YAW_ALIGN", 0.0),
+        ],
+        // docs/setup-px4.md, section 3.
+        Autopilot::Px4 => vec![setting("PLD_FAPPR_ALT", 0.5), setting("PLD_BTOUT", 5.0)],
+    };
+    if let (Autopilot::ArduPilot, Some(w)) = (autopilot, plan.wind) {
+        list.extend([
+            setting("SIM_WIND_SPD", w.speed_mps),
+            setting("SIM_WIND_DIR", w.from_deg),
+            setting("SIM_WIND_T", w.profile),
+            setting("SIM_WIND_TURB", w.turbulence_mps),
+        ]);
+    }
+    list
+}
+
+/// `--gcs`'s value: `tcp:HOST:PORT` (client), `udp:HOST:PORT` (client), `udpin:ADDR:PORT`
+/// (server: answers whoever sends, as PX4 SITL's ground-station port sends to 14550).
+pub fn parse_gcs(text: &str) -> Result<EndpointSpec, String> {
+    let (kind, addr) = text
+        .split_once(':')
+        .ok_or("expected tcp:HOST:PORT, udp:HOST:PORT or udpin:ADDR:PORT")?;
+    if addr
+        .rsplit_once(':')
+        .is_none_or(|(host, port)| host.is_empty() || port.parse::<u16>().is_err())
+    {
+        return Err(format!("`{addr}`: expected HOST:PORT"));
+    }
+    match kind {
+        "tcp" => Ok(EndpointSpec::TcpClient(addr.to_string())),
+        "udp" => Ok(EndpointSpec::UdpClient {
+            remote: addr.to_string(),
+            local_port: None,
+        }),
+        "udpin" => Ok(EndpointSpec::UdpListen(addr.to_string())),
+        _ => Err(format!(
+            "`{kind}`: expected tcp:HOST:PORT, udp:HOST:PORT or udpin:ADDR:PORT"
+        )),
+    }
+}
+
+/// The point `north_m`, `east_m` from `lat`, `lon` (degrees), on the local tangent plane.
+pub fn offset_lat_lon(lat: f64, lon: f64, north_m: f64, east_m: f64) -> (f64, f64) {
+    const EARTH_RADIUS_M: f64 = 6_378_137.0;
+    let dlat = (north_m / EARTH_RADIUS_M).to_degrees();
+    let dlon = (east_m / (EARTH_RADIUS_M * lat.to_radians().cos())).to_degrees();
+    (lat + dlat, lon + dlon)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gcs_addresses_parse_and_bad_ones_say_why() {
+        assert_eq!(
+            parse_gcs("tcp:127.0.0.1:5760"),
+            Ok(EndpointSpec::TcpClient("127.0.0.1:5760".into()))
+        );
+        assert_eq!(
+            parse_gcs("udpin:0.0.0.0:14550"),
+            Ok(EndpointSpec::UdpListen("0.0.0.0:14550".into()))
+        );
+        assert!(matches!(
+            parse_gcs("udp:127.0.0.1:18570"),
+            Ok(EndpointSpec::UdpClient { .. })
+        ));
+        for bad in [
+            "127.0.0.1:5760",
+            "tcp:5760",
+            "tcp:host:port",
+            "serial:/dev/tty:1",
+            "tcp::1",
+        ] {
+            assert!(parse_gcs(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn precland_mode_is_px4s_auto_precland() {
+        // PX4's custom_mode: main mode in bits 16-23, sub mode in bits 24-31.
+        assert_eq!(px4_precland_mode(), 0x0904_0000);
+    }
+
+    #[test]
+    fn ardupilot_recipe_enables_before_it_reboots_and_px4s_needs_no_reboot() {
+        let plan = Plan {
+            height_m: 12.0,
+            start_north_m: 1.0,
+            start_east_m: 2.0,
+            yaw_deg: None,
+            wind: Some(SitlWind {
+                speed_mps: 3.0,
+                from_deg: 90.0,
+                profile: 1.0,
+                turbulence_mps: 1.0,
+            }),
+        };
+        let ap = recipe(Autopilot::ArduPilot, &plan);
+        assert_eq!(ap[0].name, "PLND_ENABLED");
+        assert!(ap.iter().any(|s| s.name == "PLND_TYPE" && s.needs_reboot));
+        assert!(ap
+            .iter()
+            .any(|s| s.name == "SIM_WIND_SPD" && s.value == 3.0));
+        let px4 = recipe(Autopilot::Px4, &plan);
+        assert!(px4.iter().all(|s| !s.needs_reboot));
+        assert!(px4.iter().all(|s| !s.name.starts_with("SIM_")));
+    }
+
+    #[test]
+    fn an_offset_point_is_that_far_from_the_pad() {
+        let (lat, lon) = offset_lat_lon(47.0, 8.0, 3.0, -4.0);
+        let north = (lat - 47.0).to_radians() * 6_378_137.0;
+        let east = (lon - 8.0).to_radians() * 6_378_137.0 * 47f64.to_radians().cos();
+        assert!((north - 3.0).abs() < 1e-6 && (east + 4.0).abs() < 1e-6);
+    }
+}
