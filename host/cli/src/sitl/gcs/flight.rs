@@ -20,7 +20,7 @@ const ARMING_PATIENCE_S: f64 = 180.0;
 /// The climb to `--height` may take this long, s.
 const TAKEOFF_PATIENCE_S: f64 = 90.0;
 /// The move to the start point may take this long before the landing starts anyway, s.
-const MOVE_PATIENCE_S: f64 = 60.0;
+const MOVE_PATIENCE_S: f64 = 30.0;
 /// At the start point: within this distance of it, horizontally, metres (PX4 may hold its
 /// own set point tens of centimetres off in truth)...
 const START_TOLERANCE_M: f64 = 1.0;
