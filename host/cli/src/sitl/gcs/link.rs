@@ -66,6 +66,8 @@ pub struct GcsLink {
     acks: Vec<(MavCmd, MavResult)>,
     /// Its STATUSTEXTs, with the run's seconds when they came.
     pub texts: Vec<(f64, String)>,
+    /// A chunked STATUSTEXT so far: its `id` and text.
+    chunks: Option<(u16, String)>,
     next_heartbeat: Instant,
     /// The run's clock offset: [`GcsLink::texts`] are stamped in the board loop's seconds.
     clock_zero: Instant,
@@ -146,7 +148,20 @@ impl GcsLink {
             }
             MavMessage::COMMAND_ACK(a) => self.acks.push((a.command, a.result)),
             MavMessage::STATUSTEXT(s) => {
-                let text = touchdown_core::params::name_str(&s.text[..]).to_string();
+                let chunk = touchdown_core::params::name_str(&s.text[..]);
+                // A text longer than one message comes in chunks of one `id`; the last is
+                // the one that does not fill its 50 bytes.
+                let text = match self.chunks.take() {
+                    Some((id, mut head)) if id == s.id && s.id != 0 => {
+                        head.push_str(chunk);
+                        head
+                    }
+                    _ => chunk.to_string(),
+                };
+                if s.id != 0 && chunk.len() == s.text.len() {
+                    self.chunks = Some((s.id, text));
+                    return;
+                }
                 let t = self.clock_zero.elapsed().as_secs_f64();
                 if s.severity as u8 <= MavSeverity::MAV_SEVERITY_INFO as u8 {
                     let _ = writeln!(err, "{t:7.2} s  {}: {text}", self.autopilot.name());
@@ -372,6 +387,7 @@ fn connect(spec: &EndpointSpec, connect_patience: Duration) -> Result<GcsLink, C
         params: HashMap::new(),
         acks: Vec::new(),
         texts: Vec::new(),
+        chunks: None,
         next_heartbeat: now,
         clock_zero: now,
     };
