@@ -80,6 +80,11 @@ pub enum Command {
 /// `--board-params` of `replay` and `sitl`: `NAME=VALUE` pairs, comma-separated, in order
 /// (names exactly as the parameter table has them; the caller checks them against it).
 pub fn parse_board_params(list: Option<&str>) -> Result<Vec<(String, f32)>, CliError> {
+    parse_param_list("--board-params", list)
+}
+
+/// A `NAME=VALUE,...` list of option `flag` (the flag names the option in the errors).
+pub fn parse_param_list(flag: &str, list: Option<&str>) -> Result<Vec<(String, f32)>, CliError> {
     let Some(list) = list else {
         return Ok(Vec::new());
     };
@@ -87,12 +92,11 @@ pub fn parse_board_params(list: Option<&str>) -> Result<Vec<(String, f32)>, CliE
         .map(|pair| {
             let (name, value) = pair
                 .split_once('=')
-                .ok_or_else(|| CliError(format!("--board-params: `{pair}` is not NAME=VALUE")))?;
-            let value: f32 = value.trim().parse().map_err(|_| {
-                CliError(format!(
-                    "--board-params: `{pair}`: the value is not a number"
-                ))
-            })?;
+                .ok_or_else(|| CliError(format!("{flag}: `{pair}` is not NAME=VALUE")))?;
+            let value: f32 = value
+                .trim()
+                .parse()
+                .map_err(|_| CliError(format!("{flag}: `{pair}`: the value is not a number")))?;
             Ok((name.trim().to_string(), value))
         })
         .collect()

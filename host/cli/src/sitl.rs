@@ -225,6 +225,12 @@ pub struct SitlArgs {
         allow_hyphen_values = true
     )]
     pub yaw: Option<f64>,
+
+    /// With --gcs: the autopilot's own parameters to set too, NAME=VALUE,... (after the
+    /// precision-landing ones, replacing any of them; a parameter that needs a reboot takes
+    /// effect at the autopilot's next start)
+    #[arg(long, value_name = "LIST", help_heading = "A running SITL")]
+    pub autopilot_params: Option<String>,
 }
 
 fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {
@@ -519,9 +525,13 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
     if let Some(endpoint) = args.sitl_endpoint() {
         return connect::run(args, endpoint, params, out, err);
     }
-    if args.pad_at.is_some() || args.gcs.is_some() || args.yaw.is_some() {
+    if args.pad_at.is_some()
+        || args.gcs.is_some()
+        || args.yaw.is_some()
+        || args.autopilot_params.is_some()
+    {
         return Err(CliError::new(
-            "--pad-at, --gcs and --yaw are for a running SITL: give the board's link too, \
+            "--pad-at, --gcs, --yaw and --autopilot-params are for a running SITL: give the board's link too, \
              --tcp, --udp or --udp-listen",
         ));
     }

@@ -466,7 +466,7 @@ struct ConnectedJson {
 /// The rehearsal's plan from the command line: the start point at `--offset` on a bearing
 /// the seed picks (golden-ratio steps, so that consecutive seeds spread around the pad), the
 /// wind from `--wind-mps`, `--wind-profile` and `--turbulence`, from a seeded direction.
-fn plan(args: &super::SitlArgs) -> gcs::Plan {
+fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>) -> gcs::Plan {
     let golden = 0.618_033_988_749_895;
     let bearing = ((args.seed as f64) * golden).fract() * std::f64::consts::TAU;
     let wind_from = ((args.seed as f64 + 0.5) * golden).fract() * 360.0;
@@ -475,6 +475,7 @@ fn plan(args: &super::SitlArgs) -> gcs::Plan {
         start_north_m: args.offset * bearing.cos(),
         start_east_m: args.offset * bearing.sin(),
         yaw_deg: args.yaw,
+        extra,
         wind: Some(gcs::SitlWind {
             speed_mps: args.wind_mps as f32,
             from_deg: wind_from.round() as f32,
@@ -519,7 +520,14 @@ pub(super) fn run(
     let mut rehearsal = None;
     let mut prepared = gcs::Prepared::default();
     if let Some(spec) = &args.gcs {
-        let plan = plan(args);
+        let extra =
+            crate::parse_param_list("--autopilot-params", args.autopilot_params.as_deref())?;
+        if let Some((name, _)) = extra.iter().find(|(n, _)| n.is_empty() || n.len() > 16) {
+            return Err(CliError(format!(
+                "--autopilot-params: `{name}` is not a parameter name (1-16 characters)"
+            )));
+        }
+        let plan = plan(args, extra);
         let (link, p) = gcs::prepare(spec, &plan, err)?;
         prepared = p;
         rehearsal = Some(Rehearsal {

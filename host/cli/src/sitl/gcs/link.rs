@@ -469,7 +469,7 @@ pub fn prepare(
     let mut prepared = Prepared::default();
     let mut reboot = false;
     for s in &settings {
-        let Some(current) = link.read_param(s.name, err)? else {
+        let Some(current) = link.read_param(&s.name, err)? else {
             if s.optional {
                 let _ = writeln!(
                     err,
@@ -490,7 +490,7 @@ pub fn prepare(
         if same_value(held, s.value) {
             continue;
         }
-        match link.write_param(s.name, s.value, current.kind, err)? {
+        match link.write_param(&s.name, s.value, current.kind, err)? {
             Some(v) if same_value(v, s.value) => {}
             Some(v) => {
                 return Err(CliError(format!(
@@ -540,7 +540,7 @@ pub fn prepare(
         link = connect(spec, REBOOT_PATIENCE)?;
         prepared.rebooted = true;
         for s in &settings {
-            let Some(v) = link.read_param(s.name, err)? else {
+            let Some(v) = link.read_param(&s.name, err)? else {
                 if s.optional {
                     continue;
                 }

@@ -71,7 +71,7 @@ fn px4_precland_mode() -> u32 {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamSetting {
     /// Its name.
-    pub name: &'static str,
+    pub name: String,
     /// Its value.
     pub value: f32,
     /// Takes effect only after a reboot.
@@ -80,9 +80,9 @@ pub struct ParamSetting {
     pub optional: bool,
 }
 
-const fn setting(name: &'static str, value: f32) -> ParamSetting {
+fn setting(name: &str, value: f32) -> ParamSetting {
     ParamSetting {
-        name,
+        name: name.to_string(),
         value,
         needs_reboot: false,
         optional: false,
@@ -100,6 +100,8 @@ pub struct Plan {
     pub start_east_m: f64,
     /// The heading to turn to at the start point, degrees from north (`None`: as it is).
     pub yaw_deg: Option<f64>,
+    /// The user's own autopilot parameters (`--autopilot-params`), set after the recipe's.
+    pub extra: Vec<(String, f32)>,
     /// ArduPilot SITL's wind: mean speed (m/s), direction it blows from (degrees), profile
     /// (SIM_WIND_T) and turbulence (SIM_WIND_TURB, m/s). PX4's SIH has no wind.
     pub wind: Option<SitlWind>,
@@ -148,6 +150,9 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
             setting("SIM_WIND_TURB", w.turbulence_mps),
         ]);
     }
+    // The user's last: their value wins over the recipe's.
+    list.retain(|s| plan.extra.iter().all(|(name, _)| *name != s.name));
+    list.extend(plan.extra.iter().map(|(name, value)| setting(name, *value)));
     list
 }
 
@@ -226,6 +231,7 @@ mod tests {
             start_north_m: 1.0,
             start_east_m: 2.0,
             yaw_deg: None,
+            extra: vec![("PLND_EST_TYPE".into(), 0.0), ("PSC_POSXY_P".into(), 1.5)],
             wind: Some(SitlWind {
                 speed_mps: 3.0,
                 from_deg: 90.0,
@@ -241,6 +247,7 @@ mod tests {
             .any(|s| s.name == "SIM_WIND_SPD" && s.value == 3.0));
         let px4 = recipe(Autopilot::Px4, &plan);
         assert!(px4.iter().all(|s| !s.needs_reboot));
+        assert!(px4.iter().any(|s| s.name == "PSC_POSXY_P"));
         assert!(px4.iter().all(|s| !s.name.starts_with("SIM_")));
     }
 
