@@ -22,7 +22,7 @@
 //! ends the run with one line saying which.
 
 //!
-//! One module per half: [`link`] (the socket, the parameters, [`prepare`]) and [`flight`]
+//! One module per half: `link` (the socket, the parameters, [`prepare`]) and `flight`
 //! (the flight's state machine); this one holds what both share: the autopilot, its modes,
 //! the plan and the parameter recipe.
 
