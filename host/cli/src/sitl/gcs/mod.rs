@@ -20,7 +20,6 @@
 //! (AUTO / PRECLAND) uses them. Every failure the user can meet (no SITL on the port, no
 //! HEARTBEAT, a parameter refused, an estimator never ready, a vehicle that never arms)
 //! ends the run with one line saying which.
-
 //!
 //! One module per half: `link` (the socket, the parameters, [`prepare`]) and `flight`
 //! (the flight's state machine); this one holds what both share: the autopilot, its modes,
