@@ -49,16 +49,22 @@ if ! [[ "$limit_cm" =~ ^[0-9]+([.][0-9]+)?$ ]] || ! [[ "$instance" =~ ^[0-9]+$ ]
 fi
 
 case "$autopilot" in
-    arducopter) sitl_bin=${sitl_dir}/arducopter/arducopter ;;
-    px4) sitl_bin=${sitl_dir}/px4/bin/px4 ;;
+    arducopter) sitl_name=arducopter/arducopter ;;
+    px4) sitl_name=px4/bin/px4 ;;
 esac
-if [ ! -x "$sitl_bin" ]; then
-    echo "skipping the ${autopilot} rehearsal: no SITL at ${sitl_bin} (set SITL_DIR)"
+if [ ! -x "${sitl_dir}/${sitl_name}" ]; then
+    echo "skipping the ${autopilot} rehearsal: no SITL at ${sitl_dir}/${sitl_name} (set SITL_DIR)"
     exit 0
 fi
+# Absolute: the SITL runs in its own directory.
 sitl_dir=$(cd "$sitl_dir" && pwd)
+sitl_bin=${sitl_dir}/${sitl_name}
 
 touchdown=${TOUCHDOWN:-${repo}/target/release/touchdown}
+case "$touchdown" in
+    /*) ;;
+    *) touchdown=${PWD}/${touchdown} ;;
+esac
 if [ ! -x "$touchdown" ]; then
     echo "building touchdown (release)"
     (cd "$repo" && cargo build --release --quiet -p touchdown-cli)
