@@ -7,6 +7,7 @@
 
 mod autopilot_sim;
 
+use nalgebra::Vector3;
 use serde_json::Value;
 use touchdown_core::companion::Profile;
 use touchdown_core::params::PARAM_COUNT;
@@ -51,7 +52,7 @@ fn fly_and_check_targets(
 #[test]
 fn ardupilot_profile_pymavlink() {
     let mut s = Scenario::new("ardupilot", Profile::ArduPilot);
-    s.vpe = true;
+    s.vision = 3.0;
     s.params = vec![
         (2_000_000, ParamAction::RequestList),
         (3_000_000, ParamAction::ReadName("TD_RATE_HZ")),
@@ -147,6 +148,33 @@ fn ardupilot_profile_pymavlink() {
     assert!((f(last, "z") as f32 - truth.z).abs() < 0.5, "{last}");
     assert_eq!(last["covariance"].as_array().unwrap().len(), 21);
     assert!(last["covariance"][0].as_f64().unwrap() > 0.0, "{last}");
+    // VISION_SPEED_ESTIMATE (TD_VPE_EN bit 1): the vehicle's velocity, NED.
+    let speeds = velocities(&msgs, "VISION_SPEED_ESTIMATE");
+    assert!(speeds.len() > 200, "{}", speeds.len());
+    let mut sq = Vector3::<f64>::zeros();
+    for m in &speeds {
+        // usec: the autopilot's clock once TIMESYNC has an answer, ours before.
+        let usec = m["usec"].as_u64().unwrap();
+        let ours = if usec > AP_AHEAD_US {
+            usec - AP_AHEAD_US
+        } else {
+            usec
+        };
+        let truth = VehiclePath::APPROACH.velocity(ours as f32 * 1e-6);
+        for (axis, key) in ["x", "y", "z"].into_iter().enumerate() {
+            sq[axis] += (f(m, key) - truth[axis] as f64).powi(2);
+        }
+    }
+    let rms = (sq / speeds.len() as f64).map(f64::sqrt);
+    println!("[ardupilot] VISION_SPEED_ESTIMATE: RMS error {rms:.3?} m/s");
+    assert!(rms.max() < 0.2, "{rms:?}");
+    let last = speeds.last().unwrap();
+    let cov = last["covariance"].as_array().unwrap();
+    assert_eq!(cov.len(), 9);
+    for k in [0, 4, 8] {
+        let v = cov[k].as_f64().unwrap();
+        assert!(v > 0.0 && v < 0.1, "{last}");
+    }
     // TIMESYNC answers to the autopilot's requests, SET_MESSAGE_INTERVAL requests.
     let answers = msgs
         .iter()
@@ -161,12 +189,70 @@ fn ardupilot_profile_pymavlink() {
     assert!(run.stats.interval_acks_accepted >= 1);
 }
 
+/// The decoded messages of type `kind`, in order.
+fn velocities<'a>(msgs: &'a [Value], kind: &str) -> Vec<&'a Value> {
+    msgs.iter().filter(|m| m["_type"] == kind).collect()
+}
+
 #[test]
 fn px4_profile_pymavlink() {
-    let s = Scenario::new("px4", Profile::Px4);
+    let mut s = Scenario::new("px4", Profile::Px4);
+    s.vision = 2.0;
     let Some((run, msgs, targets)) = fly_and_check_targets(&s, 200) else {
         return;
     };
+    // ODOMETRY (TD_VPE_EN bit 2): the velocity alone, in PX4's NED axes, as EKF2 reads it:
+    // position and attitude NaN (None here), the velocity variances at 0, 6 and 11 of the
+    // 6 x 6 upper triangle, estimator type VISION. No VISION_POSITION_ESTIMATE (bit 0 clear).
+    assert_eq!(velocities(&msgs, "VISION_POSITION_ESTIMATE").len(), 0);
+    assert_eq!(velocities(&msgs, "VISION_SPEED_ESTIMATE").len(), 0);
+    let odometry = velocities(&msgs, "ODOMETRY");
+    assert!(odometry.len() > 200, "{}", odometry.len());
+    assert_eq!(run.stats.vision_velocities as usize, odometry.len());
+    // Against the path's velocity at each exposure: the RMS error small, and inside what the
+    // message claims (its variance) on every axis.
+    let mut sq = Vector3::<f64>::zeros();
+    let mut sum = Vector3::<f64>::zeros();
+    let mut claimed = Vector3::<f64>::zeros();
+    for m in &odometry {
+        let t = m["time_usec"].as_u64().unwrap() as f32 * 1e-6;
+        let truth = VehiclePath::APPROACH.velocity(t);
+        let cov = m["velocity_covariance"].as_array().unwrap();
+        for (axis, (key, k)) in [("vx", 0), ("vy", 6), ("vz", 11)].into_iter().enumerate() {
+            sq[axis] += (f(m, key) - truth[axis] as f64).powi(2);
+            sum[axis] += f(m, key) - truth[axis] as f64;
+            claimed[axis] += cov[k].as_f64().unwrap();
+        }
+    }
+    let n = odometry.len() as f64;
+    let rms = (sq / n).map(f64::sqrt);
+    let sigma = (claimed / n).map(f64::sqrt);
+    println!(
+        "[px4] ODOMETRY velocity: RMS error {rms:.3?} m/s (mean {:.3?}), claimed sigma {sigma:.3?}",
+        sum / n
+    );
+    for axis in 0..3 {
+        assert!(rms[axis] < 0.2, "{rms:?}");
+        assert!(rms[axis] < sigma[axis], "{rms:?} vs claimed {sigma:?}");
+    }
+    let last = odometry.last().unwrap();
+    for key in ["x", "y", "z", "rollspeed"] {
+        assert!(last[key].is_null(), "{key} not NaN: {last}");
+    }
+    assert!(last["q"][0].is_null(), "{last}");
+    assert!(last["pose_covariance"][0].is_null(), "{last}");
+    assert_eq!((f(last, "frame_id"), f(last, "child_frame_id")), (1.0, 1.0));
+    assert_eq!(f(last, "estimator_type"), 2.0, "MAV_ESTIMATOR_TYPE_VISION");
+    let cov = last["velocity_covariance"].as_array().unwrap();
+    for k in [0, 6, 11] {
+        let v = cov[k].as_f64().unwrap();
+        assert!(v > 0.0 && v < 0.1, "{k}: {last}");
+    }
+    // Sent with the target it belongs to: the same time stamp (our exposure time).
+    let stamps: std::collections::BTreeSet<u64> = targets.iter().map(|t| t.exposure_us).collect();
+    assert!(odometry
+        .iter()
+        .all(|m| stamps.contains(&m["time_usec"].as_u64().unwrap())));
     // PX4 converts time_usec itself (its TIMESYNC with us): our exposure time, exactly.
     for t in &targets {
         assert_eq!(t.clock_us, 0, "{t:?}");

@@ -49,8 +49,13 @@
 //! The autopilot is the sender of HEARTBEATs from our system id (TD_SYSID) and component 1
 //! whose `autopilot` is not MAV_AUTOPILOT_INVALID; the vehicle state, TIMESYNC answers and
 //! the profile come from it alone.
-//! - VISION_POSITION_ESTIMATE (optional, TD_VPE_EN): the vehicle in a pad-centred NED frame,
-//!   with covariance.
+//! - VISION_POSITION_ESTIMATE (optional, TD_VPE_EN bit 0): the vehicle in a pad-centred NED
+//!   frame, with covariance.
+//! - The vehicle's velocity over the ground (optional, TD_VPE_EN bit 1), from the pad's
+//!   velocity against the vehicle (a pad that does not move): ODOMETRY with the velocity alone
+//!   under the PX4 profile (EKF2 fuses it beside GPS, so that its velocity, and with it the
+//!   position controller's hold, no longer wander with GPS noise near the pad),
+//!   VISION_SPEED_ESTIMATE under the ArduPilot profiles.
 //! - TIMESYNC requests (1 Hz) and answers to the autopilot's requests ([`TimeSync`]), the
 //!   answers ahead of everything else waiting (PX4 discards round trips of 10 ms or more).
 //! - COMMAND_LONG `MAV_CMD_SET_MESSAGE_INTERVAL` for the vehicle state it needs
@@ -109,6 +114,7 @@ mod stats;
 mod target;
 mod timesync;
 mod transmit;
+mod velocity;
 
 pub use mavlink;
 
@@ -122,7 +128,10 @@ pub use timesync::{TimeSource, TimeSync};
 use crate::filter::{FrameEstimate, VehicleState};
 use crate::params::{ParamError, ParamId, ParamSet};
 use heapless::Deque;
-use mavlink::dialects::common::{MavCmd, LANDING_TARGET_DATA, VISION_POSITION_ESTIMATE_DATA};
+use mavlink::dialects::common::{
+    MavCmd, LANDING_TARGET_DATA, ODOMETRY_DATA, VISION_POSITION_ESTIMATE_DATA,
+    VISION_SPEED_ESTIMATE_DATA,
+};
 use mavlink::MessageData;
 
 /// LANDING_TARGET's payload with every MAVLink 2 extension field. If the mavlink crate is ever
@@ -280,6 +289,21 @@ struct PendingVpe {
     data: VISION_POSITION_ESTIMATE_DATA,
 }
 
+/// The vehicle's velocity, in the message the profile's autopilot fuses.
+#[derive(Debug, Clone, PartialEq)]
+enum VelocityMessage {
+    /// PX4: ODOMETRY with the velocity alone (position and attitude NaN).
+    Odometry(ODOMETRY_DATA),
+    /// ArduPilot: VISION_SPEED_ESTIMATE.
+    Speed(VISION_SPEED_ESTIMATE_DATA),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct PendingVelocity {
+    created_us: u64,
+    message: VelocityMessage,
+}
+
 /// A message stream we ask the autopilot for, and ask again while it is not arriving.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Stream {
@@ -332,6 +356,9 @@ struct State {
     status: Deque<StatusText, STATUS_QUEUE_CAPACITY>,
     target: Option<PendingTarget>,
     vpe: Option<PendingVpe>,
+    velocity: Option<PendingVelocity>,
+    /// The slope of the level positions, for the velocity (TD_VPE_EN bit 1).
+    velocity_fit: velocity::VelocityFit,
     sequence: u8,
     autopilot: Option<(u8, u8)>,
     autopilot_rx_us: Option<u64>,
@@ -393,6 +420,8 @@ impl Companion {
                 status: Deque::new(),
                 target: None,
                 vpe: None,
+                velocity: None,
+                velocity_fit: velocity::VelocityFit::new(),
                 sequence: 0,
                 autopilot: None,
                 autopilot_rx_us: None,

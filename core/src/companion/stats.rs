@@ -40,6 +40,8 @@ pub struct CompanionStats {
     pub landing_targets: u32,
     /// VISION_POSITION_ESTIMATEs sent.
     pub vision_estimates: u32,
+    /// Velocities sent (ODOMETRY or VISION_SPEED_ESTIMATE, TD_VPE_EN bit 1).
+    pub vision_velocities: u32,
     /// PARAM_VALUEs sent.
     pub param_values: u32,
     /// Queue items (STATUSTEXTs included) dropped because their queue was full.

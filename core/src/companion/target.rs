@@ -1,5 +1,5 @@
-//! From the estimator's output to the LANDING_TARGET (and VISION_POSITION_ESTIMATE) queued for
-//! the autopilot, in the format of the profile in force.
+//! From the estimator's output to the LANDING_TARGET (and the optional VISION_POSITION_ESTIMATE
+//! and velocity, TD_VPE_EN) queued for the autopilot, in the format of the profile in force.
 //!
 //! - ArduPilot: body FRD, from [`PadEstimate::body_frd`] (the level estimate rotated with the
 //!   attitude at exposure, or the camera-frame estimate through the mount). ArduPilot needs
@@ -14,12 +14,17 @@
 //! target replacing an unsent older one.
 
 use super::profile::{self, Profile, TargetFrame};
-use super::{PendingTarget, PendingVpe, State, TargetOutcome, TimeBase, UNKNOWN_Q};
+use super::velocity::FittedVelocity;
+use super::{
+    PendingTarget, PendingVelocity, PendingVpe, State, TargetOutcome, TimeBase, VelocityMessage,
+    UNKNOWN_Q,
+};
 use crate::filter::Attitude;
 use crate::filter::{Estimate, FrameEstimate};
 use crate::params::ParamId;
 use mavlink::dialects::common::{
-    LandingTargetType, MavBool, MavFrame, LANDING_TARGET_DATA, VISION_POSITION_ESTIMATE_DATA,
+    LandingTargetType, MavBool, MavEstimatorType, MavFrame, LANDING_TARGET_DATA, ODOMETRY_DATA,
+    VISION_POSITION_ESTIMATE_DATA, VISION_SPEED_ESTIMATE_DATA,
 };
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -29,6 +34,7 @@ impl State {
         if let Some(c) = &frame.mount_correction {
             self.on_mount_correction(c);
         }
+        let fitted = self.fit_velocity(frame);
         if !frame.fix_found {
             self.shift.on_gap(&self.config.px4_shift, frame.exposure_us);
             return TargetOutcome::NoFix;
@@ -136,7 +142,7 @@ impl State {
             exposure_us: t,
             data,
         });
-        if self.params.get_int(ParamId::VpeEnable) == 1 {
+        if self.params.get_int(ParamId::VpeEnable) & VISION_POSITION != 0 {
             if let Some(l) = frame.estimate.as_ref().and_then(|e| e.level) {
                 self.vpe = Some(PendingVpe {
                     created_us: now_us,
@@ -144,7 +150,39 @@ impl State {
                 });
             }
         }
+        if let Some(f) = fitted {
+            let message = match profile {
+                Profile::Px4 => VelocityMessage::Odometry(velocity_odometry(time_usec, &f)),
+                Profile::ArduPilot | Profile::ArduPilotLocalFrd => {
+                    VelocityMessage::Speed(velocity_speed_estimate(time_usec, &f))
+                }
+            };
+            self.velocity = Some(PendingVelocity {
+                created_us: now_us,
+                message,
+            });
+        }
         TargetOutcome::TargetQueued
+    }
+
+    /// With TD_VPE_EN bit 1, the frame's level position into the velocity fit, and the fit;
+    /// `None` (and the fit restarted) for a frame without a level estimate.
+    fn fit_velocity(&mut self, frame: &FrameEstimate) -> Option<FittedVelocity> {
+        if self.params.get_int(ParamId::VpeEnable) & VISION_VELOCITY == 0 {
+            return None;
+        }
+        let level = frame.estimate.as_ref().and_then(|e| e.level);
+        match level.filter(|_| frame.fix_found) {
+            Some(l) => self.velocity_fit.push(
+                frame.exposure_us,
+                l.estimate.position,
+                l.estimate.position_covariance.diagonal(),
+            ),
+            None => {
+                self.velocity_fit.clear();
+                None
+            }
+        }
     }
 
     /// The outer loop's shift for a PX4 target exposed at `t_us` with the pad at `from_origin`
@@ -179,6 +217,93 @@ impl State {
             self.params.get(ParamId::CamPosY),
             self.params.get(ParamId::CamPosZ),
         )
+    }
+}
+
+/// TD_VPE_EN bit 0: VISION_POSITION_ESTIMATE.
+const VISION_POSITION: i32 = 1;
+/// TD_VPE_EN bit 1: the vehicle's velocity.
+const VISION_VELOCITY: i32 = 2;
+
+/// The vehicle's velocity over the ground, NED: the opposite of the slope of the pad's
+/// position against the vehicle, true for a pad that stays where it is.
+fn vehicle_velocity(f: &FittedVelocity) -> Vector3<f32> {
+    -f.velocity
+}
+
+/// ODOMETRY carrying the velocity alone (PX4's EKF2 fuses it with EKF2_EV_CTRL bit 2): position
+/// and attitude NaN (PX4 takes a field only when it is finite), the velocity in the autopilot's
+/// own NED axes (`child_frame_id` LOCAL_NED: the level estimate is turned by the autopilot's
+/// attitude, heading included), its variances from the fit, the angular rates unknown.
+fn velocity_odometry(time_usec: u64, f: &FittedVelocity) -> ODOMETRY_DATA {
+    let v = vehicle_velocity(f);
+    let mut velocity_covariance = [0.0f32; 21];
+    upper_triangle_3(
+        &nalgebra::Matrix3::from_diagonal(&f.variance),
+        &mut velocity_covariance,
+        6,
+    );
+    // The angular rates' variances (rows 3-5 of the 6 x 6): unknown.
+    for k in [15, 18, 20] {
+        if let Some(slot) = velocity_covariance.get_mut(k) {
+            *slot = f32::NAN;
+        }
+    }
+    let mut pose_covariance = [0.0f32; 21];
+    pose_covariance[0] = f32::NAN;
+    ODOMETRY_DATA {
+        time_usec,
+        x: f32::NAN,
+        y: f32::NAN,
+        z: f32::NAN,
+        q: [f32::NAN, 0.0, 0.0, 0.0],
+        vx: v.x,
+        vy: v.y,
+        vz: v.z,
+        rollspeed: f32::NAN,
+        pitchspeed: f32::NAN,
+        yawspeed: f32::NAN,
+        pose_covariance,
+        velocity_covariance,
+        frame_id: MavFrame::MAV_FRAME_LOCAL_NED,
+        child_frame_id: MavFrame::MAV_FRAME_LOCAL_NED,
+        reset_counter: 0,
+        estimator_type: MavEstimatorType::MAV_ESTIMATOR_TYPE_VISION,
+        quality: 0,
+    }
+}
+
+/// VISION_SPEED_ESTIMATE (ArduPilot's AP_VisualOdom): the velocity, NED, with its 3 x 3
+/// covariance row-major (the fit's axes are independent: diagonal).
+fn velocity_speed_estimate(time_usec: u64, f: &FittedVelocity) -> VISION_SPEED_ESTIMATE_DATA {
+    let v = vehicle_velocity(f);
+    let mut covariance = [0.0f32; 9];
+    for (slot, variance) in [0, 4, 8].into_iter().zip(f.variance.iter()) {
+        if let Some(c) = covariance.get_mut(slot) {
+            *c = *variance;
+        }
+    }
+    VISION_SPEED_ESTIMATE_DATA {
+        usec: time_usec,
+        x: v.x,
+        y: v.y,
+        z: v.z,
+        covariance,
+        reset_counter: 0,
+    }
+}
+
+/// Writes the upper triangle of the 3 x 3 `m` into the first three rows of the row-major upper
+/// triangle of an `n` x `n` matrix (`out`); the other entries are left as they are.
+fn upper_triangle_3(m: &nalgebra::Matrix3<f32>, out: &mut [f32], n: usize) {
+    let mut start = 0;
+    for r in 0..3 {
+        for c in r..3 {
+            if let (Some(slot), Some(v)) = (out.get_mut(start + c - r), m.get((r, c))) {
+                *slot = *v;
+            }
+        }
+        start += n - r;
     }
 }
 

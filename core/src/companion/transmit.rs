@@ -2,8 +2,8 @@
 //! stream requests while a stream is missing, its own or a host tool's, a paced parameter
 //! list), and the order of the transmit queue: TIMESYNC answers first, then the newest
 //! LANDING_TARGET (dropped when older than
-//! [`super::CompanionConfig::max_target_latency_us`]), VISION_POSITION_ESTIMATE, STATUSTEXT,
-//! and the rest in order.
+//! [`super::CompanionConfig::max_target_latency_us`]), VISION_POSITION_ESTIMATE, the velocity
+//! (ODOMETRY or VISION_SPEED_ESTIMATE), STATUSTEXT, and the rest in order.
 //!
 //! Frames are serialised here, one per call, into the caller's buffer.
 
@@ -12,7 +12,8 @@ use core::fmt::Write;
 use super::framing;
 use super::profile::Profile;
 use super::{
-    Pending, State, Stream, StreamError, MAX_FRAME_LEN, STATUS_TEXT_LEN, TX_QUEUE_CAPACITY,
+    Pending, State, Stream, StreamError, VelocityMessage, MAX_FRAME_LEN, STATUS_TEXT_LEN,
+    TX_QUEUE_CAPACITY,
 };
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
@@ -131,6 +132,16 @@ impl State {
             if now_us.saturating_sub(p.created_us) <= latency {
                 self.stats.vision_estimates = self.stats.vision_estimates.saturating_add(1);
                 return self.emit(&MavMessage::VISION_POSITION_ESTIMATE(p.data), out);
+            }
+        }
+        if let Some(p) = self.velocity.take() {
+            if now_us.saturating_sub(p.created_us) <= latency {
+                self.stats.vision_velocities = self.stats.vision_velocities.saturating_add(1);
+                let msg = match p.message {
+                    VelocityMessage::Odometry(d) => MavMessage::ODOMETRY(d),
+                    VelocityMessage::Speed(d) => MavMessage::VISION_SPEED_ESTIMATE(d),
+                };
+                return self.emit(&msg, out);
             }
         }
         if let Some(s) = self.status.pop_front() {
@@ -252,6 +263,8 @@ impl State {
             MavMessage::VISION_POSITION_ESTIMATE(d) => {
                 framing::write_v2_frame(out, seq, sys, comp, d)
             }
+            MavMessage::ODOMETRY(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::VISION_SPEED_ESTIMATE(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             MavMessage::STATUSTEXT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             _ => return None,
         };

@@ -100,7 +100,8 @@ pub enum ParamId {
     SysId,
     /// Our MAVLink component id.
     CompId,
-    /// Send VISION_POSITION_ESTIMATE too (0/1).
+    /// Vision estimates sent besides the targets, bits: 1 VISION_POSITION_ESTIMATE, 2 the
+    /// vehicle's velocity (ODOMETRY under PX4, VISION_SPEED_ESTIMATE under ArduPilot).
     VpeEnable,
     /// Serial baud rate to the flight controller (applied at boot).
     Baud,
@@ -209,9 +210,9 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         kind: ParamKind::Int,
         default: 0.0,
         min: 0.0,
-        max: 1.0,
+        max: 3.0,
         zero_is_unset: false,
-        help: "1: also send VISION_POSITION_ESTIMATE (vehicle in a pad-centred NED frame)",
+        help: "bits: 1 also send VISION_POSITION_ESTIMATE (vehicle in a pad-centred NED frame), 2 the vehicle's velocity (PX4 ODOMETRY, ArduPilot VISION_SPEED_ESTIMATE)",
     },
     ParamDef {
         name: "TD_BAUD",

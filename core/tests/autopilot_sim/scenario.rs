@@ -56,7 +56,8 @@ pub struct Scenario {
     pub lost: Option<(u64, u64)>,
     pub corrupt: bool,
     pub params: Vec<(u64, ParamAction)>,
-    pub vpe: bool,
+    /// TD_VPE_EN: bit 0 VISION_POSITION_ESTIMATE, bit 1 the velocity.
+    pub vision: f32,
     /// TD_PROFILE auto (the default) instead of forcing `profile`; the simulated autopilot's
     /// HEARTBEAT then says `profile`'s autopilot.
     pub auto: bool,
@@ -83,7 +84,7 @@ impl Scenario {
             lost: None,
             corrupt: false,
             params: Vec::new(),
-            vpe: false,
+            vision: 0.0,
             auto: false,
             gimbal: false,
             autopilot_from_us: 0,
@@ -183,9 +184,7 @@ pub fn simulate(s: &Scenario) -> Run {
         CompanionConfig::with_profile(s.profile)
     };
     config.params.set(ParamId::CamYaw, s.cam_yaw_deg).unwrap();
-    if s.vpe {
-        config.params.set(ParamId::VpeEnable, 1.0).unwrap();
-    }
+    config.params.set(ParamId::VpeEnable, s.vision).unwrap();
     // What TD_CAM_YAW means: the downward camera turned about its optical axis.
     let mount = CameraMount::downward_rotated(s.cam_yaw_deg.to_radians()).unwrap();
     // The estimator's mount is the downward one; TD_CAM_YAW turns it (as the pipeline does).
