@@ -86,26 +86,34 @@ impl GcsLink {
     /// Reads what arrived and sends our HEARTBEAT once a second; STATUSTEXTs are echoed to
     /// `err` as they come.
     pub fn pump(&mut self, err: &mut dyn Write) -> Result<(), CliError> {
+        let (messages, drained) = self.receive();
+        for (_, message) in messages {
+            self.take(&message, err);
+        }
+        drained?;
+        self.heartbeat_when_due()
+    }
+
+    /// The messages that arrived from component 1 of the autopilot's system (of any system
+    /// until the autopilot is known, `system_id` 0), with their sender's system id; and
+    /// whether the link still stands (what arrived before it fell is returned too).
+    fn receive(&mut self) -> (Vec<(u8, MavMessage)>, Result<(), CliError>) {
         let mut rx = [0u8; 4096];
         let mut messages = Vec::new();
         let parser = &mut self.parser;
         let system_id = self.system_id;
         let drained = self.endpoint.drain(&mut rx, |bytes| {
             parser.push(bytes, |frame| {
-                if frame.system_id == system_id && frame.component_id == 1 {
+                let ours = system_id == 0 || frame.system_id == system_id;
+                if ours && frame.component_id == 1 {
                     if let Ok(message) = frame.decode() {
-                        messages.push(message);
+                        messages.push((frame.system_id, message));
                     }
                 }
             });
         });
-        for message in messages {
-            self.take(&message, err);
-        }
-        if let Err(lost) = drained {
-            return Err(CliError(format!("{}: {lost}", self.describe())));
-        }
-        self.heartbeat_when_due()
+        let drained = drained.map_err(|lost| CliError(format!("{}: {lost}", self.describe())));
+        (messages, drained)
     }
 
     /// Our HEARTBEAT, once a second: it tells a UDP autopilot where we are, and an
@@ -391,29 +399,22 @@ fn connect(spec: &EndpointSpec, connect_patience: Duration) -> Result<GcsLink, C
         next_heartbeat: now,
         clock_zero: now,
     };
-    // Until the autopilot is known the parser hands out every sender's frames.
+    // Until the autopilot is known (system id 0) every sender's frames are read.
     let until = Instant::now() + HEARTBEAT_PATIENCE;
-    let mut rx = [0u8; 4096];
     loop {
-        let mut found = None;
-        let parser = &mut link.parser;
-        let drained = link.endpoint.drain(&mut rx, |bytes| {
-            parser.push(bytes, |frame| {
-                if let (1, Ok(MavMessage::HEARTBEAT(h))) = (frame.component_id, frame.decode()) {
-                    let autopilot = match h.autopilot {
-                        MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Some(Autopilot::ArduPilot),
-                        MavAutopilot::MAV_AUTOPILOT_PX4 => Some(Autopilot::Px4),
-                        _ => None,
-                    };
-                    if let Some(a) = autopilot {
-                        found.get_or_insert((frame.system_id, a, h));
-                    }
-                }
-            });
+        let (messages, drained) = link.receive();
+        drained?;
+        let found = messages.into_iter().find_map(|(system_id, message)| {
+            let MavMessage::HEARTBEAT(h) = message else {
+                return None;
+            };
+            let autopilot = match h.autopilot {
+                MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA => Autopilot::ArduPilot,
+                MavAutopilot::MAV_AUTOPILOT_PX4 => Autopilot::Px4,
+                _ => return None,
+            };
+            Some((system_id, autopilot, h))
         });
-        if let Err(lost) = drained {
-            return Err(CliError(format!("{}: {lost}", link.describe())));
-        }
         if let Some((system_id, autopilot, h)) = found {
             link.system_id = system_id;
             link.autopilot = autopilot;
