@@ -27,6 +27,7 @@ const FAR_ALTITUDE_M: f64 = 40.0;
 const FAR_DETECTION_RATE: f64 = 0.9;
 
 #[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
 fn paper_tables_at_a_quarter_of_the_papers_error() {
     let config = Config {
         // The bound holds for the mean over a hover, not for a few frames: at 20 m one

@@ -70,6 +70,7 @@ fn render(dir: &Path, roll: f64, pitch: f64, step: usize, frames: usize, attitud
 }
 
 #[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
 fn calibrate_recovers_a_known_mount_misalignment() {
     let dir = scratch("known");
     render(&dir, 1.5, -1.0, 2, usize::MAX, true);

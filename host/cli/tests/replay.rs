@@ -611,6 +611,7 @@ fn flight_flags_are_checked() {
 /// misalignment (roll 1.2, pitch -1.6 deg) but measured, not copied (the hover's own attitude
 /// bias is in it). A board that may not calibrate (`--no-calibration`) cannot be asked to.
 #[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
 fn calibration_hover_hands_the_mount_the_board_set_to_the_flight() {
     let out = touchdown(&[
         "replay",

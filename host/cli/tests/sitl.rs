@@ -62,6 +62,7 @@ fn horizontal_cm(landing: &serde_json::Value) -> f64 {
 }
 
 #[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
 fn gusty_seeds_land_near_the_pad_and_still_air_within_5_cm() {
     let seeds = GUSTY_SEEDS.to_string();
     let (code, report, stderr) = sitl(&[

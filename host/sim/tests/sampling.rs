@@ -96,6 +96,7 @@ fn difference(a: &[u8], b: &[u8]) -> (u8, f64) {
 }
 
 #[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
 fn adaptive_sampling_is_the_exhaustive_one() {
     // (scenario, where, roll, pitch, yaw): heights of the landing from the pad small in the
     // image to the pad filling it, level and tilted.
