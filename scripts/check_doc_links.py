@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Checks the relative links of the repository's Markdown files.
 
-Every link `[text](target)`, image `![alt](target)` and reference definition `[name]: target`
-outside code must name an existing file or directory, relative to the file it is in; a
+Every link `[text](target)`, image `![alt](target)`, HTML `<img src>` or `<a href>` and
+reference definition `[name]: target` outside code must name an existing file or directory, relative to the file it is in; a
 `#anchor` (alone, or after a Markdown file) must be a heading of that file, by GitHub's rules
 for heading ids, or an explicit `id`/`name` attribute. Links with a scheme (https:, mailto:)
 are not followed.
@@ -26,6 +26,7 @@ INLINE_CODE = re.compile(r"(`+)(.+?)\1")
 INLINE_LINK = re.compile(r"!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(\s*<?([^)\s>]*)>?(?:\s+\"[^\"]*\")?\s*\)")
 REFERENCE_DEF = re.compile(r"^ {0,3}\[[^\]]+\]:\s*<?(\S+?)>?(?:\s|$)")
 HEADING = re.compile(r"^ {0,3}(#{1,6})\s+(.*?)\s*#*\s*$")
+HTML_LINK = re.compile(r"""<(?:img|a)\b[^>]*?\b(?:src|href)\s*=\s*["']([^"']+)["']""")
 HTML_ID = re.compile(r"""<[^>]+\b(?:id|name)\s*=\s*["']([^"']+)["']""")
 SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*:")
 
@@ -99,6 +100,8 @@ def links(text):
     for number, line in lines_outside_fences(text):
         bare = INLINE_CODE.sub("", line)
         for match in INLINE_LINK.finditer(bare):
+            yield number, match.group(1)
+        for match in HTML_LINK.finditer(bare):
             yield number, match.group(1)
         match = REFERENCE_DEF.match(bare)
         if match:
