@@ -33,9 +33,10 @@
 //! ([`family::tables`]), the pad designs by name ([`pad::designs`]) and the MAVLink crate with
 //! its message types ([`companion::mavlink`]).
 //!
-//! Conventions (the project's contract, see `README.md`): pixel (0, 0) is the centre of the
-//! top-left pixel, x right, y down; marker corners are the outer corners of the black border,
-//! ordered top-left, top-right, bottom-right, bottom-left of the marker's canonical image.
+//! Conventions (the project's contract, see `docs/interfaces.md`): pixel (0, 0) is the
+//! centre of the top-left pixel, x right, y down; marker corners are the outer corners of the
+//! black border, ordered top-left, top-right, bottom-right, bottom-left of the marker's
+//! canonical image.
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]

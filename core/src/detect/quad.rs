@@ -16,8 +16,8 @@
 //! squared integer distances, the vertex drop on squared bends, the shape check on squared
 //! lengths). libm's `sqrtf` is software on the Cortex-M7 (52 instructions) and micromath's,
 //! 7 instructions, is up to 6 % off, which would move the limits and drop other vertices;
-//! the squared forms are exact and cheaper than either (see the README's "Floating-point
-//! functions").
+//! the squared forms are exact and cheaper than either (see
+//! `docs/design/floating-point.md`).
 
 use super::contour::Pixel;
 use crate::geometry::cyclic;

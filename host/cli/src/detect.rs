@@ -68,6 +68,11 @@ camera frame: x right, y down, z forward; metres), with the RMS reprojection err
 corners in pixels. Corners are undistorted with the camera's Brown-Conrady coefficients;
 the pose is IPPE's better planar solution refined by Levenberg-Marquardt.
 
+Drawing: --draw OUT.png (one IMAGE) also writes the image as an RGB PNG with each marker
+found outlined in green and a red dot on its first corner (top-left of its canonical
+image): for looking at a detection, not for measuring it. --draw-scale N shrinks that
+picture N times first (each pixel the mean of an NxN block), for a smaller file.
+
 Exit status: 0 when every image was read (even with no marker found); 2 when an image could
 not be read (one line per file on stderr; the other images are still processed) or an option
 is wrong.";
@@ -97,6 +102,17 @@ pub struct DetectArgs {
     /// Print one JSON object per image per line instead of text
     #[arg(long)]
     pub json: bool,
+
+    /// Also write the image with the markers found outlined (green; a red dot on each
+    /// marker's first corner) to OUT.png; needs exactly one IMAGE
+    #[arg(long, value_name = "OUT.png")]
+    pub draw: Option<PathBuf>,
+
+    /// Shrink the --draw picture N times in each direction (each pixel the mean of an NxN
+    /// block) before outlining: a smaller file for a web page
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "draw",
+          value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub draw_scale: u8,
 
     /// Detection pipeline: touchdown's own (robust) or the paper's method (paper), kept to
     /// reproduce the paper's tables
@@ -205,6 +221,9 @@ pub fn run(
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> Result<Outcome, CliError> {
+    if args.draw.is_some() && args.images.len() != 1 {
+        return Err(CliError::new("--draw needs exactly one IMAGE"));
+    }
     let pose_setup = check_pose_options(args)?;
     let selected = searched_families(args)?;
     if selected.len() > MAX_FAMILIES {
@@ -281,6 +300,14 @@ pub fn run(
                     path.display()
                 );
             }
+        }
+        if let Some(draw) = &args.draw {
+            let quads: Vec<[[f32; 2]; 4]> = detections
+                .iter()
+                .map(|d| d.corners.map(|p| [p.x, p.y]))
+                .collect();
+            crate::overlay::write_png(draw, &frame, &quads, usize::from(args.draw_scale))
+                .map_err(|e| CliError(format!("cannot write the drawing: {e}")))?;
         }
         totals.images += 1;
         totals.markers += detections.len();

@@ -17,6 +17,7 @@ pub mod calibrate;
 pub mod companion;
 pub mod detect;
 pub mod effects;
+pub mod overlay;
 pub mod pad;
 pub mod plot;
 pub mod replay;

@@ -289,6 +289,54 @@ fn blank_pgm_gives_an_empty_json_record() {
     );
 }
 
+/// `--draw` writes the image with the marker outlined: green on the outline, the first corner
+/// red, the rest the image's grey; `--draw-scale 2` halves it; two images are refused.
+#[test]
+fn draw_outlines_the_markers_found() {
+    let (frame, corners) = draw_marker(&tables::TAG36H11, 7);
+    let image = scratch("draw-marker.png");
+    save_png(&image, &frame).expect("write");
+    let out = scratch("draw-marker-outlined.png");
+    let output = touchdown(&["detect", "--draw", path_str(&out), path_str(&image)]);
+    assert_eq!(exit_code(&output), Some(0), "{}", text(&output.stderr));
+    let drawn = image::open(&out).expect("a PNG").to_rgb8();
+    assert_eq!(
+        (drawn.width() as usize, drawn.height() as usize),
+        (frame.width, frame.height)
+    );
+    let [first, second, ..] = corners;
+    let middle_of_top = [(first[0] + second[0]) / 2.0, first[1]];
+    let at = |p: [f32; 2]| drawn.get_pixel(p[0].round() as u32, p[1].round() as u32).0;
+    assert_eq!(at(middle_of_top), [0, 220, 0]);
+    assert_eq!(at(first), [230, 0, 0]);
+    assert_eq!(drawn.get_pixel(2, 2).0, [255, 255, 255]);
+
+    let half = scratch("draw-marker-half.png");
+    let output = touchdown(&[
+        "detect",
+        "--draw",
+        path_str(&half),
+        "--draw-scale",
+        "2",
+        path_str(&image),
+    ]);
+    assert_eq!(exit_code(&output), Some(0), "{}", text(&output.stderr));
+    let (w, h) = image::image_dimensions(&half).expect("a PNG");
+    assert_eq!(
+        (w as usize, h as usize),
+        (frame.width / 2, frame.height / 2)
+    );
+
+    let output = touchdown(&[
+        "detect",
+        "--draw",
+        path_str(&out),
+        path_str(&image),
+        path_str(&image),
+    ]);
+    assert_fails_with_one_line(&output, &["--draw", "one IMAGE"]);
+}
+
 #[test]
 fn family_file_is_accepted() {
     let family = scratch("one_marker.txt");

@@ -226,8 +226,8 @@ impl Axis {
         // the known area. Clamped before rounding (the same result, `cells` being a whole
         // number; NaN goes to the same end as before), micromath's floor and ceiling (a
         // conversion to an integer and back) are exact: twice per axis and pixel, 6 and 7
-        // Cortex-M7 instructions where libm's bit manipulation takes 19 each (see the
-        // README's "Floating-point functions").
+        // Cortex-M7 instructions where libm's bit manipulation takes 19 each (see
+        // `docs/design/floating-point.md`).
         let cells_f = cells as f32;
         let first = F32Ext::floor(lo.max(0.0).min(cells_f));
         let last = F32Ext::ceil(hi.min(cells_f).max(0.0));

@@ -571,7 +571,7 @@ fn board_profile(setup: &FlightSetup) -> Option<Profile> {
 /// frame the board sends (TD_PROFILE), not on the autopilot alone.
 fn reconstruction(setup: &FlightSetup) -> &'static str {
     match (setup.autopilot, board_profile(setup)) {
-        // The BODY_FRD text is the one README's example output shows.
+        // The BODY_FRD text is the one docs/accuracy.md's example output shows.
         (AutopilotKind::ArduPilot, Some(Profile::ArduPilot)) => {
             "ArduPilot (body vector, its attitude at receipt - PLND_LAG)"
         }
