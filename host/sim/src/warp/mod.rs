@@ -137,7 +137,13 @@ impl fmt::Debug for WarpScene {
 
 impl WarpScene {
     /// Rasterises the world and the pixels' rays (`threads` for the ground).
-    pub(crate) fn new(world: &World, rays: &RayMap, width: usize, height: usize, threads: usize) -> Self {
+    pub(crate) fn new(
+        world: &World,
+        rays: &RayMap,
+        width: usize,
+        height: usize,
+        threads: usize,
+    ) -> Self {
         WarpScene {
             pad: texture::PadTables::new(&world.pad),
             ground: texture::GroundPyramid::new(&world.ground, threads),
@@ -170,7 +176,10 @@ pub(crate) fn render(
         vec![sim.camera_pose(e.t).ground_homography()]
     } else {
         (0..h)
-            .map(|y| sim.camera_pose(sim.row_time(e.t, y as f64)).ground_homography())
+            .map(|y| {
+                sim.camera_pose(sim.row_time(e.t, y as f64))
+                    .ground_homography()
+            })
             .collect()
     };
     let knots = if optics.motion_blur {

@@ -77,14 +77,17 @@ pub(crate) struct Light {
 impl Light {
     pub(crate) fn new(world: &World) -> Self {
         let l = &world.lighting;
-        let occluder = world.occluder.filter(|o| o.radii[0] > 0.0 && o.radii[1] > 0.0).map(|o| {
-            let (s, c) = o.angle_deg.to_radians().sin_cos();
-            let a = [
-                [c / o.radii[0], s / o.radii[0]],
-                [-s / o.radii[1], c / o.radii[1]],
-            ];
-            (o.center, a, f64::from(o.albedo), o.radii[0].max(o.radii[1]))
-        });
+        let occluder = world
+            .occluder
+            .filter(|o| o.radii[0] > 0.0 && o.radii[1] > 0.0)
+            .map(|o| {
+                let (s, c) = o.angle_deg.to_radians().sin_cos();
+                let a = [
+                    [c / o.radii[0], s / o.radii[0]],
+                    [-s / o.radii[1], c / o.radii[1]],
+                ];
+                (o.center, a, f64::from(o.albedo), o.radii[0].max(o.radii[1]))
+            });
         Light {
             sky: l.sky,
             direct: l.direct,
@@ -212,7 +215,11 @@ impl Motion {
         // The pixel sees, at each instant, the ground point the image moved onto it: the
         // opposite of the displacement.
         Motion {
-            m: [1.0 + 12.0 * cxx.max(0.0), 12.0 * cxy, 1.0 + 12.0 * cyy.max(0.0)],
+            m: [
+                1.0 + 12.0 * cxx.max(0.0),
+                12.0 * cxy,
+                1.0 + 12.0 * cyy.max(0.0),
+            ],
             mu: [-ex, -ey],
         }
     }
@@ -379,7 +386,10 @@ fn shade_row(
     scratch: &mut RowScratch,
 ) {
     let rays = src.rays.get(y * width..(y + 1) * width).unwrap_or(&[]);
-    let cos = src.cos_off_axis.get(y * width..(y + 1) * width).unwrap_or(&[]);
+    let cos = src
+        .cos_off_axis
+        .get(y * width..(y + 1) * width)
+        .unwrap_or(&[]);
     let half = 0.5 * (width as f64 - 1.0);
     let inv_half = 1.0 / half.max(1e-9);
     const SKY: Footprint = Footprint {

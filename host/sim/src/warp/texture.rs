@@ -505,7 +505,8 @@ mod tests {
         let grid = pad.markers[0].grid();
         for r in 0..m.n {
             for c in 0..m.n {
-                let inside = (margin..margin + grid).contains(&r) && (margin..margin + grid).contains(&c);
+                let inside =
+                    (margin..margin + grid).contains(&r) && (margin..margin + grid).contains(&c);
                 let white = !inside || pad.markers[0].pattern.is_white(r - margin, c - margin);
                 expected += f64::from(if white { PAPER_ALBEDO } else { INK_ALBEDO });
             }
