@@ -19,6 +19,7 @@ pub mod detect;
 pub mod effects;
 pub mod pad;
 pub mod plot;
+pub mod renderer;
 pub mod replay;
 pub mod simulate;
 pub mod sitl;
