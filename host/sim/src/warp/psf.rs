@@ -30,8 +30,9 @@ pub enum Psf {
         angle_deg: f64,
     },
     /// No blur at the image centre growing to a Gaussian of this standard deviation at the
-    /// corners: the image blended with its blurred copy by the squared distance from the
-    /// centre over the corner's.
+    /// corners, the variance in proportion to the squared distance from the centre (up to
+    /// 0.7 px a three-tap kernel per axis; wider, the image blended with its blurred copy by
+    /// that proportion).
     Field {
         /// Standard deviation at the corners, pixels.
         corner_sigma_px: f64,
@@ -211,23 +212,73 @@ fn convolve(image: &mut [f32], width: usize, height: usize, kernel: &Kernel) {
     }
 }
 
+/// Corner blurs up to this standard deviation are a three-tap kernel per axis whose weights
+/// follow the pixel's distance from the centre (one cheap pass); wider ones blend the image
+/// with a blurred copy.
+const FIELD_TAPS_MAX_SIGMA: f64 = 0.7;
+
 fn field(image: &mut [f32], width: usize, height: usize, corner_sigma: f64) {
     if !corner_sigma.is_finite() || corner_sigma < 0.05 {
         return;
     }
-    let mut blurred = image.to_vec();
-    gaussian(&mut blurred, width, height, corner_sigma);
     let (cx, cy) = (0.5 * (width as f64 - 1.0), 0.5 * (height as f64 - 1.0));
     let corner2 = (cx * cx + cy * cy).max(1e-9);
+    // The share of the corner's blur at each pixel: the squared distance from the centre over
+    // the corner's.
+    let share =
+        |x: usize, y: usize| (((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2)) / corner2) as f32;
+    if corner_sigma <= FIELD_TAPS_MAX_SIGMA {
+        // [w, 1 - 2w, w] along x, then along y, has the variance 2w per axis: w = sigma^2 / 2
+        // with sigma^2 the corner's times the share. The share is a sum of a column's part
+        // and a row's.
+        let k = (0.5 * corner_sigma * corner_sigma / corner2) as f32;
+        let columns: Vec<f32> = (0..width)
+            .map(|x| k * (x as f64 - cx).powi(2) as f32)
+            .collect();
+        let mut row_in = vec![0.0f32; width];
+        for (y, row) in image.chunks_mut(width).take(height).enumerate() {
+            let dy = k * (y as f64 - cy).powi(2) as f32;
+            row_in.copy_from_slice(row);
+            for (x, o) in row.iter_mut().enumerate() {
+                let w = columns[x] + dy;
+                let (l, r) = (row_in[x.saturating_sub(1)], row_in[(x + 1).min(width - 1)]);
+                *o = row_in[x] + w * (l + r - 2.0 * row_in[x]);
+            }
+        }
+        // Along y a row at a time: the rows above and here kept unfiltered, the one below
+        // not filtered yet.
+        let mut above = image.get(..width).map(<[f32]>::to_vec).unwrap_or_default();
+        let mut here = above.clone();
+        for y in 0..height {
+            let dy = k * (y as f64 - cy).powi(2) as f32;
+            let (head, tail) = image.split_at_mut((y + 1) * width);
+            let row = &mut head[y * width..];
+            let below: &[f32] = if y + 1 < height {
+                &tail[..width]
+            } else {
+                &here
+            };
+            for (x, o) in row.iter_mut().enumerate() {
+                let w = columns[x] + dy;
+                *o = here[x] + w * (above[x] + below[x] - 2.0 * here[x]);
+            }
+            std::mem::swap(&mut above, &mut here);
+            if let Some(next) = tail.get(..width) {
+                here.copy_from_slice(next);
+            }
+        }
+        return;
+    }
+    let mut blurred = image.to_vec();
+    gaussian(&mut blurred, width, height, corner_sigma);
     for (y, (row, blurred_row)) in image
         .chunks_mut(width)
         .zip(blurred.chunks(width))
         .take(height)
         .enumerate()
     {
-        let dy2 = (y as f64 - cy).powi(2);
         for (x, (o, b)) in row.iter_mut().zip(blurred_row).enumerate() {
-            let t = (((x as f64 - cx).powi(2) + dy2) / corner2) as f32;
+            let t = share(x, y);
             *o += t * (b - *o);
         }
     }

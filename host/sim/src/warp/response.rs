@@ -116,11 +116,16 @@ pub(crate) fn develop(
         apply_gamma(&mut grey, black, response.gamma);
     }
     if response.sharpen.is_finite() && response.sharpen != 0.0 {
-        sharpen(&mut grey, width, height, response.sharpen as f32);
+        return sharpen(&grey, width, height, response.sharpen as f32);
     }
-    grey.iter()
-        .map(|&v| (v.clamp(0.0, 255.0) + 0.5) as u8)
-        .collect()
+    grey.iter().map(|&v| quantise(v)).collect()
+}
+
+/// Rounded and clipped to 0..255 (`as` truncates toward zero, the floor of a non-negative).
+#[inline]
+fn quantise(v: f32) -> u8 {
+    // Through i32: the saturating float-to-u8 conversion is longer.
+    (v.clamp(0.0, 255.0) + 0.5) as i32 as u8
 }
 
 fn apply_gamma(grey: &mut [f32], black: f32, gamma: f64) {
@@ -142,12 +147,12 @@ fn apply_gamma(grey: &mut [f32], black: f32, gamma: f64) {
     }
 }
 
-/// `(1 + s) v - s mean3x3(v)`, edges repeated.
-fn sharpen(grey: &mut [f32], width: usize, height: usize, s: f32) {
+/// `(1 + s) v - s mean3x3(v)`, edges repeated, quantised.
+fn sharpen(grey: &[f32], width: usize, height: usize, s: f32) -> Vec<u8> {
     if width == 0 || height == 0 {
-        return;
+        return Vec::new();
     }
-    // Horizontal 3-sums, then vertical.
+    // Horizontal 3-sums, then vertical ones a row at a time.
     let mut h3 = vec![0.0f32; width * height];
     for (src, dst) in grey.chunks(width).zip(h3.chunks_mut(width)) {
         for x in 0..width {
@@ -157,14 +162,16 @@ fn sharpen(grey: &mut [f32], width: usize, height: usize, s: f32) {
         }
     }
     let k = s / 9.0;
-    for y in 0..height {
-        let (up, down) = (y.saturating_sub(1), (y + 1).min(height - 1));
+    let mut out = vec![0u8; width * height];
+    for (y, (row, here)) in out.chunks_mut(width).zip(grey.chunks(width)).enumerate() {
+        let up = &h3[y.saturating_sub(1) * width..][..width];
+        let mid = &h3[y * width..][..width];
+        let down = &h3[(y + 1).min(height - 1) * width..][..width];
         for x in 0..width {
-            let sum = h3[up * width + x] + h3[y * width + x] + h3[down * width + x];
-            let v = &mut grey[y * width + x];
-            *v = (1.0 + s) * *v - k * sum;
+            row[x] = quantise((1.0 + s) * here[x] - k * (up[x] + mid[x] + down[x]));
         }
     }
+    out
 }
 
 #[cfg(test)]

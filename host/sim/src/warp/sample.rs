@@ -24,6 +24,9 @@ use crate::Simulator;
 
 /// Rows between motion knots.
 pub const KNOT_ROWS: usize = 8;
+/// Pixels along a row that share one interpolation of the motion knots (the motion changes
+/// by hundredths of a pixel over them).
+const MOTION_RUN: usize = 16;
 /// Most pieces of an exposure's image path (with vibration: one per
 /// [`crate::VIBRATION_MOTION_STEP_S`]).
 const MAX_PIECES: usize = 16;
@@ -401,6 +404,7 @@ fn shade_row(
     };
     scratch.footprints.clear();
     scratch.footprints.resize(rays.len(), SKY);
+    let mut mo = Motion::STILL;
     for (x, (r, slot)) in rays.iter().zip(scratch.footprints.iter_mut()).enumerate() {
         let (rx, ry) = (f64::from(r[0]), f64::from(r[1]));
         let w = h[2][0] * rx + h[2][1] * ry + h[2][2];
@@ -433,12 +437,15 @@ fn shade_row(
                 wyy: a[1] * a[1] + b[1] * b[1],
             },
             Some(knots) => {
-                let xf = x as i64 as f64;
-                let mo = if xf <= half {
-                    Motion::lerp(&knots[0], &knots[1], xf * inv_half)
-                } else {
-                    Motion::lerp(&knots[1], &knots[2], (xf - half) * inv_half)
-                };
+                // The knots interpolated at the middle of each run of MOTION_RUN pixels.
+                if x % MOTION_RUN == 0 {
+                    let xf = (x + MOTION_RUN / 2) as i64 as f64;
+                    mo = if xf <= half {
+                        Motion::lerp(&knots[0], &knots[1], xf * inv_half)
+                    } else {
+                        Motion::lerp(&knots[1], &knots[2], ((xf - half) * inv_half).min(1.0))
+                    };
+                }
                 let [m0, m1, m2] = mo.m;
                 // J M with J = [a b] (columns), then (J M) J^T.
                 let jm = [

@@ -28,6 +28,11 @@ pub const GROUND_TEXELS: usize = 1024;
 /// Smallest box side, in cells or metres, so that a box never has zero area.
 const MIN_WIDTH: f64 = 1e-4;
 
+/// Where in an octave of footprint sizes the blend toward the coarser level starts, and over
+/// how much of it the blend runs (trilinear filtering is 0 and 1).
+const BLEND_START: f64 = 0.35;
+const BLEND_WIDTH: f64 = 0.3;
+
 /// Fraction bits of the fixed-point texel coordinates.
 const FRACTION_BITS: u32 = 16;
 
@@ -135,8 +140,9 @@ impl GroundPyramid {
     }
 
     /// Mean albedo over a footprint about `sqrt(footprint2_m2)` metres across around
-    /// `(x, y)`: trilinear between the levels whose texels bracket the footprint.
-    #[inline]
+    /// `(x, y)`: bilinear in the level whose texels match the footprint, blended with the next
+    /// coarser one in the middle of the octave.
+    #[inline(always)]
     pub(crate) fn sample(&self, x: f64, y: f64, footprint2_m2: f64) -> f64 {
         let Some(first) = self.levels.first() else {
             return 0.0;
@@ -149,7 +155,9 @@ impl GroundPyramid {
         // log2 of the footprint's size from its square: no square root.
         let lod = (0.5 * fast_log2(footprint2_m2 * (INV_TEXEL * INV_TEXEL))).clamp(0.0, top);
         let l0 = lod as i64;
-        let t = (lod - l0 as f64) as f32;
+        // Blended across the middle of each octave only: most samples read one level (half
+        // the cost), and the blur still changes continuously with the footprint.
+        let t = (((lod - l0 as f64) - BLEND_START) * (1.0 / BLEND_WIDTH)).clamp(0.0, 1.0) as f32;
         let l0 = l0 as usize;
         // Fixed-point texel coordinates of the finest level, with the texel centres at
         // integers (`- 0.5`); a coarser level's are these halved, shifted by the same half.
@@ -160,11 +168,14 @@ impl GroundPyramid {
         if t <= 0.0 || l0 + 1 >= self.levels.len() {
             return f64::from(a);
         }
+        if t >= 1.0 {
+            return f64::from(self.bilinear(l0 + 1, u, v));
+        }
         f64::from(a + t * (self.bilinear(l0 + 1, u, v) - a))
     }
 
     /// Level `level` at the finest level's fixed-point texel corner coordinates `(u, v)`.
-    #[inline]
+    #[inline(always)]
     fn bilinear(&self, level: usize, u: i64, v: i64) -> f32 {
         let Some(l) = self.levels.get(level) else {
             return 0.0;
@@ -512,25 +523,5 @@ mod tests {
             }
         }
         assert!((total - expected).abs() < 1e-9, "{total} {expected}");
-    }
-}
-
-#[cfg(test)]
-mod timing {
-    use super::*;
-    #[test]
-    #[ignore]
-    fn time_sample() {
-        let g = GroundPyramid::new(&GroundTexture::new(GroundKind::Grass, 1), 2);
-        for fp in [0.001f64, 0.009, 0.036] {
-            let start = std::time::Instant::now();
-            let mut acc = 0.0;
-            for j in 0..480 {
-                for i in 0..640 {
-                    acc += g.sample(i as f64 * fp, j as f64 * fp, fp * fp);
-                }
-            }
-            println!("{fp}: {:.2} ms {acc}", start.elapsed().as_secs_f64() * 1e3);
-        }
     }
 }
