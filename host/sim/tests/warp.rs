@@ -336,9 +336,13 @@ fn the_pad_texture_is_the_printed_cells() {
                 let (c, r) = (cells[0].0 - margin, cells[0].1 - margin);
                 let albedo = if c < -margin || r < -margin || c >= n + margin || r >= n + margin {
                     continue;
-                } else if c < 0.0 || r < 0.0 || c >= n || r >= n {
-                    PAPER_ALBEDO
-                } else if marker.pattern.is_white(r as usize, c as usize) {
+                } else if c < 0.0
+                    || r < 0.0
+                    || c >= n
+                    || r >= n
+                    || marker.pattern.is_white(r as usize, c as usize)
+                {
+                    // The margin, or a white cell.
                     PAPER_ALBEDO
                 } else {
                     INK_ALBEDO
@@ -468,4 +472,12 @@ fn each_psf_blurs_an_edge_by_its_width() {
     // sqrt(((w - 1) / 2)^2 + ((h - 1) / 2)^2): the blend's weight is the square of that.
     let weight = (32.0f64 * 32.0) / (31.5f64 * 31.5 + 32.0 * 32.0);
     close(top, weight * 4.0, "field blur in the top row");
+    // A narrow corner blur (three taps per axis): the same proportion of its variance.
+    let narrow = Psf::Field {
+        corner_sigma_px: 0.6,
+    };
+    let centre = edge_variance(&narrow, cw, ch, ch / 2);
+    assert!(centre < 0.01, "narrow field blur at the centre: {centre}");
+    let top = edge_variance(&narrow, cw, ch, 0);
+    close(top, weight * 0.36, "narrow field blur in the top row");
 }

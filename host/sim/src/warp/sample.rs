@@ -73,8 +73,18 @@ pub(crate) struct Light {
     direct: f64,
     /// Point, unit normal into the shadow, penumbra width.
     shadow: Option<([f64; 2], [f64; 2], f64)>,
-    /// Centre, pad-to-unit-circle matrix, albedo, bounding radius.
-    occluder: Option<([f64; 2], [[f64; 2]; 2], f64, f64)>,
+    occluder: Option<Blob>,
+}
+
+/// The occluder as the light's closed forms need it.
+#[derive(Debug, Clone, Copy)]
+struct Blob {
+    centre: [f64; 2],
+    /// Pad frame to the unit circle's.
+    to_unit: [[f64; 2]; 2],
+    albedo: f64,
+    /// Bounding radius, metres.
+    reach: f64,
 }
 
 impl Light {
@@ -89,7 +99,12 @@ impl Light {
                     [c / o.radii[0], s / o.radii[0]],
                     [-s / o.radii[1], c / o.radii[1]],
                 ];
-                (o.center, a, f64::from(o.albedo), o.radii[0].max(o.radii[1]))
+                Blob {
+                    centre: o.center,
+                    to_unit: a,
+                    albedo: f64::from(o.albedo),
+                    reach: o.radii[0].max(o.radii[1]),
+                }
             });
         Light {
             sky: l.sky,
@@ -142,7 +157,12 @@ impl Light {
     /// edge at the footprint's scale).
     #[inline]
     fn occluder(&self, f: &Footprint) -> Option<(f64, f64)> {
-        let (c, a, albedo, reach) = self.occluder?;
+        let Blob {
+            centre: c,
+            to_unit: a,
+            albedo,
+            reach,
+        } = self.occluder?;
         let (dx, dy) = (f.x - c[0], f.y - c[1]);
         let wide = f.wxx.max(f.wyy).max(0.0).sqrt();
         if dx.abs() > reach + wide || dy.abs() > reach + wide {
@@ -522,10 +542,4 @@ fn lit(src: &Sources<'_>, f: &Footprint, albedo: f64) -> f64 {
         None => albedo,
     };
     albedo * src.light.illumination(f)
-}
-
-/// Mean radiance over a footprint (the pixels' path, one footprint at a time).
-#[cfg(test)]
-pub(crate) fn shade(src: &Sources<'_>, f: &Footprint) -> f64 {
-    lit(src, f, pad_albedo(src, f, &mut 0))
 }

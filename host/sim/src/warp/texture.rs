@@ -524,4 +524,46 @@ mod tests {
         }
         assert!((total - expected).abs() < 1e-9, "{total} {expected}");
     }
+
+    #[test]
+    fn a_box_across_a_cell_edge_is_the_area_mix_of_its_cells() {
+        let pad = PrintedPad::design("paper-single").expect("shipped design");
+        let tables = PadTables::new(&pad);
+        let m = &pad.markers[0];
+        // The black border's outer edge: column 0 of the grid is black, the margin white.
+        let [x0, y0] = m.to_pad(-0.5 * m.size, 0.0);
+        let side = 0.25 * m.cell;
+        for (shift, black) in [
+            (0.0, 0.5),
+            (0.25 * side, 0.75),
+            (-0.25 * side, 0.25),
+            (side, 1.0),
+        ] {
+            let f = Footprint {
+                x: x0 + shift,
+                y: y0,
+                wxx: side * side,
+                wxy: 0.0,
+                wyy: side * side,
+            };
+            let cover = tables.cover(&f, &mut 0).expect("on the pad");
+            let expected = black * f64::from(INK_ALBEDO) + (1.0 - black) * f64::from(PAPER_ALBEDO);
+            assert!((cover.paper - 1.0).abs() < 1e-9, "{cover:?}");
+            assert!(
+                (cover.albedo_sum - expected).abs() < 1e-6,
+                "{shift}: {cover:?}"
+            );
+        }
+        // Half off the sheet's edge: half paper.
+        let f = Footprint {
+            x: pad.sheet.x1,
+            y: 0.0,
+            wxx: side * side,
+            wxy: 0.0,
+            wyy: side * side,
+        };
+        let cover = tables.cover(&f, &mut 0).expect("on the sheet's edge");
+        assert!((cover.paper - 0.5).abs() < 1e-9, "{cover:?}");
+        assert!((cover.albedo_sum - 0.5 * f64::from(PAPER_ALBEDO)).abs() < 1e-6);
+    }
 }
