@@ -32,8 +32,13 @@ const CORNER_PARITY_PX: f64 = 0.15;
 /// The landing scenario (seed 3) with the typical flight effects: rolling shutter,
 /// vibration, misaligned mount, board lens and sensor, grass.
 fn landing() -> Scenario {
+    landing_with(&FlightEffects::typical())
+}
+
+/// The landing scenario (seed 3) with `effects`.
+fn landing_with(effects: &FlightEffects) -> Scenario {
     let mut s = Scenario::named("landing", 3).expect("landing");
-    s.apply_effects(&FlightEffects::typical());
+    s.apply_effects(effects);
     s
 }
 
@@ -144,9 +149,8 @@ struct Found {
     rms: f64,
 }
 
-/// The detector on frames of the landing at `heights`, against the rolling-shutter truth.
-fn detector_on(renderer: Renderer, heights: &[f64]) -> Vec<Found> {
-    let scenario = landing();
+/// The detector on frames of `scenario` at `heights`, against the rolling-shutter truth.
+fn detector_on(scenario: Scenario, renderer: Renderer, heights: &[f64]) -> Vec<Found> {
     let family = tables::by_name("tag36h11").expect("shipped family");
     let simulator = Simulator::new(scenario).with_renderer(renderer);
     let pad = simulator.world.pad.clone();
@@ -204,13 +208,22 @@ fn detector_on(renderer: Renderer, heights: &[f64]) -> Vec<Found> {
 #[test]
 fn the_detector_finds_the_markers_where_the_truth_puts_them() {
     let heights = [20.0, 10.0, 5.0, 3.0, 2.0, 1.0];
-    let warp = detector_on(Renderer::Warp, &heights);
-    let raster = detector_on(Renderer::Raster, &heights);
+    let warp = detector_on(landing(), Renderer::Warp, &heights);
+    let raster = detector_on(landing(), Renderer::Raster, &heights);
     for (w, r) in warp.iter().zip(&raster) {
         println!(
-            "{} m: {} markers whole in view; warp finds {} of them (worst corner {:.3} px) and              {} in all (corner RMS {:.3} px); raster {} (worst {:.3} px), {} (RMS {:.3} px)",
-            w.height, w.whole, w.whole_found, w.worst, w.found, w.rms, r.whole_found, r.worst,
-            r.found, r.rms
+            "{} m: {} markers whole in view; warp finds {} of them (worst corner {:.3} px) and \
+             {} in all (corner RMS {:.3} px); raster {} (worst {:.3} px), {} (RMS {:.3} px)",
+            w.height,
+            w.whole,
+            w.whole_found,
+            w.worst,
+            w.found,
+            w.rms,
+            r.whole_found,
+            r.worst,
+            r.found,
+            r.rms
         );
     }
     for (w, r) in warp.iter().zip(&raster) {
@@ -233,6 +246,32 @@ fn the_detector_finds_the_markers_where_the_truth_puts_them() {
             "{} m: corner RMS {:.3} px",
             w.height,
             w.rms
+        );
+    }
+}
+
+/// Without the flight effects (a global shutter on a rigid, aligned mount; the board lens
+/// and sensor, motion blur and all), the corners are within half a pixel.
+#[test]
+fn without_flight_effects_the_corners_are_within_half_a_pixel() {
+    let heights = [20.0, 10.0, 5.0, 3.0, 2.0, 1.0];
+    let warp = detector_on(
+        landing_with(&FlightEffects::none()),
+        Renderer::Warp,
+        &heights,
+    );
+    for w in &warp {
+        println!(
+            "{} m, no effects: {} markers whole in view, {} found, worst corner {:.3} px, \
+             RMS {:.3} px",
+            w.height, w.whole, w.whole_found, w.worst, w.rms
+        );
+        assert_eq!(w.whole_found, w.whole, "{} m: markers missed", w.height);
+        assert!(
+            w.worst <= 0.5,
+            "{} m: worst corner {:.3} px",
+            w.height,
+            w.worst
         );
     }
 }

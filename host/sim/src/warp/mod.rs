@@ -69,8 +69,9 @@ impl fmt::Display for Renderer {
 pub struct WarpOptics {
     /// Point-spread functions applied in turn to the radiance.
     pub psfs: Vec<Psf>,
-    /// Also a defocus disc of the scenario's lens ([`Optics::defocus_diameter_px`]) at the
-    /// frame's distance along the optical axis.
+    /// Also a defocus disc of the scenario's lens
+    /// ([`crate::sensor::Optics::defocus_diameter_px`]) at the frame's distance along the
+    /// optical axis (a narrow one merged into the first Gaussian of `psfs`).
     pub defocus: bool,
     /// The footprint swept along the image's path over the exposure.
     pub motion_blur: bool,
