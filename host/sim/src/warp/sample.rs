@@ -16,6 +16,8 @@
 //!
 //! A pixel whose centre ray misses the ground sees the sky whole (no partial horizon).
 
+use std::collections::HashMap;
+
 use super::texture::{Footprint, GroundPyramid, PadTables};
 use crate::camera::{CameraPose, RayMap};
 use crate::math::{apply_homography, Mat3};
@@ -28,7 +30,8 @@ pub const KNOT_ROWS: usize = 8;
 /// by hundredths of a pixel over them).
 const MOTION_RUN: usize = 16;
 /// Most pieces of an exposure's image path (with vibration: one per
-/// [`crate::VIBRATION_MOTION_STEP_S`]).
+/// [`crate::VIBRATION_MOTION_STEP_S`] of a grid shared by the rows, longer for long
+/// exposures).
 const MAX_PIECES: usize = 16;
 
 /// Per pixel: the centre's normalised ray `(x, y)` and its derivatives along the pixel's
@@ -215,26 +218,25 @@ impl Motion {
         }
     }
 
-    /// From the image positions of one ground point at evenly spaced instants of the
-    /// exposure, relative to its position at the row's time: each piece between two instants
-    /// travelled at constant speed for the same time.
-    fn of_path(path: &[[f64; 2]]) -> Motion {
-        let pieces = path.len().saturating_sub(1);
-        if pieces == 0 {
-            return Motion::STILL;
-        }
+    /// From the image positions of one ground point at instants `times` of the exposure,
+    /// relative to its position at the row's time: each piece between two instants travelled
+    /// at constant speed, weighed by its duration.
+    fn of_path(path: &[[f64; 2]], times: &[f64]) -> Motion {
+        let total = match (times.first(), times.last()) {
+            (Some(a), Some(b)) if b > a && path.len() == times.len() => b - a,
+            _ => return Motion::STILL,
+        };
         let (mut ex, mut ey, mut exx, mut exy, mut eyy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for w in path.windows(2) {
+        for (w, t) in path.windows(2).zip(times.windows(2)) {
             let (p, q) = (w[0], w[1]);
-            ex += 0.5 * (p[0] + q[0]);
-            ey += 0.5 * (p[1] + q[1]);
-            exx += (p[0] * p[0] + q[0] * q[0]) / 3.0 + p[0] * q[0] / 3.0;
-            eyy += (p[1] * p[1] + q[1] * q[1]) / 3.0 + p[1] * q[1] / 3.0;
-            exy += (p[0] * p[1] + q[0] * q[1]) / 3.0 + (p[0] * q[1] + q[0] * p[1]) / 6.0;
+            let k = (t[1] - t[0]) / total;
+            ex += k * 0.5 * (p[0] + q[0]);
+            ey += k * 0.5 * (p[1] + q[1]);
+            exx += k * ((p[0] * p[0] + q[0] * q[0]) / 3.0 + p[0] * q[0] / 3.0);
+            eyy += k * ((p[1] * p[1] + q[1] * q[1]) / 3.0 + p[1] * q[1] / 3.0);
+            exy += k * ((p[0] * p[1] + q[0] * q[1]) / 3.0 + (p[0] * q[1] + q[0] * p[1]) / 6.0);
         }
-        let k = 1.0 / pieces as f64;
-        let (ex, ey) = (ex * k, ey * k);
-        let (cxx, cxy, cyy) = (exx * k - ex * ex, exy * k - ex * ey, eyy * k - ey * ey);
+        let (cxx, cxy, cyy) = (exx - ex * ex, exy - ex * ey, eyy - ey * ey);
         // The pixel sees, at each instant, the ground point the image moved onto it: the
         // opposite of the displacement.
         Motion {
@@ -275,7 +277,16 @@ impl Knots {
         let vibrating = !sim.scenario.vibration.is_none();
         let mut moved = false;
         let mut motion = Vec::with_capacity(rows.len());
-        let mut path = Vec::with_capacity(MAX_PIECES + 1);
+        let mut path = Vec::with_capacity(MAX_PIECES + 2);
+        let mut times = Vec::with_capacity(MAX_PIECES + 2);
+        // Poses by their time's bits: the knot rows' exposures overlap, and their inner
+        // instants lie on one grid, so most poses serve several rows.
+        let mut cache: HashMap<u64, CameraPose> = HashMap::new();
+        let mut pose_at = |time: f64| {
+            *cache
+                .entry(time.to_bits())
+                .or_insert_with(|| sim.camera_pose(time))
+        };
         for &y in &rows {
             let (open, close) = sim.row_exposure_window(t, y as f64, exposure_s);
             let span = close - open;
@@ -283,19 +294,27 @@ impl Knots {
                 motion.push([Motion::STILL; 3]);
                 continue;
             }
-            let pieces = if vibrating {
-                ((span / crate::VIBRATION_MOTION_STEP_S).ceil() as usize).clamp(2, MAX_PIECES)
+            times.clear();
+            times.push(open);
+            if vibrating {
+                // The grid's instants inside the exposure, at most MAX_PIECES pieces.
+                let step = crate::VIBRATION_MOTION_STEP_S;
+                let stride = (span / (step * MAX_PIECES as f64)).ceil().max(1.0) * step;
+                let mut k = (open / stride).floor() + 1.0;
+                while k * stride < close - 1e-9 && times.len() < MAX_PIECES + 1 {
+                    times.push(k * stride);
+                    k += 1.0;
+                }
             } else {
-                2
-            };
-            let middle = sim.camera_pose(sim.row_time(t, y as f64));
-            let poses: Vec<CameraPose> = (0..=pieces)
-                .map(|k| sim.camera_pose(open + span * k as f64 / pieces as f64))
-                .collect();
+                times.push(open + 0.5 * span);
+            }
+            times.push(close);
+            let middle = pose_at(sim.row_time(t, y as f64));
+            let poses: Vec<CameraPose> = times.iter().map(|&time| pose_at(time)).collect();
             let hm = middle.ground_homography();
             let mut row = [Motion::STILL; 3];
             for (slot, &cx) in row.iter_mut().zip(&columns) {
-                let x = cx.round() as usize;
+                let x = (cx + 0.5) as usize;
                 let Some(r) = rays.get(y * w + x.min(w - 1)) else {
                     continue;
                 };
@@ -314,7 +333,7 @@ impl Knots {
                     }
                 }
                 if path.len() == poses.len() {
-                    *slot = Motion::of_path(&path);
+                    *slot = Motion::of_path(&path, &times);
                     moved |= *slot != Motion::STILL;
                 }
             }
