@@ -11,7 +11,7 @@ pub enum RendererArg {
     #[default]
     Raster,
     /// The pre-rasterised world through a homography per row, motion blur as each pixel's
-    /// footprint swept, its own PSFs and sensor response (about ten times faster)
+    /// footprint swept, its own PSFs and sensor response (much faster)
     Warp,
 }
 

@@ -94,7 +94,7 @@ pub struct SimulateArgs {
     pub ideal: bool,
 
     /// The image model: raster (ray casting, the default) or warp (pre-rasterised world,
-    /// about ten times faster, its own optics and sensor)
+    /// much faster, its own optics and sensor)
     #[arg(
         long,
         value_name = "NAME",

@@ -160,7 +160,7 @@ pub struct SitlArgs {
     #[arg(long, help_heading = "Flight effects")]
     pub ideal: bool,
 
-    /// The image model: raster (ray casting) or warp (pre-rasterised world, about ten times
+    /// The image model: raster (ray casting) or warp (pre-rasterised world, much
     /// faster, its own optics and sensor)
     #[arg(
         long,

@@ -19,7 +19,7 @@
 //! - [`warp`]: a second image model ([`Renderer::Warp`], chosen per simulator with
 //!   [`Simulator::with_renderer`]): a pre-rasterised world sampled through a homography per
 //!   row with box-filtered footprints, motion blur as the footprint's sweep, its own PSFs and
-//!   sensor response; about ten times faster, and differently made, for checking the
+//!   sensor response; fast enough for wall-clock frames, and differently made, for checking the
 //!   detector on images it was not tuned on.
 //! - [`render`]: the test renderer, single frames of printed markers on a plane through an
 //!   ideal pinhole camera, for the detector's tests.
@@ -176,8 +176,8 @@ impl Simulator {
     }
 
     /// Renders with `renderer` ([`Renderer::Raster`] unless told). Choosing
-    /// [`Renderer::Warp`] rasterises the world once, here (a few hundred milliseconds on
-    /// one thread for a textured ground).
+    /// [`Renderer::Warp`] rasterises the world once, here, on the simulator's threads (the
+    /// ground's texture is most of it): set [`Simulator::with_threads`] first.
     pub fn with_renderer(mut self, renderer: Renderer) -> Self {
         self.renderer = renderer;
         if renderer == Renderer::Warp && self.warp.is_none() {

@@ -325,7 +325,7 @@ pub struct ReplayArgs {
     pub position_drift_m: Option<f32>,
 
     /// The image model for --scenario: raster (ray casting) or warp (pre-rasterised world,
-    /// about ten times faster, its own optics and sensor) [default: raster]
+    /// much faster, its own optics and sensor) [default: raster]
     #[arg(
         long,
         value_name = "NAME",
