@@ -445,6 +445,15 @@ fn shade_row(
     scratch.footprints.resize(rays.len(), SKY);
     let mut mo = Motion::STILL;
     for (x, (r, slot)) in rays.iter().zip(scratch.footprints.iter_mut()).enumerate() {
+        // The knots interpolated at the middle of each run of MOTION_RUN pixels.
+        if let (Some(knots), 0) = (motion, x % MOTION_RUN) {
+            let xf = (x + MOTION_RUN / 2) as i64 as f64;
+            mo = if xf <= half {
+                Motion::lerp(&knots[0], &knots[1], xf * inv_half)
+            } else {
+                Motion::lerp(&knots[1], &knots[2], ((xf - half) * inv_half).min(1.0))
+            };
+        }
         let (rx, ry) = (f64::from(r[0]), f64::from(r[1]));
         let w = h[2][0] * rx + h[2][1] * ry + h[2][2];
         // NaN rays fail this too; the sky is a NaN footprint.
@@ -475,16 +484,7 @@ fn shade_row(
                 wxy: a[0] * a[1] + b[0] * b[1],
                 wyy: a[1] * a[1] + b[1] * b[1],
             },
-            Some(knots) => {
-                // The knots interpolated at the middle of each run of MOTION_RUN pixels.
-                if x % MOTION_RUN == 0 {
-                    let xf = (x + MOTION_RUN / 2) as i64 as f64;
-                    mo = if xf <= half {
-                        Motion::lerp(&knots[0], &knots[1], xf * inv_half)
-                    } else {
-                        Motion::lerp(&knots[1], &knots[2], ((xf - half) * inv_half).min(1.0))
-                    };
-                }
+            Some(_) => {
                 let [m0, m1, m2] = mo.m;
                 // J M with J = [a b] (columns), then (J M) J^T.
                 let jm = [
