@@ -420,6 +420,73 @@ fn the_pad_texture_is_the_printed_cells() {
     }
 }
 
+#[test]
+fn block_compression_keeps_flat_blocks_and_block_means() {
+    let render = |height: f64, quality: Option<u8>| {
+        Simulator::new(still(height, GroundKind::Flat(0.5)))
+            .with_renderer(Renderer::Warp)
+            .with_warp_optics(WarpOptics {
+                response: Response {
+                    block_quality: quality,
+                    ..Response::linear()
+                },
+                ..WarpOptics::ideal()
+            })
+            .render(0)
+            .expect("frame 0")
+            .image
+    };
+    // At the best quality the steps are half a grey level and up: a flat block comes back
+    // as it was, an edge moves by a few grey levels at most.
+    let plain = render(3.0, None);
+    let best = render(3.0, Some(100));
+    let block = |img: &GrayFrame, bx: usize, by: usize| -> Vec<u8> {
+        (0..64)
+            .map(|k| img.pixels[(by * 8 + k / 8) * 640 + bx * 8 + k % 8])
+            .collect()
+    };
+    let mut flat_blocks = 0;
+    for by in 0..480 / 8 {
+        for bx in 0..640 / 8 {
+            let before = block(&plain, bx, by);
+            if before.iter().all(|&p| p == before[0]) {
+                flat_blocks += 1;
+                assert_eq!(before, block(&best, bx, by), "block ({bx}, {by})");
+            }
+        }
+    }
+    assert!(flat_blocks > 1000, "{flat_blocks}");
+    let worst_change = plain
+        .pixels
+        .iter()
+        .zip(&best.pixels)
+        .map(|(&a, &b)| (i32::from(a) - i32::from(b)).abs())
+        .max()
+        .unwrap_or(0);
+    assert!(worst_change <= 4, "{worst_change}");
+    // At quality 30 the edges ring, but every block keeps its mean to within half the mean's
+    // step (the transform's step 0.5 + 49.5 x 70 / 99 = 35.5, over 8 for the mean) plus
+    // what the clipping of the ringing at black and white takes (3 grey levels).
+    let rough = render(3.0, Some(30));
+    assert_ne!(plain.pixels, rough.pixels);
+    let mut worst_mean = 0.0f64;
+    for by in 0..480 / 8 {
+        for bx in 0..640 / 8 {
+            let mean = |img: &GrayFrame| {
+                block(img, bx, by)
+                    .iter()
+                    .map(|&p| f64::from(p))
+                    .sum::<f64>()
+                    / 64.0
+            };
+            worst_mean = worst_mean.max((mean(&plain) - mean(&rough)).abs());
+        }
+    }
+    println!("quality 30: block means within {worst_mean:.2} grey levels");
+    let half_step = 0.5 * (0.5 + 49.5 * 70.0 / 99.0) / 8.0;
+    assert!(worst_mean <= half_step + 3.0, "{worst_mean}");
+}
+
 /// The variance, pixels squared, of the line-spread function of a vertical step edge in
 /// row `row` of a `w x h` image blurred by `psf`.
 fn edge_variance(psf: &Psf, w: usize, h: usize, row: usize) -> f64 {

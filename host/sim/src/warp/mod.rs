@@ -17,7 +17,7 @@
 //!   line, a field-dependent blur growing toward the corners, chosen by [`WarpOptics`].
 //! - **Sensor** (`response`): the scenario's exposure and photometry, its own noise
 //!   (SplitMix64, sum of uniforms, seeded per row), gamma, a 3x3 sharpening kernel,
-//!   rounding. No blooming.
+//!   rounding, optional 8x8 block compression. No blooming.
 //!
 //! The truth of a frame ([`crate::SimFrame::truth`], the marker corners) is the same
 //! function of the pose as with the raster renderer; only the image differs. A frame is a

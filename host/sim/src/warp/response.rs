@@ -11,6 +11,8 @@
 //! 3. Gain and black level to grey levels, then the DSP: a gamma curve (through a table)
 //!    and a 3x3 sharpening kernel (`(1 + s)` times the pixel less `s` times its 3x3 mean),
 //!    then rounding and clipping to 0..255.
+//! 4. Optionally, block compression as a sensor module that streams JPEG loses detail: each
+//!    8x8 block's cosine transform rounded to steps growing with the frequency.
 
 use crate::sensor::Sensor;
 
@@ -24,6 +26,9 @@ pub struct Response {
     pub sharpen: f64,
     /// Shot and read noise on (off: the exact mean signal, for tests).
     pub noise: bool,
+    /// Block compression like a JPEG encoder's at this quality (1..100; `None` none): each
+    /// whole 8x8 block's cosine transform rounded to steps growing with the frequency.
+    pub block_quality: Option<u8>,
 }
 
 impl Response {
@@ -33,6 +38,7 @@ impl Response {
             gamma: 1.0,
             sharpen: 0.0,
             noise: false,
+            block_quality: None,
         }
     }
 
@@ -42,6 +48,7 @@ impl Response {
             gamma: 1.0,
             sharpen: 0.3,
             noise: true,
+            block_quality: None,
         }
     }
 }
@@ -115,10 +122,109 @@ pub(crate) fn develop(
     if response.gamma.is_finite() && response.gamma > 0.0 && response.gamma != 1.0 {
         apply_gamma(&mut grey, black, response.gamma);
     }
-    if response.sharpen.is_finite() && response.sharpen != 0.0 {
-        return sharpen(&grey, width, height, response.sharpen as f32);
+    let mut pixels = if response.sharpen.is_finite() && response.sharpen != 0.0 {
+        sharpen(&grey, width, height, response.sharpen as f32)
+    } else {
+        grey.iter().map(|&v| quantise(v)).collect()
+    };
+    if let Some(quality) = response.block_quality {
+        compress_blocks(&mut pixels, width, height, quality);
     }
-    grey.iter().map(|&v| quantise(v)).collect()
+    pixels
+}
+
+/// Side of a compression block, pixels.
+const BLOCK: usize = 8;
+
+/// Compresses an 8-bit image in place the way a JPEG encoder loses detail (a sensor module
+/// that streams JPEG): each whole 8x8 block's cosine transform (DCT-II, orthonormal) is
+/// rounded to steps that grow with the frequency, `step(u, v) = s (1 + (u + v) / 2)`, with
+/// `s` from 0.5 at quality 100 to 50 at quality 1, and transformed back. The block's mean
+/// keeps a step of `s` / 8 grey levels; a partial block at the right or bottom edge is kept
+/// as it is. No entropy coding: only what the rounding loses.
+pub(crate) fn compress_blocks(pixels: &mut [u8], width: usize, height: usize, quality: u8) {
+    if width < BLOCK || height < BLOCK || pixels.len() < width * height {
+        return;
+    }
+    let q = f32::from(quality.clamp(1, 100));
+    let step = 0.5 + 49.5 * (100.0 - q) / 99.0;
+    // basis[u][x] = c(u) cos((2x + 1) u pi / 16), orthonormal.
+    let mut basis = [[0.0f32; BLOCK]; BLOCK];
+    for (u, row) in basis.iter_mut().enumerate() {
+        let c = if u == 0 { (1.0f32 / 8.0).sqrt() } else { 0.5 };
+        for (x, b) in row.iter_mut().enumerate() {
+            let angle = (2 * x + 1) as f32 * u as f32 * std::f32::consts::PI / 16.0;
+            *b = c * angle.cos();
+        }
+    }
+    let mut block = [[0.0f32; BLOCK]; BLOCK];
+    let mut tmp = [[0.0f32; BLOCK]; BLOCK];
+    for by in 0..height / BLOCK {
+        for bx in 0..width / BLOCK {
+            for (y, row) in block.iter_mut().enumerate() {
+                let start = (by * BLOCK + y) * width + bx * BLOCK;
+                for (x, v) in row.iter_mut().enumerate() {
+                    *v = f32::from(pixels[start + x]) - 128.0;
+                }
+            }
+            // Rows, then columns: F = B X B^T.
+            transform(&block, &mut tmp, &basis, false);
+            transform_columns(&tmp, &mut block, &basis, false);
+            for (u, row) in block.iter_mut().enumerate() {
+                for (v, c) in row.iter_mut().enumerate() {
+                    let s = step * (1.0 + 0.5 * (u + v) as f32);
+                    *c = (*c / s).round() * s;
+                }
+            }
+            transform_columns(&block, &mut tmp, &basis, true);
+            transform(&tmp, &mut block, &basis, true);
+            for (y, row) in block.iter().enumerate() {
+                let start = (by * BLOCK + y) * width + bx * BLOCK;
+                for (x, &v) in row.iter().enumerate() {
+                    pixels[start + x] = quantise(v + 128.0);
+                }
+            }
+        }
+    }
+}
+
+/// Along each row of `from`: forward (`out[y][u] = sum_x from[y][x] basis[u][x]`) or
+/// inverse (`out[y][x] = sum_u from[y][u] basis[u][x]`).
+fn transform(
+    from: &[[f32; BLOCK]; BLOCK],
+    out: &mut [[f32; BLOCK]; BLOCK],
+    basis: &[[f32; BLOCK]; BLOCK],
+    inverse: bool,
+) {
+    for (src, dst) in from.iter().zip(out.iter_mut()) {
+        for (k, d) in dst.iter_mut().enumerate() {
+            *d = (0..BLOCK)
+                .map(|j| {
+                    let b = if inverse { basis[j][k] } else { basis[k][j] };
+                    src[j] * b
+                })
+                .sum();
+        }
+    }
+}
+
+/// Along each column of `from`, as [`transform`] along rows.
+fn transform_columns(
+    from: &[[f32; BLOCK]; BLOCK],
+    out: &mut [[f32; BLOCK]; BLOCK],
+    basis: &[[f32; BLOCK]; BLOCK],
+    inverse: bool,
+) {
+    for col in 0..BLOCK {
+        for k in 0..BLOCK {
+            out[k][col] = (0..BLOCK)
+                .map(|j| {
+                    let b = if inverse { basis[j][k] } else { basis[k][j] };
+                    from[j][col] * b
+                })
+                .sum();
+        }
+    }
 }
 
 /// Rounded and clipped to 0..255 (`as` truncates toward zero, the floor of a non-negative).
