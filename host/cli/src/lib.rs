@@ -20,6 +20,7 @@ pub mod effects;
 pub mod overlay;
 pub mod pad;
 pub mod plot;
+pub mod renderer;
 pub mod replay;
 pub mod simulate;
 pub mod sitl;

@@ -13,10 +13,11 @@ use clap::Args;
 
 use super::{CliError, Outcome};
 use crate::effects::EffectArgs;
+use crate::renderer::RendererArg;
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
-use touchdown_sim::Simulator;
+use touchdown_sim::{Renderer, Simulator};
 
 /// `touchdown simulate --help`.
 pub const LONG_HELP: &str = "\
@@ -91,6 +92,17 @@ pub struct SimulateArgs {
     /// flags then set only what they name)
     #[arg(long, help_heading = "Flight effects")]
     pub ideal: bool,
+
+    /// The image model: raster (ray casting, the default) or warp (pre-rasterised world,
+    /// much faster, its own optics and sensor)
+    #[arg(
+        long,
+        value_name = "NAME",
+        value_parser = RendererArg::parse,
+        default_value = "raster",
+        help_heading = "Advanced"
+    )]
+    pub renderer: RendererArg,
 
     /// Rendering threads [default: all cores]
     #[arg(
@@ -172,13 +184,14 @@ pub fn run(
     if let Some(threads) = args.threads {
         simulator = simulator.with_threads(threads);
     }
+    let simulator = simulator.with_renderer(args.renderer.renderer());
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let mut writer = RecordingWriter::create_with_vehicle_attitude(&dir, &camera, &pad, true, true)
         .map_err(CliError::new)?;
     std::fs::write(
         dir.join("simulation.toml"),
-        simulation_toml(&simulator.scenario, &effects),
+        simulation_toml(&simulator.scenario, &effects, args.renderer.renderer()),
     )
     .map_err(|e| {
         CliError(format!(
@@ -232,13 +245,14 @@ pub fn run(
 }
 
 /// `simulation.toml`: what produced the recording (informational; readers ignore it).
-fn simulation_toml(s: &Scenario, effects: &FlightEffects) -> String {
+fn simulation_toml(s: &Scenario, effects: &FlightEffects, renderer: Renderer) -> String {
     let lens = s.camera.model.distortion;
     format!(
         "# How this recording was simulated (touchdown simulate); informational.\n\
          scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\
          supersampling = {}\nground = {}\ndistortion = {:?}\n\
-         readout_ms = {:?}\nvibration_deg = {:?}\nmount_roll_deg = {:?}\nmount_pitch_deg = {:?}\n",
+         readout_ms = {:?}\nvibration_deg = {:?}\nmount_roll_deg = {:?}\nmount_pitch_deg = {:?}\n\
+         renderer = {}\n",
         touchdown_formats::toml_string(&s.name),
         touchdown_formats::toml_string(&s.description),
         s.seed,
@@ -250,6 +264,7 @@ fn simulation_toml(s: &Scenario, effects: &FlightEffects) -> String {
         effects.readout_ms,
         effects.vibration_deg,
         effects.mount_roll_deg,
-        effects.mount_pitch_deg
+        effects.mount_pitch_deg,
+        touchdown_formats::toml_string(renderer.name())
     )
 }

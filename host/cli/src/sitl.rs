@@ -22,6 +22,7 @@ pub mod gcs;
 use super::{CliError, Outcome};
 use crate::companion::endpoint::EndpointSpec;
 use crate::effects::EffectArgs;
+use crate::renderer::RendererArg;
 use touchdown_eval::closed_loop::wind::WindProfile;
 use touchdown_eval::closed_loop::{self, LandingConfig, LandingOutcome};
 use touchdown_formats::recording::RecordingWriter;
@@ -158,6 +159,17 @@ pub struct SitlArgs {
     /// No flight effects: global shutter, no vibration, the nominal mount
     #[arg(long, help_heading = "Flight effects")]
     pub ideal: bool,
+
+    /// The image model: raster (ray casting) or warp (pre-rasterised world, much
+    /// faster, its own optics and sensor)
+    #[arg(
+        long,
+        value_name = "NAME",
+        value_parser = RendererArg::parse,
+        default_value = "raster",
+        help_heading = "Advanced"
+    )]
+    pub renderer: RendererArg,
 
     /// Threads [default: all cores]: seeds in parallel, or one seed's rendering
     #[arg(long, value_name = "N", help_heading = "Advanced")]
@@ -553,6 +565,7 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             params: params.clone(),
             fps: args.fps,
             qvga: args.qvga,
+            renderer: args.renderer.renderer(),
             threads: render_threads,
             max_flight_s: args.max_time,
             ..LandingConfig::issue_15(args.seed.wrapping_add(k))

@@ -186,6 +186,53 @@ fn replay_prints_the_set_point_table_and_writes_figures() {
     }
 }
 
+/// `--renderer warp` reaches the simulator both ways: a scenario replayed in memory with it
+/// gives the tables of its recording simulated with it, and not the raster frames' tables.
+#[test]
+fn the_renderer_is_the_same_in_memory_and_on_disk() {
+    let frames = FRAMES.to_string();
+    let dir = scratch("paper-recording-warp");
+    let output = touchdown(&[
+        "simulate",
+        "--scenario",
+        "paper",
+        "--ideal",
+        "--renderer",
+        "warp",
+        "--frames",
+        &frames,
+        "--out",
+        path_str(&dir),
+    ]);
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let replay = |renderer: &str| {
+        touchdown(&[
+            "replay",
+            "--scenario",
+            "paper",
+            "--frames",
+            &frames,
+            "--no-plots",
+            "--ideal",
+            "--renderer",
+            renderer,
+        ])
+    };
+    let (warp, raster) = (replay("warp"), replay("raster"));
+    assert!(warp.status.success(), "{}", text(&warp.stderr));
+    assert!(raster.status.success(), "{}", text(&raster.stderr));
+    let from_disk = touchdown(&["replay", path_str(&dir), "--no-plots", "--ideal"]);
+    assert!(from_disk.status.success(), "{}", text(&from_disk.stderr));
+    let (w, r, d) = (
+        text(&warp.stdout),
+        text(&raster.stdout),
+        text(&from_disk.stdout),
+    );
+    assert!(!set_point_table(&w).is_empty());
+    assert_eq!(set_point_table(&w), set_point_table(&d));
+    assert_ne!(set_point_table(&w), set_point_table(&r));
+}
+
 #[test]
 fn scenario_in_memory_gives_the_same_tables_as_its_recording() {
     let frames = FRAMES.to_string();

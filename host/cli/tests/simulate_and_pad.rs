@@ -7,7 +7,7 @@ use std::process::Command;
 
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::Scenario;
-use touchdown_sim::Simulator;
+use touchdown_sim::{Renderer, Simulator};
 
 /// A fresh scratch directory path under the target directory (removed if it exists, not
 /// created).
@@ -148,6 +148,49 @@ fn simulate_effect_flags_override_the_typical_ones() {
 }
 
 #[test]
+fn simulate_renders_with_the_renderer_asked_for() {
+    let dir = scratch("simulate-warp");
+    let out = touchdown()
+        .args([
+            "simulate",
+            "--scenario",
+            "landing",
+            "--frames",
+            "2",
+            "--seed",
+            "5",
+            "--threads",
+            "2",
+            "--renderer",
+            "warp",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let recording = touchdown_formats::recording::Recording::read(&dir).unwrap();
+    let mut scenario = Scenario::named("landing", 5).unwrap();
+    scenario.truncate(2);
+    scenario.apply_effects(&FlightEffects::typical());
+    let warp = Simulator::new(scenario.clone())
+        .with_renderer(Renderer::Warp)
+        .render(1)
+        .unwrap();
+    assert_eq!(warp.image, recording.frames[1].image);
+    assert_ne!(
+        Simulator::new(scenario).render(1).unwrap().image,
+        recording.frames[1].image
+    );
+    let toml = std::fs::read_to_string(dir.join("simulation.toml")).unwrap();
+    assert!(toml.contains("renderer = \"warp\""), "{toml}");
+}
+
+#[test]
 fn bad_options_are_one_line_and_status_2() {
     for args in [
         vec!["simulate", "--scenario", "moon"],
@@ -155,6 +198,10 @@ fn bad_options_are_one_line_and_status_2() {
         vec!["simulate", "--scenario", "paper", "--vibration-deg", "x"],
         vec!["simulate", "--scenario", "paper", "--readout-ms", "-1"],
         vec!["simulate", "--scenario", "paper", "--mount-roll-deg", "90"],
+        vec!["simulate", "--scenario", "paper", "--renderer", "gpu"],
+        vec!["sitl", "--renderer", "ray"],
+        vec!["replay", "--scenario", "paper", "--renderer", ""],
+        vec!["replay", "/nonexistent", "--renderer", "warp"],
         vec!["pad", "--design", "nested"],
         vec!["pad", "--layout", "/nonexistent/pad.toml", "--out", "/tmp"],
     ] {

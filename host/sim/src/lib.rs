@@ -16,6 +16,11 @@
 //!   misalignment.
 //! - [`scenario`]: the named scenarios (`paper`, `lateral`, `descent`, `landing`, `sun`,
 //!   `shadow`, `occlusion`).
+//! - [`warp`]: a second image model ([`Renderer::Warp`], chosen per simulator with
+//!   [`Simulator::with_renderer`]): a pre-rasterised world sampled through a homography per
+//!   row with box-filtered footprints, motion blur as the footprint's sweep, its own PSFs and
+//!   sensor response; fast enough for wall-clock frames, and differently made, for checking the
+//!   detector on images it was not tuned on.
 //! - [`render`]: the test renderer, single frames of printed markers on a plane through an
 //!   ideal pinhole camera, for the detector's tests.
 //! - [`math`]: the `f64` vectors, rotations and homographies both use; `noise` (private):
@@ -60,6 +65,7 @@ pub mod scenario;
 pub mod sensor;
 pub mod texture;
 pub mod trajectory;
+pub mod warp;
 pub mod world;
 
 use camera::{CameraMount, CameraPose, RayMap};
@@ -68,6 +74,8 @@ use raster::RowPoses;
 use scenario::Scenario;
 use touchdown_formats::image_io::GrayFrame;
 use world::World;
+
+pub use warp::{Renderer, WarpOptics};
 
 /// Most sub-frames averaged for motion blur.
 pub const MAX_SUBFRAMES: usize = 24;
@@ -116,7 +124,8 @@ pub struct SimFrame {
     pub vehicle_attitude: Quat,
     /// Set-point label, if any.
     pub label: Option<String>,
-    /// Sub-frames averaged for motion blur (1 = none).
+    /// Sub-frames averaged for motion blur (1 = none; always 1 with [`Renderer::Warp`], which
+    /// blurs by sweeping each pixel's footprint instead).
     pub subframes: usize,
 }
 
@@ -129,6 +138,10 @@ pub struct Simulator {
     pub world: World,
     rays: RayMap,
     threads: usize,
+    renderer: Renderer,
+    /// The warp renderer's pre-rasterised world, built by [`Simulator::with_renderer`].
+    warp: Option<std::sync::Arc<warp::WarpScene>>,
+    warp_optics: WarpOptics,
 }
 
 /// A 64-bit mix of two numbers (splitmix64 finaliser), for per-frame seeds.
@@ -150,12 +163,46 @@ impl Simulator {
         world.occluder = scenario.occluder;
         let rays = RayMap::new(&scenario.camera);
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let warp_optics = WarpOptics::of_scenario(&scenario);
         Simulator {
             scenario,
             world,
             rays,
             threads,
+            renderer: Renderer::Raster,
+            warp: None,
+            warp_optics,
         }
+    }
+
+    /// Renders with `renderer` ([`Renderer::Raster`] unless told). Choosing
+    /// [`Renderer::Warp`] rasterises the world once, here, on the simulator's threads (the
+    /// ground's texture is most of it): set [`Simulator::with_threads`] first.
+    pub fn with_renderer(mut self, renderer: Renderer) -> Self {
+        self.renderer = renderer;
+        if renderer == Renderer::Warp && self.warp.is_none() {
+            let (w, h) = (self.scenario.camera.width(), self.scenario.camera.height());
+            self.warp = Some(std::sync::Arc::new(warp::WarpScene::new(
+                &self.world,
+                &self.rays,
+                w,
+                h,
+                self.threads,
+            )));
+        }
+        self
+    }
+
+    /// The warp renderer's optics and response ([`WarpOptics::of_scenario`] unless told);
+    /// the raster renderer ignores them.
+    pub fn with_warp_optics(mut self, optics: WarpOptics) -> Self {
+        self.warp_optics = optics;
+        self
+    }
+
+    /// The image model in use.
+    pub fn renderer(&self) -> Renderer {
+        self.renderer
     }
 
     /// Uses `threads` threads per frame (the result does not depend on it).
@@ -403,11 +450,39 @@ impl Simulator {
             ),
             None => (self.scenario.exposure_time_s, self.scenario.sensor),
         };
-        let poses = self.row_poses(t, exposure_s);
-        let subframes = poses.subframes();
         let middle = self.camera_pose(t);
         let s = &self.scenario;
         let (w, h) = (s.camera.width(), s.camera.height());
+        if let (Renderer::Warp, Some(scene)) = (self.renderer, &self.warp) {
+            let pixels = warp::render(
+                self,
+                scene,
+                &self.rays,
+                &self.warp_optics,
+                &warp::Exposure {
+                    t,
+                    exposure_s,
+                    sensor: &sensor,
+                    noise_seed: mix(s.seed, index as u64 + 1),
+                },
+                self.threads,
+            );
+            return SimFrame {
+                index,
+                t_us,
+                image: GrayFrame {
+                    width: w,
+                    height: h,
+                    pixels,
+                },
+                truth: truth_of_pose(&middle),
+                vehicle_attitude: self.vehicle_attitude(t),
+                label,
+                subframes: 1,
+            };
+        }
+        let poses = self.row_poses(t, exposure_s);
+        let subframes = poses.subframes();
         // The sub-frames already average over the footprint's motion: fewer sub-samples each.
         let supersampling = if subframes > 1 {
             ((s.supersampling as f64 / (subframes as f64).sqrt()).round() as usize).max(2)

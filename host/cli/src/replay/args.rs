@@ -5,6 +5,7 @@
 
 use super::CliError;
 use crate::effects::EffectArgs;
+use crate::renderer::RendererArg;
 use clap::Args;
 use std::path::PathBuf;
 use touchdown_eval::flight::{AutopilotKind, ErrorModel};
@@ -322,6 +323,16 @@ pub struct ReplayArgs {
         help_heading = "Error model"
     )]
     pub position_drift_m: Option<f32>,
+
+    /// The image model for --scenario: raster (ray casting) or warp (pre-rasterised world,
+    /// much faster, its own optics and sensor) [default: raster]
+    #[arg(
+        long,
+        value_name = "NAME",
+        value_parser = RendererArg::parse,
+        help_heading = "Advanced"
+    )]
+    pub renderer: Option<RendererArg>,
 
     /// Rendering threads for --scenario [default: all cores]
     #[arg(

@@ -87,9 +87,9 @@ impl Input {
             )),
             (None, Some(name)) => Self::scenario(name, args, &super::flight_effects(args)),
             (Some(dir), None) => {
-                if args.seed.is_some() || args.threads.is_some() {
+                if args.seed.is_some() || args.threads.is_some() || args.renderer.is_some() {
                     return Err(CliError(
-                        "--seed and --threads apply to --scenario only".into(),
+                        "--seed, --threads and --renderer apply to --scenario only".into(),
                     ));
                 }
                 if super::effect_flag_given(args) {
@@ -155,6 +155,7 @@ impl Input {
         if let Some(threads) = args.threads {
             simulator = simulator.with_threads(threads);
         }
+        let simulator = simulator.with_renderer(args.renderer.unwrap_or_default().renderer());
         Input {
             title: format!("scenario {name}, seed {seed}"),
             short_name: name.to_string(),

@@ -216,7 +216,9 @@ pub fn fly(
     err: &mut dyn Write,
 ) -> Result<ConnectedOutcome, CliError> {
     let scenario = closed_loop::scene(&config.landing).map_err(CliError)?;
-    let mut simulator = Simulator::new(scenario).with_threads(config.landing.threads);
+    let mut simulator = Simulator::new(scenario)
+        .with_threads(config.landing.threads)
+        .with_renderer(config.landing.renderer);
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let layout = pad
@@ -506,6 +508,7 @@ pub(super) fn run(
         params,
         fps: args.fps,
         qvga: args.qvga,
+        renderer: args.renderer.renderer(),
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),

@@ -10,7 +10,7 @@ use touchdown_sim::camera::SimCamera;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{FramePlan, Scenario};
 use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
-use touchdown_sim::{SimFrame, Simulator};
+use touchdown_sim::{Renderer, SimFrame, Simulator};
 
 use super::land::{LandController, LandParams};
 use super::px4::{Px4Params, Px4PrecLand, Px4State};
@@ -62,6 +62,8 @@ pub struct LandingConfig {
     /// Render at 320x240 instead of the landing scenario's 640x480 (same lens), with
     /// `QVGA_SUPERSAMPLING`.
     pub qvga: bool,
+    /// The simulator's image model ([`Renderer::Raster`] in [`LandingConfig::issue_15`]).
+    pub renderer: Renderer,
     /// Rendering threads per frame.
     pub threads: usize,
     /// Give up after this long without a touchdown, seconds.
@@ -104,6 +106,7 @@ impl LandingConfig {
             params: Vec::new(),
             fps: 15.0,
             qvga: false,
+            renderer: Renderer::Raster,
             threads: 1,
             max_flight_s: 90.0,
             vehicle: VehicleParams::typical(),
@@ -305,7 +308,9 @@ pub fn fly(
     if !(config.fps.is_finite() && config.fps > 0.0) {
         return Err(format!("frame rate {} is not positive", config.fps));
     }
-    let mut simulator = Simulator::new(scene(config)?).with_threads(config.threads);
+    let mut simulator = Simulator::new(scene(config)?)
+        .with_threads(config.threads)
+        .with_renderer(config.renderer);
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let layout = pad
