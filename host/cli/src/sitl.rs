@@ -161,15 +161,15 @@ pub struct SitlArgs {
     pub ideal: bool,
 
     /// The image model: raster (ray casting) or warp (pre-rasterised world, much
-    /// faster, its own optics and sensor)
+    /// faster, its own optics and sensor) [default: warp against a running SITL, which the
+    /// frames must keep pace with; raster for the model's landings]
     #[arg(
         long,
         value_name = "NAME",
         value_parser = RendererArg::parse,
-        default_value = "raster",
         help_heading = "Advanced"
     )]
-    pub renderer: RendererArg,
+    pub renderer: Option<RendererArg>,
 
     /// Threads [default: all cores]: seeds in parallel, or one seed's rendering
     #[arg(long, value_name = "N", help_heading = "Advanced")]
@@ -565,7 +565,7 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             params: params.clone(),
             fps: args.fps,
             qvga: args.qvga,
-            renderer: args.renderer.renderer(),
+            renderer: args.renderer.unwrap_or(RendererArg::Raster).renderer(),
             threads: render_threads,
             max_flight_s: args.max_time,
             ..LandingConfig::issue_15(args.seed.wrapping_add(k))

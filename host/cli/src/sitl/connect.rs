@@ -508,7 +508,11 @@ pub(super) fn run(
         params,
         fps: args.fps,
         qvga: args.qvga,
-        renderer: args.renderer.renderer(),
+        // In wall-clock time the frames must keep pace: the fast image model unless asked.
+        renderer: args
+            .renderer
+            .unwrap_or(crate::renderer::RendererArg::Warp)
+            .renderer(),
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
