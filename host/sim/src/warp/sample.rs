@@ -432,6 +432,33 @@ fn shade_row(
         .cos_off_axis
         .get(y * width..(y + 1) * width)
         .unwrap_or(&[]);
+    // In spans short enough for a span's footprints to stay in the first-level cache
+    // between the passes.
+    for ((rays, cos), (k, out)) in rays
+        .chunks(SPAN)
+        .zip(cos.chunks(SPAN))
+        .zip(out.chunks_mut(SPAN).enumerate())
+    {
+        shade_span(src, h, motion, width, k * SPAN, rays, cos, out, scratch);
+    }
+}
+
+/// Pixels shaded a pass at a time.
+const SPAN: usize = 128;
+
+/// Pixels `x0..` of a row (their rays and cosines): [`shade_row`]'s passes.
+#[allow(clippy::too_many_arguments)]
+fn shade_span(
+    src: &Sources<'_>,
+    h: &Mat3,
+    motion: Option<&[Motion; 3]>,
+    width: usize,
+    x0: usize,
+    rays: &[[f32; 6]],
+    cos: &[f32],
+    out: &mut [f32],
+    scratch: &mut RowScratch,
+) {
     let half = 0.5 * (width as f64 - 1.0);
     let inv_half = 1.0 / half.max(1e-9);
     const SKY: Footprint = Footprint {
@@ -446,6 +473,7 @@ fn shade_row(
     let mut mo = Motion::STILL;
     for (x, (r, slot)) in rays.iter().zip(scratch.footprints.iter_mut()).enumerate() {
         // The knots interpolated at the middle of each run of MOTION_RUN pixels.
+        let x = x0 + x;
         if let (Some(knots), 0) = (motion, x % MOTION_RUN) {
             let xf = (x + MOTION_RUN / 2) as i64 as f64;
             mo = if xf <= half {
