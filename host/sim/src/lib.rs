@@ -453,34 +453,52 @@ impl Simulator {
         let middle = self.camera_pose(t);
         let s = &self.scenario;
         let (w, h) = (s.camera.width(), s.camera.height());
-        if let (Renderer::Warp, Some(scene)) = (self.renderer, &self.warp) {
-            let pixels = warp::render(
-                self,
-                scene,
-                &self.rays,
-                &self.warp_optics,
-                &warp::Exposure {
-                    t,
-                    exposure_s,
-                    sensor: &sensor,
-                    noise_seed: mix(s.seed, index as u64 + 1),
-                },
-                self.threads,
-            );
-            return SimFrame {
-                index,
-                t_us,
-                image: GrayFrame {
-                    width: w,
-                    height: h,
-                    pixels,
-                },
-                truth: truth_of_pose(&middle),
-                vehicle_attitude: self.vehicle_attitude(t),
-                label,
-                subframes: 1,
-            };
+        let (pixels, subframes) = match (self.renderer, &self.warp) {
+            // The warp model blurs the motion within its one pass: no sub-frames.
+            (Renderer::Warp, Some(scene)) => (
+                warp::render(
+                    self,
+                    scene,
+                    &self.rays,
+                    &self.warp_optics,
+                    &warp::Exposure {
+                        t,
+                        exposure_s,
+                        sensor: &sensor,
+                        noise_seed: mix(s.seed, index as u64 + 1),
+                    },
+                    self.threads,
+                ),
+                1,
+            ),
+            _ => self.render_raster(t, exposure_s, &sensor, &middle, index),
+        };
+        SimFrame {
+            index,
+            t_us,
+            image: GrayFrame {
+                width: w,
+                height: h,
+                pixels,
+            },
+            truth: truth_of_pose(&middle),
+            vehicle_attitude: self.vehicle_attitude(t),
+            label,
+            subframes,
         }
+    }
+
+    /// The raster model's pixels of the frame at `t` (s) and its motion-blur sub-frame count.
+    fn render_raster(
+        &self,
+        t: f64,
+        exposure_s: f64,
+        sensor: &sensor::Sensor,
+        middle: &CameraPose,
+        index: usize,
+    ) -> (Vec<u8>, usize) {
+        let s = &self.scenario;
+        let (w, h) = (s.camera.width(), s.camera.height());
         let poses = self.row_poses(t, exposure_s);
         let subframes = poses.subframes();
         // The sub-frames already average over the footprint's motion: fewer sub-samples each.
@@ -507,23 +525,11 @@ impl Simulator {
             h,
             &self.rays.cos_off_axis,
             &s.optics,
-            &sensor,
+            sensor,
             blur,
             mix(s.seed, index as u64 + 1),
         );
-        SimFrame {
-            index,
-            t_us,
-            image: GrayFrame {
-                width: w,
-                height: h,
-                pixels,
-            },
-            truth: truth_of_pose(&middle),
-            vehicle_attitude: self.vehicle_attitude(t),
-            label,
-            subframes,
-        }
+        (pixels, subframes)
     }
 
     /// Where each pad marker's outer corners (top-left, top-right, bottom-right, bottom-left)
