@@ -2,9 +2,10 @@
 //! reads back (and renders again to the same bytes), a printable pad whose pad.toml gives the
 //! same layout back, page tiling, and one-line errors with status 2.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use touchdown_formats::recording::Recording;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::Scenario;
 use touchdown_sim::{Renderer, Simulator};
@@ -23,29 +24,27 @@ fn touchdown() -> Command {
     Command::new(env!("CARGO_BIN_EXE_touchdown"))
 }
 
-#[test]
-fn simulate_writes_a_readable_recording() {
-    let dir = scratch("simulate");
+/// Runs `touchdown simulate ARGS --out DIR`, which must succeed, and reads the recording.
+fn simulate(args: &[&str], dir: &Path) -> Recording {
     let out = touchdown()
-        .args([
-            "simulate",
-            "--scenario",
-            "sun",
-            "--frames",
-            "2",
-            "--seed",
-            "3",
-            "--out",
-        ])
-        .arg(&dir)
+        .arg("simulate")
+        .args(args)
+        .arg("--out")
+        .arg(dir)
         .output()
         .unwrap();
     assert!(
         out.status.success(),
-        "{}",
+        "{args:?}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let recording = touchdown_formats::recording::Recording::read(&dir).unwrap();
+    Recording::read(dir).unwrap()
+}
+
+#[test]
+fn simulate_writes_a_readable_recording() {
+    let dir = scratch("simulate");
+    let recording = simulate(&["--scenario", "sun", "--frames", "2", "--seed", "3"], &dir);
     assert_eq!(recording.frames.len(), 2);
     assert_eq!(recording.frames[0].label.as_deref(), Some("hover=20"));
     let truth = recording.frames[1].truth.unwrap();
@@ -92,19 +91,9 @@ fn simulate_writes_a_readable_recording() {
 fn simulate_effect_flags_override_the_typical_ones() {
     let run = |name: &str, flags: &[&str]| {
         let dir = scratch(name);
-        let out = touchdown()
-            .args(["simulate", "--scenario", "occlusion", "--frames", "1"])
-            .args(flags)
-            .arg("--out")
-            .arg(&dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{flags:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let recording = touchdown_formats::recording::Recording::read(&dir).unwrap();
+        let mut args = vec!["--scenario", "occlusion", "--frames", "1"];
+        args.extend_from_slice(flags);
+        let recording = simulate(&args, &dir);
         let _ = std::fs::remove_dir_all(&dir);
         recording
     };
@@ -150,9 +139,8 @@ fn simulate_effect_flags_override_the_typical_ones() {
 #[test]
 fn simulate_renders_with_the_renderer_asked_for() {
     let dir = scratch("simulate-warp");
-    let out = touchdown()
-        .args([
-            "simulate",
+    let recording = simulate(
+        &[
             "--scenario",
             "landing",
             "--frames",
@@ -163,17 +151,9 @@ fn simulate_renders_with_the_renderer_asked_for() {
             "2",
             "--renderer",
             "warp",
-            "--out",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        &dir,
     );
-    let recording = touchdown_formats::recording::Recording::read(&dir).unwrap();
     let mut scenario = Scenario::named("landing", 5).unwrap();
     scenario.truncate(2);
     scenario.apply_effects(&FlightEffects::typical());
