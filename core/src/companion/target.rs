@@ -237,16 +237,17 @@ fn vehicle_velocity(f: &FittedVelocity) -> Vector3<f32> {
 /// attitude, heading included), its variances from the fit, the angular rates unknown.
 fn velocity_odometry(time_usec: u64, f: &FittedVelocity) -> ODOMETRY_DATA {
     let v = vehicle_velocity(f);
+    // The 6 x 6 upper triangle, row-major: the velocity variances at 0, 6 and 11 (the fit's
+    // axes are independent), the angular rates' at 15, 18 and 20 unknown.
     let mut velocity_covariance = [0.0f32; 21];
-    upper_triangle_3(
-        &nalgebra::Matrix3::from_diagonal(&f.variance),
-        &mut velocity_covariance,
-        6,
-    );
-    // The angular rates' variances (rows 3-5 of the 6 x 6): unknown.
-    for k in [15, 18, 20] {
-        if let Some(slot) = velocity_covariance.get_mut(k) {
-            *slot = f32::NAN;
+    for (slot, variance) in [0, 6, 11].into_iter().zip(f.variance.iter()) {
+        if let Some(c) = velocity_covariance.get_mut(slot) {
+            *c = *variance;
+        }
+    }
+    for slot in [15, 18, 20] {
+        if let Some(c) = velocity_covariance.get_mut(slot) {
+            *c = f32::NAN;
         }
     }
     let mut pose_covariance = [0.0f32; 21];
@@ -290,20 +291,6 @@ fn velocity_speed_estimate(time_usec: u64, f: &FittedVelocity) -> VISION_SPEED_E
         z: v.z,
         covariance,
         reset_counter: 0,
-    }
-}
-
-/// Writes the upper triangle of the 3 x 3 `m` into the first three rows of the row-major upper
-/// triangle of an `n` x `n` matrix (`out`); the other entries are left as they are.
-fn upper_triangle_3(m: &nalgebra::Matrix3<f32>, out: &mut [f32], n: usize) {
-    let mut start = 0;
-    for r in 0..3 {
-        for c in r..3 {
-            if let (Some(slot), Some(v)) = (out.get_mut(start + c - r), m.get((r, c))) {
-                *slot = *v;
-            }
-        }
-        start += n - r;
     }
 }
 

@@ -138,8 +138,8 @@ pub struct Simulator {
     pub world: World,
     rays: RayMap,
     threads: usize,
-    renderer: Renderer,
-    /// The warp renderer's pre-rasterised world, built by [`Simulator::with_renderer`].
+    /// The warp renderer's pre-rasterised world, built by [`Simulator::with_renderer`]; `None`:
+    /// the raster renderer.
     warp: Option<std::sync::Arc<warp::WarpScene>>,
     warp_optics: WarpOptics,
 }
@@ -169,7 +169,6 @@ impl Simulator {
             world,
             rays,
             threads,
-            renderer: Renderer::Raster,
             warp: None,
             warp_optics,
         }
@@ -179,8 +178,9 @@ impl Simulator {
     /// [`Renderer::Warp`] rasterises the world once, here, on the simulator's threads (the
     /// ground's texture is most of it): set [`Simulator::with_threads`] first.
     pub fn with_renderer(mut self, renderer: Renderer) -> Self {
-        self.renderer = renderer;
-        if renderer == Renderer::Warp && self.warp.is_none() {
+        if renderer == Renderer::Raster {
+            self.warp = None;
+        } else if self.warp.is_none() {
             let (w, h) = (self.scenario.camera.width(), self.scenario.camera.height());
             self.warp = Some(std::sync::Arc::new(warp::WarpScene::new(
                 &self.world,
@@ -202,7 +202,11 @@ impl Simulator {
 
     /// The image model in use.
     pub fn renderer(&self) -> Renderer {
-        self.renderer
+        if self.warp.is_some() {
+            Renderer::Warp
+        } else {
+            Renderer::Raster
+        }
     }
 
     /// Uses `threads` threads per frame (the result does not depend on it).
@@ -453,9 +457,9 @@ impl Simulator {
         let middle = self.camera_pose(t);
         let s = &self.scenario;
         let (w, h) = (s.camera.width(), s.camera.height());
-        let (pixels, subframes) = match (self.renderer, &self.warp) {
+        let (pixels, subframes) = match &self.warp {
             // The warp model blurs the motion within its one pass: no sub-frames.
-            (Renderer::Warp, Some(scene)) => (
+            Some(scene) => (
                 warp::render(
                     self,
                     scene,
@@ -471,7 +475,7 @@ impl Simulator {
                 ),
                 1,
             ),
-            _ => self.render_raster(t, exposure_s, &sensor, &middle, index),
+            None => self.render_raster(t, exposure_s, &sensor, &middle, index),
         };
         SimFrame {
             index,
