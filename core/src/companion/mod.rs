@@ -115,6 +115,7 @@ mod target;
 mod timesync;
 mod transmit;
 mod velocity;
+mod vision;
 
 pub use mavlink;
 
@@ -356,6 +357,8 @@ struct State {
     status: Deque<StatusText, STATUS_QUEUE_CAPACITY>,
     target: Option<PendingTarget>,
     vpe: Option<PendingVpe>,
+    /// The vision estimate's reset counter and fit state (TD_VPE_EN bit 0).
+    vision: vision::VisionState,
     velocity: Option<PendingVelocity>,
     /// The slope of the level positions, for the velocity (TD_VPE_EN bit 1).
     velocity_fit: velocity::VelocityFit,
@@ -420,6 +423,7 @@ impl Companion {
                 status: Deque::new(),
                 target: None,
                 vpe: None,
+                vision: vision::VisionState::default(),
                 velocity: None,
                 velocity_fit: velocity::VelocityFit::new(),
                 sequence: 0,

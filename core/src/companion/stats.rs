@@ -40,6 +40,11 @@ pub struct CompanionStats {
     pub landing_targets: u32,
     /// VISION_POSITION_ESTIMATEs sent.
     pub vision_estimates: u32,
+    /// Times the VISION_POSITION_ESTIMATE's reset counter stepped (the stream resumed after a
+    /// gap: a new track).
+    pub vision_resets: u32,
+    /// The VISION_POSITION_ESTIMATE is fit to navigate on (see `companion::vision`).
+    pub vision_fit: bool,
     /// Velocities sent (ODOMETRY or VISION_SPEED_ESTIMATE, TD_VPE_EN bit 1).
     pub vision_velocities: u32,
     /// PARAM_VALUEs sent.

@@ -19,14 +19,13 @@ use super::{
     PendingTarget, PendingVelocity, PendingVpe, State, TargetOutcome, TimeBase, VelocityMessage,
     UNKNOWN_Q,
 };
-use crate::filter::Attitude;
 use crate::filter::{Estimate, FrameEstimate};
 use crate::params::ParamId;
 use mavlink::dialects::common::{
     LandingTargetType, MavBool, MavEstimatorType, MavFrame, LANDING_TARGET_DATA, ODOMETRY_DATA,
-    VISION_POSITION_ESTIMATE_DATA, VISION_SPEED_ESTIMATE_DATA,
+    VISION_SPEED_ESTIMATE_DATA,
 };
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 impl State {
     pub(super) fn on_estimate(&mut self, frame: &FrameEstimate, now_us: u64) -> TargetOutcome {
@@ -35,6 +34,7 @@ impl State {
             self.on_mount_correction(c);
         }
         let fitted = self.fit_velocity(frame);
+        self.vision_gap(frame.exposure_us);
         if !frame.fix_found {
             self.shift.on_gap(&self.config.px4_shift, frame.exposure_us);
             return TargetOutcome::NoFix;
@@ -144,9 +144,10 @@ impl State {
         });
         if self.params.get_int(ParamId::VpeEnable) & VISION_POSITION != 0 {
             if let Some(l) = frame.estimate.as_ref().and_then(|e| e.level) {
+                let data = self.vision_estimate_for(t, time_usec, &l);
                 self.vpe = Some(PendingVpe {
                     created_us: now_us,
-                    data: vision_estimate(time_usec, &l.estimate, &l.attitude),
+                    data,
                 });
             }
         }
@@ -211,7 +212,7 @@ impl State {
     }
 
     /// TD_CAM_POS_X/Y/Z: the camera's position on the vehicle, body FRD, metres.
-    fn camera_position(&self) -> Vector3<f32> {
+    pub(super) fn camera_position(&self) -> Vector3<f32> {
         Vector3::new(
             self.params.get(ParamId::CamPosX),
             self.params.get(ParamId::CamPosY),
@@ -289,45 +290,6 @@ fn velocity_speed_estimate(time_usec: u64, f: &FittedVelocity) -> VISION_SPEED_E
         x: v.x,
         y: v.y,
         z: v.z,
-        covariance,
-        reset_counter: 0,
-    }
-}
-
-/// VISION_POSITION_ESTIMATE: the vehicle in a pad-centred NED frame (origin at the pad, NED
-/// axes), i.e. minus the pad's level position, with the vehicle's attitude; covariance upper
-/// triangle (x, y, z, roll, pitch, yaw), row-major: the estimate's position covariance, the
-/// attitude entries set to (0.05 rad)², since the attitude is the autopilot's own.
-fn vision_estimate(time_usec: u64, e: &Estimate, att: &Attitude) -> VISION_POSITION_ESTIMATE_DATA {
-    let [w, x, y, z] = att.quaternion_wxyz();
-    let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z));
-    let (roll, pitch, yaw) = q.euler_angles();
-    let mut full = nalgebra::Matrix6::<f32>::zeros();
-    full.fixed_view_mut::<3, 3>(0, 0)
-        .copy_from(&e.position_covariance);
-    for k in 3..6 {
-        if let Some(v) = full.get_mut((k, k)) {
-            *v = 0.05 * 0.05;
-        }
-    }
-    let mut covariance = [0.0f32; 21];
-    let mut slots = covariance.iter_mut();
-    for r in 0..6 {
-        for c in r..6 {
-            if let (Some(slot), Some(v)) = (slots.next(), full.get((r, c))) {
-                *slot = *v;
-            }
-        }
-    }
-    let p = -e.position;
-    VISION_POSITION_ESTIMATE_DATA {
-        usec: time_usec,
-        x: p.x,
-        y: p.y,
-        z: p.z,
-        roll,
-        pitch,
-        yaw,
         covariance,
         reset_counter: 0,
     }

@@ -326,7 +326,11 @@ fn frame_at(
         fix_found: true,
         estimate: Some(PadEstimate {
             body_frd: attitude.ned_to_body(&rel_ned),
-            level: Some(LevelEstimate { estimate, attitude }),
+            level: Some(LevelEstimate {
+                estimate,
+                attitude,
+                mount_sigma_deg: 0.0,
+            }),
             vehicle_position: position.map(|position| PositionSample {
                 position,
                 velocity: Vector3::zeros(),
@@ -596,4 +600,171 @@ fn px4_outer_loop_shifts_the_point_in_precision_land_only() {
     let (rest, s3) = fly(PRECLAND, 8.0, 2, 0.12);
     assert_eq!(s3, nalgebra::Vector2::zeros());
     assert!(rest.iter().all(|v| v.is_finite()));
+}
+
+/// `frame_at`'s frame with the level estimate's position covariance `variance` I and the
+/// mount's tilt sigma `mount_sigma_deg`.
+fn vision_frame(
+    exposure_us: u64,
+    rel_ned: Vector3<f32>,
+    variance: f32,
+    mount_sigma_deg: f32,
+) -> FrameEstimate {
+    let att = crate::filter::Attitude::from_euler(0.05, -0.03, 0.4).unwrap();
+    let mut frame = frame_at(
+        exposure_us,
+        rel_ned,
+        att,
+        Some(Vector3::new(1.0, 2.0, -12.0)),
+    );
+    if let Some(l) = frame.estimate.as_mut().and_then(|e| e.level.as_mut()) {
+        l.estimate.position_covariance = nalgebra::Matrix3::identity() * variance;
+        l.mount_sigma_deg = mount_sigma_deg;
+    }
+    frame
+}
+
+/// Feeds `frame` at `now_us` to `c` and returns the VISION_POSITION_ESTIMATE and the
+/// STATUSTEXTs sent for it.
+fn vision_sent(
+    c: &mut Companion,
+    frame: &FrameEstimate,
+    now_us: u64,
+) -> (Option<VISION_POSITION_ESTIMATE_DATA>, std::vec::Vec<String>) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let _ = c.on_estimate(frame, now_us);
+    let mut parser = FrameParser::new();
+    let (mut vpe, mut texts) = (None, std::vec::Vec::new());
+    while let Some(n) = c.poll_transmit(now_us, &mut out) {
+        parser.push(&out[..n], |f| match f.decode() {
+            Ok(MavMessage::VISION_POSITION_ESTIMATE(v)) => vpe = Some(v),
+            Ok(MavMessage::STATUSTEXT(s)) => texts.push(s.text.to_str().unwrap().to_string()),
+            _ => {}
+        });
+    }
+    (vpe, texts)
+}
+
+/// A companion for the vision tests: ArduPilot profile, TD_VPE_EN 1, `params` on top, its
+/// start-up messages drained.
+fn vision_companion(params: &[(ParamId, f32)]) -> Companion {
+    let mut c = Companion::new(CompanionConfig::default());
+    c.set_param(ParamId::Profile, 0.0).unwrap();
+    c.set_param(ParamId::VpeEnable, 1.0).unwrap();
+    for (id, v) in params {
+        c.set_param(*id, *v).unwrap();
+    }
+    let mut out = [0u8; MAX_FRAME_LEN];
+    while c.poll_transmit(0, &mut out).is_some() {}
+    c
+}
+
+#[test]
+fn vision_estimate_is_the_vehicle_origin_with_the_mount_error_in_its_covariance() {
+    let cam_pos = Vector3::new(0.2, -0.1, 0.08);
+    let mut c = vision_companion(&[
+        (ParamId::CamPosX, cam_pos.x),
+        (ParamId::CamPosY, cam_pos.y),
+        (ParamId::CamPosZ, cam_pos.z),
+    ]);
+    let rel = Vector3::new(0.5, -0.3, 12.0);
+    let frame = vision_frame(1_000_000, rel, 0.0004, 2.0);
+    let (vpe, _) = vision_sent(&mut c, &frame, 1_000_000);
+    let vpe = vpe.expect("a VISION_POSITION_ESTIMATE");
+    let att = frame.estimate.unwrap().level.unwrap().attitude;
+    // The vehicle's origin: minus the pad from the camera, minus the turned lever arm.
+    let expected = -(att.body_to_ned(&cam_pos) + rel);
+    let got = Vector3::new(vpe.x, vpe.y, vpe.z);
+    assert!((got - expected).amax() < 1e-5, "{got} vs {expected}");
+    assert!((got + rel).amax() > 0.1, "the lever arm is applied");
+    // The mount's 2 degrees across 12 m of line of sight: 0.42 m one sigma, north and east
+    // alike, beside which the track's 2 cm is small; hardly anything along the line (down).
+    let turned = crate::filter::turn_covariance(&rel, 2.0f32.to_radians());
+    let north = vpe.covariance[0];
+    let east = vpe.covariance[6];
+    let down = vpe.covariance[11];
+    assert!((north - (0.0004 + turned[(0, 0)])).abs() < 1e-5, "{north}");
+    assert!((east - (0.0004 + turned[(1, 1)])).abs() < 1e-5, "{east}");
+    assert!(
+        (libm::sqrtf(north) - 0.42).abs() < 0.01,
+        "{}",
+        libm::sqrtf(north)
+    );
+    assert!(down < 0.001, "{down}");
+    // The same frame with a calibrated mount (0.1 degree): a few centimetres.
+    let mut c = vision_companion(&[]);
+    let (vpe, _) = vision_sent(
+        &mut c,
+        &vision_frame(1_000_000, rel, 0.0004, 0.1),
+        1_000_000,
+    );
+    let north = vpe.unwrap().covariance[0];
+    assert!(libm::sqrtf(north) < 0.04, "{}", libm::sqrtf(north));
+}
+
+#[test]
+fn the_reset_counter_steps_when_the_stream_resumes_after_a_gap() {
+    let mut c = vision_companion(&[]);
+    let rel = Vector3::new(0.1, 0.2, 5.0);
+    let mut counters = std::vec::Vec::new();
+    // 10 frames at 30 Hz, a gap of 0.6 s (no fix), 10 more, a gap of 0.4 s, 10 more.
+    let mut t = 1_000_000u64;
+    for (frames, gap_us) in [(10, 600_000u64), (10, 400_000), (10, 0)] {
+        for _ in 0..frames {
+            let (vpe, _) = vision_sent(&mut c, &vision_frame(t, rel, 0.0004, 0.1), t);
+            counters.push(vpe.expect("an estimate").reset_counter);
+            t += 33_333;
+        }
+        let gap_end = t + gap_us;
+        while t < gap_end {
+            let mut lost = vision_frame(t, rel, 0.0004, 0.1);
+            lost.fix_found = false;
+            lost.estimate = None;
+            let _ = vision_sent(&mut c, &lost, t);
+            t += 33_333;
+        }
+    }
+    assert!(counters[..10].iter().all(|&r| r == 0), "{counters:?}");
+    assert!(counters[10..].iter().all(|&r| r == 1), "{counters:?}");
+    assert_eq!(c.stats().vision_resets, 1);
+}
+
+#[test]
+fn fit_to_navigate_is_announced_when_it_changes() {
+    let mut c = vision_companion(&[]);
+    let rel = Vector3::new(0.1, 0.2, 12.0);
+    let mut t = 1_000_000u64;
+    let mut feed = |c: &mut Companion, mount_sigma_deg: f32, fix: bool| {
+        let mut frame = vision_frame(t, rel, 0.0004, mount_sigma_deg);
+        if !fix {
+            frame.fix_found = false;
+            frame.estimate = None;
+        }
+        let (_, texts) = vision_sent(c, &frame, t);
+        t += 33_333;
+        texts
+    };
+    // An uncalibrated mount at 12 m: not fit, and nothing said (it never was).
+    assert!(feed(&mut c, 2.0, true).is_empty());
+    assert!(!c.stats().vision_fit);
+    // Calibrated: fit, said once.
+    assert_eq!(
+        feed(&mut c, 0.1, true),
+        ["touchdown: position fit to navigate +-0.03 m"]
+    );
+    assert!(feed(&mut c, 0.1, true).is_empty());
+    assert!(c.stats().vision_fit);
+    // Within the hysteresis (0.12 m: over the 0.10 to become fit, under the 0.15 to stop).
+    assert!(feed(&mut c, 0.55, true).is_empty());
+    // Worse than that: not fit.
+    assert_eq!(
+        feed(&mut c, 2.0, true),
+        ["touchdown: position not fit +-0.42 m"]
+    );
+    assert!(!c.stats().vision_fit);
+    // Fit again, then the pad lost for more than half a second.
+    assert_eq!(feed(&mut c, 0.1, true).len(), 1);
+    let texts: std::vec::Vec<String> = (0..20).flat_map(|_| feed(&mut c, 0.1, false)).collect();
+    assert_eq!(texts, ["touchdown: position not fit: pad lost"]);
+    assert!(!c.stats().vision_fit);
 }

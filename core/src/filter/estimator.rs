@@ -111,10 +111,19 @@ impl Default for EstimatorConfig {
 /// of sight. In the replayed `sun` hover at 20 m it drove the level track's vertical speed to
 /// 0.8 m/s and its altitude 14 cm below every fix of the last four frames.
 pub fn level_covariance(level: &Measurement, sigma_rad: f32) -> Matrix3<f32> {
-    let p = level.position;
-    let across = Matrix3::identity() * p.norm_squared() - p * p.transpose();
-    level.covariance + across * (sigma_rad * sigma_rad)
+    level.covariance + turn_covariance(&level.position, sigma_rad)
 }
+
+/// The covariance a turn of `sigma_rad` (one sigma about each axis) gives the end of the
+/// vector `p`: `sigma^2 (|p|^2 I - p p^T)`, across `p` only (see [`level_covariance`]).
+pub fn turn_covariance(p: &Vector3<f32>, sigma_rad: f32) -> Matrix3<f32> {
+    (Matrix3::identity() * p.norm_squared() - p * p.transpose()) * (sigma_rad * sigma_rad)
+}
+
+/// One sigma of the tilt error of a camera mount that no calibration has measured, degrees:
+/// what a mount aligned by eye or a printed bracket is good to (see
+/// [`PadEstimator::mount_sigma_deg`]).
+pub const MOUNT_PRIOR_SIGMA_DEG: f32 = 2.0;
 
 /// The level estimate with the attitude it was read with.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,6 +132,11 @@ pub struct LevelEstimate {
     pub estimate: Estimate,
     /// The vehicle's attitude at the exposure (body FRD to NED).
     pub attitude: Attitude,
+    /// One sigma of the mount's tilt error the estimate was levelled with, degrees
+    /// ([`PadEstimator::mount_sigma_deg`]). Unlike the attitude's frame-to-frame noise it is
+    /// the same in every frame, so no filtering removes it and `estimate`'s covariance does
+    /// not hold it: a position for navigation adds it ([`turn_covariance`]).
+    pub mount_sigma_deg: f32,
 }
 
 /// The filtered pad at one frame's exposure.
@@ -260,6 +274,20 @@ impl PadEstimator {
         self.calibrator.estimate()
     }
 
+    /// One sigma of the mount in force's tilt error, degrees: with a confident calibration,
+    /// its sigma plus the mount in force's distance from it (a correction reported but not
+    /// applied, TD_CAM_CAL = 1, leaves that distance); before one (or with TD_CAM_CAL off,
+    /// when the board cannot know how well the mount was set), [`MOUNT_PRIOR_SIGMA_DEG`].
+    pub fn mount_sigma_deg(&self) -> f32 {
+        match self.calibrator.estimate().filter(|e| e.confident) {
+            Some(e) => {
+                let (roll, pitch) = self.mount_tilt_deg;
+                e.sigma_deg() + libm::hypotf(e.roll_deg - roll, e.pitch_deg - pitch)
+            }
+            None => MOUNT_PRIOR_SIGMA_DEG,
+        }
+    }
+
     /// Forgets both tracks (a new, independent flight). The mount calibration is kept: the
     /// mount belongs to the airframe.
     pub fn reset(&mut self) {
@@ -337,10 +365,13 @@ impl PadEstimator {
                 level_covariance(&level, self.config.attitude_noise_deg.to_radians());
             self.level.update(&level);
         }
+        let mount_sigma_deg = self.mount_sigma_deg();
         let level = attitude.and_then(|attitude| {
-            self.level
-                .estimate(t)
-                .map(|estimate| LevelEstimate { estimate, attitude })
+            self.level.estimate(t).map(|estimate| LevelEstimate {
+                estimate,
+                attitude,
+                mount_sigma_deg,
+            })
         });
         let body_frd = match &level {
             Some(l) => Some(l.attitude.ned_to_body(&l.estimate.position)),

@@ -52,8 +52,8 @@ pub use axes::{
     ned_to_camera, Attitude, CameraMount, LandingAngles, RotationError,
 };
 pub use estimator::{
-    level_covariance, EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate, PadEstimator,
-    ATTITUDE_NOISE_DEG,
+    level_covariance, turn_covariance, EstimatorConfig, FrameEstimate, LevelEstimate, PadEstimate,
+    PadEstimator, ATTITUDE_NOISE_DEG, MOUNT_PRIOR_SIGMA_DEG,
 };
 pub use mount_calibration::{
     roll_pitch_aligning, MountCalibrationConfig, MountCalibrationMode, MountCalibrationStats,

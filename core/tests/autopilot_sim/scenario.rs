@@ -70,6 +70,9 @@ pub struct Scenario {
     pub pad_yaw: f32,
     /// TD_CAM_YAW, degrees (the simulated camera is turned the same way).
     pub cam_yaw_deg: f32,
+    /// The simulated camera's mount tilted by this roll and pitch, degrees, which the board
+    /// is not told (TD_CAM_ROLL and TD_CAM_PITCH stay 0).
+    pub mount_error_deg: (f32, f32),
 }
 
 impl Scenario {
@@ -90,6 +93,7 @@ impl Scenario {
             autopilot_from_us: 0,
             pad_yaw: 0.0,
             cam_yaw_deg: 0.0,
+            mount_error_deg: (0.0, 0.0),
         }
     }
 }
@@ -186,7 +190,9 @@ pub fn simulate(s: &Scenario) -> Run {
     config.params.set(ParamId::CamYaw, s.cam_yaw_deg).unwrap();
     config.params.set(ParamId::VpeEnable, s.vision).unwrap();
     // What TD_CAM_YAW means: the downward camera turned about its optical axis.
-    let mount = CameraMount::downward_rotated(s.cam_yaw_deg.to_radians()).unwrap();
+    let mount = CameraMount::downward_rotated(s.cam_yaw_deg.to_radians())
+        .unwrap()
+        .tilted(s.mount_error_deg.0, s.mount_error_deg.1);
     // The estimator's mount is the downward one; TD_CAM_YAW turns it (as the pipeline does).
     let kind = match s.profile {
         Profile::ArduPilot | Profile::ArduPilotLocalFrd => {

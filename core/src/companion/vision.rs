@@ -1,0 +1,196 @@
+//! The vehicle's position for an autopilot that navigates on the pad (TD_VPE_EN bit 0): the
+//! VISION_POSITION_ESTIMATE, and the board's word on whether that position is fit to
+//! navigate on.
+//!
+//! Why each part is as it is:
+//! - **The vehicle's origin**, not the camera: the lens sits TD_CAM_POS from the point the
+//!   autopilot's estimator tracks, turned with the attitude, so the message needs no lever arm
+//!   on the autopilot's side (ArduPilot's VISO_POS_*, PX4's EKF2_EV_POS_* stay 0). It is the
+//!   same offset the PX4 profile's targets add.
+//! - **The covariance holds what the board does not know**: the level track's (the fixes'
+//!   noise and the attitude's frame-to-frame noise), plus the mount's tilt error turned over
+//!   the line of sight ([`crate::filter::turn_covariance`],
+//!   [`LevelEstimate::mount_sigma_deg`]). A mount error is the same in every frame, so no
+//!   filtering removes it, and it grows with height: before the in-flight calibration, the
+//!   position high above the pad is worth decimetres, and an estimator that fuses it must be
+//!   told so rather than trust centimetres.
+//! - **The reset counter steps when the stream resumes after a gap** ([`RESUME_GAP_US`]):
+//!   the track that resumes is a new one, whose first positions need not continue the old
+//!   track's last. Both autopilots take a stepped counter as a jump to adopt (ArduPilot's
+//!   AP_VisualOdom hands the EKF a reset time, PX4's EKF2 resets its vision fusion), rather
+//!   than a measurement to reject against the old track.
+//! - **Fit to navigate**: the position's horizontal one sigma within [`FIT_SIGMA_M`] (and
+//!   still within [`UNFIT_SIGMA_M`] once fit, so that a sigma near the limit does not
+//!   chatter). The board says so, and when it stops being so, in a STATUSTEXT
+//!   (`touchdown: position fit to navigate +-0.04 m`, `touchdown: position not fit +-0.31 m`,
+//!   `touchdown: position not fit: pad lost`), and keeps the state in its counters
+//!   ([`super::CompanionStats::vision_fit`]). A pilot or a ground station waits for the
+//!   first before making the board the only position source.
+
+use core::fmt::Write;
+
+use super::State;
+use crate::filter::{turn_covariance, Attitude, LevelEstimate};
+use mavlink::dialects::common::{MavSeverity, VISION_POSITION_ESTIMATE_DATA};
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// A VISION_POSITION_ESTIMATE this long after the previous one starts a new track (the reset
+/// counter steps) and ends a fit position ("pad lost"), µs: longer than a few dropped frames
+/// at any frame rate the board runs, shorter than the autopilots' own timeouts for vision
+/// data (ArduPilot's VisOdom counts as unhealthy after 0.3 s without, and its EKF stops
+/// fusing soon after).
+pub const RESUME_GAP_US: u64 = 500_000;
+
+/// The horizontal one sigma at or under which the position becomes fit to navigate, metres:
+/// what a landing within 5 cm needs of its source of position.
+pub const FIT_SIGMA_M: f32 = 0.10;
+
+/// The horizontal one sigma over which a fit position stops being fit, metres.
+pub const UNFIT_SIGMA_M: f32 = 0.15;
+
+/// The vision estimate's own state: its reset counter and whether it is fit to navigate.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct VisionState {
+    /// The exposure of the last estimate queued, our clock, µs.
+    last_exposure_us: Option<u64>,
+    /// The reset counter sent.
+    reset_counter: u8,
+    /// The position is fit to navigate (announced).
+    fit: bool,
+}
+
+impl State {
+    /// With TD_VPE_EN bit 0, the frame's VISION_POSITION_ESTIMATE, stamped `time_usec`, from
+    /// `level` exposed at `exposure_us` (our clock); the reset counter and the fit state move
+    /// with it.
+    pub(super) fn vision_estimate_for(
+        &mut self,
+        exposure_us: u64,
+        time_usec: u64,
+        level: &LevelEstimate,
+    ) -> VISION_POSITION_ESTIMATE_DATA {
+        if self
+            .vision
+            .last_exposure_us
+            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US)
+        {
+            self.vision.reset_counter = self.vision.reset_counter.wrapping_add(1);
+            self.stats.vision_resets = self.stats.vision_resets.saturating_add(1);
+        }
+        self.vision.last_exposure_us = Some(exposure_us);
+        let data = vision_estimate(
+            time_usec,
+            level,
+            &self.camera_position(),
+            self.vision.reset_counter,
+        );
+        let sigma = horizontal_sigma(&data);
+        let limit = if self.vision.fit {
+            UNFIT_SIGMA_M
+        } else {
+            FIT_SIGMA_M
+        };
+        self.set_vision_fit(sigma <= limit, sigma);
+        data
+    }
+
+    /// A frame exposed at `exposure_us` without a vision estimate: a fit position that has
+    /// had none for [`RESUME_GAP_US`] is no longer fit.
+    pub(super) fn vision_gap(&mut self, exposure_us: u64) {
+        let lost = self
+            .vision
+            .last_exposure_us
+            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US);
+        if self.vision.fit && lost {
+            self.set_vision_fit(false, f32::INFINITY);
+        }
+    }
+
+    /// Moves the fit state to `fit`, announcing a change; `sigma` is the horizontal one
+    /// sigma, metres (infinite: the pad was lost).
+    fn set_vision_fit(&mut self, fit: bool, sigma: f32) {
+        if fit == self.vision.fit {
+            return;
+        }
+        self.vision.fit = fit;
+        self.stats.vision_fit = fit;
+        let mut text = heapless::String::<64>::new();
+        // Integers only (core's float formatting keeps panic paths, see nopanic/); `as`
+        // saturates. Every text fits MAVLink's 50 bytes.
+        let cm = libm::roundf(sigma * 100.0) as u32;
+        let (severity, verdict) = if fit {
+            (MavSeverity::MAV_SEVERITY_NOTICE, "fit to navigate")
+        } else {
+            (MavSeverity::MAV_SEVERITY_WARNING, "not fit")
+        };
+        let _ = if sigma.is_finite() && cm < 10_000 {
+            write!(
+                text,
+                "touchdown: position {verdict} +-{}.{}{} m",
+                cm / 100,
+                cm / 10 % 10,
+                cm % 10
+            )
+        } else {
+            write!(text, "touchdown: position {verdict}: pad lost")
+        };
+        self.queue_status_text(severity, &text);
+    }
+}
+
+/// The larger of the north and east one sigmas in a VISION_POSITION_ESTIMATE's covariance,
+/// metres (its upper triangle: x x at 0, y y at 6).
+fn horizontal_sigma(data: &VISION_POSITION_ESTIMATE_DATA) -> f32 {
+    let north = data.covariance.first().copied().unwrap_or(f32::INFINITY);
+    let east = data.covariance.get(6).copied().unwrap_or(f32::INFINITY);
+    libm::sqrtf(north.max(east))
+}
+
+/// VISION_POSITION_ESTIMATE: the vehicle's origin in a pad-centred frame with NED axes
+/// (origin at the pad), i.e. minus the pad's level position from the origin, with the
+/// vehicle's attitude; covariance upper triangle (x, y, z, roll, pitch, yaw), row-major: the
+/// level track's position covariance plus the mount's tilt error across the line of sight,
+/// the attitude entries (0.05 rad)², since the attitude is the autopilot's own.
+fn vision_estimate(
+    time_usec: u64,
+    level: &LevelEstimate,
+    cam_pos_body: &Vector3<f32>,
+    reset_counter: u8,
+) -> VISION_POSITION_ESTIMATE_DATA {
+    let e = &level.estimate;
+    let att: &Attitude = &level.attitude;
+    let [w, x, y, z] = att.quaternion_wxyz();
+    let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z));
+    let (roll, pitch, yaw) = q.euler_angles();
+    let mut full = nalgebra::Matrix6::<f32>::zeros();
+    let position_covariance =
+        e.position_covariance + turn_covariance(&e.position, level.mount_sigma_deg.to_radians());
+    full.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&position_covariance);
+    for k in 3..6 {
+        if let Some(v) = full.get_mut((k, k)) {
+            *v = 0.05 * 0.05;
+        }
+    }
+    let mut covariance = [0.0f32; 21];
+    let mut slots = covariance.iter_mut();
+    for r in 0..6 {
+        for c in r..6 {
+            if let (Some(slot), Some(v)) = (slots.next(), full.get((r, c))) {
+                *slot = *v;
+            }
+        }
+    }
+    let p = -(att.body_to_ned(cam_pos_body) + e.position);
+    VISION_POSITION_ESTIMATE_DATA {
+        usec: time_usec,
+        x: p.x,
+        y: p.y,
+        z: p.z,
+        roll,
+        pitch,
+        yaw,
+        covariance,
+        reset_counter,
+    }
+}
