@@ -274,15 +274,24 @@ impl PadEstimator {
         self.calibrator.estimate()
     }
 
-    /// One sigma of the mount in force's tilt error, degrees: with a confident calibration,
-    /// its sigma plus the mount in force's distance from it (a correction reported but not
-    /// applied, TD_CAM_CAL = 1, leaves that distance); before one (or with TD_CAM_CAL off,
-    /// when the board cannot know how well the mount was set), [`MOUNT_PRIOR_SIGMA_DEG`].
+    /// One sigma of the mount in force's tilt error, degrees: once the calibrator has the
+    /// frames and the time span a report needs, its sigma plus the mount in force's distance
+    /// from it (a correction reported but not applied, TD_CAM_CAL = 1, leaves that distance),
+    /// at most [`MOUNT_PRIOR_SIGMA_DEG`]; before that (or with TD_CAM_CAL off, when the board
+    /// cannot know how well the mount was set), [`MOUNT_PRIOR_SIGMA_DEG`]. Not its
+    /// confidence: that gates a report on a steady estimate, and a calibration made in a calm
+    /// hover stays as good when a gusty descent later adds scattered frames to it.
     pub fn mount_sigma_deg(&self) -> f32 {
-        match self.calibrator.estimate().filter(|e| e.confident) {
+        let c = self.calibrator.config();
+        match self
+            .calibrator
+            .estimate()
+            .filter(|e| e.frames >= c.min_frames && e.span_us >= c.min_span_us)
+        {
             Some(e) => {
                 let (roll, pitch) = self.mount_tilt_deg;
-                e.sigma_deg() + libm::hypotf(e.roll_deg - roll, e.pitch_deg - pitch)
+                let sigma = e.sigma_deg() + libm::hypotf(e.roll_deg - roll, e.pitch_deg - pitch);
+                sigma.min(MOUNT_PRIOR_SIGMA_DEG)
             }
             None => MOUNT_PRIOR_SIGMA_DEG,
         }
@@ -673,6 +682,54 @@ mod tests {
                 assert_eq!(e.mount_calibrator().stats().tilt_not_measured, 400);
             }
         }
+    }
+
+    #[test]
+    fn the_mount_sigma_is_the_prior_until_a_calibration_has_its_frames_and_is_applied() {
+        let mut e = PadEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut vehicle = VehicleState::new();
+        let fix = misaligned_fix();
+        let mut level_sigma = |e: &mut PadEstimator, k: u64| {
+            let t = k * PERIOD_US;
+            vehicle.push_attitude(t, &Attitude::level_north(), t);
+            let out = e.update(Some(&fix), &vehicle.at(t));
+            out.estimate
+                .and_then(|p| p.level)
+                .map(|l| l.mount_sigma_deg)
+        };
+        assert_eq!(level_sigma(&mut e, 0), None, "no track yet");
+        let mut tracked = 0;
+        for k in 1..20 {
+            if let Some(sigma) = level_sigma(&mut e, k) {
+                assert_eq!(sigma, MOUNT_PRIOR_SIGMA_DEG, "frame {k}");
+                tracked += 1;
+            }
+        }
+        assert!(tracked > 10, "{tracked}");
+        for k in 20..400 {
+            level_sigma(&mut e, k);
+        }
+        let calibration = e.mount_estimate().unwrap();
+        assert!(calibration.confident);
+        // Not applied: at most the prior (1.8 degrees from the mount in force, plus its sigma).
+        assert_eq!(level_sigma(&mut e, 400), Some(MOUNT_PRIOR_SIGMA_DEG));
+        // Half applied: its sigma plus the distance left.
+        e.set_mount(0.0, 1.0, -0.5);
+        let half = level_sigma(&mut e, 401).unwrap();
+        let distance = libm::hypotf(calibration.roll_deg - 1.0, calibration.pitch_deg + 0.5);
+        assert!(
+            (half - calibration.sigma_deg() - distance).abs() < 0.01,
+            "{half}"
+        );
+        assert!(half < MOUNT_PRIOR_SIGMA_DEG, "{half}");
+        // Applied (TD_CAM_ROLL/PITCH set to it): its own sigma.
+        e.set_mount(0.0, calibration.roll_deg, calibration.pitch_deg);
+        let applied = level_sigma(&mut e, 402).unwrap();
+        assert!(
+            (applied - calibration.sigma_deg()).abs() < 1e-3,
+            "{applied}"
+        );
+        assert!(applied < 0.5, "{applied}");
     }
 
     #[test]
