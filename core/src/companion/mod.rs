@@ -267,6 +267,11 @@ enum Pending {
         target: (u8, u8),
     },
     ParamValue(ParamId),
+    /// NAMED_VALUE_FLOAT `TD_VIEW`: the view margin, metres (`vision`).
+    ViewMargin {
+        time_boot_ms: u32,
+        metres: f32,
+    },
 }
 
 /// A STATUSTEXT waiting to be sent.

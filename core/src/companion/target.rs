@@ -143,8 +143,9 @@ impl State {
             data,
         });
         if self.params.get_int(ParamId::VpeEnable) & VISION_POSITION != 0 {
-            if let Some(l) = frame.estimate.as_ref().and_then(|e| e.level) {
+            if let Some((e, l)) = frame.estimate.as_ref().and_then(|e| Some((e, e.level?))) {
                 let data = self.vision_estimate_for(t, time_usec, &l);
+                self.report_view_margin(t, e.view_margin_m, now_us);
                 self.vpe = Some(PendingVpe {
                     created_us: now_us,
                     data,

@@ -98,6 +98,7 @@ fn auto_profile_latches_on_the_autopilot_only() {
             vehicle_position: None,
             orientation_body: None,
             orientation_ned: None,
+            view_margin_m: None,
         }),
         mount_correction: None,
     };
@@ -157,6 +158,7 @@ fn target_latency_is_measured_and_reported_at_doublings() {
                 vehicle_position: None,
                 orientation_body: None,
                 orientation_ned: None,
+                view_margin_m: None,
             }),
             mount_correction: None,
         };
@@ -337,6 +339,7 @@ fn frame_at(
             }),
             orientation_body: None,
             orientation_ned: Some([1.0, 0.0, 0.0, 0.0]),
+            view_margin_m: None,
         }),
         mount_correction: None,
     }
@@ -767,4 +770,51 @@ fn fit_to_navigate_is_announced_when_it_changes() {
     let texts: std::vec::Vec<String> = (0..20).flat_map(|_| feed(&mut c, 0.1, false)).collect();
     assert_eq!(texts, ["touchdown: position not fit: pad lost"]);
     assert!(!c.stats().vision_fit);
+}
+
+#[test]
+fn the_view_margin_goes_out_twice_a_second_with_the_vision_estimates() {
+    let rel = Vector3::new(0.1, 0.2, 8.0);
+    let margins = |vpe_enable: f32| {
+        let mut c = vision_companion(&[(ParamId::VpeEnable, vpe_enable)]);
+        let mut out = [0u8; MAX_FRAME_LEN];
+        let mut sent = std::vec::Vec::new();
+        // 3 s at 30 Hz.
+        for k in 0..90u64 {
+            let t = 1_000_000 + k * 33_333;
+            let mut frame = vision_frame(t, rel, 0.0004, 0.1);
+            if let Some(e) = frame.estimate.as_mut() {
+                e.view_margin_m = Some(1.25 + k as f32 * 0.01);
+            }
+            let _ = c.on_estimate(&frame, t + 20_000);
+            let mut parser = FrameParser::new();
+            while let Some(n) = c.poll_transmit(t + 20_000, &mut out) {
+                parser.push(&out[..n], |f| {
+                    if let Ok(MavMessage::NAMED_VALUE_FLOAT(v)) = f.decode() {
+                        sent.push((
+                            v.time_boot_ms,
+                            v.name.to_str().unwrap().to_string(),
+                            v.value,
+                        ));
+                    }
+                });
+            }
+        }
+        sent
+    };
+    let sent = margins(1.0);
+    // Every 0.5 s of exposures: the first frame's, then the first at least 0.5 s after the
+    // last one sent (every 16th at 30 Hz).
+    assert_eq!(sent.len(), 6, "{sent:?}");
+    for (k, (ms, name, value)) in sent.iter().enumerate() {
+        assert_eq!(name, "TD_VIEW");
+        let frame = 16 * k as u64;
+        assert!(
+            (value - (1.25 + frame as f32 * 0.01)).abs() < 1e-5,
+            "{sent:?}"
+        );
+        assert_eq!(u64::from(*ms), (1_000_000 + frame * 33_333 + 20_000) / 1000);
+    }
+    // Only with the vision estimates (TD_VPE_EN bit 0).
+    assert!(margins(2.0).is_empty());
 }

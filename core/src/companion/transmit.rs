@@ -18,9 +18,12 @@ use super::{
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
-    MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_VALUE_DATA,
-    STATUSTEXT_DATA, TIMESYNC_DATA,
+    MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, NAMED_VALUE_FLOAT_DATA,
+    PARAM_VALUE_DATA, STATUSTEXT_DATA, TIMESYNC_DATA,
 };
+
+/// NAMED_VALUE_FLOAT's name for the view margin (`vision`).
+const VIEW_MARGIN_NAME: &str = "TD_VIEW";
 
 /// Targets sent before the first report of their exposure-to-send delay; the report repeats
 /// each time the count doubles.
@@ -209,6 +212,14 @@ impl State {
                 param_id: id.def().name.into(),
                 param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
             }),
+            Pending::ViewMargin {
+                time_boot_ms,
+                metres,
+            } => MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                time_boot_ms,
+                value: metres,
+                name: VIEW_MARGIN_NAME.into(),
+            }),
         }
     }
 
@@ -266,6 +277,7 @@ impl State {
             MavMessage::ODOMETRY(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             MavMessage::VISION_SPEED_ESTIMATE(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             MavMessage::STATUSTEXT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::NAMED_VALUE_FLOAT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             _ => return None,
         };
         self.sequence = self.sequence.wrapping_add(1);

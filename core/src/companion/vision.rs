@@ -26,6 +26,10 @@
 //!   `touchdown: position not fit: pad lost`), and keeps the state in its counters
 //!   ([`super::CompanionStats::vision_fit`]). A pilot or a ground station waits for the
 //!   first before making the board the only position source.
+//! - **The view margin**, NAMED_VALUE_FLOAT `TD_VIEW` every [`VIEW_MARGIN_PERIOD_US`] while
+//!   estimates flow: how far the vehicle can move before the pad leaves the view
+//!   ([`crate::pipeline::view_margin_m`]). Past it the autopilot coasts on its own estimate;
+//!   a ground station can plot it, and a pilot flying on the board keeps moves under it.
 
 use core::fmt::Write;
 
@@ -48,6 +52,9 @@ pub const FIT_SIGMA_M: f32 = 0.10;
 /// The horizontal one sigma over which a fit position stops being fit, metres.
 pub const UNFIT_SIGMA_M: f32 = 0.15;
 
+/// The view margin's period, µs: enough to watch, a small part of the link.
+pub const VIEW_MARGIN_PERIOD_US: u64 = 500_000;
+
 /// The vision estimate's own state: its reset counter and whether it is fit to navigate.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(super) struct VisionState {
@@ -57,6 +64,8 @@ pub(super) struct VisionState {
     reset_counter: u8,
     /// The position is fit to navigate (announced).
     fit: bool,
+    /// The exposure after which the next view margin is due, our clock, µs.
+    next_margin_us: u64,
 }
 
 impl State {
@@ -92,6 +101,29 @@ impl State {
         };
         self.set_vision_fit(sigma <= limit, sigma);
         data
+    }
+
+    /// Queues the view margin of the frame exposed at `exposure_us` (our clock), if known and
+    /// due, stamped with `now_us`.
+    pub(super) fn report_view_margin(
+        &mut self,
+        exposure_us: u64,
+        margin_m: Option<f32>,
+        now_us: u64,
+    ) {
+        let Some(metres) = margin_m.filter(|m| m.is_finite()) else {
+            return;
+        };
+        if exposure_us < self.vision.next_margin_us {
+            return;
+        }
+        self.vision.next_margin_us = exposure_us.saturating_add(VIEW_MARGIN_PERIOD_US);
+        // MAVLink's milliseconds since boot wrap after 49 days, as the field does.
+        let time_boot_ms = (now_us / 1000) as u32;
+        self.enqueue(super::Pending::ViewMargin {
+            time_boot_ms,
+            metres,
+        });
     }
 
     /// A frame exposed at `exposure_us` without a vision estimate: a fit position that has

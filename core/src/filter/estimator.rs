@@ -155,6 +155,10 @@ pub struct PadEstimate {
     pub orientation_body: Option<[f32; 4]>,
     /// The same, pad frame to NED (needs the attitude at the exposure).
     pub orientation_ned: Option<[f32; 4]>,
+    /// How far the vehicle can move before the pad leaves the view, metres, from this frame's
+    /// fix (`crate::pipeline::view_margin_m`): set by the per-frame pipeline, which knows the
+    /// camera; `None` from the estimator alone.
+    pub view_margin_m: Option<f32>,
 }
 
 /// What the estimator made of one frame.
@@ -397,6 +401,7 @@ impl PadEstimator {
             orientation_ned: attitude
                 .as_ref()
                 .and_then(|att| pad_orientation(&fix.pose.rotation, &self.mount, Some(att))),
+            view_margin_m: None,
         });
         FrameEstimate {
             exposure_us: t,

@@ -71,8 +71,10 @@
 
 mod paper;
 mod shutter;
+mod view;
 
 pub use paper::{PaperPipeline, PaperReport};
+pub use view::{view_margin_m, DECODABLE_PX};
 
 use crate::camera::CameraModel;
 use crate::detect::{Buffers, DetectError, Detection, Detector, DetectorConfig};
@@ -507,12 +509,14 @@ impl<'a> FramePipeline<'a> {
         let max_exposure_us = at_exposure
             .body_rate
             .and_then(|w| motion_cap_us(w.norm(), self.camera.fx.max(self.camera.fy)));
+        let mut estimate =
+            self.estimator
+                .update_with_image_fix(fix.as_ref(), image_fix.as_ref(), &at_exposure);
+        if let (Some(e), Some(f)) = (estimate.estimate.as_mut(), image_fix.as_ref()) {
+            e.view_margin_m = view::view_margin_m(&f.pose, &self.pad, &self.camera);
+        }
         FrameReport {
-            estimate: self.estimator.update_with_image_fix(
-                fix.as_ref(),
-                image_fix.as_ref(),
-                &at_exposure,
-            ),
+            estimate,
             fix,
             markers,
             detect_error,

@@ -1,0 +1,171 @@
+//! How far the vehicle can move before the pad leaves the camera's view: the margin a pilot
+//! or a ground station watches when the board is the vehicle's only source of position.
+//!
+//! The margin is that of the marker with the most room: the distance, on the ground at that
+//! marker's depth, from its nearest corner to the nearest edge of the image, over the markers
+//! fully in view and large enough to decode ([`DECODABLE_PX`]). It is the worst direction's
+//! margin: a move of that much toward the nearest edge takes the last such marker out of the
+//! view (or a turn or tilt that moves the image by as much), after which the board has no fix
+//! and the autopilot's estimator coasts on its own.
+
+use super::CameraModel;
+use crate::geometry::Point;
+use crate::pad::PadLayout;
+use crate::pose::Pose;
+use nalgebra::Vector3;
+
+/// A marker is counted only from this many pixels across (its longest side): about what the
+/// detector decodes (see [`crate::pad`] for the arithmetic of the shipped pads).
+pub const DECODABLE_PX: f32 = 14.0;
+
+/// The view margin of `pad` seen at `pose` (pad frame to camera frame) through `camera`,
+/// metres; `None` when no marker of the pad is fully in view and decodable.
+pub fn view_margin_m(pose: &Pose, pad: &PadLayout<'_>, camera: &CameraModel) -> Option<f32> {
+    const SIGNS: [(f32, f32); 4] = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    let focal = camera.fx.min(camera.fy);
+    if !(focal > 0.0 && w > 0.0 && h > 0.0) {
+        return None;
+    }
+    let mut best: Option<f32> = None;
+    for marker in pad.markers() {
+        let half = 0.5 * marker.size;
+        let mut corners = [Point::new(0.0, 0.0); 4];
+        let mut whole = true;
+        for (slot, (sx, sy)) in corners.iter_mut().zip(SIGNS) {
+            let on_pad = marker.to_pad(&Vector3::new(sx * half, sy * half, 0.0));
+            match camera.project(&pose.transform(&on_pad)) {
+                Some(p) => *slot = p,
+                None => whole = false,
+            }
+        }
+        if !whole {
+            continue;
+        }
+        let side = |a: &Point, b: &Point| libm::hypotf(a.x - b.x, a.y - b.y);
+        let longest = corners
+            .iter()
+            .zip(corners.iter().cycle().skip(1))
+            .map(|(a, b)| side(a, b))
+            .fold(0.0, f32::max);
+        // Pixel centres span [0, w - 1]: a corner on the last pixel has no room left.
+        let room_px = corners
+            .iter()
+            .map(|p| p.x.min(p.y).min(w - 1.0 - p.x).min(h - 1.0 - p.y))
+            .fold(f32::INFINITY, f32::min);
+        let depth = pose.transform(&marker.to_pad(&Vector3::zeros())).z;
+        if !(longest >= DECODABLE_PX && room_px >= 0.0 && depth > 0.0) {
+            continue;
+        }
+        let metres = room_px * depth / focal;
+        best = Some(best.map_or(metres, |b| b.max(metres)));
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pad::designs;
+    use nalgebra::Matrix3;
+
+    /// A 320 x 240 camera with a 60 degree horizontal field of view, no distortion.
+    fn qvga() -> CameraModel {
+        let f = 160.0 / libm::tanf(30f32.to_radians());
+        CameraModel::pinhole(320, 240, f, f, 159.5, 119.5)
+    }
+
+    /// The camera `height` m straight above the pad point (`x`, `y`), image top toward pad +y.
+    fn above(x: f32, y: f32, height: f32) -> Pose {
+        // Camera x right = pad x, camera y down = pad -y, camera z forward = pad -z.
+        let rotation = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
+        Pose {
+            rotation,
+            translation: rotation * Vector3::new(-x, -y, -height),
+        }
+    }
+
+    #[test]
+    fn centred_over_one_marker_the_margin_is_the_room_around_it_on_the_ground() {
+        let camera = qvga();
+        // The paper's single 1 m marker from 10 m: the frame's short side covers 2 * 10 *
+        // (120 / f) m; the marker takes 1 m of it, leaving half the rest each side.
+        let margin = view_margin_m(&above(0.0, 0.0, 10.0), &designs::PAPER_SINGLE, &camera)
+            .expect("in view");
+        let short_side = 2.0 * 10.0 * 119.5 / camera.fy;
+        let expected = 0.5 * (short_side - 1.0);
+        assert!((margin - expected).abs() < 0.01, "{margin} vs {expected}");
+        // Moved by less than the margin toward the nearest (top or bottom) edge: that much
+        // less room; by more: gone.
+        let moved = view_margin_m(&above(0.0, 1.0, 10.0), &designs::PAPER_SINGLE, &camera)
+            .expect("still in view");
+        assert!((moved - (expected - 1.0)).abs() < 0.01, "{moved}");
+        assert_eq!(
+            view_margin_m(
+                &above(0.0, expected + 0.05, 10.0),
+                &designs::PAPER_SINGLE,
+                &camera
+            ),
+            None
+        );
+    }
+
+    #[test]
+    fn too_small_or_behind_counts_for_nothing() {
+        let camera = qvga();
+        // The 1 m marker from 20 km: a pixel wide.
+        assert_eq!(
+            view_margin_m(&above(0.0, 0.0, 20_000.0), &designs::PAPER_SINGLE, &camera),
+            None
+        );
+        // The camera looking up, away from the pad.
+        let mut away = above(0.0, 0.0, 10.0);
+        away.rotation = -away.rotation;
+        away.translation = -away.translation;
+        assert_eq!(view_margin_m(&away, &designs::PAPER_SINGLE, &camera), None);
+    }
+
+    #[test]
+    fn the_nested_pad_keeps_a_marker_in_view_from_its_top_height_down_to_its_smallest() {
+        let camera = qvga();
+        // Over the landing point: the marker with the most room changes with height.
+        for height in [0.3f32, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0] {
+            let margin = view_margin_m(&above(0.0, 0.0, height), &designs::NESTED, &camera);
+            assert!(margin.is_some_and(|m| m > 0.0), "{height} m: {margin:?}");
+        }
+    }
+
+    /// The envelope docs/hardware.md quotes: the nested pad's view margin with the camera
+    /// straight above the landing point, for the 60 degree QVGA and the 70 degree VGA lens
+    /// (`cargo test -p touchdown-core --lib envelope -- --nocapture` prints it).
+    #[test]
+    fn envelope_of_the_nested_pad() {
+        extern crate std;
+        let vga = {
+            let f = 320.0 / libm::tanf(35f32.to_radians());
+            CameraModel::pinhole(640, 480, f, f, 319.5, 239.5)
+        };
+        let heights = [
+            0.2f32, 0.3, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0, 30.0, 40.0,
+        ];
+        std::println!("| height | 320x240, 60 deg | 640x480, 70 deg |");
+        std::println!("|---|---|---|");
+        for h in heights {
+            let cell = |camera: &CameraModel| match view_margin_m(
+                &above(0.0, 0.0, h),
+                &designs::NESTED,
+                camera,
+            ) {
+                Some(m) => std::format!("{m:.2} m"),
+                None => std::string::String::from("none"),
+            };
+            std::println!("| {h} m | {} | {} |", cell(&qvga()), cell(&vga));
+        }
+        for h in [0.2f32, 0.3, 1.0, 3.0, 12.0, 30.0, 40.0] {
+            assert!(
+                view_margin_m(&above(0.0, 0.0, h), &designs::NESTED, &vga).is_some(),
+                "{h}"
+            );
+        }
+    }
+}
