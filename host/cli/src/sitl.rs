@@ -243,6 +243,14 @@ pub struct SitlArgs {
     /// effect at the autopilot's next start)
     #[arg(long, value_name = "LIST", help_heading = "A running SITL")]
     pub autopilot_params: Option<String>,
+
+    /// With --gcs on ArduPilot SITL: lose GPS on the climb at this height over the pad
+    /// (at most --height): switch the EKF to source set 2, the board's
+    /// VISION_POSITION_ESTIMATE (TD_VPE_EN 1 unless set), then turn the SITL's GPS off; the
+    /// move and the landing fly on the board's position alone. Adds the external-navigation
+    /// parameters to the recipe (docs/setup-ardupilot.md, "Without GPS")
+    #[arg(long, value_name = "M", help_heading = "A running SITL")]
+    pub gps_loss_height: Option<f64>,
 }
 
 fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {
@@ -305,6 +313,14 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
         return Err(CliError(
             "--yaw must be a heading within -360..360 degrees".into(),
         ));
+    }
+    if let Some(h) = args.gps_loss_height {
+        if !positive(h) || h > args.height {
+            return Err(CliError(format!(
+                "--gps-loss-height must be a height > 0 and at most --height ({} m): GPS is lost on the climb",
+                args.height
+            )));
+        }
     }
     if args.seeds == 0 {
         return Err(CliError("--seeds must be at least 1".into()));
@@ -544,6 +560,12 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
     {
         return Err(CliError::new(
             "--pad-at, --gcs, --yaw and --autopilot-params are for a running SITL: give the board's link too, \
+             --tcp, --udp or --udp-listen",
+        ));
+    }
+    if args.gps_loss_height.is_some() {
+        return Err(CliError::new(
+            "--gps-loss-height is for a running SITL flown with --gcs: give the board's link too, \
              --tcp, --udp or --udp-listen",
         ));
     }

@@ -82,6 +82,9 @@ const MSG_SIM_STATE: u32 = 108;
 const MSG_HIL_STATE_QUATERNION: u32 = 115;
 /// How often the loop looks at the link and the clock.
 const TICK: Duration = Duration::from_millis(1);
+/// The board's VISION_POSITION_ESTIMATEs count as flowing while the last is this recent, s
+/// (a GPS-denied rehearsal loses GPS only then).
+const VISION_FLOWING_S: f64 = 0.5;
 
 /// What a connected landing is told.
 #[derive(Debug, Clone)]
@@ -205,6 +208,8 @@ pub struct ConnectedOutcome {
     pub lag_s: Option<(f64, f64)>,
     /// The vehicle rose again after touchdown (seconds, run clock).
     pub retakeoff_s: Option<f64>,
+    /// VISION_POSITION_ESTIMATEs sent (TD_VPE_EN bit 0).
+    pub vision_estimates_sent: u32,
 }
 
 /// Flies one landing against the SITL at `config.endpoint`; progress lines go to `err`. With a
@@ -263,6 +268,8 @@ pub fn fly(
         r.link.set_clock_zero(start);
     }
     let (mut lag_sum, mut lag_max, mut lag_count) = (0.0, 0.0_f64, 0usize);
+    // The board's VISION_POSITION_ESTIMATEs: how many, and when the count last grew.
+    let (mut vision_sent, mut vision_sent_s) = (0u32, f64::NEG_INFINITY);
 
     let _ = writeln!(
         err,
@@ -371,8 +378,9 @@ pub fn fly(
             }
         }
         if let Some(r) = rehearsal.as_deref_mut() {
+            let vision_flowing = t - vision_sent_s < VISION_FLOWING_S;
             if r.flight
-                .poll(&mut r.link, t, now_truth, pad_at, err)?
+                .poll(&mut r.link, t, now_truth, pad_at, vision_flowing, err)?
                 .is_some()
             {
                 break;
@@ -418,6 +426,11 @@ pub fn fly(
             outcome.first_target_s = Some(now_s());
         }
         outcome.targets_sent = sent;
+        let vision = companion.stats().vision_estimates;
+        if vision != vision_sent {
+            (vision_sent, vision_sent_s) = (vision, now_s());
+        }
+        outcome.vision_estimates_sent = vision;
         std::thread::sleep(TICK);
     }
     outcome.lag_s = (lag_count > 0).then(|| (lag_sum / lag_count as f64, lag_max));
@@ -439,6 +452,24 @@ struct RehearsalJson {
     landing_to_touchdown_s: Option<f64>,
     disarmed_s: Option<f64>,
     autopilot_messages: Vec<(f64, String)>,
+    /// Only with --gps-loss-height: the key is absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gps_loss: Option<GpsLossJson>,
+}
+
+/// What happened to the GPS in a GPS-denied rehearsal (keys in docs/interfaces.md).
+#[derive(Debug, serde::Serialize)]
+struct GpsLossJson {
+    /// `--gps-loss-height`, metres.
+    height_m: f64,
+    /// When ArduPilot acknowledged the vision source set, and the height then (truth).
+    source_switched_s: Option<f64>,
+    source_switched_height_m: Option<f64>,
+    /// When the SITL answered that its GPS is off, and which parameter turned it off.
+    gps_off_s: Option<f64>,
+    gps_param: Option<String>,
+    /// VISION_POSITION_ESTIMATEs the board sent over the whole run.
+    vision_estimates_sent: u32,
 }
 
 /// The JSON record of a connected landing (keys in docs/interfaces.md).
@@ -468,7 +499,7 @@ struct ConnectedJson {
 /// The rehearsal's plan from the command line: the start point at `--offset` on a bearing
 /// the seed picks (golden-ratio steps, so that consecutive seeds spread around the pad), the
 /// wind from `--wind-mps`, `--wind-profile` and `--turbulence`, from a seeded direction.
-fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>) -> gcs::Plan {
+fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>, vision_velocity: bool) -> gcs::Plan {
     let golden = 0.618_033_988_749_895;
     let bearing = ((args.seed as f64) * golden).fract() * std::f64::consts::TAU;
     let wind_from = ((args.seed as f64 + 0.5) * golden).fract() * 360.0;
@@ -487,6 +518,8 @@ fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>) -> gcs::Plan {
             },
             turbulence_mps: args.turbulence as f32,
         }),
+        gps_loss_height_m: args.gps_loss_height,
+        vision_velocity,
     }
 }
 
@@ -502,6 +535,31 @@ pub(super) fn run(
         return Err(CliError::new(
             "--seeds and --record fly the model; a running SITL flies one landing",
         ));
+    }
+    if args.gps_loss_height.is_some() && args.gcs.is_none() {
+        return Err(CliError::new(
+            "--gps-loss-height needs --gcs: the ground station switches the autopilot's sources",
+        ));
+    }
+    // A GPS-denied rehearsal navigates on the board's VISION_POSITION_ESTIMATE: TD_VPE_EN 1
+    // unless the user set it.
+    let mut params = params;
+    if args.gps_loss_height.is_some()
+        && params
+            .iter()
+            .all(|(name, _)| !name.eq_ignore_ascii_case("TD_VPE_EN"))
+    {
+        params.push(("TD_VPE_EN".to_string(), 1.0));
+    }
+    let vpe_en = params
+        .iter()
+        .rev()
+        .find(|(name, _)| name.eq_ignore_ascii_case("TD_VPE_EN"))
+        .map_or(0, |(_, v)| *v as i32);
+    if args.gps_loss_height.is_some() && vpe_en & 1 == 0 {
+        return Err(CliError(format!(
+            "--gps-loss-height: TD_VPE_EN = {vpe_en} sends no VISION_POSITION_ESTIMATE (bit 0)"
+        )));
     }
     let landing = LandingConfig {
         effects: args.effect_terms.effects(args.ideal),
@@ -534,7 +592,7 @@ pub(super) fn run(
                 "--autopilot-params: `{name}` is not a parameter name (1-16 characters)"
             )));
         }
-        let plan = plan(args, extra);
+        let plan = plan(args, extra, vpe_en & 2 != 0);
         let (link, p) = gcs::prepare(spec, &plan, err)?;
         prepared = p;
         rehearsal = Some(Rehearsal {
@@ -593,6 +651,14 @@ pub(super) fn run(
                     landing_to_touchdown_s: landing_to_touchdown,
                     disarmed_s: l.disarmed_s,
                     autopilot_messages: r.link.texts.clone(),
+                    gps_loss: args.gps_loss_height.map(|height_m| GpsLossJson {
+                        height_m,
+                        source_switched_s: l.source_switched_s,
+                        source_switched_height_m: l.source_switched_height_m,
+                        gps_off_s: l.gps_off_s,
+                        gps_param: r.link.gps_switch.as_ref().map(|s| s.name.clone()),
+                        vision_estimates_sent: o.vision_estimates_sent,
+                    }),
                 }),
         };
         let mut line = serde_json::to_string(&json).map_err(CliError::new)?;
@@ -628,6 +694,16 @@ pub(super) fn run(
             }
             if let Some(d) = l.disarmed_s {
                 events.push((d, "disarmed".into()));
+            }
+            if let Some(s) = l.source_switched_s {
+                let at = l
+                    .source_switched_height_m
+                    .map_or(String::new(), |h| format!(" at {h:.1} m"));
+                events.push((s, format!("EKF source set 2 (the board's position){at}")));
+            }
+            if let Some(s) = l.gps_off_s {
+                let name = r.link.gps_switch.as_ref().map_or("", |s| s.name.as_str());
+                events.push((s, format!("GPS off ({name}): lost")));
             }
         }
         if let Some(f) = o.first_target_s {
@@ -672,6 +748,19 @@ pub(super) fn run(
                 1e3 * max
             ))
         ));
+        if let (Some(loss_m), Some(l)) = (args.gps_loss_height, &log) {
+            t.push_str(&match (l.gps_off_s, l.source_switched_height_m) {
+                (Some(s), Some(h)) => format!(
+                    "GPS lost at {s:.2} s, {h:.1} m up (asked: {loss_m:.1} m); \
+                     VISION_POSITION_ESTIMATEs sent {}\n",
+                    o.vision_estimates_sent
+                ),
+                _ => format!(
+                    "GPS not lost (asked at {loss_m:.1} m); VISION_POSITION_ESTIMATEs sent {}\n",
+                    o.vision_estimates_sent
+                ),
+            });
+        }
         t
     };
     out.write_all(text.as_bytes())

@@ -12,6 +12,7 @@ use touchdown_eval::flight::TrueState;
 
 use super::{
     offset_lat_lon, px4_precland_mode, Autopilot, GcsLink, Plan, COPTER_GUIDED, COPTER_LAND,
+    VISION_SOURCE_SET,
 };
 use crate::CliError;
 
@@ -34,6 +35,25 @@ const START_HEADING_DEG: f64 = 5.0;
 const RETRY_S: f64 = 2.0;
 /// After the autopilot disarms the run watches this much longer (a re-take-off shows), s.
 const AFTER_DISARM_S: f64 = 2.0;
+/// ArduPilot's MAV_CMD_SET_EKF_SOURCE_SET (ardupilotmega.xml; not in the common dialect).
+const MAV_CMD_SET_EKF_SOURCE_SET: u16 = 42007;
+/// Each step of the GPS loss (the source switch acknowledged, the GPS switch echoed) may
+/// take this long, seconds; the landing waits as long for the loss beyond the move's own
+/// patience.
+const GPS_LOSS_PATIENCE_S: f64 = 10.0;
+
+/// Where the GPS loss of a GPS-denied rehearsal is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum GpsLoss {
+    /// Not yet at its height, or the board not yet sending its position.
+    Waiting { said: bool },
+    /// MAV_CMD_SET_EKF_SOURCE_SET sent (again every [`RETRY_S`]) until acknowledged.
+    Switching { since_s: f64, next_try_s: f64 },
+    /// On the vision source set; the SITL's GPS switch sent until its echo says off.
+    TurningOff { since_s: f64, next_try_s: f64 },
+    /// The GPS is off.
+    Done,
+}
 
 /// Where the flight is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,6 +91,12 @@ pub struct FlightLog {
     pub disarmed_s: Option<f64>,
     /// Whether the start point was reached and held before the landing began.
     pub start_held: bool,
+    /// GPS-denied rehearsal: when ArduPilot acknowledged the switch to the vision source set.
+    pub source_switched_s: Option<f64>,
+    /// The vehicle's height over the pad then (truth), metres.
+    pub source_switched_height_m: Option<f64>,
+    /// When the SITL answered that its GPS is off.
+    pub gps_off_s: Option<f64>,
 }
 
 /// The flight's state machine (see the module documentation).
@@ -81,6 +107,8 @@ pub struct Flight {
     pad: Option<[f64; 3]>,
     /// PX4: the take-off altitude AMSL in its own estimate.
     target_amsl_m: Option<f64>,
+    /// The GPS loss, when the plan asks for one.
+    gps_loss: Option<GpsLoss>,
     /// What happened when.
     pub log: FlightLog,
 }
@@ -96,6 +124,9 @@ impl Flight {
     /// A flight to fly `plan`.
     pub fn new(plan: Plan) -> Self {
         Flight {
+            gps_loss: plan
+                .gps_loss_height_m
+                .map(|_| GpsLoss::Waiting { said: false }),
             plan,
             stage: Stage::Arming { next_try_s: 0.0 },
             pad: None,
@@ -110,17 +141,27 @@ impl Flight {
     }
 
     /// One step: reads the link, and sends what the stage needs. `truth` is the vehicle's
-    /// true state in the pad frame (x east, y north, z up), `pad` the pad's geodetic origin.
+    /// true state in the pad frame (x east, y north, z up), `pad` the pad's geodetic origin,
+    /// `vision_flowing` whether the board has sent a VISION_POSITION_ESTIMATE lately.
     pub fn poll(
         &mut self,
         link: &mut GcsLink,
         t: f64,
         truth: Option<(TrueState, f64)>,
         pad: Option<[f64; 3]>,
+        vision_flowing: bool,
         err: &mut dyn Write,
     ) -> Result<Option<FlightEnd>, CliError> {
         link.pump(err)?;
         self.pad = self.pad.or(pad);
+        self.lose_gps(
+            link,
+            t,
+            truth.map(|(s, _)| s.position.z),
+            vision_flowing,
+            err,
+        )?;
+        let gps_lost = self.gps_loss.is_none_or(|g| g == GpsLoss::Done);
         let autopilot = link.autopilot;
         match self.stage {
             Stage::Arming { next_try_s } => {
@@ -217,7 +258,14 @@ impl Flight {
                     None
                 };
                 let held = settled_s.is_some_and(|s| t - s >= START_HOLD_S);
-                if held || t - since_s > MOVE_PATIENCE_S {
+                if !gps_lost && t - since_s > MOVE_PATIENCE_S + GPS_LOSS_PATIENCE_S {
+                    return Err(CliError(format!(
+                        "GPS not lost by the landing: the board sent no VISION_POSITION_ESTIMATE \
+                         at {:.1} m (TD_VPE_EN bit 0 off, or the pad out of view?)",
+                        self.plan.gps_loss_height_m.unwrap_or_default()
+                    )));
+                }
+                if gps_lost && (held || t - since_s > MOVE_PATIENCE_S) {
                     self.log.start_held = held;
                     if !held {
                         let _ = writeln!(
@@ -292,6 +340,124 @@ impl Flight {
             }
         }
         Ok(None)
+    }
+
+    /// The GPS loss of a GPS-denied rehearsal: at its height on the climb (or at the top of
+    /// it), once the board sends its position, switch ArduPilot's EKF to the vision source set
+    /// and then turn the SITL's GPS off, each retried until the autopilot confirms it.
+    fn lose_gps(
+        &mut self,
+        link: &mut GcsLink,
+        t: f64,
+        height: Option<f64>,
+        vision_flowing: bool,
+        err: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        let (Some(state), Some(loss_m)) = (self.gps_loss, self.plan.gps_loss_height_m) else {
+            return Ok(());
+        };
+        let next = match state {
+            GpsLoss::Waiting { said } => {
+                let climbing = matches!(
+                    self.stage,
+                    Stage::TakingOff { .. } | Stage::Moving { .. }
+                );
+                // At the top of the climb the take-off counts within its 0.5 m.
+                let at = loss_m.min(self.plan.height_m - 0.5);
+                if !(climbing && height.is_some_and(|h| h >= at)) {
+                    return Ok(());
+                }
+                if !vision_flowing {
+                    if !said {
+                        let _ = writeln!(
+                            err,
+                            "{t:7.2} s  at {:.1} m: waiting for the board's VISION_POSITION_ESTIMATEs to lose GPS",
+                            height.unwrap_or_default()
+                        );
+                    }
+                    GpsLoss::Waiting { said: true }
+                } else {
+                    self.log.source_switched_height_m = height;
+                    GpsLoss::Switching {
+                        since_s: t,
+                        next_try_s: t,
+                    }
+                }
+            }
+            GpsLoss::Switching {
+                since_s,
+                next_try_s,
+            } => match link.take_raw_ack(MAV_CMD_SET_EKF_SOURCE_SET) {
+                Some(0) => {
+                    self.log.source_switched_s = Some(t);
+                    self.log.source_switched_height_m = height.or(self.log.source_switched_height_m);
+                    let _ = writeln!(
+                        err,
+                        "{t:7.2} s  at {:.1} m: EKF source set {VISION_SOURCE_SET} (the board's position); turning the GPS off",
+                        height.unwrap_or_default()
+                    );
+                    GpsLoss::TurningOff {
+                        since_s: t,
+                        next_try_s: t,
+                    }
+                }
+                Some(result) => {
+                    return Err(CliError(format!(
+                        "{} refused MAV_CMD_SET_EKF_SOURCE_SET {VISION_SOURCE_SET} (MAV_RESULT {result})",
+                        link.autopilot.name()
+                    )))
+                }
+                None if t - since_s > GPS_LOSS_PATIENCE_S => {
+                    return Err(CliError(format!(
+                        "{} did not answer MAV_CMD_SET_EKF_SOURCE_SET in {GPS_LOSS_PATIENCE_S:.0} s",
+                        link.autopilot.name()
+                    )))
+                }
+                None if t >= next_try_s => {
+                    let mut p = [0.0f32; 7];
+                    p[0] = f32::from(VISION_SOURCE_SET);
+                    link.command_raw(MAV_CMD_SET_EKF_SOURCE_SET, p)?;
+                    GpsLoss::Switching {
+                        since_s,
+                        next_try_s: t + RETRY_S,
+                    }
+                }
+                None => state,
+            },
+            GpsLoss::TurningOff {
+                since_s,
+                next_try_s,
+            } => {
+                let name = link
+                    .gps_switch
+                    .as_ref()
+                    .map_or(String::new(), |s| format!("{} {}", s.name, s.off));
+                if link.gps_switch_held() {
+                    self.log.gps_off_s = Some(t);
+                    let _ = writeln!(
+                        err,
+                        "{t:7.2} s  GPS off ({name}): flying on the board's position alone"
+                    );
+                    GpsLoss::Done
+                } else if t - since_s > GPS_LOSS_PATIENCE_S {
+                    return Err(CliError(format!(
+                        "{} did not confirm {name} in {GPS_LOSS_PATIENCE_S:.0} s",
+                        link.autopilot.name()
+                    )));
+                } else if t >= next_try_s {
+                    link.turn_gps_off()?;
+                    GpsLoss::TurningOff {
+                        since_s,
+                        next_try_s: t + RETRY_S,
+                    }
+                } else {
+                    state
+                }
+            }
+            GpsLoss::Done => GpsLoss::Done,
+        };
+        self.gps_loss = Some(next);
+        Ok(())
     }
 
     fn take_off(&mut self, link: &mut GcsLink) -> Result<(), CliError> {

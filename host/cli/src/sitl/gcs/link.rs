@@ -10,10 +10,13 @@ use touchdown_core::companion::mavlink::dialects::common::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
     MavType, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
 };
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
+use touchdown_core::companion::mavlink::error::ParserError;
+use touchdown_core::companion::mavlink::{
+    MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, MessageData,
+};
 use touchdown_core::companion::FrameParser;
 
-use super::{recipe, Autopilot, Plan};
+use super::{recipe, Autopilot, Plan, SIM_GPS_SWITCHES};
 use crate::companion::endpoint::{Endpoint, EndpointSpec};
 use crate::CliError;
 
@@ -50,6 +53,62 @@ struct ParamValue {
     kind: MavParamType,
 }
 
+/// The SITL's GPS switch, found by [`prepare`] for a GPS-denied rehearsal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GpsSwitch {
+    /// SIM_GPS1_ENABLE or SIM_GPS_DISABLE.
+    pub name: String,
+    /// The value that turns the simulated GPS off.
+    pub off: f32,
+    /// Its type, for the PARAM_SET.
+    kind: MavParamType,
+}
+
+/// MAVLink's COMMAND_LONG id and CRC extra.
+const COMMAND_LONG_ID: u32 = 76;
+/// See [`COMMAND_LONG_ID`].
+const COMMAND_LONG_EXTRA_CRC: u8 = 152;
+/// COMMAND_ACK's id.
+const COMMAND_ACK_ID: u32 = 77;
+
+/// A COMMAND_LONG with a command number the common dialect lacks (ArduPilot's own, e.g.
+/// MAV_CMD_SET_EKF_SOURCE_SET 42007), serialised by hand: the dialect's `MavCmd` cannot hold it.
+struct RawCommandLong {
+    params: [f32; 7],
+    command: u16,
+    target_system: u8,
+}
+
+impl MessageData for RawCommandLong {
+    type Message = MavMessage;
+    const ID: u32 = COMMAND_LONG_ID;
+    const NAME: &'static str = "COMMAND_LONG";
+    const EXTRA_CRC: u8 = COMMAND_LONG_EXTRA_CRC;
+    const ENCODED_LEN: usize = 33;
+
+    fn ser(&self, _version: MavlinkVersion, payload: &mut [u8]) -> usize {
+        // The wire order: the seven floats, command, target system, target component,
+        // confirmation; MAVLink 2 trims the trailing zeros.
+        let mut bytes = [0u8; 33];
+        for (k, p) in self.params.iter().enumerate() {
+            bytes[4 * k..4 * k + 4].copy_from_slice(&p.to_le_bytes());
+        }
+        bytes[28..30].copy_from_slice(&self.command.to_le_bytes());
+        bytes[30] = self.target_system;
+        bytes[31] = 1;
+        let len = bytes.iter().rposition(|b| *b != 0).map_or(1, |k| k + 1);
+        let n = len.min(payload.len());
+        payload[..n].copy_from_slice(&bytes[..n]);
+        n
+    }
+
+    fn deser(_version: MavlinkVersion, _payload: &[u8]) -> Result<Self, ParserError> {
+        Err(ParserError::UnknownMessage {
+            id: COMMAND_LONG_ID,
+        })
+    }
+}
+
 /// The ground station's link: the socket, the autopilot's identity and what it last said.
 pub struct GcsLink {
     spec: EndpointSpec,
@@ -64,6 +123,10 @@ pub struct GcsLink {
     pub status: Status,
     params: HashMap<String, ParamValue>,
     acks: Vec<(MavCmd, MavResult)>,
+    /// COMMAND_ACKs of commands the dialect lacks: command number, result.
+    raw_acks: Vec<(u16, u8)>,
+    /// The SITL's GPS switch, for a GPS-denied rehearsal.
+    pub gps_switch: Option<GpsSwitch>,
     /// Its STATUSTEXTs, with the run's seconds when they came.
     pub texts: Vec<(f64, String)>,
     /// A chunked STATUSTEXT so far: its `id` and text.
@@ -87,6 +150,7 @@ impl GcsLink {
     /// `err` as they come.
     pub fn pump(&mut self, err: &mut dyn Write) -> Result<(), CliError> {
         let (messages, drained) = self.receive();
+
         for (_, message) in messages {
             self.take(&message, err);
         }
@@ -101,13 +165,21 @@ impl GcsLink {
         let mut rx = [0u8; 4096];
         let mut messages = Vec::new();
         let parser = &mut self.parser;
+        let raw_acks = &mut self.raw_acks;
         let system_id = self.system_id;
         let drained = self.endpoint.drain(&mut rx, |bytes| {
             parser.push(bytes, |frame| {
                 let ours = system_id == 0 || frame.system_id == system_id;
                 if ours && frame.component_id == 1 {
-                    if let Ok(message) = frame.decode() {
-                        messages.push((frame.system_id, message));
+                    match frame.decode() {
+                        Ok(message) => messages.push((frame.system_id, message)),
+                        // A COMMAND_ACK of a command the dialect lacks: command, result (the
+                        // payload's first three bytes; MAVLink 2 trims trailing zeros).
+                        Err(_) if frame.message_id == COMMAND_ACK_ID => {
+                            let byte = |k: usize| frame.payload.get(k).copied().unwrap_or(0);
+                            raw_acks.push((u16::from_le_bytes([byte(0), byte(1)]), byte(2)));
+                        }
+                        Err(_) => {}
                     }
                 }
             });
@@ -212,6 +284,62 @@ impl GcsLink {
             target_component: 1,
             confirmation: 0,
         }))
+    }
+
+    /// Sends COMMAND_LONG with a command number the common dialect lacks.
+    pub fn command_raw(&mut self, command: u16, params: [f32; 7]) -> Result<(), CliError> {
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message_data(
+            MavHeader {
+                system_id: GCS_SYSTEM_ID.into(),
+                component_id: GCS_COMPONENT_ID,
+                sequence: self.sequence,
+            },
+            &RawCommandLong {
+                params,
+                command,
+                target_system: self.system_id,
+            },
+        );
+        self.sequence = self.sequence.wrapping_add(1);
+        self.endpoint
+            .send(raw.raw_bytes())
+            .map(|_| ())
+            .map_err(|e| CliError(format!("{}: {e}", self.describe())))
+    }
+
+    /// The newest answer (MAV_RESULT as a number) to a command sent with
+    /// [`GcsLink::command_raw`], taken off the list.
+    pub fn take_raw_ack(&mut self, command: u16) -> Option<u8> {
+        let k = self.raw_acks.iter().rposition(|(c, _)| *c == command)?;
+        let (_, result) = self.raw_acks.remove(k);
+        self.raw_acks.retain(|(c, _)| *c != command);
+        Some(result)
+    }
+
+    /// Sends a PARAM_SET for the SITL's GPS switch without waiting (the board's loop must go
+    /// on): [`GcsLink::gps_switch_held`] tells what the autopilot then holds.
+    pub fn turn_gps_off(&mut self) -> Result<(), CliError> {
+        let Some(switch) = self.gps_switch.clone() else {
+            return Ok(());
+        };
+        self.params.remove(&switch.name);
+        self.send(&MavMessage::PARAM_SET(PARAM_SET_DATA {
+            param_value: encode_param(self.autopilot, switch.off, switch.kind),
+            target_system: self.system_id,
+            target_component: 1,
+            param_id: switch.name.as_str().into(),
+            param_type: switch.kind,
+        }))
+    }
+
+    /// Whether the autopilot has answered that its simulated GPS is off.
+    pub fn gps_switch_held(&self) -> bool {
+        self.gps_switch.as_ref().is_some_and(|s| {
+            self.params
+                .get(&s.name)
+                .is_some_and(|v| same_value(decode_param(self.autopilot, v.value, v.kind), s.off))
+        })
     }
 
     /// The newest answer to `command` since the last call, taken off the list.
@@ -394,6 +522,8 @@ fn connect(spec: &EndpointSpec, connect_patience: Duration) -> Result<GcsLink, C
         status: Status::default(),
         params: HashMap::new(),
         acks: Vec::new(),
+        raw_acks: Vec::new(),
+        gps_switch: None,
         texts: Vec::new(),
         chunks: None,
         next_heartbeat: now,
@@ -466,6 +596,15 @@ pub fn prepare(
             link.describe()
         )));
     }
+    let gps_switch = match (plan.gps_loss_height_m, link.autopilot) {
+        (None, _) => None,
+        (Some(_), Autopilot::Px4) => {
+            return Err(CliError::new(
+                "--gps-loss-height: not supported on PX4 yet (ArduPilot SITL only)",
+            ))
+        }
+        (Some(_), Autopilot::ArduPilot) => Some(find_gps_switch(&mut link, err)?),
+    };
     let settings = recipe(link.autopilot, plan);
     let mut prepared = Prepared::default();
     let mut reboot = false;
@@ -480,37 +619,44 @@ pub fn prepare(
                 );
                 continue;
             }
+            let hint = match s.name.as_str() {
+                "ARMING_SKIPCHK" => {
+                    " (ArduPilot 4.6 and older: give ARMING_CHECK without bit 18, visual \
+                     odometry, in --autopilot-params)"
+                        .to_string()
+                }
+                "VISO_TYPE" => " (a build without visual odometry?)".to_string(),
+                _ => format!(" (a {} build without it?)", link.autopilot.name()),
+            };
             return Err(CliError(format!(
-                "{}: the autopilot has no parameter {} (a {} build without it?)",
+                "{}: the autopilot has no parameter {}{hint}",
                 link.describe(),
                 s.name,
-                link.autopilot.name()
             )));
         };
         let held = decode_param(link.autopilot, current.value, current.kind);
-        if same_value(held, s.value) {
+        let want = s.wanted(held);
+        if same_value(held, want) {
             continue;
         }
-        match link.write_param(&s.name, s.value, current.kind, err)? {
-            Some(v) if same_value(v, s.value) => {}
+        match link.write_param(&s.name, want, current.kind, err)? {
+            Some(v) if same_value(v, want) => {}
             Some(v) => {
                 return Err(CliError(format!(
-                    "{}: the autopilot refused {} = {} (it keeps {v})",
+                    "{}: the autopilot refused {} = {want} (it keeps {v})",
                     link.describe(),
                     s.name,
-                    s.value
                 )))
             }
             None => {
                 return Err(CliError(format!(
-                    "{}: no answer to setting {} = {}",
+                    "{}: no answer to setting {} = {want}",
                     link.describe(),
                     s.name,
-                    s.value
                 )))
             }
         }
-        prepared.changed.push(format!("{}={}", s.name, s.value));
+        prepared.changed.push(format!("{}={want}", s.name));
         reboot |= s.needs_reboot;
     }
     if !prepared.changed.is_empty() {
@@ -552,24 +698,59 @@ pub fn prepare(
                 )));
             };
             let held = decode_param(link.autopilot, v.value, v.kind);
-            if !same_value(held, s.value) {
+            if !same_value(held, s.wanted(held)) {
                 return Err(CliError(format!(
                     "{}: {} = {held} after the reboot, not {} (not saved?)",
                     link.describe(),
                     s.name,
-                    s.value
+                    s.wanted(held)
                 )));
             }
         }
     }
+    link.gps_switch = gps_switch;
     // The autopilot's own altitude, for PX4's take-off and reposition in AMSL.
     link.request_stream(33, 200_000.0)?;
     Ok((link, prepared))
 }
 
+/// The SITL's GPS switch of this build ([`SIM_GPS_SWITCHES`]), or one line saying there is none.
+fn find_gps_switch(link: &mut GcsLink, err: &mut dyn Write) -> Result<GpsSwitch, CliError> {
+    for (name, off) in SIM_GPS_SWITCHES {
+        if let Some(v) = link.read_param(name, err)? {
+            return Ok(GpsSwitch {
+                name: name.to_string(),
+                off,
+                kind: v.kind,
+            });
+        }
+    }
+    Err(CliError(format!(
+        "{}: --gps-loss-height: the autopilot has neither {} nor {} (not an ArduPilot SITL?)",
+        link.describe(),
+        SIM_GPS_SWITCHES[0].0,
+        SIM_GPS_SWITCHES[1].0
+    )))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_raw_command_long_is_what_pymavlink_would_send() {
+        let mut payload = [0u8; 255];
+        let n = RawCommandLong {
+            params: [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            command: 42007,
+            target_system: 1,
+        }
+        .ser(MavlinkVersion::V2, &mut payload);
+        // param1 2.0, the command at 28, target 1/1, confirmation 0 trimmed.
+        assert_eq!(n, 32);
+        assert_eq!(&payload[..4], &2.0f32.to_le_bytes());
+        assert_eq!(&payload[28..32], &[0x17, 0xA4, 1, 1]);
+    }
 
     #[test]
     fn px4_integers_go_bytewise_and_ardupilot_ones_as_floats() {

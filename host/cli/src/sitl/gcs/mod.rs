@@ -31,7 +31,7 @@ mod flight;
 mod link;
 
 pub use flight::{Flight, FlightEnd, FlightLog};
-pub use link::{prepare, GcsLink, Prepared, Status};
+pub use link::{prepare, GcsLink, GpsSwitch, Prepared, Status};
 
 /// The autopilot at the other end, from its HEARTBEAT.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,6 +77,9 @@ pub struct ParamSetting {
     pub needs_reboot: bool,
     /// Absent in some versions: skipped (with a line) instead of an error.
     pub optional: bool,
+    /// A bitmask to add to: these bits set in what the autopilot holds, the others kept
+    /// (`value` is then unused).
+    pub set_bits: Option<u32>,
 }
 
 fn setting(name: &str, value: f32) -> ParamSetting {
@@ -85,8 +88,30 @@ fn setting(name: &str, value: f32) -> ParamSetting {
         value,
         needs_reboot: false,
         optional: false,
+        set_bits: None,
     }
 }
+
+impl ParamSetting {
+    /// The value to set where the autopilot holds `held`.
+    pub fn wanted(&self, held: f32) -> f32 {
+        match self.set_bits {
+            // Bitmask parameters are integers, exact in an f32 up to 2^24.
+            Some(bits) => ((held.max(0.0) as u32) | bits) as f32,
+            None => self.value,
+        }
+    }
+}
+
+/// ArduPilot's ARMING_SKIPCHK bit for the visual odometry check (`ARMING_CHECK_VISION`, bit
+/// 18 of `AP_Arming::Check`): "VisOdom: not healthy" while the board sends nothing.
+pub const ARMING_SKIP_VISION: u32 = 1 << 18;
+/// The simulated GPS's switch: SIM_GPS1_ENABLE (ArduPilot 4.5 and newer) and the value that
+/// turns it off, or SIM_GPS_DISABLE (older) and its value.
+pub const SIM_GPS_SWITCHES: [(&str, f32); 2] = [("SIM_GPS1_ENABLE", 0.0), ("SIM_GPS_DISABLE", 1.0)];
+/// ArduPilot's source set the GPS-denied rehearsal switches to (MAV_CMD_SET_EKF_SOURCE_SET's
+/// param1, 1-based): EK3_SRC2_*.
+pub const VISION_SOURCE_SET: u8 = 2;
 
 /// What the rehearsal is asked to fly, besides the autopilot's own settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,6 +129,11 @@ pub struct Plan {
     /// ArduPilot SITL's wind: mean speed (m/s), direction it blows from (degrees), profile
     /// (SIM_WIND_T) and turbulence (SIM_WIND_TURB, m/s). PX4's SIH has no wind.
     pub wind: Option<SitlWind>,
+    /// GPS lost on the climb at this height over the pad, metres (`--gps-loss-height`):
+    /// ArduPilot switches to the vision source set and the SITL's GPS is turned off.
+    pub gps_loss_height_m: Option<f64>,
+    /// The board sends its velocity too (TD_VPE_EN bit 1): the vision source set fuses it.
+    pub vision_velocity: bool,
 }
 
 /// ArduPilot SITL's wind parameters.
@@ -141,6 +171,15 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
         // docs/setup-px4.md, section 3.
         Autopilot::Px4 => vec![setting("PLD_FAPPR_ALT", 0.5), setting("PLD_BTOUT", 5.0)],
     };
+    if let (Autopilot::ArduPilot, Some(_)) = (autopilot, plan.gps_loss_height_m) {
+        let own_arming = plan.extra.iter().any(|(name, _)| name == "ARMING_CHECK");
+        list.extend(
+            gps_denied_recipe(plan.vision_velocity)
+                .into_iter()
+                // ArduPilot 4.6 and older: the user's ARMING_CHECK instead.
+                .filter(|s| !(own_arming && s.name == "ARMING_SKIPCHK")),
+        );
+    }
     if let (Autopilot::ArduPilot, Some(w)) = (autopilot, plan.wind) {
         list.extend([
             setting("SIM_WIND_SPD", w.speed_mps),
@@ -153,6 +192,35 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
     list.retain(|s| plan.extra.iter().all(|(name, _)| *name != s.name));
     list.extend(plan.extra.iter().map(|(name, value)| setting(name, *value)));
     list
+}
+
+/// ArduPilot set up to navigate on the board's VISION_POSITION_ESTIMATE once the ground
+/// station switches to source set 2 (docs/setup-ardupilot.md, "Without GPS"); set 1 (GPS)
+/// stays as it is, for the arming and the climb.
+fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
+    vec![
+        // The MAVLink visual-odometry backend, created at boot (AP_VisualOdom::init).
+        ParamSetting {
+            needs_reboot: true,
+            ..setting("VISO_TYPE", 1.0)
+        },
+        // The estimate's age on arrival: the board's lag from exposure to sending (64-70 ms
+        // in the SITL rehearsals, 50 ms of it the rendering's) plus the link.
+        setting("VISO_DELAY_MS", 80.0),
+        // Source set 2: the board's position, baro height, compass yaw; its velocity only
+        // when the board sends one.
+        setting("EK3_SRC2_POSXY", 6.0),
+        setting("EK3_SRC2_VELXY", if vision_velocity { 6.0 } else { 0.0 }),
+        setting("EK3_SRC2_POSZ", 1.0),
+        setting("EK3_SRC2_VELZ", 0.0),
+        setting("EK3_SRC2_YAW", 1.0),
+        // The board sends nothing while the vehicle rests on the pad: skip the visual
+        // odometry arming check.
+        ParamSetting {
+            set_bits: Some(ARMING_SKIP_VISION),
+            ..setting("ARMING_SKIPCHK", 0.0)
+        },
+    ]
 }
 
 /// `--gcs`'s value: `tcp:HOST:PORT` (client), `udp:HOST:PORT` (client), `udpin:ADDR:PORT`
@@ -237,8 +305,11 @@ mod tests {
                 profile: 1.0,
                 turbulence_mps: 1.0,
             }),
+            gps_loss_height_m: None,
+            vision_velocity: false,
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
+        assert!(ap.iter().all(|s| !s.name.starts_with("VISO_")));
         assert_eq!(ap[0].name, "PLND_ENABLED");
         assert!(ap.iter().any(|s| s.name == "PLND_TYPE" && s.needs_reboot));
         assert!(ap
@@ -248,6 +319,47 @@ mod tests {
         assert!(px4.iter().all(|s| !s.needs_reboot));
         assert!(px4.iter().any(|s| s.name == "PSC_POSXY_P"));
         assert!(px4.iter().all(|s| !s.name.starts_with("SIM_")));
+    }
+
+    #[test]
+    fn the_gps_denied_recipe_comes_only_when_asked_and_adds_the_vision_check_bit() {
+        let plan = Plan {
+            height_m: 12.0,
+            start_north_m: 1.0,
+            start_east_m: 2.0,
+            yaw_deg: None,
+            extra: vec![("VISO_DELAY_MS".into(), 60.0)],
+            wind: None,
+            gps_loss_height_m: Some(12.0),
+            vision_velocity: true,
+        };
+        let ap = recipe(Autopilot::ArduPilot, &plan);
+        let names: Vec<&str> = ap.iter().map(|s| s.name.as_str()).collect();
+        let viso = names
+            .iter()
+            .position(|n| *n == "VISO_TYPE")
+            .expect("VISO_TYPE");
+        let delay = names
+            .iter()
+            .position(|n| *n == "VISO_DELAY_MS")
+            .expect("delay");
+        // The enable parameter first; the user's value last, replacing the recipe's.
+        assert!(viso < delay && delay == names.len() - 1, "{names:?}");
+        assert!(ap.iter().any(|s| s.name == "VISO_TYPE" && s.needs_reboot));
+        assert!(ap
+            .iter()
+            .any(|s| s.name == "EK3_SRC2_VELXY" && s.value == 6.0));
+        let skip = ap
+            .iter()
+            .find(|s| s.name == "ARMING_SKIPCHK")
+            .expect("arming");
+        // Bits already skipped stay skipped.
+        assert_eq!(skip.wanted(0.0), 262_144.0);
+        assert_eq!(skip.wanted(6.0), 262_150.0);
+        assert_eq!(skip.wanted(262_144.0), 262_144.0);
+        // PX4: nothing of it (the rehearsal refuses it there).
+        let px4 = recipe(Autopilot::Px4, &plan);
+        assert!(px4.iter().all(|s| !s.name.starts_with("EK3_")));
     }
 
     #[test]
