@@ -8,7 +8,9 @@
 //!
 //! Asserted: a port with nothing behind it, an armed vehicle, a refused parameter and a
 //! missing one each end the run with exit status 2 and one line saying which, before the
-//! board's link is opened.
+//! board's link is opened. The same for a GPS-denied rehearsal (`--gps-loss-height`): a
+//! build without the SITL's GPS switch, without visual odometry or without ARMING_SKIPCHK, a
+//! PX4, and the arming check's bit added to what the autopilot already skips.
 
 #[allow(dead_code)] // The shared helpers this file does not need.
 mod common;
@@ -29,6 +31,8 @@ use touchdown_core::companion::FrameParser;
 #[derive(Clone)]
 struct StandIn {
     armed: bool,
+    /// What its HEARTBEAT says it is.
+    autopilot: MavAutopilot,
     /// Parameters it has, with their values.
     params: HashMap<&'static str, f32>,
     /// A parameter whose writes it ignores.
@@ -39,6 +43,7 @@ impl StandIn {
     fn ardupilot() -> Self {
         StandIn {
             armed: false,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
             params: [
                 ("PLND_ENABLED", 0.0),
                 ("PLND_TYPE", 0.0),
@@ -49,6 +54,16 @@ impl StandIn {
                 ("SIM_WIND_DIR", 180.0),
                 ("SIM_WIND_T", 0.0),
                 ("SIM_WIND_TURB", 0.0),
+                // For --gps-loss-height.
+                ("SIM_GPS1_ENABLE", 1.0),
+                ("VISO_TYPE", 0.0),
+                ("VISO_DELAY_MS", 10.0),
+                ("EK3_SRC2_POSXY", 0.0),
+                ("EK3_SRC2_VELXY", 0.0),
+                ("EK3_SRC2_POSZ", 1.0),
+                ("EK3_SRC2_VELZ", 0.0),
+                ("EK3_SRC2_YAW", 0.0),
+                ("ARMING_SKIPCHK", 6.0),
             ]
             .into_iter()
             .collect(),
@@ -91,7 +106,7 @@ fn serve(mut stream: TcpStream, mut standin: StandIn) {
                 &MavMessage::HEARTBEAT(HEARTBEAT_DATA {
                     custom_mode: 0,
                     mavtype: MavType::MAV_TYPE_QUADROTOR,
-                    autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    autopilot: standin.autopilot,
                     base_mode,
                     system_status: MavState::MAV_STATE_STANDBY,
                     mavlink_version: 3,
@@ -141,6 +156,11 @@ fn serve(mut stream: TcpStream, mut standin: StandIn) {
 /// Runs `touchdown sitl --gcs` against the stand-in (or against nothing when `standin` is
 /// `None`, on a port that was just freed).
 fn rehearse(standin: Option<StandIn>) -> Output {
+    rehearse_with(standin, &[])
+}
+
+/// [`rehearse`] with more options for `touchdown sitl`.
+fn rehearse_with(standin: Option<StandIn>, extra: &[&str]) -> Output {
     let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
     let port = listener.local_addr().expect("addr").port();
     let server = match standin {
@@ -163,6 +183,7 @@ fn rehearse(standin: Option<StandIn>) -> Output {
             "--gcs",
             &format!("tcp:127.0.0.1:{port}"),
         ])
+        .args(extra)
         .output()
         .expect("run touchdown");
     if let Some(server) = server {
@@ -229,4 +250,123 @@ fn gcs_without_the_boards_link_is_a_usage_error() {
         .output()
         .expect("run touchdown");
     assert_eq!(output.status.code(), Some(2), "{output:?}");
+}
+
+/// A GPS-denied rehearsal's option: GPS lost at 12 m of a 12 m climb.
+const GPS_LOSS: [&str; 4] = ["--height", "12", "--gps-loss-height", "12"];
+
+#[test]
+fn gps_loss_without_the_sitls_gps_switch_is_one_line() {
+    let mut standin = StandIn::ardupilot();
+    standin.params.remove("SIM_GPS1_ENABLE");
+    assert_one_line_error(
+        &rehearse_with(Some(standin), &GPS_LOSS),
+        &[
+            "--gps-loss-height",
+            "neither SIM_GPS1_ENABLE nor SIM_GPS_DISABLE",
+        ],
+    );
+}
+
+#[test]
+fn gps_loss_without_visual_odometry_or_the_skip_mask_says_what_is_missing() {
+    let mut standin = StandIn::ardupilot();
+    standin.params.remove("VISO_TYPE");
+    assert_one_line_error(
+        &rehearse_with(Some(standin), &GPS_LOSS),
+        &["no parameter VISO_TYPE", "visual odometry"],
+    );
+    let mut standin = StandIn::ardupilot();
+    standin.params.remove("ARMING_SKIPCHK");
+    assert_one_line_error(
+        &rehearse_with(Some(standin), &GPS_LOSS),
+        &["no parameter ARMING_SKIPCHK", "ARMING_CHECK"],
+    );
+}
+
+#[test]
+fn gps_loss_adds_the_vision_bit_to_the_checks_already_skipped() {
+    // The stand-in skips bits 1 and 2 (6) and refuses the write: the value asked for is
+    // both, plus bit 18 (262144).
+    let standin = StandIn {
+        refuses: Some("ARMING_SKIPCHK"),
+        ..StandIn::ardupilot()
+    };
+    assert_one_line_error(
+        &rehearse_with(Some(standin), &GPS_LOSS),
+        &["refused ARMING_SKIPCHK = 262150", "keeps 6"],
+    );
+}
+
+#[test]
+fn gps_loss_on_px4_is_not_supported_yet() {
+    let standin = StandIn {
+        autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+        ..StandIn::ardupilot()
+    };
+    assert_one_line_error(
+        &rehearse_with(Some(standin), &GPS_LOSS),
+        &["--gps-loss-height", "not supported on PX4 yet"],
+    );
+}
+
+#[test]
+fn gps_loss_options_out_of_place_are_usage_errors() {
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_touchdown"))
+            .args(args)
+            .output()
+            .expect("run touchdown")
+    };
+    // Above the climb, or not a height.
+    for bad in ["13", "0", "nan"] {
+        assert_one_line_error(
+            &run(&[
+                "sitl",
+                "--tcp",
+                "127.0.0.1:9",
+                "--gcs",
+                "tcp:127.0.0.1:9",
+                "--height",
+                "12",
+                "--gps-loss-height",
+                bad,
+            ]),
+            &["--gps-loss-height must be"],
+        );
+    }
+    // Without the ground station, or without a SITL at all.
+    assert_one_line_error(
+        &run(&[
+            "sitl",
+            "--tcp",
+            "127.0.0.1:9",
+            "--height",
+            "12",
+            "--gps-loss-height",
+            "8",
+        ]),
+        &["--gps-loss-height needs --gcs"],
+    );
+    assert_one_line_error(
+        &run(&["sitl", "--height", "12", "--gps-loss-height", "8"]),
+        &["--gps-loss-height", "running SITL"],
+    );
+    // A board told to send no position.
+    assert_one_line_error(
+        &run(&[
+            "sitl",
+            "--tcp",
+            "127.0.0.1:9",
+            "--gcs",
+            "tcp:127.0.0.1:9",
+            "--height",
+            "12",
+            "--gps-loss-height",
+            "8",
+            "--board-params",
+            "TD_VPE_EN=2",
+        ]),
+        &["TD_VPE_EN = 2", "VISION_POSITION_ESTIMATE"],
+    );
 }
