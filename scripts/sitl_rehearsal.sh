@@ -9,7 +9,8 @@
 #   --keep DIR     run the SITL in DIR (kept: its logs, parameters, our JSON) instead of a
 #                  temporary directory
 #   options after the autopilot go to `touchdown sitl` as they are (e.g. --height 15 --offset 2
-#   --wind-mps 3 --turbulence 1 --qvga --fps 10 --seed 2)
+#   --wind-mps 3 --turbulence 1 --qvga --fps 10 --seed 2; ArduCopter without GPS after the
+#   climb: --height 12 --gps-loss-height 12)
 #
 # Environment:
 #   SITL_DIR        the SITL builds (arducopter/arducopter, px4/bin/px4, px4/etc); default the
@@ -174,6 +175,11 @@ line = (f"rehearsal {autopilot}: touchdown "
         + f", {r.get('targets_sent', 0)} targets, lag "
         + ("-" if lag is None else f"{lag:.0f} ms") + f", {r.get('frames_skipped', 0)} frames skipped"
         + f", landing started {reh.get('landing_height_m') or 0:.1f} m up")
+loss = reh.get("gps_loss")
+if loss is not None:
+    lost_m = loss.get("source_switched_height_m")
+    line += (", GPS not lost" if loss.get("gps_off_s") is None or lost_m is None
+             else f", GPS lost at {lost_m:.1f} m")
 if status != 0 or h is None:
     print(f"{line}: FAILED (touchdown sitl exit {status})")
     sys.exit(1)
