@@ -198,7 +198,7 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
 /// station switches to source set 2 (docs/setup-ardupilot.md, "Without GPS"); set 1 (GPS)
 /// stays as it is, for the arming and the climb.
 fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
-    vec![
+    let mut list = vec![
         // The MAVLink visual-odometry backend, created at boot (AP_VisualOdom::init).
         ParamSetting {
             needs_reboot: true,
@@ -220,7 +220,14 @@ fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
             set_bits: Some(ARMING_SKIP_VISION),
             ..setting("ARMING_SKIPCHK", 0.0)
         },
-    ]
+    ];
+    if vision_velocity {
+        // ArduPilot weighs VISION_SPEED_ESTIMATE by this, not by the message's covariance:
+        // at its 0.1 m/s default the board's velocity (errors up to 1 m/s while the vehicle
+        // manoeuvres at 12 m, and some 0.3 s old) made the vehicle oscillate and lose the pad.
+        list.push(setting("VISO_VEL_M_NSE", 1.0));
+    }
+    list
 }
 
 /// `--gcs`'s value: `tcp:HOST:PORT` (client), `udp:HOST:PORT` (client), `udpin:ADDR:PORT`
@@ -349,6 +356,9 @@ mod tests {
         assert!(ap
             .iter()
             .any(|s| s.name == "EK3_SRC2_VELXY" && s.value == 6.0));
+        assert!(ap
+            .iter()
+            .any(|s| s.name == "VISO_VEL_M_NSE" && s.value == 1.0));
         let skip = ap
             .iter()
             .find(|s| s.name == "ARMING_SKIPCHK")
