@@ -702,8 +702,12 @@ pub(super) fn run(
                 events.push((s, format!("EKF source set 2 (the board's position){at}")));
             }
             if let Some(s) = l.gps_off_s {
-                let name = r.link.gps_switch.as_ref().map_or("", |s| s.name.as_str());
-                events.push((s, format!("GPS off ({name}): lost")));
+                let switch = r
+                    .link
+                    .gps_switch
+                    .as_ref()
+                    .map_or(String::new(), |s| format!(" ({} {})", s.name, s.off));
+                events.push((s, format!("GPS lost{switch}")));
             }
         }
         if let Some(f) = o.first_target_s {
