@@ -378,9 +378,12 @@ pub fn fly(
             }
         }
         if let Some(r) = rehearsal.as_deref_mut() {
-            let vision_flowing = t - vision_sent_s < VISION_FLOWING_S;
+            let board = gcs::BoardPosition {
+                flowing: t - vision_sent_s < VISION_FLOWING_S,
+                fit: companion.stats().vision_fit,
+            };
             if r.flight
-                .poll(&mut r.link, t, now_truth, pad_at, vision_flowing, err)?
+                .poll(&mut r.link, t, now_truth, pad_at, board, err)?
                 .is_some()
             {
                 break;
@@ -434,6 +437,27 @@ pub fn fly(
         std::thread::sleep(TICK);
     }
     outcome.lag_s = (lag_count > 0).then(|| (lag_sum / lag_count as f64, lag_max));
+    // The board's mount calibration: what it made of the flight (a GPS-denied rehearsal
+    // waits for it), for whoever wonders why the board's position was or was not fit.
+    let calibrator = pipeline.estimator().mount_calibrator();
+    let st = calibrator.stats();
+    let estimate = calibrator
+        .estimate()
+        .map_or("no estimate".to_string(), |e| {
+            format!(
+                "roll {:+.2} pitch {:+.2} deg +-{:.2}{}",
+                e.roll_deg,
+                e.pitch_deg,
+                e.sigma_deg(),
+                if e.confident { ", confident" } else { "" }
+            )
+        });
+    let _ = writeln!(
+        err,
+        "board's mount calibration: {estimate}; frames accepted {}, refused: poor tilt {}, \
+         tilt not measured {}, ambiguous {}, not level {}, outliers {}",
+        st.accepted, st.poor_tilt, st.tilt_not_measured, st.ambiguous, st.not_level, st.outliers
+    );
     Ok(outcome)
 }
 
@@ -468,6 +492,8 @@ struct GpsLossJson {
     /// When the SITL answered that its GPS is off, and which parameter turned it off.
     gps_off_s: Option<f64>,
     gps_param: Option<String>,
+    /// Whether the board's position was fit to navigate on when the switch began.
+    board_fit_at_switch: Option<bool>,
     /// VISION_POSITION_ESTIMATEs the board sent over the whole run.
     vision_estimates_sent: u32,
 }
@@ -657,6 +683,7 @@ pub(super) fn run(
                         source_switched_height_m: l.source_switched_height_m,
                         gps_off_s: l.gps_off_s,
                         gps_param: r.link.gps_switch.as_ref().map(|s| s.name.clone()),
+                        board_fit_at_switch: l.board_fit_at_switch,
                         vision_estimates_sent: o.vision_estimates_sent,
                     }),
                 }),

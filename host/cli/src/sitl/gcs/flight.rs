@@ -42,6 +42,15 @@ const MAV_CMD_SET_EKF_SOURCE_SET: u16 = 42007;
 /// patience.
 const GPS_LOSS_PATIENCE_S: f64 = 10.0;
 
+/// What the board's position is at, for the GPS loss.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BoardPosition {
+    /// A VISION_POSITION_ESTIMATE was sent lately.
+    pub flowing: bool,
+    /// The board says its position is fit to navigate on (`CompanionStats::vision_fit`).
+    pub fit: bool,
+}
+
 /// Where the GPS loss of a GPS-denied rehearsal is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum GpsLoss {
@@ -97,6 +106,10 @@ pub struct FlightLog {
     pub source_switched_height_m: Option<f64>,
     /// When the SITL answered that its GPS is off.
     pub gps_off_s: Option<f64>,
+    /// Whether the board said its position was fit to navigate on when the switch began (the
+    /// rehearsal does not wait for it: at the heights it loses GPS the board's mount
+    /// calibration is not yet confident, docs/setup-ardupilot.md).
+    pub board_fit_at_switch: Option<bool>,
 }
 
 /// The flight's state machine (see the module documentation).
@@ -142,25 +155,19 @@ impl Flight {
 
     /// One step: reads the link, and sends what the stage needs. `truth` is the vehicle's
     /// true state in the pad frame (x east, y north, z up), `pad` the pad's geodetic origin,
-    /// `vision_flowing` whether the board has sent a VISION_POSITION_ESTIMATE lately.
+    /// `board` what the board's position is at (VISION_POSITION_ESTIMATEs).
     pub fn poll(
         &mut self,
         link: &mut GcsLink,
         t: f64,
         truth: Option<(TrueState, f64)>,
         pad: Option<[f64; 3]>,
-        vision_flowing: bool,
+        board: BoardPosition,
         err: &mut dyn Write,
     ) -> Result<Option<FlightEnd>, CliError> {
         link.pump(err)?;
         self.pad = self.pad.or(pad);
-        self.lose_gps(
-            link,
-            t,
-            truth.map(|(s, _)| s.position.z),
-            vision_flowing,
-            err,
-        )?;
+        self.lose_gps(link, t, truth.map(|(s, _)| s.position.z), board, err)?;
         let gps_lost = self.gps_loss.is_none_or(|g| g == GpsLoss::Done);
         let autopilot = link.autopilot;
         match self.stage {
@@ -202,8 +209,14 @@ impl Flight {
                 next_try_s,
             } => {
                 let height = truth.map(|(s, _)| s.position.z);
-                if height.is_some_and(|h| h >= self.plan.height_m - 0.5) {
-                    self.log.climbed_s = Some(t);
+                let climbed = height.is_some_and(|h| h >= self.plan.height_m - 0.5);
+                if climbed && !gps_lost {
+                    // A GPS-denied rehearsal hovers at the top until GPS is lost (the board's
+                    // mount calibrates in this hover), so that the move flies on the board's
+                    // position; `lose_gps` bounds the wait.
+                    self.log.climbed_s = self.log.climbed_s.or(Some(t));
+                } else if climbed {
+                    self.log.climbed_s = self.log.climbed_s.or(Some(t));
                     let _ = writeln!(
                         err,
                         "{t:7.2} s  at {:.1} m; flying to {:+.2} m north, {:+.2} m east of the pad",
@@ -350,7 +363,7 @@ impl Flight {
         link: &mut GcsLink,
         t: f64,
         height: Option<f64>,
-        vision_flowing: bool,
+        board: BoardPosition,
         err: &mut dyn Write,
     ) -> Result<(), CliError> {
         let (Some(state), Some(loss_m)) = (self.gps_loss, self.plan.gps_loss_height_m) else {
@@ -367,16 +380,17 @@ impl Flight {
                 if !(climbing && height.is_some_and(|h| h >= at)) {
                     return Ok(());
                 }
-                if !vision_flowing {
+                let h = height.unwrap_or_default();
+                if !board.flowing {
                     if !said {
                         let _ = writeln!(
                             err,
-                            "{t:7.2} s  at {:.1} m: waiting for the board's VISION_POSITION_ESTIMATEs to lose GPS",
-                            height.unwrap_or_default()
+                            "{t:7.2} s  at {h:.1} m: waiting for the board's VISION_POSITION_ESTIMATEs to lose GPS"
                         );
                     }
                     GpsLoss::Waiting { said: true }
                 } else {
+                    self.log.board_fit_at_switch = Some(board.fit);
                     self.log.source_switched_height_m = height;
                     GpsLoss::Switching {
                         since_s: t,

@@ -30,7 +30,7 @@ use crate::companion::endpoint::EndpointSpec;
 mod flight;
 mod link;
 
-pub use flight::{Flight, FlightEnd, FlightLog};
+pub use flight::{BoardPosition, Flight, FlightEnd, FlightLog};
 pub use link::{prepare, GcsLink, GpsSwitch, Prepared, Status};
 
 /// The autopilot at the other end, from its HEARTBEAT.
