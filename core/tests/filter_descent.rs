@@ -12,12 +12,24 @@ use descent_sim::{compare, SimConfig};
 
 #[test]
 fn descent_ours_beats_raw_without_lag_and_paper_lags() {
-    for seed in 1..=5 {
-        let cfg = SimConfig {
-            seed,
-            ..SimConfig::default()
-        };
-        let c = compare(&cfg);
+    // The seeds are independent descents: simulated on threads, checked in seed order.
+    let comparisons: Vec<_> = std::thread::scope(|scope| {
+        let runs: Vec<_> = (1..=5)
+            .map(|seed| {
+                scope.spawn(move || {
+                    let cfg = SimConfig {
+                        seed,
+                        ..SimConfig::default()
+                    };
+                    (seed, compare(&cfg))
+                })
+            })
+            .collect();
+        runs.into_iter()
+            .map(|run| run.join().expect("a seed's descent"))
+            .collect()
+    });
+    for (seed, c) in comparisons {
         println!("seed {seed}\n{}", c.table());
         let raw = &c.raw_inliers;
         for axis in 0..3 {

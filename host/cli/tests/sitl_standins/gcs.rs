@@ -12,8 +12,7 @@
 //! build without the SITL's GPS switch, without visual odometry or without ARMING_SKIPCHK, a
 //! PX4, and the arming check's bit added to what the autopilot already skips.
 
-#[allow(dead_code)] // The shared helpers this file does not need.
-mod common;
+use crate::common;
 
 use std::collections::HashMap;
 use std::io::{Read, Write};
@@ -202,8 +201,10 @@ fn assert_one_line_error(output: &Output, needles: &[&str]) {
     }
 }
 
+/// The longest here (the run retries the refused port for its whole patience): first in name
+/// order, so that it waits beside the others (see `main.rs`).
 #[test]
-fn no_sitl_on_the_port_is_one_line() {
+fn a_closed_port_asks_whether_the_sitl_runs() {
     assert_one_line_error(
         &rehearse(None),
         &["--gcs tcp:127.0.0.1:", "is the SITL running?"],
