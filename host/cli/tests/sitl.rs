@@ -22,8 +22,9 @@
 //!   keep it short: measured 3.9 m off).
 //! - `--record DIR` writes a recording `touchdown replay DIR` replays: the same frames, and
 //!   the replay's board sends and its autopilot receives the targets the landing did. Started
-//!   low (4 m), which also keeps the frames that end a landing, the pad a few millimetres
-//!   from the lens and blurred by thousands of pixels, fast to render.
+//!   low (4 m) and rendered by the warp model: what is checked is that the recording holds
+//!   what the landing saw, whichever model drew it, and the ray caster's landings are flown
+//!   above.
 //!
 //! Rendered at 320x240 (the same lens, 2x2 supersampling) and 10 frames per second, the
 //! seeds flown on threads, to keep the test within CI's budget (about 90 s on two idle
@@ -164,7 +165,16 @@ fn a_recorded_landing_replays_frame_for_frame() {
     let dir = scratch("record");
     let dir_arg = dir.to_str().expect("a UTF-8 temp path");
     let started = std::time::Instant::now();
-    let (code, report, stderr) = sitl(&["--height", "4", "--offset", "0.5", "--record", dir_arg]);
+    let (code, report, stderr) = sitl(&[
+        "--height",
+        "4",
+        "--offset",
+        "0.5",
+        "--renderer",
+        "warp",
+        "--record",
+        dir_arg,
+    ]);
     assert_eq!(code, 0, "{stderr}");
     eprintln!("landing from 4 m, recorded, in {:.1?}", started.elapsed());
     let landing = &report["landings"][0];
