@@ -402,8 +402,13 @@ fn signalled_run(signal: &str) -> Output {
 #[test]
 fn sigint_and_sigterm_print_the_summary() {
     // Two runs of their own, side by side: each waits for its link and its signal.
-    let runs = [("-INT", "SIGINT", 130), ("-TERM", "SIGTERM", 143)]
-        .map(|(signal, name, code)| (std::thread::spawn(move || signalled_run(signal)), name, code));
+    let runs = [("-INT", "SIGINT", 130), ("-TERM", "SIGTERM", 143)].map(|(signal, name, code)| {
+        (
+            std::thread::spawn(move || signalled_run(signal)),
+            name,
+            code,
+        )
+    });
     for (run, name, code) in runs {
         let output = run.join().expect("the signalled run");
         assert_eq!(output.status.code(), Some(code), "{name}");
