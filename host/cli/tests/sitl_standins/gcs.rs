@@ -271,16 +271,20 @@ fn gps_loss_without_the_sitls_gps_switch_is_one_line() {
 
 #[test]
 fn gps_loss_without_visual_odometry_or_the_skip_mask_says_what_is_missing() {
-    let mut standin = StandIn::ardupilot();
-    standin.params.remove("VISO_TYPE");
+    // Two stand-ins side by side: each run waits out the tries of the parameter it lacks.
+    let [viso, skip] = ["VISO_TYPE", "ARMING_SKIPCHK"].map(|missing| {
+        std::thread::spawn(move || {
+            let mut standin = StandIn::ardupilot();
+            standin.params.remove(missing);
+            rehearse_with(Some(standin), &GPS_LOSS)
+        })
+    });
     assert_one_line_error(
-        &rehearse_with(Some(standin), &GPS_LOSS),
+        &viso.join().expect("the run without VISO_TYPE"),
         &["no parameter VISO_TYPE", "visual odometry"],
     );
-    let mut standin = StandIn::ardupilot();
-    standin.params.remove("ARMING_SKIPCHK");
     assert_one_line_error(
-        &rehearse_with(Some(standin), &GPS_LOSS),
+        &skip.join().expect("the run without ARMING_SKIPCHK"),
         &["no parameter ARMING_SKIPCHK", "ARMING_CHECK"],
     );
 }
