@@ -4,7 +4,7 @@
     python3 scripts/diagrams.py wiring OUT.svg     the camera board to the flight controller
     python3 scripts/diagrams.py pipeline OUT.svg   the per-frame path on the camera board
 
-The pins are those of docs/hardware.md and firmware/README.md (which say which are checked
+The pins are those of firmware/README.md's wiring tables (which say which are checked
 against ST's pin data and which are board-level details to check); the stages are those of
 core::pipeline and core::detect. Change those first, then this drawing.
 """

@@ -292,14 +292,13 @@ impl WalkStep {
 /// Evenly spaced bilinear samples along a segment inside an image
 /// ([`GrayImage::bilinear_walk`]), as integers ([`WALK_SAMPLE_SCALE`] per grey level).
 ///
-/// An edge profile reads a dozen samples per edge point, thousands per candidate; with the
-/// float sample ([`GrayImage::sample_inside`]) a profile's loop spent 57 Cortex-M7
-/// instructions a sample, its extremes' bookkeeping included: the position's multiply-adds,
-/// two float-to-integer conversions and back for the weights, four byte-to-float
-/// conversions. Here the position steps by integer additions and the interpolation is
-/// integer multiply-adds on the bytes: 36 a sample, and 19 for the extremes in a loop of
-/// their own (measured on the `qvga-adv-tags` frame of `bench/m7`; the walk's registers
-/// are spilled, the loop being inlined into the edge's). The value is exact at the position
+/// An edge profile reads a dozen samples per edge point, thousands per candidate; the float
+/// sample ([`GrayImage::sample_inside`]) pays, per sample on the Cortex-M7, the position's
+/// multiply-adds, two float-to-integer conversions and back for the weights and four
+/// byte-to-float conversions. Here the position steps by integer additions and the
+/// interpolation is integer multiply-adds on the bytes, and the extremes are kept in a loop
+/// of their own (the walk's registers are spilled, the loop being inlined into the edge's;
+/// `bench/m7`'s `qvga-adv-tags` frame counts it). The value is exact at the position
 /// rounded to 1/2048 px (the float's position was closer, within a few 1e-5 px, but its
 /// interpolation rounded to 24 bits).
 #[derive(Debug, Clone)]

@@ -74,11 +74,12 @@ pub type Workspace = touchdown_core::detect::QvgaWorkspace;
 pub type Workspace = touchdown_core::detect::VgaWorkspace;
 
 /// The link's executor: the MAVLink link preempts the thread-mode tasks, above all the vision
-/// task, whose frame is one long computation (a VGA frame about 10 ms) that never yields.
-/// On the thread executor the link would answer PX4's TIMESYNC requests only between frames:
-/// the emulated board measured round trips up to 9.9 ms at VGA, against PX4's limit of
-/// 10 ms (`MAX_RTT_SAMPLE`: slower answers are not used, and PX4 then cannot put our
-/// `time_usec` in its clock); LANDING_TARGETs and HEARTBEATs waited the same way. Its tasks
+/// task, whose frame is one long computation that never yields (its cost:
+/// `docs/performance.md`). On the thread executor the link would answer PX4's TIMESYNC
+/// requests only between frames, up to a frame late: a VGA frame takes about as long as
+/// PX4's limit on a round trip (10 ms, `MAX_RTT_SAMPLE`: slower answers are not used, and
+/// PX4 then cannot put our `time_usec` in its clock); LANDING_TARGETs and HEARTBEATs would
+/// wait the same way. Its tasks
 /// share nothing with the others but [`channels`], whose mutexes are critical sections.
 static LINK_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
 

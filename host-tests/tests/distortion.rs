@@ -286,70 +286,107 @@ fn score(detections: &[Detection], searched: &[&Family<'_>], case: &Case) -> Out
     outcome
 }
 
-/// Renders every case of the set and runs the detector with and without the camera.
+/// The random draws of one case: the marker's id, its yaw (degrees) and the camera's tilt
+/// (roll, pitch; radians).
+type Draw = (u16, f64, (f64, f64));
+
+/// Renders every case of the set and runs the detector with and without the camera. Each lens
+/// on a thread of its own; the cases' random draws are made first, in the set's order, so the
+/// set is the same on any number of threads.
 fn run_set() -> Vec<(Case, Outcome, Outcome)> {
     let families = families();
     let mut rng = ChaCha8Rng::seed_from_u64(16);
+    let draws: Vec<Vec<Draw>> = (0..K1.len())
+        .map(|ki| {
+            let mut lens_draws = Vec::new();
+            for si in 0..SIZES_PX.len() {
+                for pi in 0..PLACES.len() {
+                    let family = families[(ki + si + pi) % families.len()];
+                    let id = rng.random_range(0..family.codes.len().min(250)) as u16;
+                    let yaw: f64 = rng.random_range(0.0..360.0);
+                    let tilt = (
+                        rng.random_range(-10.0f64..10.0).to_radians(),
+                        rng.random_range(-10.0f64..10.0).to_radians(),
+                    );
+                    lens_draws.push((id, yaw, tilt));
+                }
+            }
+            lens_draws
+        })
+        .collect();
+    std::thread::scope(|scope| {
+        let lenses: Vec<_> = draws
+            .iter()
+            .enumerate()
+            .map(|(ki, lens_draws)| scope.spawn(move || run_lens(ki, lens_draws)))
+            .collect();
+        lenses
+            .into_iter()
+            .flat_map(|lens| lens.join().expect("a lens's cases"))
+            .collect()
+    })
+}
+
+/// The cases of lens `ki` of [`K1`], with their `draws` (see [`run_set`]).
+fn run_lens(ki: usize, draws: &[Draw]) -> Vec<(Case, Outcome, Outcome)> {
+    let families = families();
+    let k1 = K1[ki];
     let mut workspace = HostWorkspace::new();
     let mut results = Vec::new();
-    for (ki, &k1) in K1.iter().enumerate() {
-        let mut sim = Simulator::new(scenario(k1)).with_threads(2);
-        let camera: CameraModel = sim.scenario.camera.model;
-        let mut plain = Detector::new(DetectorConfig::default());
-        let mut lensed = Detector::new(DetectorConfig::default());
-        lensed.set_camera(Some(camera));
-        for (si, &nominal) in SIZES_PX.iter().enumerate() {
-            for (pi, &(place, dir)) in PLACES.iter().enumerate() {
-                let fi = (ki + si + pi) % families.len();
-                let family = families[fi];
-                let id = rng.random_range(0..family.codes.len().min(250)) as u16;
-                let yaw = rng.random_range(0.0..360.0);
-                let tilt = (
-                    rng.random_range(-10.0f64..10.0).to_radians(),
-                    rng.random_range(-10.0f64..10.0).to_radians(),
-                );
-                sim.scenario.trajectory = hold(tilt.0, tilt.1);
-                // The lens shrinks a marker towards the border: its printed size is scaled
-                // until its edge in the frame is the nominal one.
-                let mut size = nominal / f64::from(camera.fx) * ALTITUDE_M;
-                let mut placed = None;
-                for _ in 0..SIZE_ITERATIONS {
-                    let Some((x, y)) = place_marker(&sim, family.name, id, size, yaw, dir) else {
-                        break;
-                    };
-                    let pad = pad_of(family.name, id, size, x, y, yaw);
-                    let (corners, edge_px) = project_corners(&sim, &pad);
-                    size *= nominal / edge_px;
-                    placed = Some((pad, corners, edge_px));
-                }
-                let Some((pad, corners, edge_px)) = placed else {
-                    continue;
-                };
-                sim.world.pad = pad;
-                let frame = sim.render(0).expect("one frame").image;
-                let image = GrayImage::new(&frame.pixels, frame.width, frame.height)
-                    .expect("a valid frame");
-                let case = Case {
-                    k1,
-                    nominal_px: nominal,
-                    place,
-                    family: family.name,
-                    id,
-                    edge_px,
-                    corners,
-                };
-                let searched = [family];
-                let without = workspace
-                    .detect(&mut plain, &image, &searched)
-                    .expect("detects");
-                let with = workspace
-                    .detect(&mut lensed, &image, &searched)
-                    .expect("detects");
-                let a = score(&without, &searched, &case);
-                let b = score(&with, &searched, &case);
-                results.push((case, a, b));
-            }
+    // One rendering thread: the lenses are the threads.
+    let mut sim = Simulator::new(scenario(k1)).with_threads(1);
+    let camera: CameraModel = sim.scenario.camera.model;
+    let mut plain = Detector::new(DetectorConfig::default());
+    let mut lensed = Detector::new(DetectorConfig::default());
+    lensed.set_camera(Some(camera));
+    let cases = SIZES_PX.iter().enumerate().flat_map(|(si, &nominal)| {
+        PLACES
+            .iter()
+            .enumerate()
+            .map(move |(pi, &p)| (si, nominal, pi, p))
+    });
+    for ((si, nominal, pi, (place, dir)), &(id, yaw, tilt)) in cases.zip(draws) {
+        let family = families[(ki + si + pi) % families.len()];
+        sim.scenario.trajectory = hold(tilt.0, tilt.1);
+        // The lens shrinks a marker towards the border: its printed size is scaled
+        // until its edge in the frame is the nominal one.
+        let mut size = nominal / f64::from(camera.fx) * ALTITUDE_M;
+        let mut placed = None;
+        for _ in 0..SIZE_ITERATIONS {
+            let Some((x, y)) = place_marker(&sim, family.name, id, size, yaw, dir) else {
+                break;
+            };
+            let pad = pad_of(family.name, id, size, x, y, yaw);
+            let (corners, edge_px) = project_corners(&sim, &pad);
+            size *= nominal / edge_px;
+            placed = Some((pad, corners, edge_px));
         }
+        let Some((pad, corners, edge_px)) = placed else {
+            continue;
+        };
+        sim.world.pad = pad;
+        let frame = sim.render(0).expect("one frame").image;
+        let image =
+            GrayImage::new(&frame.pixels, frame.width, frame.height).expect("a valid frame");
+        let case = Case {
+            k1,
+            nominal_px: nominal,
+            place,
+            family: family.name,
+            id,
+            edge_px,
+            corners,
+        };
+        let searched = [family];
+        let without = workspace
+            .detect(&mut plain, &image, &searched)
+            .expect("detects");
+        let with = workspace
+            .detect(&mut lensed, &image, &searched)
+            .expect("detects");
+        let a = score(&without, &searched, &case);
+        let b = score(&with, &searched, &case);
+        results.push((case, a, b));
     }
     results
 }

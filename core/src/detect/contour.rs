@@ -42,9 +42,9 @@
 //! takes the run's steps at once on 64-bit targets: the run's length is a count of ones in
 //! the row's words it has read anyway (`Rows::run`), its pixels are stored and marked as
 //! the steps would have, and the walk goes on from the run's end. Same pixels, same steps
-//! charged; a 1920 x 1080 frame of a checkerboard, 78 % of whose steps are such runs, is
-//! detected a fifth faster on an x86-64 host. The Cortex-M7 walks step by step: working
-//! out the run's length at every step cost it more instructions than the runs saved.
+//! charged; on a frame of long straight edges (a checkerboard) most steps are such runs
+//! (the speed-up: `docs/performance.md`). The Cortex-M7 walks step by step: working out the
+//! run's length at every step costs it more instructions than the runs save.
 //!
 //! Every step marks the pixel in the `visited` bitmap, so no boundary is followed twice, and
 //! draws from the frame's work budget (one unit per step), so the time per frame is bounded on any image: a
@@ -201,12 +201,10 @@ impl<'b> Tracer<'b> {
     /// bitmap row whose first word is `visited`'s word `first_word`.
     ///
     /// On 64-bit targets a loop of its own, so that its few values stay in registers: inside
-    /// the detector's scan, whose state is mostly in memory, each word passed cost several
-    /// loads and stores (the scan was an eighth of the time on a 1920 x 1080 frame of a
-    /// checkerboard, whose squares' insides are long runs of dark words). On the Cortex-M7 a
-    /// call per word that may hold a start costs more than it saves (7 % more instructions
-    /// on a frame of a checkerboard of 2-pixel squares, where nearly every word may): there
-    /// it is inlined.
+    /// the detector's scan, whose state is mostly in memory, each word passed costs several
+    /// loads and stores (a checkerboard's squares' insides are long runs of dark words). On
+    /// the Cortex-M7 a call per word that may hold a start costs more than it saves (on a
+    /// checkerboard of 2-pixel squares nearly every word may): there it is inlined.
     #[cfg_attr(target_pointer_width = "64", inline(never))]
     #[cfg_attr(not(target_pointer_width = "64"), inline(always))]
     pub fn next_start_word(
@@ -525,10 +523,8 @@ impl<'w> Walk<'w> {
     /// position, whose neighbourhood decides the next direction), so its speed is that
     /// chain's latency. Where registers are plenty (64-bit targets: the host tools) the
     /// position is carried and moved by the step's offset ([`Walk::moved`]), which takes the
-    /// multiplication of [`Walk::position`] off the chain: the whole detection 7-9 % faster
-    /// on AprilTag's textured test photos and a 1920 x 1080 frame on an x86-64 host. On the
-    /// Cortex-M7 carrying it spills the walk's other values (3.4 % more instructions on a
-    /// frame of noise), so there it is recomputed from `(x, y)`.
+    /// multiplication of [`Walk::position`] off the chain. On the Cortex-M7 carrying it
+    /// spills the walk's other values, so there it is recomputed from `(x, y)`.
     #[inline(always)]
     fn advance(&self, rel: usize, xy: u32, d: usize) -> usize {
         if cfg!(target_pointer_width = "64") {
@@ -683,7 +679,7 @@ impl Rows {
         let east = (u64::from(self.mid & !self.up) >> (self.west + 3)).trailing_ones();
         let west = ((u64::from(self.mid & !self.down) << 32) << (32 - self.west)).leading_ones();
         // Which way the walk goes on a ragged boundary is not predictable: a branch on it
-        // is mispredicted often (the whole detection of a textured photo was 10 % slower).
+        // is mispredicted often, on a textured photo enough to slow the whole detection.
         let run = select_unpredictable(d == 4, west, 0);
         select_unpredictable(d == 0, east, run) as usize
     }

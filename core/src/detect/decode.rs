@@ -594,10 +594,9 @@ pub(crate) enum Precheck {
 /// cells, would otherwise each spend the refinement (about 55,000 Cortex-M7 instructions for
 /// a 24-pixel marker, several times that for a large one) only to be turned down by the read.
 ///
-/// Cheap on purpose, as it runs on every candidate (about 1,550 Cortex-M7 instructions with
-/// its rough quad, [`super::refine::rough_half_pixel_adjusted`], when it reads all 48
-/// points, as on the benchmark's frame of small dark squares; 2,140 before the reads went
-/// unclamped and unrolled):
+/// Cheap on purpose, as it runs on every candidate (a few percent of a refinement, with its
+/// rough quad, [`super::refine::rough_half_pixel_adjusted`], when it reads all 48 points, as
+/// on the benchmark's frame of small dark squares):
 /// nearest pixels at positions blended bilinearly from the corners (no homography:
 /// perspective moves the samples along the ring or across the data area by a fraction of a
 /// cell, which changes neither test), up to four points along the middle half of each side

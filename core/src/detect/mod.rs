@@ -52,9 +52,9 @@
 //! an image adds before any boundary is followed: the blocks the binarisation compared with
 //! their thresholds ([`WORK_THRESHOLD_BLOCK`]; a block of flat tiles is written without being
 //! read) and the words the scan tested for starts ([`WORK_SCAN_WORD`]). The prices of the
-//! steps (`WORK_*`) were measured on the Cortex-M7 benchmark (`bench/m7`), where one unit is
-//! 40 to 100 instructions (a contour step about 55 with its neighbourhood read, table
-//! look-up and share of the boundary's start, the screening and the pattern fit 60 to 100).
+//! steps (`WORK_*`) are set from the Cortex-M7 benchmark (`bench/m7`) so that one unit is
+//! about one contour step there; what each step costs, with the command that counts it, is
+//! in `docs/design/detection.md` ("Work budget").
 //!
 //! ## Memory
 //! Frame-sized work memory is lent by the caller as [`Buffers`] (sized by
@@ -111,40 +111,37 @@ pub const TILE: usize = 4;
 /// diameter tests cost about 15 Cortex-M7 instructions per boundary pixel.
 pub const WORK_SCREEN_PIXELS: u32 = 4;
 /// Work units of the Douglas-Peucker quad fit of a boundary that passed the screening: this
-/// many, plus one per boundary pixel (measured: about 3,000 Cortex-M7 instructions with the
-/// screening for the 28-pixel boundary of an 8-pixel square; 3,400, and 12,000 for a
-/// 150-pixel one, before the fit took its chords in order).
+/// many, plus one per boundary pixel (its cost on the Cortex-M7: `docs/design/detection.md`,
+/// "Work budget").
 pub const WORK_FIT: u32 = 20;
 /// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::default`], for the camera:
 /// the bound on the time per frame (see [`DetectorConfig::work_budget_per_pixel`]).
 ///
-/// Why 0.28: it is about the least that legitimate frames do not reach, now that the budget
-/// pays for the binarisation's compared blocks and the scan too (0.25 before it did). None of
-/// the camera-configured test frames (distortion, rendered, families, rolling shutter) is
-/// truncated. The replayed VGA scenarios (seed 1) use 0.026 (`lateral`) to 0.176 (`landing`)
-/// units per pixel, but for `shadow` (a hard shadow edge across a pad on concrete): its 20 m
-/// frames use 0.25-0.26 with the far marker's pattern fit, which at 0.25 would no longer be
-/// paid for, and 3 of its 60 frames are cut after their markers were found (as they were at
-/// 0.25 before the charges). At 0.28 VGA uniform noise costs 7.28 M Cortex-M7 instructions,
-/// 1.96 times the VGA landing frame (3.72 M). A QVGA frame (21,504 units at 0.28) gets the
+/// Why 0.28: it is about the least that legitimate frames do not reach. None of the
+/// camera-configured test frames (distortion, rendered, families, rolling shutter) is
+/// truncated; the replayed scenarios stay below it but for `shadow`'s far frames (a hard
+/// shadow edge across the pad on concrete, and the far marker's pattern fit), whose busiest
+/// are cut after their markers were found; and the worst frames stay within twice a landing
+/// frame on the Cortex-M7. The figures, with their commands: `docs/design/detection.md`
+/// ("Work budget") and `docs/performance.md`. A QVGA frame (21,504 units at 0.28) gets the
 /// floor, [`MIN_WORK_BUDGET`].
 pub const CAMERA_WORK_BUDGET: f32 = 0.28;
 /// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::offline`]: fourteen times
-/// the camera's, what the most cluttered photo in the test data needs (0.47) eight times over.
+/// the camera's, and several times what the most cluttered photo of the test data needs
+/// (`docs/design/detection.md`, "Work budget").
 pub const OFFLINE_WORK_BUDGET: f32 = 4.0;
 /// Work units charged for starting a boundary (the call, the first neighbour search, the
 /// bookkeeping): a frame of thousands of two-pixel specks costs that much more than its steps.
 pub const WORK_TRACE_START: u32 = 2;
 /// Work units of a block of 32 x 4 pixels that the binarisation compared with its
 /// thresholds (a block with a tile of contrast; one of flat tiles is written without
-/// reading its pixels). Measured on the Cortex-M7 benchmark: a frame of noise, every block
-/// compared, costs 367 instructions a block more in the binarisation than a flat frame
-/// (756,000 against 535,000 at QVGA).
+/// reading its pixels): a compared block costs about six contour steps more in the
+/// binarisation than a flat one on the Cortex-M7 (`docs/design/detection.md`, "Work
+/// budget").
 pub const WORK_THRESHOLD_BLOCK: u32 = 6;
 /// Work units of a bitmap word the scan looks at for boundary starts (one with a dark pixel
 /// whose west neighbour is light and not on a followed boundary): its neighbourhood's six
-/// words and the start test, about 60 Cortex-M7 instructions. A frame of noise has a
-/// thousand of them at QVGA.
+/// words and the start test, about one contour step on the Cortex-M7.
 pub const WORK_SCAN_WORD: u32 = 1;
 
 /// Work units of the quick look at a candidate before its refinement (border ring, margin
@@ -156,14 +153,14 @@ pub const WORK_PRECHECK: u32 = 30;
 pub const WORK_CANDIDATE: u32 = 300;
 /// Twice the work units per image read of a refined candidate: a bilinear sample on an edge
 /// profile or in a cell, or a point mapped through the cell grid's homography, costs about
-/// 110 Cortex-M7 instructions with its share of the bookkeeping (measured: 93,000 for the
-/// 64 profiles of 13 samples that refine a 60-pixel marker's corners).
+/// two contour steps with its share of the bookkeeping on the Cortex-M7
+/// (`docs/design/detection.md`, "Work budget").
 pub const WORK_PER_SAMPLE_X2: u32 = 3;
-/// Smallest work budget of a frame, whatever its size: the budget of a QVGA frame. The
-/// benchmark's QVGA frame of the nested pad with all six markers in view (`qvga-multi-6`,
-/// textured ground) uses 22,885 units, 92 % of it; a frame that spends all of it on
-/// uniform noise or marker look-alikes costs 1.91 to 1.92 times the QVGA landing frame on
-/// the Cortex-M7 (2.08 M instructions at most, against 1.08 M; `scripts/m7_check.sh`).
+/// Smallest work budget of a frame, whatever its size: the budget of a QVGA frame, just
+/// above what the benchmark's QVGA frame of the nested pad with all six markers in view
+/// (`qvga-multi-6`, textured ground) uses, and within twice the QVGA landing frame on the
+/// Cortex-M7 for a frame that spends all of it on noise or look-alikes (the figures:
+/// `docs/design/detection.md`, "Work budget", and `docs/performance.md`).
 pub const MIN_WORK_BUDGET: u32 = 25_000;
 
 /// Sizes of the caller-provided buffers for a frame size.
@@ -267,9 +264,9 @@ pub struct DetectorConfig {
     pub refine_edges: bool,
     /// Step 7: when every marker of a frame is small (at most 40 pixels across: a far pad),
     /// fit the corners of the largest one with its decoded pattern, blurred, to the
-    /// pixels. It removes the edge search's scale bias on small markers (1.4 % of range at
-    /// 11 pixels across, in a direction set by the blur), which is the pose's largest error
-    /// above 25 m. Needs `refine_edges`.
+    /// pixels. It removes the edge search's scale bias on small markers (in a direction set
+    /// by the blur; its size: `docs/design/detection.md`, step 7), which is the pose's largest
+    /// error far from the pad. Needs `refine_edges`.
     pub fit_small_markers: bool,
     /// Smallest decision margin (0..1: mean distance of the data cells from the threshold,
     /// relative to half the black/white contrast) for a detection to be reported.
@@ -287,11 +284,10 @@ pub struct DetectorConfig {
     ///
     /// The default, [`CAMERA_WORK_BUDGET`], is for the camera board: it holds the worst
     /// frames of the Cortex-M7 benchmark (uniform noise, hundreds of small squares, a sheet of
-    /// marker look-alikes) within twice the cost of a typical landing frame (1.80 to 1.94
-    /// times, `scripts/m7_check.sh`). Replayed VGA scenarios use 0.026 to 0.176 units per
-    /// pixel, the `shadow` scenario's busiest frames up to all of it (see
-    /// [`CAMERA_WORK_BUDGET`]). Cluttered photos with dozens of markers use more (up to 0.47
-    /// in the test data: AprilTag 3's photo of 25 tags on cubes): [`DetectorConfig::offline`]
+    /// marker look-alikes) within twice the cost of a typical landing frame
+    /// (`scripts/m7_check.sh`). Replayed scenarios stay below it, the `shadow` scenario's
+    /// busiest frames reach it (see [`CAMERA_WORK_BUDGET`]). Cluttered photos with dozens of
+    /// markers use more (AprilTag 3's photo of 25 tags on cubes): [`DetectorConfig::offline`]
     /// is the setting for photos on a host. Not a number, or below 0, counts as 0.
     pub work_budget_per_pixel: f32,
     /// Candidate quads refined and read per frame. A quad costs far more than a traced

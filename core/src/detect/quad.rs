@@ -14,10 +14,9 @@
 //!
 //! No square roots: every length here is only compared (screening and the chord test on
 //! squared integer distances, the vertex drop on squared bends, the shape check on squared
-//! lengths). libm's `sqrtf` is software on the Cortex-M7 (52 instructions) and micromath's,
-//! 7 instructions, is up to 6 % off, which would move the limits and drop other vertices;
-//! the squared forms are exact and cheaper than either (see
-//! `docs/design/floating-point.md`).
+//! lengths). libm's `sqrtf` is software on the Cortex-M7 and micromath's is an approximation
+//! that would move the limits and drop other vertices; the squared forms are exact and
+//! cheaper than either (the costs and errors: `docs/design/floating-point.md`).
 
 use super::contour::Pixel;
 use crate::geometry::cyclic;
@@ -49,8 +48,8 @@ fn pt(p: Pixel) -> Point {
 
 /// The square of the distance from `p` to the line through `a` and `b` (of the distance to
 /// `a` when they coincide). Squared: the fit only compares these (with each other and with a
-/// limit), and a square root is software on the Cortex-M7 (libm's `sqrtf`, 52 instructions;
-/// micromath's is 6 % off, which would pick a different vertex to drop).
+/// limit), and a square root is software on the Cortex-M7 (libm's; micromath's is too far
+/// off, and would pick a different vertex to drop).
 fn line_distance_squared(p: Point, a: Point, b: Point) -> f32 {
     let (dx, dy) = (b.x - a.x, b.y - a.y);
     let len2 = dx * dx + dy * dy;
@@ -73,8 +72,8 @@ pub(crate) fn signed_area2(contour: &[Pixel]) -> i64 {
 
 /// Twice the signed area of the boundary polygon: positive when it runs clockwise on
 /// screen (an outer boundary), negative for a hole. An `i32`, which it fits (below): the
-/// screening converts it to `f32` in one instruction, where an `i64` took a software
-/// conversion (about 35 Cortex-M7 instructions per screened boundary).
+/// screening converts it to `f32` in one instruction, where an `i64` needs a software
+/// conversion on the Cortex-M7.
 fn signed_area2_i32(contour: &[Pixel]) -> i32 {
     // The shoelace sum in wrapping 32-bit arithmetic: its partial sums may wrap, but the
     // total, twice the area of a polygon inside a frame of at most `image::MAX_DIMENSION`
@@ -318,10 +317,11 @@ pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
     )
 }
 
-/// The cheap tests a boundary must pass before the fit, about 15 Cortex-M7 instructions per
-/// boundary pixel in all: long enough, compact, roughly convex (when `convex`: markers with
-/// a quiet margin have a straight outline; tagStandard41h12's data cells outside its border
-/// make a bumpy one), wide enough for four sides of `min_edge`. Most boundaries of a
+/// The cheap tests a boundary must pass before the fit, a few instructions per boundary
+/// pixel (priced by [`super::WORK_SCREEN_PIXELS`]): long enough, compact, roughly convex
+/// (when `convex`: markers with a quiet margin have a straight outline; tagStandard41h12's
+/// data cells outside its border make a bumpy one), wide enough for four sides of
+/// `min_edge`. Most boundaries of a
 /// cluttered or noisy frame stop here.
 ///
 /// `contour` is the boundary's pixels in order, every one of them or (a boundary longer
@@ -407,8 +407,7 @@ pub(crate) fn screen(
 /// one that must go bends it by more than twice `tolerance`. Each vertex's bend (the square
 /// of its distance from the line through its neighbours) is kept, and only the two
 /// neighbours of a dropped vertex are measured again. Not inlined: [`fit`] calls it only
-/// when Douglas-Peucker left more than four vertices, and inlined it cost every fit
-/// (about 50 Cortex-M7 instructions on a frame of small quads, none of which needed it).
+/// when Douglas-Peucker left more than four vertices, and inlined it costs every fit.
 #[inline(never)]
 fn drop_least_bent(corners: &mut heapless::Vec<Point, MAX_VERTICES>, tolerance: f32) -> bool {
     let bend = |points: &[Point], k: usize| {
@@ -521,8 +520,8 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
 
 /// Convex, edges long enough and not too unequal, no degenerate angle.
 ///
-/// On squared lengths: no square root (software on the Cortex-M7, about 50 instructions
-/// each, four per candidate were a tenth of the fit on a frame of small quads). Every test
+/// On squared lengths: no square root (software on the Cortex-M7, and four per candidate
+/// would be a large share of the fit on a frame of small quads). Every test
 /// is the square of the one on lengths (`|cos| > c` as `dot^2 > c^2 e1^2 e2^2`), the same
 /// up to rounding.
 pub(crate) fn check_shape(c: &[Point; 4], min_edge: f32) -> bool {

@@ -43,14 +43,13 @@
 //! same steps as byte loops over small arrays, which compilers turn into vector
 //! instructions (the comparison with the thresholds as words again, of eight pixels), with
 //! the same bitmap and the same count of compared blocks (charged to the work budget, so
-//! host tools reproduce what flies). It binarises AprilTag's 799 x 533 photos and a 1920 x 1080
-//! frame 1.6 to 1.8 times as fast on x86-64. Which one runs is chosen by
+//! host tools reproduce what flies; its speed-up on x86-64 is in `docs/performance.md`).
+//! Which one runs is chosen by
 //! `target_pointer_width` where the detector calls it; the tests hold both to the
 //! pixel-by-pixel definition. The two share the partial tiles, the comparison loop (generic
 //! over the kernel of a 32 x 4 block: [`dark_block`] or [`Vectorised::dark_block`]) and the
-//! bottom rows; the shared loop costs the M7's frames 0.2-0.3 % more instructions than its
-//! own copy did (QVGA landing 1.084 M against 1.082 M, VGA 3.747 M against 3.737 M), the
-//! price of one comparison loop instead of two.
+//! bottom rows; the shared loop costs the M7's frames a little more than a copy of its own
+//! would, the price of one comparison loop instead of two.
 //!
 //! Bitmap layout: row `y` starts at word `y * words_per_row(width)`; pixel `x` is bit `x % 32`
 //! of word `x / 32` (least significant bit = leftmost pixel), so "left neighbour" is a shift.

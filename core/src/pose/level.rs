@@ -3,8 +3,8 @@
 //! A flat pad's tilt relative to the camera is what a single small marker measures worst: at
 //! 20 m a 1 m marker spans ~28 pixels, and the image barely tells a slight tilt from a
 //! slightly smaller distance, so the six-parameter fit trades one for the other and the
-//! altitude comes out biased low (by roughly `d * tilt^2 / 2`; measured 4 cm at 20 m and 12
-//! cm at 25 m in the paper geometry). The vehicle's attitude knows the camera's tilt to a
+//! altitude comes out biased low (by roughly `d * tilt^2 / 2`: centimetres at 20-25 m in the
+//! paper geometry). The vehicle's attitude knows the camera's tilt to a
 //! fraction of a degree. [`level_pad_fix`] keeps only the heading of the image fix (well
 //! observed: it is the marker's in-image rotation), takes the tilt from the attitude, and
 //! re-solves the translation by linear least squares over every corner of every layout

@@ -41,11 +41,10 @@
 //! late). A step is the whole correction, so the frames metered before it reaches the sensor
 //! must not be corrected for again: after each change of the brightness the loop lets
 //! [`SETTLE_FRAMES`] frames' levels pass (their bookkeeping, the pad's hold, and the motion cap
-//! still apply). Without that, a clipped pad was halved on two frames in a row, then found a
-//! quarter too dark and doubled twice: a limit cycle of six frames (measured on the `sun`
-//! scenario at 20 m: the markers' white 254, 254, 187, 95, 95, 186, 254, ...), a third of the
-//! frames clipped, where blooming made the markers read 1 to 2.5 % small (the altitude as much
-//! high) and the jumps between those and the good frames became the pad tracker's velocity.
+//! still apply). Without that, a clipped pad is halved on two frames in a row, then found a
+//! quarter too dark and doubled twice: a limit cycle of six frames, a third of them clipped,
+//! where blooming makes the markers read small (the altitude as much high) and the jumps
+//! between those and the good frames become the pad tracker's velocity.
 //!
 //! # Search
 //!

@@ -309,7 +309,7 @@ mod tests {
             OV7725_QVGA.capture_timeout_us(),
             2 * 33_360 + CAPTURE_MARGIN_US
         );
-        // A slow frame rate gets a longer timeout (the fixed 100 ms was one 10 fps frame).
+        // A slow frame rate gets a longer timeout (a fixed 100 ms would be one 10 fps frame).
         let slow = FrameTiming {
             frame_lines: 278 * 3,
             ..OV7725_QVGA

@@ -7,9 +7,11 @@
 //!
 //! - `NAME`, `HSE` (the clock into OSC_IN and its PLL pre-divider, see [`crate::clocks`]) and
 //!   `XCLK_HZ` (the camera clock driven out of MCO1);
-//! - `init(p, baud) -> Board`: claims the pins and builds every driver.
+//! - `init(p, baud, watchdog_timeout_us) -> Board`: claims the pins and builds every driver,
+//!   written once here (`board_pins!`) and given each board's pin table.
 //!
-//! The pin tables with their sources are in `firmware/README.md`.
+//! The wiring, with the module's labels, the sources of each pin and what was not checked
+//! against the board, is in `firmware/README.md` ("Wiring").
 
 #[cfg(all(feature = "board-nucleo", feature = "board-openmv"))]
 compile_error!(
@@ -18,6 +20,112 @@ compile_error!(
 );
 #[cfg(not(any(feature = "board-nucleo", feature = "board-openmv")))]
 compile_error!("enable one board feature: `board-nucleo` or `board-openmv`");
+
+/// A board's pin table, and from it the bring-up every board shares: the interrupt bindings
+/// (`Irqs`) and `init`. The peripherals are typed by their pins (a pin without the function
+/// fails to compile), hence a macro rather than a function over the pins. The DMA streams
+/// are the same on every board: DMA1 stream 0 for the DCMI, 1 and 2 for the SCCB.
+macro_rules! board_pins {
+    (
+        led: $led:ident starting $led_level:ident,
+        xclk: $xclk:ident = HSI48 / $xclk_div:ident,
+        dcmi: [$d0:ident, $d1:ident, $d2:ident, $d3:ident, $d4:ident, $d5:ident, $d6:ident, $d7:ident],
+        sync: vsync $vsync:ident, hsync $hsync:ident, pixclk $pixclk:ident,
+        sccb: scl $scl:ident, sda $sda:ident,
+        camera: reset $reset:ident, power_down $power_down:ident,
+        uart: $uart:ident rx $rx:ident tx $tx:ident,
+    ) => {
+        use embassy_stm32::dcmi::{self, Dcmi};
+        use embassy_stm32::flash::{self, Flash};
+        use embassy_stm32::gpio::{Level, Output, Speed};
+        use embassy_stm32::i2c::{self, I2c};
+        use embassy_stm32::peripherals::{self, DCMI};
+        use embassy_stm32::rcc::{Mco, Mco1Source, McoPrescaler};
+        use embassy_stm32::usart::{self, BufferedUart};
+        use embassy_stm32::wdg::IndependentWatchdog;
+        use embassy_stm32::{bind_interrupts, dma, Peripherals};
+
+        use super::{Board, CameraPins};
+        use crate::capture::FrameStamp;
+
+        bind_interrupts!(struct Irqs {
+            DCMI => dcmi::InterruptHandler<DCMI>, FrameStamp;
+            DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
+            DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+            DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
+            I2C1_EV => i2c::EventInterruptHandler<peripherals::I2C1>;
+            I2C1_ER => i2c::ErrorInterruptHandler<peripherals::I2C1>;
+            $uart => usart::BufferedInterruptHandler<peripherals::$uart>;
+            FLASH => flash::InterruptHandler;
+        });
+
+        /// Claims the pins and builds the drivers; `baud` is the flight-controller UART's rate.
+        pub fn init(p: Peripherals, baud: u32, watchdog_timeout_us: u32) -> Board {
+            let led = Output::new(p.$led, Level::$led_level, Speed::Low);
+
+            // XCLK first: the sensor's SCCB port needs its clock running.
+            let xclk = Mco::new(
+                p.MCO1,
+                p.$xclk,
+                Mco1Source::HSI48,
+                super::xclk_config(McoPrescaler::$xclk_div),
+            );
+
+            let dcmi = Dcmi::new_8bit(
+                p.DCMI,
+                p.DMA1_CH0,
+                Irqs,
+                p.$d0,
+                p.$d1,
+                p.$d2,
+                p.$d3,
+                p.$d4,
+                p.$d5,
+                p.$d6,
+                p.$d7,
+                p.$vsync,
+                p.$hsync,
+                p.$pixclk,
+                crate::capture::dcmi_config(),
+            );
+            let sccb = I2c::new(
+                p.I2C1,
+                p.$scl,
+                p.$sda,
+                p.DMA1_CH1,
+                p.DMA1_CH2,
+                Irqs,
+                super::sccb_config(),
+            );
+            let camera = CameraPins {
+                dcmi,
+                sccb,
+                reset_n: Output::new(p.$reset, Level::Low, Speed::Low),
+                power_down: Output::new(p.$power_down, Level::High, Speed::Low),
+                xclk,
+            };
+
+            let (tx_buffer, rx_buffer) = super::uart_buffers();
+            let uart = defmt::unwrap!(BufferedUart::new(
+                p.$uart,
+                p.$rx,
+                p.$tx,
+                tx_buffer,
+                rx_buffer,
+                Irqs,
+                super::uart_config(baud)
+            ));
+
+            Board {
+                led,
+                camera,
+                uart,
+                flash: Flash::new(p.FLASH, Irqs),
+                watchdog: IndependentWatchdog::new(p.IWDG1, watchdog_timeout_us),
+            }
+        }
+    };
+}
 
 #[cfg(feature = "board-nucleo")]
 mod nucleo;

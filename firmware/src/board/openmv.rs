@@ -1,38 +1,15 @@
-//! OpenMV Cam H7 (STM32H743VI, LQFP100) with its on-board OV7725.
-//!
-//! Pin map (the camera wiring is fixed on the board; taken from OpenMV's published board
-//! configuration for this camera, alternate functions checked against embassy's
-//! `stm32-metapac` pin data; see `firmware/README.md`):
-//!
-//! | signal | pin | | signal | pin |
-//! |---|---|---|---|---|
-//! | DCMI_D0 | PC6 | | DCMI_PIXCLK | PA6 |
-//! | DCMI_D1 | PC7 | | DCMI_HSYNC | PA4 |
-//! | DCMI_D2 | PE0 | | DCMI_VSYNC | PB7 |
-//! | DCMI_D3 | PE1 | | SCCB SCL (I2C1) | PB8 |
-//! | DCMI_D4 | PE4 | | SCCB SDA (I2C1) | PB9 |
-//! | DCMI_D5 | PB6 | | XCLK (MCO1 on PA8) | PA8 |
-//! | DCMI_D6 | PE5 | | camera RESETB | PA10 |
-//! | DCMI_D7 | PE6 | | camera PWDN | PD7 |
-//! | USART3_TX (P4, to FC RX) | PB10 | | USART3_RX (P5, from FC TX) | PB11 |
-//! | LED (green, active low) | PC1 | | | |
+//! OpenMV Cam H7 (STM32H743VI, LQFP100) with its on-board OV7725. The camera wiring is fixed
+//! on the board: taken from OpenMV's published board configuration for this camera,
+//! alternate functions checked against embassy's `stm32-metapac` pin data (the wiring is in
+//! `firmware/README.md`).
 //!
 //! Clock: a 12 MHz crystal on OSC_IN (OpenMV's PLL settings divide it by 3 for a 4 MHz
 //! reference). Camera clock: HSI48 / 4 = 12 MHz on MCO1 (OpenMV drives the same pin from TIM1
 //! at 12 MHz; MCO1 is the other function of PA8).
 
-use embassy_stm32::dcmi::{self, Dcmi};
-use embassy_stm32::flash::{self, Flash};
-use embassy_stm32::gpio::{Level, Output, Speed};
-use embassy_stm32::i2c::{self, I2c};
-use embassy_stm32::peripherals::{self, DCMI};
-use embassy_stm32::rcc::{Mco, Mco1Source, McoPrescaler, PllPreDiv};
-use embassy_stm32::usart::{self, BufferedUart};
-use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, dma, Peripherals};
+use embassy_stm32::rcc::PllPreDiv;
 
-use super::{Board, CameraPins, HseClock};
-use crate::capture::FrameStamp;
+use super::HseClock;
 
 /// Board name for the log.
 pub const NAME: &str = "OpenMV Cam H7";
@@ -45,80 +22,14 @@ pub const HSE: HseClock = HseClock {
 /// Camera clock: HSI48 / 4 (what OpenMV's own firmware runs this sensor at).
 pub const XCLK_HZ: u32 = 12_000_000;
 
-bind_interrupts!(struct Irqs {
-    DCMI => dcmi::InterruptHandler<DCMI>, FrameStamp;
-    DMA1_STREAM0 => dma::InterruptHandler<peripherals::DMA1_CH0>;
-    DMA1_STREAM1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
-    DMA1_STREAM2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
-    I2C1_EV => i2c::EventInterruptHandler<peripherals::I2C1>;
-    I2C1_ER => i2c::ErrorInterruptHandler<peripherals::I2C1>;
-    USART3 => usart::BufferedInterruptHandler<peripherals::USART3>;
-    FLASH => flash::InterruptHandler;
-});
-
-/// Claims the pins and builds the drivers; `baud` is the flight-controller UART's rate.
-pub fn init(p: Peripherals, baud: u32, watchdog_timeout_us: u32) -> Board {
-    // Active low: start dark.
-    let led = Output::new(p.PC1, Level::High, Speed::Low);
-
-    // XCLK first: the sensor's SCCB port needs its clock running.
-    let xclk = Mco::new(
-        p.MCO1,
-        p.PA8,
-        Mco1Source::HSI48,
-        super::xclk_config(McoPrescaler::DIV4),
-    );
-
-    let dcmi = Dcmi::new_8bit(
-        p.DCMI,
-        p.DMA1_CH0,
-        Irqs,
-        p.PC6,
-        p.PC7,
-        p.PE0,
-        p.PE1,
-        p.PE4,
-        p.PB6,
-        p.PE5,
-        p.PE6,
-        p.PB7,
-        p.PA4,
-        p.PA6,
-        crate::capture::dcmi_config(),
-    );
-    let sccb = I2c::new(
-        p.I2C1,
-        p.PB8,
-        p.PB9,
-        p.DMA1_CH1,
-        p.DMA1_CH2,
-        Irqs,
-        super::sccb_config(),
-    );
-    let camera = CameraPins {
-        dcmi,
-        sccb,
-        reset_n: Output::new(p.PA10, Level::Low, Speed::Low),
-        power_down: Output::new(p.PD7, Level::High, Speed::Low),
-        xclk,
-    };
-
-    let (tx_buffer, rx_buffer) = super::uart_buffers();
-    let uart = defmt::unwrap!(BufferedUart::new(
-        p.USART3,
-        p.PB11,
-        p.PB10,
-        tx_buffer,
-        rx_buffer,
-        Irqs,
-        super::uart_config(baud)
-    ));
-
-    Board {
-        led,
-        camera,
-        uart,
-        flash: Flash::new(p.FLASH, Irqs),
-        watchdog: IndependentWatchdog::new(p.IWDG1, watchdog_timeout_us),
-    }
+board_pins! {
+    // The green LED, active low: starts dark.
+    led: PC1 starting High,
+    xclk: PA8 = HSI48 / DIV4,
+    dcmi: [PC6, PC7, PE0, PE1, PE4, PB6, PE5, PE6],
+    sync: vsync PB7, hsync PA4, pixclk PA6,
+    sccb: scl PB8, sda PB9,
+    camera: reset PA10, power_down PD7,
+    // TX PB10 (P4) to the flight controller's RX, RX PB11 (P5) from its TX.
+    uart: USART3 rx PB11 tx PB10,
 }

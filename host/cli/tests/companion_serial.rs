@@ -62,10 +62,12 @@ fn descent_recording(name: &str, frames: u32) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     // --ideal: these tests are about the serial link and the parameters, and the descent
     // starts with the pad near the edge of the view, where the default 2 degree mount
-    // misalignment takes it out of some of these few frames.
+    // misalignment takes it out of some of these few frames. The warp model, for the same
+    // reason: it renders them in a fraction of the ray caster's time.
     let status = touchdown()
         .args(["simulate", "--ideal", "--scenario", "descent", "--frames"])
         .arg(frames.to_string())
+        .args(["--renderer", "warp"])
         .arg("--out")
         .arg(&dir)
         .status()
@@ -94,7 +96,8 @@ fn param_set(name: &str, value: f32) -> Vec<u8> {
 /// Runs `touchdown companion --serial` on `recording` against a pty, playing the flight
 /// controller (a heartbeat every 250 ms) after writing `first` to the port, and returns
 /// everything the command wrote, decoded by pymavlink (strict), or `None` without pymavlink.
-fn run_over_pty(recording: &Path, first: &[u8]) -> Option<Vec<Value>> {
+/// `run` names the run's bytes beside the recording (runs on the same recording may overlap).
+fn run_over_pty(recording: &Path, run: &str, first: &[u8]) -> Option<Vec<Value>> {
     // The flight controller's end (master) and the port the command opens (slave).
     let master = openpt(OpenptFlags::RDWR | OpenptFlags::NOCTTY).expect("openpt");
     grantpt(&master).expect("grantpt");
@@ -165,7 +168,7 @@ fn run_over_pty(recording: &Path, first: &[u8]) -> Option<Vec<Value>> {
     assert!(!bytes.is_empty(), "nothing arrived on the serial port");
 
     // pymavlink, strict.
-    let path = recording.with_extension("bin");
+    let path = recording.with_extension(format!("{run}.bin"));
     std::fs::write(&path, &bytes).expect("write frames");
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/mavlink_decode.py");
     let output = Command::new("python3").arg(&script).arg(&path).output();
@@ -208,7 +211,7 @@ fn target_distances(msgs: &[Value]) -> Vec<f64> {
 #[test]
 fn companion_over_a_pseudo_terminal() {
     let dir = descent_recording("plain", 45);
-    let msgs = run_over_pty(&dir, &[]);
+    let msgs = run_over_pty(&dir, "plain", &[]);
     let _ = std::fs::remove_dir_all(&dir);
     let Some(msgs) = msgs else { return };
     println!(
@@ -231,8 +234,12 @@ fn companion_over_a_pseudo_terminal() {
 #[test]
 fn tag_size_set_over_mavlink_scales_the_distances() {
     let dir = descent_recording("tag-size", 30);
-    let as_built = run_over_pty(&dir, &[]);
-    let half = run_over_pty(&dir, &param_set("TD_TAG_SIZE", 0.625));
+    // The two runs side by side, each on its own pty: they only read the recording.
+    let (as_built, half) = std::thread::scope(|scope| {
+        let as_built = scope.spawn(|| run_over_pty(&dir, "as-built", &[]));
+        let half = run_over_pty(&dir, "half", &param_set("TD_TAG_SIZE", 0.625));
+        (as_built.join().expect("the run as built"), half)
+    });
     let _ = std::fs::remove_dir_all(&dir);
     let (Some(as_built), Some(half)) = (as_built, half) else {
         return;

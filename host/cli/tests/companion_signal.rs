@@ -30,6 +30,8 @@ fn sigint_returns_the_outcome_after_the_summary() {
             "descent",
             "--frames",
             "5",
+            "--renderer",
+            "warp",
         ])
         .arg("--out")
         .arg(&dir)

@@ -1,6 +1,8 @@
 //! The error sources of a real flight that sit between the vehicle and its camera: the
 //! rolling shutter's readout, the camera's vibration on its mount, and the mount's
-//! misalignment. One struct, [`FlightEffects`], sets all three on a [`Scenario`].
+//! misalignment. One struct, [`FlightEffects`], holds all three; a scenario takes them
+//! ([`crate::scenario::Scenario::apply_effects`]). This module is the effects alone: it knows
+//! no scenario.
 //!
 //! - **Rolling shutter**: the sensor exposes its rows one after another; row `v` is exposed
 //!   `(v - (height - 1) / 2) * line_time_us` after the frame's time (the contract's
@@ -12,18 +14,16 @@
 //! - **Mount misalignment**: the camera is not screwed on exactly along the body axes. The
 //!   true mount is the nominal downward one turned by `mount_roll_deg` about body x and
 //!   `mount_pitch_deg` about body y: camera-to-body = `R_y(pitch) R_x(roll) nominal`
-//!   ([`CameraMount::misaligned`]). The board believes the nominal mount unless calibrated.
+//!   ([`crate::camera::CameraMount::misaligned`]). The board believes the nominal mount
+//!   unless calibrated.
 //!
-//! [`Scenario::named`] builds scenarios without any of these (so the tests that use them
-//! keep their meaning); [`Scenario::apply_effects`] adds them, as `touchdown simulate` and
-//! the replay do.
+//! The named scenarios are built without any of these (so the tests that use them keep
+//! their meaning); `apply_effects` adds them, as `touchdown simulate` and the replay do.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::camera::CameraMount;
 use crate::math::{from_euler, Mat3, IDENTITY};
-use crate::scenario::Scenario;
 
 /// Lowest vibration frequency drawn, Hz.
 pub const VIBRATION_MIN_HZ: f64 = 50.0;
@@ -80,23 +80,6 @@ impl FlightEffects {
 impl Default for FlightEffects {
     fn default() -> Self {
         Self::typical()
-    }
-}
-
-impl Scenario {
-    /// Renders this scenario with `effects`: the camera's `line_time_us` is the readout over
-    /// its rows (`readout_ms * 1000 / height`), the vibration is seeded from the scenario's
-    /// seed, and the mount is the nominal downward one misaligned by the effects' angles.
-    /// Applying [`FlightEffects::none`] leaves a scenario of [`Scenario::named`] unchanged.
-    pub fn apply_effects(&mut self, effects: &FlightEffects) {
-        let height = self.camera.height().max(1) as f64;
-        let readout_us = effects.readout_ms.max(0.0) * 1000.0;
-        self.camera.model.line_time_us = (readout_us / height) as f32;
-        self.vibration = Vibration::new(
-            effects.vibration_deg,
-            self.seed ^ 0x7669_6272_6174_696f, // "vibratio"
-        );
-        self.mount = CameraMount::misaligned(effects.mount_roll_deg, effects.mount_pitch_deg);
     }
 }
 
@@ -181,37 +164,6 @@ impl Vibration {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::{max_difference, mul};
-
-    #[test]
-    fn none_changes_nothing() {
-        let mut scenario = Scenario::named("landing", 3).expect("landing");
-        let before = (scenario.camera, scenario.mount, scenario.vibration.clone());
-        scenario.apply_effects(&FlightEffects::none());
-        assert_eq!(
-            before,
-            (scenario.camera, scenario.mount, scenario.vibration.clone())
-        );
-    }
-
-    #[test]
-    fn typical_sets_the_readout_and_the_mount() {
-        let mut scenario = Scenario::named("landing", 3).expect("landing");
-        scenario.apply_effects(&FlightEffects::typical());
-        let readout = scenario.camera.model.line_time_us as f64 * 480.0;
-        assert!((readout - 30_500.0).abs() < 0.1, "{readout} us");
-        assert!(scenario.camera.model.validate().is_ok());
-        assert!(!scenario.vibration.is_none());
-        // R_y(pitch) R_x(roll) nominal.
-        let expected = mul(
-            &from_euler(0.0, (-1.6f64).to_radians(), 0.0),
-            &mul(
-                &from_euler(1.2f64.to_radians(), 0.0, 0.0),
-                &CameraMount::downward().rotation,
-            ),
-        );
-        assert!(max_difference(&scenario.mount.rotation, &expected) < 1e-15);
-    }
 
     #[test]
     fn vibration_has_the_asked_rms_and_band() {

@@ -37,7 +37,7 @@
 //! `hover=3`); the paper's tables group frames by them.
 
 use crate::camera::{CameraMount, SimCamera};
-use crate::effects::Vibration;
+use crate::effects::{FlightEffects, Vibration};
 use crate::math::Vec3;
 use crate::pad::PrintedPad;
 use crate::sensor::{Exposure, Optics, Sensor};
@@ -487,9 +487,57 @@ impl Scenario {
     }
 }
 
+impl Scenario {
+    /// Renders this scenario with `effects`: the camera's `line_time_us` is the readout over
+    /// its rows (`readout_ms * 1000 / height`), the vibration is seeded from the scenario's
+    /// seed, and the mount is the nominal downward one misaligned by the effects' angles.
+    /// Applying [`FlightEffects::none`] leaves a scenario of [`Scenario::named`] unchanged.
+    pub fn apply_effects(&mut self, effects: &FlightEffects) {
+        let height = self.camera.height().max(1) as f64;
+        let readout_us = effects.readout_ms.max(0.0) * 1000.0;
+        self.camera.model.line_time_us = (readout_us / height) as f32;
+        self.vibration = Vibration::new(
+            effects.vibration_deg,
+            self.seed ^ 0x7669_6272_6174_696f, // "vibratio"
+        );
+        self.mount = CameraMount::misaligned(effects.mount_roll_deg, effects.mount_pitch_deg);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::{from_euler, max_difference, mul};
+
+    #[test]
+    fn none_changes_nothing() {
+        let mut scenario = Scenario::named("landing", 3).expect("landing");
+        let before = (scenario.camera, scenario.mount, scenario.vibration.clone());
+        scenario.apply_effects(&FlightEffects::none());
+        assert_eq!(
+            before,
+            (scenario.camera, scenario.mount, scenario.vibration.clone())
+        );
+    }
+
+    #[test]
+    fn typical_sets_the_readout_and_the_mount() {
+        let mut scenario = Scenario::named("landing", 3).expect("landing");
+        scenario.apply_effects(&FlightEffects::typical());
+        let readout = scenario.camera.model.line_time_us as f64 * 480.0;
+        assert!((readout - 30_500.0).abs() < 0.1, "{readout} us");
+        assert!(scenario.camera.model.validate().is_ok());
+        assert!(!scenario.vibration.is_none());
+        // R_y(pitch) R_x(roll) nominal.
+        let expected = mul(
+            &from_euler(0.0, (-1.6f64).to_radians(), 0.0),
+            &mul(
+                &from_euler(1.2f64.to_radians(), 0.0, 0.0),
+                &CameraMount::downward().rotation,
+            ),
+        );
+        assert!(max_difference(&scenario.mount.rotation, &expected) < 1e-15);
+    }
 
     #[test]
     fn every_scenario_exists_with_the_frame_count_its_help_gives() {

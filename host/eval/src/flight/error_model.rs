@@ -25,8 +25,9 @@
 //! - **autopilot clock**: booted 12.3 s before the board (it powers the board) and 30 ppm fast
 //!   (two crystals differ by tens of ppm).
 //! - **processing, 20 ms, jitter 5 ms**: the board's exposure-to-send time (readout, detection,
-//!   pose, filter; measured on the board and reported by the companion's STATUSTEXT), uniform
-//!   in 15-25 ms.
+//!   pose, filter; the board reports its own in the companion's STATUSTEXT, and
+//!   `docs/performance.md` has the per-frame path's cost on the Cortex-M7), uniform in
+//!   15-25 ms.
 //! - **PLND_LAG, 0.02 s**: ArduPilot's default; the autopilot assigns a LANDING_TARGET to its
 //!   receipt time minus this.
 //! - **local position drift, 0.3 m RMS** (PX4's LOCAL_POSITION_NED): GPS and baro wander over
@@ -36,9 +37,9 @@
 //! scheduler's slot, not a heavy tail. [`ErrorModel::none`] is an autopilot that knows the
 //! truth exactly and instantly (the replay before this model) over a link without delay; the
 //! board still takes 20 ms to process a frame. With it (and no flight effects,
-//! `touchdown replay --scenario paper --ideal`) the replay gives what it gave before it ran in
-//! flight to within the interpolation of the 50 Hz attitude stream: ours 0.20 / 0.14 / 2.33 cm
-//! RMS against 0.18 / 0.08 / 2.35, the set points' mean errors within 0.03 cm.
+//! `touchdown replay --scenario paper --ideal`) the in-flight replay differs from the truth
+//! itself only by the interpolation of the 50 Hz attitude stream and the board's processing
+//! time.
 //!
 //! A [`Realisation`] turns the model into functions of time, deterministic in its seed: the
 //! same seed gives the same errors for every method of a replay, so their columns differ only

@@ -1,7 +1,7 @@
 //! `touchdown sitl --tcp` against a stand-in for ArduPilot SITL: a TCP server that speaks
 //! what ArduCopter SITL sends on a serial port (HEARTBEAT, SYSTEM_TIME, ATTITUDE_QUATERNION,
 //! SIM_STATE with the position in 1e-7 degrees in both its float and its integer fields,
-//! TIMESYNC answers) for a vehicle it flies on a script: a hover at 6 m, 30 cm north and 20 cm
+//! TIMESYNC answers) for a vehicle it flies on a script: a hover at 4 m, 30 cm north and 20 cm
 //! west of the pad, heading 30 degrees, then straight down at 1 m/s onto the ground.
 //!
 //! Like ArduPilot on a port that streams nothing unasked, the stand-in sends SIM_STATE only once
@@ -16,8 +16,7 @@
 //! SITL's messages, the frames rendered from it, the per-frame path and the companion on
 //! them, and the bytes both ways over TCP in wall-clock time.
 
-#[allow(dead_code)] // `scratch` is for the tests that write files; this one writes none.
-mod common;
+use crate::common;
 
 use std::io::{Read, Write};
 use std::net::TcpListener;
@@ -35,8 +34,10 @@ const PAD: [f64; 3] = [-35.363_261, 149.165_230, 584.0];
 const NORTH_M: f64 = 0.30;
 const EAST_M: f64 = -0.20;
 const YAW_DEG: f64 = 30.0;
-const HOVER_S: f64 = 2.0;
-const START_HEIGHT_M: f64 = 6.0;
+/// The hover before the descent, seconds.
+const HOVER_S: f64 = 1.0;
+/// Above `touchdown sitl`'s airborne height (2 m), from which a landing counts.
+const START_HEIGHT_M: f64 = 4.0;
 const GEAR_M: f64 = 0.1;
 
 /// The scripted vehicle's height over the pad at `t` seconds.
