@@ -251,6 +251,24 @@ pub struct SitlArgs {
     /// parameters to the recipe (docs/setup-ardupilot.md, "Without GPS")
     #[arg(long, value_name = "M", help_heading = "A running SITL")]
     pub gps_loss_height: Option<f64>,
+
+    /// With --gcs: how long a refused connection to the ground-station port is tried again,
+    /// seconds (a SITL just launched opens its port a few seconds later)
+    #[arg(long, value_name = "S", default_value_t = 10.0, value_parser = parse_timeout, help_heading = "A running SITL")]
+    pub connect_timeout: f64,
+
+    /// With --gcs: how long each of the three tries of a parameter read or write waits for
+    /// the autopilot's answer, seconds
+    #[arg(long, value_name = "S", default_value_t = 1.5, value_parser = parse_timeout, help_heading = "A running SITL")]
+    pub param_timeout: f64,
+}
+
+/// A timeout in seconds: finite, over 0 and at most an hour.
+fn parse_timeout(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 && s <= 3600.0 => Ok(s),
+        _ => Err("expected seconds, over 0 and at most 3600".to_string()),
+    }
 }
 
 fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {

@@ -546,6 +546,10 @@ fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>, vision_velocity: bool
         }),
         gps_loss_height_m: args.gps_loss_height,
         vision_velocity,
+        patience: gcs::Patience {
+            connect: std::time::Duration::from_secs_f64(args.connect_timeout),
+            param_try: std::time::Duration::from_secs_f64(args.param_timeout),
+        },
     }
 }
 

@@ -181,6 +181,12 @@ fn rehearse_with(standin: Option<StandIn>, extra: &[&str]) -> Output {
             "127.0.0.1:9",
             "--gcs",
             &format!("tcp:127.0.0.1:{port}"),
+            // A closed port and a missing parameter are waited out: a second, and three
+            // tries of half a second, instead of the defaults' 10 s and 4.5 s.
+            "--connect-timeout",
+            "1",
+            "--param-timeout",
+            "0.5",
         ])
         .args(extra)
         .output()
@@ -201,8 +207,7 @@ fn assert_one_line_error(output: &Output, needles: &[&str]) {
     }
 }
 
-/// The longest here (the run retries the refused port for its whole patience): first in name
-/// order, so that it waits beside the others (see `main.rs`).
+/// The run retries the refused port for its whole `--connect-timeout`, then says why.
 #[test]
 fn a_closed_port_asks_whether_the_sitl_runs() {
     assert_one_line_error(
@@ -374,4 +379,33 @@ fn gps_loss_options_out_of_place_are_usage_errors() {
         ]),
         &["TD_VPE_EN = 2", "VISION_POSITION_ESTIMATE"],
     );
+}
+
+#[test]
+fn timeouts_that_are_not_seconds_are_usage_errors() {
+    for (option, bad) in [
+        ("--connect-timeout", "0"),
+        ("--connect-timeout", "nan"),
+        ("--param-timeout", "0.0"),
+        ("--param-timeout", "1e9"),
+    ] {
+        let output = Command::new(env!("CARGO_BIN_EXE_touchdown"))
+            .args([
+                "sitl",
+                "--tcp",
+                "127.0.0.1:9",
+                "--gcs",
+                "tcp:127.0.0.1:9",
+                option,
+                bad,
+            ])
+            .output()
+            .expect("run touchdown");
+        assert_eq!(output.status.code(), Some(2), "{option} {bad}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            stderr.contains(option) && stderr.contains("at most 3600"),
+            "{option} {bad}: {stderr}"
+        );
+    }
 }

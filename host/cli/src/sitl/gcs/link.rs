@@ -25,7 +25,7 @@ const GCS_SYSTEM_ID: u8 = 255;
 /// Our component id: MAV_COMP_ID_MISSIONPLANNER.
 const GCS_COMPONENT_ID: u8 = 190;
 /// How long a connection to a SITL that is not there yet is retried.
-const CONNECT_PATIENCE: Duration = Duration::from_secs(10);
+pub const CONNECT_PATIENCE: Duration = Duration::from_secs(10);
 /// How long to wait for the autopilot's first HEARTBEAT.
 const HEARTBEAT_PATIENCE: Duration = Duration::from_secs(30);
 /// How long a rebooting SITL may take to answer again.
@@ -33,7 +33,7 @@ const REBOOT_PATIENCE: Duration = Duration::from_secs(60);
 /// A parameter read or write is retried this often, each try waiting [`PARAM_TRY`].
 const PARAM_TRIES: u32 = 3;
 /// See [`PARAM_TRIES`].
-const PARAM_TRY: Duration = Duration::from_millis(1500);
+pub const PARAM_TRY: Duration = Duration::from_millis(1500);
 
 /// The vehicle as the ground-station link reports it.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -134,6 +134,9 @@ pub struct GcsLink {
     next_heartbeat: Instant,
     /// The run's clock offset: [`GcsLink::texts`] are stamped in the board loop's seconds.
     clock_zero: Instant,
+    /// How long each try of a parameter read or write waits ([`PARAM_TRY`] unless the plan
+    /// says otherwise).
+    param_try: Duration,
 }
 
 impl GcsLink {
@@ -411,7 +414,7 @@ impl GcsLink {
                 target_component: 1,
                 param_id: name.into(),
             }))?;
-            if let Some(v) = self.wait(PARAM_TRY, err, |l| l.params.get(name).copied())? {
+            if let Some(v) = self.wait(self.param_try, err, |l| l.params.get(name).copied())? {
                 return Ok(Some(v));
             }
         }
@@ -437,7 +440,7 @@ impl GcsLink {
                 param_id: name.into(),
                 param_type: kind,
             }))?;
-            if let Some(v) = self.wait(PARAM_TRY, err, |l| l.params.get(name).copied())? {
+            if let Some(v) = self.wait(self.param_try, err, |l| l.params.get(name).copied())? {
                 return Ok(Some(decode_param(self.autopilot, v.value, v.kind)));
             }
         }
@@ -528,6 +531,7 @@ fn connect(spec: &EndpointSpec, connect_patience: Duration) -> Result<GcsLink, C
         chunks: None,
         next_heartbeat: now,
         clock_zero: now,
+        param_try: PARAM_TRY,
     };
     // Until the autopilot is known (system id 0) every sender's frames are read.
     let until = Instant::now() + HEARTBEAT_PATIENCE;
@@ -582,7 +586,8 @@ pub fn prepare(
     plan: &Plan,
     err: &mut dyn Write,
 ) -> Result<(GcsLink, Prepared), CliError> {
-    let mut link = connect(spec, CONNECT_PATIENCE)?;
+    let mut link = connect(spec, plan.patience.connect)?;
+    link.param_try = plan.patience.param_try;
     let _ = writeln!(
         err,
         "{}: {} (system {})",
@@ -685,6 +690,7 @@ pub fn prepare(
         drop(link);
         std::thread::sleep(Duration::from_secs(1));
         link = connect(spec, REBOOT_PATIENCE)?;
+        link.param_try = plan.patience.param_try;
         prepared.rebooted = true;
         for s in &settings {
             let Some(v) = link.read_param(&s.name, err)? else {

@@ -134,6 +134,27 @@ pub struct Plan {
     pub gps_loss_height_m: Option<f64>,
     /// The board sends its velocity too (TD_VPE_EN bit 1): the vision source set fuses it.
     pub vision_velocity: bool,
+    /// How long the ground station waits for the SITL.
+    pub patience: Patience,
+}
+
+/// How long the ground station waits for the SITL (`--connect-timeout`, `--param-timeout`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Patience {
+    /// A refused connection to the ground-station port is tried again for this long (a SITL
+    /// still starting opens its port seconds after it is launched).
+    pub connect: std::time::Duration,
+    /// Each of a parameter read's or write's three tries waits this long for its answer.
+    pub param_try: std::time::Duration,
+}
+
+impl Default for Patience {
+    fn default() -> Self {
+        Patience {
+            connect: link::CONNECT_PATIENCE,
+            param_try: link::PARAM_TRY,
+        }
+    }
 }
 
 /// ArduPilot SITL's wind parameters.
@@ -314,6 +335,7 @@ mod tests {
             }),
             gps_loss_height_m: None,
             vision_velocity: false,
+            patience: Patience::default(),
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
         assert!(ap.iter().all(|s| !s.name.starts_with("VISO_")));
@@ -339,6 +361,7 @@ mod tests {
             wind: None,
             gps_loss_height_m: Some(12.0),
             vision_velocity: true,
+            patience: Patience::default(),
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
         let names: Vec<&str> = ap.iter().map(|s| s.name.as_str()).collect();
