@@ -105,6 +105,7 @@ fn camera_params_are_range_checked_applied_and_persisted() {
             cam_roll_deg: 1.5,
             cam_pitch_deg: 0.0,
             mount_calibration: MountCalibrationMode::Report,
+            view_margin: false,
         }
     );
     assert_eq!(

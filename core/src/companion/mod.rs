@@ -497,6 +497,7 @@ impl Companion {
         s.time_source = Some(self.state.timesync.source());
         s.clock_offset_us = self.state.timesync.offset_us();
         s.autopilot = self.state.autopilot;
+        s.vision_fit = self.state.vision_fit();
         s
     }
 

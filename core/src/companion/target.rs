@@ -20,7 +20,7 @@ use super::{
     UNKNOWN_Q,
 };
 use crate::filter::{Estimate, FrameEstimate};
-use crate::params::ParamId;
+use crate::params::{ParamId, VPE_POSITION, VPE_VELOCITY};
 use mavlink::dialects::common::{
     LandingTargetType, MavBool, MavEstimatorType, MavFrame, LANDING_TARGET_DATA, ODOMETRY_DATA,
     VISION_SPEED_ESTIMATE_DATA,
@@ -142,7 +142,7 @@ impl State {
             exposure_us: t,
             data,
         });
-        if self.params.get_int(ParamId::VpeEnable) & VISION_POSITION != 0 {
+        if self.params.get_int(ParamId::VpeEnable) & VPE_POSITION != 0 {
             if let Some((e, l)) = frame.estimate.as_ref().and_then(|e| Some((e, e.level?))) {
                 let data = self.vision_estimate_for(t, time_usec, &l);
                 self.report_view_margin(t, e.view_margin_m, now_us);
@@ -170,7 +170,7 @@ impl State {
     /// With TD_VPE_EN bit 1, the frame's level position into the velocity fit, and the fit;
     /// `None` (and the fit restarted) for a frame without a level estimate.
     fn fit_velocity(&mut self, frame: &FrameEstimate) -> Option<FittedVelocity> {
-        if self.params.get_int(ParamId::VpeEnable) & VISION_VELOCITY == 0 {
+        if self.params.get_int(ParamId::VpeEnable) & VPE_VELOCITY == 0 {
             return None;
         }
         let level = frame.estimate.as_ref().and_then(|e| e.level);
@@ -221,11 +221,6 @@ impl State {
         )
     }
 }
-
-/// TD_VPE_EN bit 0: VISION_POSITION_ESTIMATE.
-const VISION_POSITION: i32 = 1;
-/// TD_VPE_EN bit 1: the vehicle's velocity.
-const VISION_VELOCITY: i32 = 2;
 
 /// The vehicle's velocity over the ground, NED: the opposite of the slope of the pad's
 /// position against the vehicle, true for a pad that stays where it is.

@@ -68,7 +68,20 @@ pub(super) struct VisionState {
     next_margin_us: u64,
 }
 
+impl VisionState {
+    /// More than [`RESUME_GAP_US`] between the last estimate and an exposure at `exposure_us`.
+    fn gap_before(&self, exposure_us: u64) -> bool {
+        self.last_exposure_us
+            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US)
+    }
+}
+
 impl State {
+    /// Whether the position is fit to navigate on (announced).
+    pub(super) fn vision_fit(&self) -> bool {
+        self.vision.fit
+    }
+
     /// With TD_VPE_EN bit 0, the frame's VISION_POSITION_ESTIMATE, stamped `time_usec`, from
     /// `level` exposed at `exposure_us` (our clock); the reset counter and the fit state move
     /// with it.
@@ -78,11 +91,7 @@ impl State {
         time_usec: u64,
         level: &LevelEstimate,
     ) -> VISION_POSITION_ESTIMATE_DATA {
-        if self
-            .vision
-            .last_exposure_us
-            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US)
-        {
+        if self.vision.gap_before(exposure_us) {
             self.vision.reset_counter = self.vision.reset_counter.wrapping_add(1);
             self.stats.vision_resets = self.stats.vision_resets.saturating_add(1);
         }
@@ -129,11 +138,7 @@ impl State {
     /// A frame exposed at `exposure_us` without a vision estimate: a fit position that has
     /// had none for [`RESUME_GAP_US`] is no longer fit.
     pub(super) fn vision_gap(&mut self, exposure_us: u64) {
-        let lost = self
-            .vision
-            .last_exposure_us
-            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US);
-        if self.vision.fit && lost {
+        if self.vision.fit && self.vision.gap_before(exposure_us) {
             self.set_vision_fit(false, f32::INFINITY);
         }
     }
@@ -145,7 +150,6 @@ impl State {
             return;
         }
         self.vision.fit = fit;
-        self.stats.vision_fit = fit;
         let mut text = heapless::String::<64>::new();
         // Integers only (core's float formatting keeps panic paths, see nopanic/); `as`
         // saturates. Every text fits MAVLink's 50 bytes.

@@ -44,7 +44,7 @@ pub use persist::{
     SlotKey, Store, ERASED, SAVE_DEBOUNCE_US, SECTORS, SLOT_LEN,
 };
 
-pub use settings::PipelineSettings;
+pub use settings::{PipelineSettings, VPE_POSITION, VPE_VELOCITY};
 
 /// Longest parameter name (MAVLink's `param_id`, not NUL-terminated when exactly 16).
 pub const PARAM_NAME_LEN: usize = 16;

@@ -51,7 +51,16 @@ pub struct PipelineSettings {
     pub cam_pitch_deg: f32,
     /// The in-flight mount calibration (TD_CAM_CAL).
     pub mount_calibration: MountCalibrationMode,
+    /// Each frame's view margin is worked out (`crate::pipeline::view_margin_m`): only the
+    /// vision estimates carry it (TD_VPE_EN bit 0), so the per-frame path spends nothing on it
+    /// otherwise.
+    pub view_margin: bool,
 }
+
+/// TD_VPE_EN bit 0: VISION_POSITION_ESTIMATE (and with it the view margin).
+pub const VPE_POSITION: i32 = 1;
+/// TD_VPE_EN bit 1: the vehicle's velocity.
+pub const VPE_VELOCITY: i32 = 2;
 
 impl Default for PipelineSettings {
     /// The settings of the default parameters.
@@ -84,6 +93,7 @@ impl PipelineSettings {
             cam_roll_deg: params.get(ParamId::CamRoll),
             cam_pitch_deg: params.get(ParamId::CamPitch),
             mount_calibration: MountCalibrationMode::from_param(params.get_int(ParamId::CamCal)),
+            view_margin: params.get_int(ParamId::VpeEnable) & VPE_POSITION != 0,
         }
     }
 
@@ -212,12 +222,24 @@ mod tests {
         assert_eq!(s.cam_yaw_deg, 90.0);
         assert_eq!((s.cam_roll_deg, s.cam_pitch_deg), (1.5, -1.0));
         assert_eq!(s.mount_calibration, MountCalibrationMode::Report);
-        // Parameters of the MAVLink side change nothing here.
+        // Parameters of the MAVLink side change nothing here (the velocity alone included)...
         let mut q = p;
         q.set(ParamId::RateHz, 5.0).unwrap();
         q.set(ParamId::Profile, 1.0).unwrap();
-        q.set(ParamId::VpeEnable, 1.0).unwrap();
+        q.set(ParamId::VpeEnable, 2.0).unwrap();
         assert_eq!(PipelineSettings::from_params(&q), s);
+        assert!(!s.view_margin);
+        // ...but the vision estimates, which carry the view margin.
+        q.set(ParamId::VpeEnable, 1.0).unwrap();
+        let with_margin = PipelineSettings::from_params(&q);
+        assert!(with_margin.view_margin);
+        assert_eq!(
+            PipelineSettings {
+                view_margin: false,
+                ..with_margin
+            },
+            s
+        );
         // Back to 0: the pad as built again.
         p.set(ParamId::TagSize, 0.0).unwrap();
         assert_eq!(PipelineSettings::from_params(&p).tag_size_m, None);

@@ -512,7 +512,11 @@ impl<'a> FramePipeline<'a> {
         let mut estimate =
             self.estimator
                 .update_with_image_fix(fix.as_ref(), image_fix.as_ref(), &at_exposure);
-        if let (Some(e), Some(f)) = (estimate.estimate.as_mut(), image_fix.as_ref()) {
+        if let (Some(e), Some(f), true) = (
+            estimate.estimate.as_mut(),
+            image_fix.as_ref(),
+            self.settings.view_margin,
+        ) {
             e.view_margin_m = view::view_margin_m(&f.pose, &self.pad, &self.camera);
         }
         FrameReport {

@@ -145,8 +145,10 @@ pub fn detect(state: &mut DetectState, data: &[u8]) {
             // Boxed: the detector inside holds a contour buffer of tens of KiB.
             // The configuration's correction cap as it is (not TD_MAX_HAMMING's default), so
             // every bound a family allows is fuzzed.
+            // The view margin on, so that its projections are fuzzed too.
             let settings = PipelineSettings {
                 max_hamming: config.max_hamming,
+                view_margin: true,
                 ..PipelineSettings::default()
             };
             let pipeline_config = PipelineConfig {

@@ -254,12 +254,12 @@ pub struct SitlArgs {
 
     /// With --gcs: how long a refused connection to the ground-station port is tried again,
     /// seconds (a SITL just launched opens its port a few seconds later)
-    #[arg(long, value_name = "S", default_value_t = 10.0, value_parser = parse_timeout, help_heading = "A running SITL")]
+    #[arg(long, value_name = "S", default_value_t = gcs::CONNECT_PATIENCE.as_secs_f64(), value_parser = parse_timeout, help_heading = "A running SITL")]
     pub connect_timeout: f64,
 
     /// With --gcs: how long each of the three tries of a parameter read or write waits for
     /// the autopilot's answer, seconds
-    #[arg(long, value_name = "S", default_value_t = 1.5, value_parser = parse_timeout, help_heading = "A running SITL")]
+    #[arg(long, value_name = "S", default_value_t = gcs::PARAM_TRY.as_secs_f64(), value_parser = parse_timeout, help_heading = "A running SITL")]
     pub param_timeout: f64,
 }
 

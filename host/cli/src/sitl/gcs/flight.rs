@@ -210,13 +210,13 @@ impl Flight {
             } => {
                 let height = truth.map(|(s, _)| s.position.z);
                 let climbed = height.is_some_and(|h| h >= self.plan.height_m - 0.5);
+                if climbed {
+                    self.log.climbed_s.get_or_insert(t);
+                }
                 if climbed && !gps_lost {
-                    // A GPS-denied rehearsal hovers at the top until GPS is lost (the board's
-                    // mount calibrates in this hover), so that the move flies on the board's
-                    // position; `lose_gps` bounds the wait.
-                    self.log.climbed_s = self.log.climbed_s.or(Some(t));
+                    // A GPS-denied rehearsal hovers at the top until GPS is lost, so that the
+                    // move flies on the board's position; `lose_gps` bounds the wait.
                 } else if climbed {
-                    self.log.climbed_s = self.log.climbed_s.or(Some(t));
                     let _ = writeln!(
                         err,
                         "{t:7.2} s  at {:.1} m; flying to {:+.2} m north, {:+.2} m east of the pad",

@@ -31,7 +31,7 @@ mod flight;
 mod link;
 
 pub use flight::{BoardPosition, Flight, FlightEnd, FlightLog};
-pub use link::{prepare, GcsLink, GpsSwitch, Prepared, Status};
+pub use link::{prepare, GcsLink, GpsSwitch, Prepared, Status, CONNECT_PATIENCE, PARAM_TRY};
 
 /// The autopilot at the other end, from its HEARTBEAT.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
