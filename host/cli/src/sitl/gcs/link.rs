@@ -32,7 +32,8 @@ const HEARTBEAT_PATIENCE: Duration = Duration::from_secs(30);
 const REBOOT_PATIENCE: Duration = Duration::from_secs(60);
 /// A parameter read or write is retried this often, each try waiting [`PARAM_TRY`].
 const PARAM_TRIES: u32 = 3;
-/// See [`PARAM_TRIES`].
+/// How long each of a parameter read's or write's tries waits for the answer by default
+/// (`--param-timeout`).
 pub const PARAM_TRY: Duration = Duration::from_millis(1500);
 
 /// The vehicle as the ground-station link reports it.
