@@ -18,7 +18,7 @@
 //! several sizes. See [`designs`] and `pads/*.toml` for the arithmetic.
 
 /// Most markers on a pad.
-pub const MAX_PAD_MARKERS: usize = 16;
+pub const MAX_PAD_MARKERS: usize = 40;
 
 /// One marker on the pad.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -179,11 +179,11 @@ impl<'a> PadLayout<'a> {
 }
 
 /// `array` with element `index` replaced (`const fn`; out-of-range indices change nothing).
-const fn place<'a>(
-    mut array: [PadMarker<'a>; MAX_PAD_MARKERS],
+const fn place<'a, const N: usize>(
+    mut array: [PadMarker<'a>; N],
     index: usize,
     marker: PadMarker<'a>,
-) -> [PadMarker<'a>; MAX_PAD_MARKERS] {
+) -> [PadMarker<'a>; N] {
     let mut k = 0;
     let mut slots: &mut [PadMarker<'a>] = &mut array;
     while let [slot, rest @ ..] = slots {
@@ -221,7 +221,7 @@ const fn or_empty(layout: Result<PadLayout<'static>, PadError>) -> PadLayout<'st
 /// (384 px), so down to `h = 1.19 s`; and an off-centre marker must lie entirely in view,
 /// `|offset| + s/2 <= 0.525 h` along the frame's short (vertical) side.
 pub mod designs {
-    use super::{or_empty, PadLayout, PadMarker};
+    use super::{or_empty, place, PadLayout, PadMarker};
 
     const fn m(family: &'static str, id: u16, size: f32, x: f32, y: f32) -> PadMarker<'static> {
         PadMarker {
@@ -263,8 +263,78 @@ pub mod designs {
         ],
     ));
 
+    /// The rest field of [`NESTED_REST`]: markers per side.
+    const REST_SIDE: usize = 5;
+    /// Edge of a rest-field marker, metres.
+    const REST_SIZE: f32 = 0.027;
+    /// Centre-to-centre spacing of the rest field, metres: one marker plus both quiet rings
+    /// (a cell each, `size / 8`), rounded up to the millimetre.
+    const REST_PITCH: f32 = 0.034;
+    /// Id of the rest field's first marker (top left; then row by row, left to right).
+    const REST_FIRST_ID: u16 = 10;
+    /// The markers of [`NESTED_REST`] besides its rest field.
+    const NESTED_REST_FRAME: [PadMarker<'static>; 9] = [
+        m("tag36h11", 0, 1.25, 0.0, 1.4),
+        m("tag36h11", 1, 0.40, -0.35, 0.35),
+        m("tag36h11", 2, 0.40, 0.35, 0.35),
+        m("tag36h11", 3, 0.40, 0.35, -0.35),
+        m("tag36h11", 4, 0.40, -0.35, -0.35),
+        m("tag36h11", 6, 0.12, 0.0, 0.16),
+        m("tag36h11", 7, 0.12, 0.16, 0.0),
+        m("tag36h11", 8, 0.12, 0.0, -0.16),
+        m("tag36h11", 9, 0.12, -0.16, 0.0),
+    ];
+    /// Markers of [`NESTED_REST`].
+    const NESTED_REST_LEN: usize = NESTED_REST_FRAME.len() + REST_SIDE * REST_SIDE;
+
+    /// [`NESTED_REST`]'s markers: its frame, then the rest field.
+    const fn nested_rest_markers() -> [PadMarker<'static>; NESTED_REST_LEN] {
+        let mut out = [PadMarker::EMPTY; NESTED_REST_LEN];
+        let (mut k, mut frame) = (0, NESTED_REST_FRAME.as_slice());
+        while let [marker, rest @ ..] = frame {
+            out = place(out, k, *marker);
+            (k, frame) = (k + 1, rest);
+        }
+        let half = (REST_SIDE - 1) as f32 / 2.0;
+        let mut cell = 0;
+        while cell < REST_SIDE * REST_SIDE {
+            let (row, col) = ((cell / REST_SIDE) as f32, (cell % REST_SIDE) as f32);
+            let marker = m(
+                "tag36h11",
+                REST_FIRST_ID + cell as u16,
+                REST_SIZE,
+                (col - half) * REST_PITCH,
+                (half - row) * REST_PITCH,
+            );
+            out = place(out, NESTED_REST_FRAME.len() + cell, marker);
+            cell += 1;
+        }
+        out
+    }
+
+    /// The recommended pad: [`NESTED`]'s large and middle markers (same ids, same places), with
+    /// the landing point under a field of small markers so that the camera of a vehicle
+    /// *resting* on the pad still has whole markers in view, and four markers between the
+    /// two for the last metre. A vehicle gets its position on the ground, so it can arm, take
+    /// off and land in a position mode without GPS, and its mount can be calibrated before
+    /// take-off. Marker 5 of [`NESTED`] is not used, so neither pad's markers are mistaken
+    /// for the other's.
+    ///
+    /// | marker | size | centre | decodable up to | fully in view down to |
+    /// |---|---|---|---|---|
+    /// | id 0 | 1.25 m | (0, 1.40) | 40.8 m | 3.9 m (offset) |
+    /// | ids 1-4 | 0.40 m | (+-0.35, +-0.35) | 13.0 m | 1.05 m (offset) |
+    /// | ids 6-9 | 0.12 m | (0, +-0.16), (+-0.16, 0) | 3.9 m | 0.42 m (offset) |
+    /// | ids 10-34 | 0.027 m | 5 x 5 at 0.034 m, within +-0.068 m | 0.88 m | the ground |
+    ///
+    /// On the ground the rest field keeps a whole marker in view, whatever the heading, with
+    /// the camera 0.08 m or more above the pad and within about 8 cm of the landing point
+    /// (both lenses above; `the_rest_pad_has_a_marker_in_view_from_the_ground_up` checks it).
+    pub const NESTED_REST: PadLayout<'static> =
+        or_empty(PadLayout::new("nested-rest", &nested_rest_markers()));
+
     /// Every shipped design.
-    pub const ALL: [&PadLayout<'static>; 2] = [&PAPER_SINGLE, &NESTED];
+    pub const ALL: [&PadLayout<'static>; 3] = [&PAPER_SINGLE, &NESTED, &NESTED_REST];
 }
 
 #[cfg(test)]

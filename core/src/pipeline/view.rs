@@ -135,6 +135,68 @@ mod tests {
         }
     }
 
+    /// The camera `height` m above the pad point (`x`, `y`), its image top turned `yaw_deg`
+    /// counter-clockwise from pad +y.
+    fn above_turned(x: f32, y: f32, height: f32, yaw_deg: f32) -> Pose {
+        let level = above(x, y, height);
+        let (s, c) = libm::sincosf(yaw_deg.to_radians());
+        // Turning the camera about its optical axis: camera-frame points turn the other way.
+        let turn = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+        Pose {
+            rotation: turn * level.rotation,
+            translation: turn * level.translation,
+        }
+    }
+
+    /// Whether some marker of `pad` is in view and decodable from every heading and from
+    /// every point within `radius` m of the landing point (a grid of a twelfth of it),
+    /// `height` m up.
+    fn covered(pad: &PadLayout<'_>, camera: &CameraModel, height: f32, radius: f32) -> bool {
+        const STEPS: i32 = 6;
+        let step = radius / STEPS as f32;
+        (-STEPS..=STEPS).all(|i| {
+            (-STEPS..=STEPS).all(|j| {
+                let (x, y) = (i as f32 * step, j as f32 * step);
+                x * x + y * y > radius * radius + 1e-6
+                    || (0..18).all(|k| {
+                        let pose = above_turned(x, y, height, 5.0 * k as f32);
+                        view_margin_m(&pose, pad, camera).is_some()
+                    })
+            })
+        })
+    }
+
+    #[test]
+    fn the_rest_pad_has_a_marker_in_view_from_the_ground_up() {
+        let vga = {
+            let f = 320.0 / libm::tanf(35f32.to_radians());
+            CameraModel::pinhole(640, 480, f, f, 319.5, 239.5)
+        };
+        let pad = &designs::NESTED_REST;
+        // On the ground: the camera 0.1 m up (or higher landing gear), within 6 cm of the
+        // landing point (a lever arm plus a landing's miss), facing anywhere.
+        for camera in [qvga(), vga] {
+            for height in [0.1f32, 0.15, 0.2, 0.3] {
+                assert!(covered(pad, &camera, height, 0.06), "{height} m");
+            }
+        }
+        // In the air: the camera within a tenth of its height of the landing point (a
+        // precision landing's approach).
+        for (camera, top) in [(qvga(), 20.0f32), (vga, 30.0)] {
+            for height in [0.5f32, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0, 30.0] {
+                if height <= top {
+                    assert!(
+                        covered(pad, &camera, height, (0.1 * height).min(1.0)),
+                        "{height} m, {} px",
+                        camera.width
+                    );
+                }
+            }
+        }
+        // The earlier nested pad has nothing whole in view on the ground.
+        assert!(!covered(&designs::NESTED, &qvga(), 0.1, 0.0));
+    }
+
     /// The envelope docs/hardware.md quotes: the nested pad's view margin with the camera
     /// straight above the landing point, for the 60 degree QVGA and the 70 degree VGA lens
     /// (`cargo test -p touchdown-core --lib envelope -- --nocapture` prints it).

@@ -136,6 +136,12 @@ pub struct SitlArgs {
     #[arg(long)]
     pub qvga: bool,
 
+    /// The pad drawn and looked for, a shipped design: nested-rest, nested or paper-single
+    /// [default: nested-rest against a running SITL, whose rehearsals start on the pad;
+    /// nested for the model's landings]
+    #[arg(long, value_name = "DESIGN")]
+    pub pad: Option<String>,
+
     /// Give up on a landing after this long, seconds
     #[arg(long, value_name = "S", default_value_t = 90.0)]
     pub max_time: f64,
@@ -252,6 +258,18 @@ pub struct SitlArgs {
     #[arg(long, value_name = "M", help_heading = "A running SITL")]
     pub gps_loss_height: Option<f64>,
 
+    /// With --gcs on ArduPilot SITL: no GPS at all, from boot (GPS1_TYPE 0): the EKF's
+    /// position is the board's VISION_POSITION_ESTIMATE (TD_VPE_EN 1 unless set) from the
+    /// ground up, its origin set at the pad; the vehicle arms once the board sends its
+    /// position and has calibrated its mount on the pad (docs/setup-ardupilot.md, "Without
+    /// GPS")
+    #[arg(
+        long,
+        help_heading = "A running SITL",
+        conflicts_with = "gps_loss_height"
+    )]
+    pub no_gps: bool,
+
     /// With --gcs: how long a refused connection to the ground-station port is tried again,
     /// seconds (a SITL just launched opens its port a few seconds later)
     #[arg(long, value_name = "S", default_value_t = gcs::CONNECT_PATIENCE.as_secs_f64(), value_parser = parse_timeout, help_heading = "A running SITL")]
@@ -337,6 +355,15 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
             return Err(CliError(format!(
                 "--gps-loss-height must be a height > 0 and at most --height ({} m): GPS is lost on the climb",
                 args.height
+            )));
+        }
+    }
+    if let Some(name) = &args.pad {
+        let names = touchdown_sim::pad::design_names();
+        if !names.iter().any(|n| n.eq_ignore_ascii_case(name)) {
+            return Err(CliError(format!(
+                "--pad: no design `{name}` (shipped: {})",
+                names.join(", ")
             )));
         }
     }
@@ -581,10 +608,10 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
              --tcp, --udp or --udp-listen",
         ));
     }
-    if args.gps_loss_height.is_some() {
+    if args.gps_loss_height.is_some() || args.no_gps {
         return Err(CliError::new(
-            "--gps-loss-height is for a running SITL flown with --gcs: give the board's link too, \
-             --tcp, --udp or --udp-listen",
+            "--gps-loss-height and --no-gps are for a running SITL flown with --gcs: give the \
+             board's link too, --tcp, --udp or --udp-listen",
         ));
     }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -606,6 +633,7 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             fps: args.fps,
             qvga: args.qvga,
             renderer: args.renderer.unwrap_or(RendererArg::Raster).renderer(),
+            pad: args.pad.clone(),
             threads: render_threads,
             max_flight_s: args.max_time,
             ..LandingConfig::issue_15(args.seed.wrapping_add(k))

@@ -80,6 +80,13 @@ const TRUTH_INTERVAL_US: u32 = 20_000;
 const MSG_SIM_STATE: u32 = 108;
 /// PX4's ground truth, HIL_STATE_QUATERNION.
 const MSG_HIL_STATE_QUATERNION: u32 = 115;
+/// The pad a running SITL's rehearsal draws unless `--pad` says otherwise: the one whose
+/// markers stay in view with the vehicle resting on it.
+const REST_PAD: &str = "nested-rest";
+/// The board's mount counts as calibrated when the tilt it may still be off by is at most
+/// this, degrees: the calibrator's own confidence bound
+/// (`MountCalibrationConfig::max_sigma_deg`'s default).
+const MOUNT_READY_DEG: f32 = 0.5;
 /// How often the loop looks at the link and the clock.
 const TICK: Duration = Duration::from_millis(1);
 /// The board's VISION_POSITION_ESTIMATEs count as flowing while the last is this recent, s
@@ -381,6 +388,7 @@ pub fn fly(
             let board = gcs::BoardPosition {
                 flowing: t - vision_sent_s < VISION_FLOWING_S,
                 fit: companion.stats().vision_fit,
+                mount_ready: pipeline.estimator().mount_sigma_deg() <= MOUNT_READY_DEG,
             };
             if r.flight
                 .poll(&mut r.link, t, now_truth, pad_at, board, err)?
@@ -545,6 +553,7 @@ fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>, vision_velocity: bool
             turbulence_mps: args.turbulence as f32,
         }),
         gps_loss_height_m: args.gps_loss_height,
+        no_gps: args.no_gps,
         vision_velocity,
         patience: gcs::Patience {
             connect: std::time::Duration::from_secs_f64(args.connect_timeout),
@@ -566,15 +575,21 @@ pub(super) fn run(
             "--seeds and --record fly the model; a running SITL flies one landing",
         ));
     }
-    if args.gps_loss_height.is_some() && args.gcs.is_none() {
-        return Err(CliError::new(
-            "--gps-loss-height needs --gcs: the ground station switches the autopilot's sources",
-        ));
+    let gps_denied = args.gps_loss_height.is_some() || args.no_gps;
+    let gps_flag = if args.no_gps {
+        "--no-gps"
+    } else {
+        "--gps-loss-height"
+    };
+    if gps_denied && args.gcs.is_none() {
+        return Err(CliError(format!(
+            "{gps_flag} needs --gcs: the ground station sets the autopilot's sources"
+        )));
     }
     // A GPS-denied rehearsal navigates on the board's VISION_POSITION_ESTIMATE: TD_VPE_EN 1
     // unless the user set it.
     let mut params = params;
-    if args.gps_loss_height.is_some()
+    if gps_denied
         && params
             .iter()
             .all(|(name, _)| !name.eq_ignore_ascii_case("TD_VPE_EN"))
@@ -586,9 +601,9 @@ pub(super) fn run(
         .rev()
         .find(|(name, _)| name.eq_ignore_ascii_case("TD_VPE_EN"))
         .map_or(0, |(_, v)| *v as i32);
-    if args.gps_loss_height.is_some() && vpe_en & 1 == 0 {
+    if gps_denied && vpe_en & 1 == 0 {
         return Err(CliError(format!(
-            "--gps-loss-height: TD_VPE_EN = {vpe_en} sends no VISION_POSITION_ESTIMATE (bit 0)"
+            "{gps_flag}: TD_VPE_EN = {vpe_en} sends no VISION_POSITION_ESTIMATE (bit 0)"
         )));
     }
     let landing = LandingConfig {
@@ -601,6 +616,8 @@ pub(super) fn run(
             .renderer
             .unwrap_or(crate::renderer::RendererArg::Warp)
             .renderer(),
+        // A rehearsal starts with the vehicle resting on the pad: the pad it can see there.
+        pad: Some(args.pad.clone().unwrap_or_else(|| REST_PAD.to_string())),
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),

@@ -382,6 +382,51 @@ fn gps_loss_options_out_of_place_are_usage_errors() {
 }
 
 #[test]
+fn no_gps_and_pad_options_out_of_place_are_usage_errors() {
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_touchdown"))
+            .args(args)
+            .output()
+            .expect("run touchdown")
+    };
+    assert_one_line_error(
+        &run(&["sitl", "--tcp", "127.0.0.1:9", "--no-gps"]),
+        &["--no-gps needs --gcs"],
+    );
+    assert_one_line_error(&run(&["sitl", "--no-gps"]), &["--no-gps", "running SITL"]);
+    assert_one_line_error(
+        &run(&[
+            "sitl",
+            "--tcp",
+            "127.0.0.1:9",
+            "--gcs",
+            "tcp:127.0.0.1:9",
+            "--no-gps",
+            "--gps-loss-height",
+            "8",
+        ]),
+        &["--no-gps", "--gps-loss-height"],
+    );
+    assert_one_line_error(
+        &run(&[
+            "sitl",
+            "--tcp",
+            "127.0.0.1:9",
+            "--gcs",
+            "tcp:127.0.0.1:9",
+            "--no-gps",
+            "--board-params",
+            "TD_VPE_EN=0",
+        ]),
+        &["--no-gps: TD_VPE_EN = 0", "VISION_POSITION_ESTIMATE"],
+    );
+    assert_one_line_error(
+        &run(&["sitl", "--pad", "round"]),
+        &["--pad: no design `round`", "nested-rest"],
+    );
+}
+
+#[test]
 fn timeouts_that_are_not_seconds_are_usage_errors() {
     for (option, bad) in [
         ("--connect-timeout", "0"),

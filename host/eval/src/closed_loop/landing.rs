@@ -8,6 +8,7 @@ use touchdown_core::image::GrayImage;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::camera::SimCamera;
 use touchdown_sim::effects::FlightEffects;
+use touchdown_sim::pad::PrintedPad;
 use touchdown_sim::scenario::{FramePlan, Scenario};
 use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
 use touchdown_sim::{Renderer, SimFrame, Simulator};
@@ -64,6 +65,9 @@ pub struct LandingConfig {
     pub qvga: bool,
     /// The simulator's image model ([`Renderer::Raster`] in [`LandingConfig::issue_15`]).
     pub renderer: Renderer,
+    /// The shipped pad design drawn and looked for, by name; `None`: the landing
+    /// scenario's own (nested).
+    pub pad: Option<String>,
     /// Rendering threads per frame.
     pub threads: usize,
     /// Give up after this long without a touchdown, seconds.
@@ -107,6 +111,7 @@ impl LandingConfig {
             fps: 15.0,
             qvga: false,
             renderer: Renderer::Raster,
+            pad: None,
             threads: 1,
             max_flight_s: 90.0,
             vehicle: VehicleParams::typical(),
@@ -289,6 +294,14 @@ pub fn scene(config: &LandingConfig) -> Result<Scenario, String> {
         let lens = scenario.camera.model.distortion;
         scenario.camera = SimCamera::with_fov(320, 240, LANDING_HFOV_DEG, lens);
         scenario.supersampling = QVGA_SUPERSAMPLING;
+    }
+    if let Some(name) = &config.pad {
+        scenario.pad = PrintedPad::design(name).ok_or_else(|| {
+            format!(
+                "no pad design `{name}` (shipped: {})",
+                touchdown_sim::pad::design_names().join(", ")
+            )
+        })?;
     }
     scenario.frames.clear();
     scenario.apply_effects(&config.effects);

@@ -49,6 +49,32 @@ pub struct BoardPosition {
     pub flowing: bool,
     /// The board says its position is fit to navigate on (`CompanionStats::vision_fit`).
     pub fit: bool,
+    /// The board's mount calibration is done and in force: its position stays right at
+    /// height, not only on the ground.
+    pub mount_ready: bool,
+}
+
+/// What a rehearsal without GPS waits for before it arms, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ArmingWait {
+    /// The estimator's origin (SET_GPS_GLOBAL_ORIGIN at the pad).
+    Origin,
+    /// The board's VISION_POSITION_ESTIMATEs.
+    BoardPosition,
+    /// The board's mount calibration, made with the vehicle resting on the pad.
+    Mount,
+}
+
+impl ArmingWait {
+    fn says(self) -> &'static str {
+        match self {
+            ArmingWait::Origin => "setting the EKF origin at the pad (SET_GPS_GLOBAL_ORIGIN)",
+            ArmingWait::BoardPosition => "waiting for the board's VISION_POSITION_ESTIMATEs",
+            ArmingWait::Mount => {
+                "waiting for the board's mount calibration (the vehicle resting on the pad)"
+            }
+        }
+    }
 }
 
 /// Where the GPS loss of a GPS-denied rehearsal is.
@@ -107,9 +133,12 @@ pub struct FlightLog {
     /// When the SITL answered that its GPS is off.
     pub gps_off_s: Option<f64>,
     /// Whether the board said its position was fit to navigate on when the switch began (the
-    /// rehearsal does not wait for it: at the heights it loses GPS the board's mount
-    /// calibration is not yet confident, docs/setup-ardupilot.md).
+    /// rehearsal does not wait for it).
     pub board_fit_at_switch: Option<bool>,
+    /// Without GPS: when the autopilot had its origin.
+    pub origin_set_s: Option<f64>,
+    /// When the board's mount calibration was in force (any rehearsal: first seen).
+    pub mount_ready_s: Option<f64>,
 }
 
 /// The flight's state machine (see the module documentation).
@@ -122,6 +151,8 @@ pub struct Flight {
     target_amsl_m: Option<f64>,
     /// The GPS loss, when the plan asks for one.
     gps_loss: Option<GpsLoss>,
+    /// The last wait before arming that was said (each is said once).
+    arming_wait_said: Option<ArmingWait>,
     /// What happened when.
     pub log: FlightLog,
 }
@@ -144,6 +175,7 @@ impl Flight {
             stage: Stage::Arming { next_try_s: 0.0 },
             pad: None,
             target_amsl_m: None,
+            arming_wait_said: None,
             log: FlightLog::default(),
         }
     }
@@ -167,6 +199,12 @@ impl Flight {
     ) -> Result<Option<FlightEnd>, CliError> {
         link.pump(err)?;
         self.pad = self.pad.or(pad);
+        if board.mount_ready {
+            self.log.mount_ready_s.get_or_insert(t);
+        }
+        if link.status.origin_set {
+            self.log.origin_set_s.get_or_insert(t);
+        }
         self.lose_gps(link, t, truth.map(|(s, _)| s.position.z), board, err)?;
         let gps_lost = self.gps_loss.is_none_or(|g| g == GpsLoss::Done);
         let autopilot = link.autopilot;
@@ -190,7 +228,13 @@ impl Flight {
                         last_refusal(link)
                     )));
                 } else if t >= next_try_s && self.pad.is_some() {
-                    if autopilot == Autopilot::ArduPilot && link.status.custom_mode != COPTER_GUIDED
+                    if let Some(wait) = self.arming_wait(link, board)? {
+                        if self.arming_wait_said != Some(wait) {
+                            self.arming_wait_said = Some(wait);
+                            let _ = writeln!(err, "{t:7.2} s  {}", wait.says());
+                        }
+                    } else if autopilot == Autopilot::ArduPilot
+                        && link.status.custom_mode != COPTER_GUIDED
                     {
                         link.set_mode(COPTER_GUIDED)?;
                     } else {
@@ -472,6 +516,31 @@ impl Flight {
         };
         self.gps_loss = Some(next);
         Ok(())
+    }
+
+    /// Without GPS, what arming still waits for (the origin is asked for on the way); `None`
+    /// when it may arm.
+    fn arming_wait(
+        &mut self,
+        link: &mut GcsLink,
+        board: BoardPosition,
+    ) -> Result<Option<ArmingWait>, CliError> {
+        if !self.plan.no_gps {
+            return Ok(None);
+        }
+        if !link.status.origin_set {
+            if let Some(pad) = self.pad {
+                link.set_origin(pad)?;
+            }
+            return Ok(Some(ArmingWait::Origin));
+        }
+        Ok(if !board.flowing {
+            Some(ArmingWait::BoardPosition)
+        } else if !board.mount_ready {
+            Some(ArmingWait::Mount)
+        } else {
+            None
+        })
     }
 
     fn take_off(&mut self, link: &mut GcsLink) -> Result<(), CliError> {

@@ -45,6 +45,8 @@ pub struct Status {
     pub custom_mode: u32,
     /// GLOBAL_POSITION_INT: the autopilot's own altitude AMSL, metres.
     pub altitude_m: Option<f64>,
+    /// The estimator has its origin: a GPS_GLOBAL_ORIGIN came, or ArduPilot said "origin set".
+    pub origin_set: bool,
 }
 
 /// A parameter as the autopilot last reported it.
@@ -230,6 +232,7 @@ impl GcsLink {
                     },
                 );
             }
+            MavMessage::GPS_GLOBAL_ORIGIN(_) => self.status.origin_set = true,
             MavMessage::COMMAND_ACK(a) => self.acks.push((a.command, a.result)),
             MavMessage::STATUSTEXT(s) => {
                 let chunk = touchdown_core::params::name_str(&s.text[..]);
@@ -247,6 +250,10 @@ impl GcsLink {
                     return;
                 }
                 let t = self.clock_zero.elapsed().as_secs_f64();
+                // ArduPilot's EKF3: "EKF3 IMU0 origin set".
+                if text.contains("origin set") {
+                    self.status.origin_set = true;
+                }
                 if s.severity as u8 <= MavSeverity::MAV_SEVERITY_INFO as u8 {
                     let _ = writeln!(err, "{t:7.2} s  {}: {text}", self.autopilot.name());
                 }
@@ -335,6 +342,24 @@ impl GcsLink {
             param_id: switch.name.as_str().into(),
             param_type: switch.kind,
         }))
+    }
+
+    /// Sets the estimator's origin (SET_GPS_GLOBAL_ORIGIN): latitude and longitude in
+    /// degrees, altitude AMSL in metres. An autopilot that has its origin ignores it.
+    // The message MAVLink now calls superseded by MAV_CMD_DO_SET_GLOBAL_ORIGIN is the one
+    // ArduPilot 4.x and PX4 handle.
+    #[allow(deprecated)]
+    pub fn set_origin(&mut self, at: [f64; 3]) -> Result<(), CliError> {
+        use touchdown_core::companion::mavlink::dialects::common::SET_GPS_GLOBAL_ORIGIN_DATA;
+        self.send(&MavMessage::SET_GPS_GLOBAL_ORIGIN(
+            SET_GPS_GLOBAL_ORIGIN_DATA {
+                latitude: (at[0] * 1e7).round() as i32,
+                longitude: (at[1] * 1e7).round() as i32,
+                altitude: (at[2] * 1e3).round() as i32,
+                target_system: self.system_id,
+                ..SET_GPS_GLOBAL_ORIGIN_DATA::DEFAULT
+            },
+        ))
     }
 
     /// Whether the autopilot has answered that its simulated GPS is off.
@@ -601,6 +626,11 @@ pub fn prepare(
             "{}: the vehicle is armed: start the rehearsal on the ground, disarmed",
             link.describe()
         )));
+    }
+    if plan.no_gps && link.autopilot == Autopilot::Px4 {
+        return Err(CliError::new(
+            "--no-gps: not supported on PX4 yet (ArduPilot SITL only; docs/setup-px4.md)",
+        ));
     }
     let gps_switch = match (plan.gps_loss_height_m, link.autopilot) {
         (None, _) => None,

@@ -132,6 +132,9 @@ pub struct Plan {
     /// GPS lost on the climb at this height over the pad, metres (`--gps-loss-height`):
     /// ArduPilot switches to the vision source set and the SITL's GPS is turned off.
     pub gps_loss_height_m: Option<f64>,
+    /// No GPS from boot (`--no-gps`): ArduPilot's GPS off and its position from the board
+    /// (source set 1); the EKF origin set at the pad; arming waits for the board.
+    pub no_gps: bool,
     /// The board sends its velocity too (TD_VPE_EN bit 1): the vision source set fuses it.
     pub vision_velocity: bool,
     /// How long the ground station waits for the SITL.
@@ -192,7 +195,9 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
         // docs/setup-px4.md, section 3.
         Autopilot::Px4 => vec![setting("PLD_FAPPR_ALT", 0.5), setting("PLD_BTOUT", 5.0)],
     };
-    if let (Autopilot::ArduPilot, Some(_)) = (autopilot, plan.gps_loss_height_m) {
+    if autopilot == Autopilot::ArduPilot && plan.no_gps {
+        list.extend(no_gps_recipe(plan.vision_velocity));
+    } else if let (Autopilot::ArduPilot, Some(_)) = (autopilot, plan.gps_loss_height_m) {
         let own_arming = plan.extra.iter().any(|(name, _)| name == "ARMING_CHECK");
         list.extend(
             gps_denied_recipe(plan.vision_velocity)
@@ -246,6 +251,41 @@ fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
         // ArduPilot weighs VISION_SPEED_ESTIMATE by this, not by the message's covariance:
         // at its 0.1 m/s default the board's velocity (errors up to 1 m/s while the vehicle
         // manoeuvres at 12 m, and some 0.3 s old) made the vehicle oscillate and lose the pad.
+        list.push(setting("VISO_VEL_M_NSE", 1.0));
+    }
+    list
+}
+
+/// ArduPilot without GPS from boot (docs/setup-ardupilot.md, "Without GPS"): source set 1 is
+/// the board's position, baro height and compass yaw, as a vehicle with no GPS receiver is set
+/// up. The visual-odometry arming check stays on: the board sends its position with the
+/// vehicle on the pad, and a vehicle that cannot see the pad must not take off on it.
+fn no_gps_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
+    let mut list = vec![
+        ParamSetting {
+            needs_reboot: true,
+            ..setting("VISO_TYPE", 1.0)
+        },
+        setting("VISO_DELAY_MS", 80.0),
+        setting("EK3_SRC1_POSXY", 6.0),
+        setting("EK3_SRC1_VELXY", if vision_velocity { 6.0 } else { 0.0 }),
+        setting("EK3_SRC1_POSZ", 1.0),
+        setting("EK3_SRC1_VELZ", 0.0),
+        setting("EK3_SRC1_YAW", 1.0),
+        // No receiver: GPS1_TYPE (ArduPilot 4.6 and newer) or GPS_TYPE (older), read at boot.
+        ParamSetting {
+            needs_reboot: true,
+            optional: true,
+            ..setting("GPS1_TYPE", 0.0)
+        },
+        ParamSetting {
+            needs_reboot: true,
+            optional: true,
+            ..setting("GPS_TYPE", 0.0)
+        },
+    ];
+    if vision_velocity {
+        // As in the GPS-loss recipe: ArduPilot weighs the velocity by this, not the message.
         list.push(setting("VISO_VEL_M_NSE", 1.0));
     }
     list
@@ -334,6 +374,7 @@ mod tests {
                 turbulence_mps: 1.0,
             }),
             gps_loss_height_m: None,
+            no_gps: false,
             vision_velocity: false,
             patience: Patience::default(),
         };
@@ -360,6 +401,7 @@ mod tests {
             extra: vec![("VISO_DELAY_MS".into(), 60.0)],
             wind: None,
             gps_loss_height_m: Some(12.0),
+            no_gps: false,
             vision_velocity: true,
             patience: Patience::default(),
         };
@@ -393,6 +435,39 @@ mod tests {
         // PX4: nothing of it (the rehearsal refuses it there).
         let px4 = recipe(Autopilot::Px4, &plan);
         assert!(px4.iter().all(|s| !s.name.starts_with("EK3_")));
+    }
+
+    #[test]
+    fn without_gps_from_boot_the_first_source_set_is_the_board_and_arming_is_checked() {
+        let plan = Plan {
+            height_m: 12.0,
+            start_north_m: 1.0,
+            start_east_m: 2.0,
+            yaw_deg: None,
+            extra: vec![],
+            wind: None,
+            gps_loss_height_m: None,
+            no_gps: true,
+            vision_velocity: false,
+            patience: Patience::default(),
+        };
+        let ap = recipe(Autopilot::ArduPilot, &plan);
+        let value = |name: &str| ap.iter().find(|s| s.name == name).map(|s| s.value);
+        assert_eq!(value("EK3_SRC1_POSXY"), Some(6.0));
+        assert_eq!(value("EK3_SRC1_VELXY"), Some(0.0));
+        assert_eq!(value("EK3_SRC1_POSZ"), Some(1.0));
+        assert_eq!(value("GPS1_TYPE"), Some(0.0));
+        assert!(ap.iter().all(|s| !s.name.starts_with("EK3_SRC2")));
+        // The receiver and the odometry backend are read at boot; the vision arming check
+        // stays.
+        assert!(ap
+            .iter()
+            .filter(|s| ["VISO_TYPE", "GPS1_TYPE", "GPS_TYPE"].contains(&s.name.as_str()))
+            .all(|s| s.needs_reboot));
+        assert!(ap.iter().all(|s| s.name != "ARMING_SKIPCHK"));
+        assert!(recipe(Autopilot::Px4, &plan)
+            .iter()
+            .all(|s| !s.name.starts_with("EK3_") && !s.name.starts_with("GPS")));
     }
 
     #[test]
