@@ -18,6 +18,7 @@ use serde::Serialize;
 
 mod connect;
 pub mod gcs;
+mod vision_check;
 
 use super::{CliError, Outcome};
 use crate::companion::endpoint::EndpointSpec;

@@ -26,6 +26,10 @@
 //! pace for [`LANDED_HOLD_S`]; the error is the horizontal position then against the pad's
 //! origin, as in the model's closed loop.
 //!
+//! With TD_VPE_EN bit 0 the board's VISION_POSITION_ESTIMATEs are set against the truth at
+//! their frames' times as they go out (`vision_check`), while the flight holds a position and
+//! while airborne: how right the position an autopilot would navigate on is.
+//!
 //! Each frame is rendered [`FRAME_DELAY_S`] in the past, so that the truth is interpolated
 //! between two samples instead of extrapolated: like the board, which processes a frame
 //! after its readout, the frame is older than the moment it is processed.
@@ -46,6 +50,7 @@ use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::Simulator;
 
 use super::gcs::{self, Flight, GcsLink};
+use super::vision_check::{FrameNote, VisionAccuracy, VisionCheck};
 use crate::companion::endpoint::{Endpoint, EndpointSpec};
 use crate::companion::interrupt;
 use crate::CliError;
@@ -217,6 +222,8 @@ pub struct ConnectedOutcome {
     pub retakeoff_s: Option<f64>,
     /// VISION_POSITION_ESTIMATEs sent (TD_VPE_EN bit 0).
     pub vision_estimates_sent: u32,
+    /// How right those were against the truth (`None`: none sent).
+    pub vision_accuracy: Option<VisionAccuracy>,
 }
 
 /// Flies one landing against the SITL at `config.endpoint`; progress lines go to `err`. With a
@@ -277,6 +284,7 @@ pub fn fly(
     let (mut lag_sum, mut lag_max, mut lag_count) = (0.0, 0.0_f64, 0usize);
     // The board's VISION_POSITION_ESTIMATEs: how many, and when the count last grew.
     let (mut vision_sent, mut vision_sent_s) = (0u32, f64::NEG_INFINITY);
+    let mut vision_check = VisionCheck::new(rehearsal.is_some());
 
     let _ = writeln!(
         err,
@@ -422,6 +430,10 @@ pub fn fly(
                 outcome.frames += 1;
                 outcome.frames_with_fix += usize::from(report.fix.is_some());
                 let handed_s = now_s();
+                vision_check.on_frame(FrameNote {
+                    exposure_us: t_us,
+                    holding: rehearsal.as_deref().map(|r| r.flight.holding()),
+                });
                 companion.on_estimate(&report.estimate, (handed_s * 1e6) as u64);
                 let lag = handed_s - frame_s;
                 lag_sum += lag;
@@ -430,7 +442,9 @@ pub fn fly(
             }
         }
         while let Some(n) = companion.poll_transmit((now_s() * 1e6) as u64, &mut tx) {
-            let _ = endpoint.send(tx.get(..n).unwrap_or(&[]));
+            let bytes = tx.get(..n).unwrap_or(&[]);
+            let _ = endpoint.send(bytes);
+            vision_check.on_sent(bytes, companion.timesync(), &truth, AIRBORNE_HEIGHT_M);
         }
         let sent = companion.stats().landing_targets;
         if sent > 0 && outcome.first_target_s.is_none() {
@@ -445,6 +459,7 @@ pub fn fly(
         std::thread::sleep(TICK);
     }
     outcome.lag_s = (lag_count > 0).then(|| (lag_sum / lag_count as f64, lag_max));
+    outcome.vision_accuracy = vision_check.report();
     // The board's mount calibration: what it made of the flight (a GPS-denied rehearsal
     // waits for it), for whoever wonders why the board's position was or was not fit.
     let calibrator = pipeline.estimator().mount_calibrator();
@@ -528,6 +543,9 @@ struct ConnectedJson {
     run_s: f64,
     stopped: Option<String>,
     rehearsal: Option<RehearsalJson>,
+    /// Only when the board sent VISION_POSITION_ESTIMATEs: the key is absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    vision_accuracy: Option<VisionAccuracy>,
 }
 
 /// The rehearsal's plan from the command line: the start point at `--offset` on a bearing
@@ -708,6 +726,7 @@ pub(super) fn run(
                         vision_estimates_sent: o.vision_estimates_sent,
                     }),
                 }),
+            vision_accuracy: o.vision_accuracy.clone(),
         };
         let mut line = serde_json::to_string(&json).map_err(CliError::new)?;
         line.push('\n');
@@ -800,6 +819,14 @@ pub(super) fn run(
                 1e3 * max
             ))
         ));
+        if let Some(v) = &o.vision_accuracy {
+            if let Some(holding) = &v.holding {
+                t.push_str(&holding.line("while holding"));
+                t.push('\n');
+            }
+            t.push_str(&v.airborne.line("while airborne"));
+            t.push('\n');
+        }
         if let (Some(loss_m), Some(l)) = (args.gps_loss_height, &log) {
             t.push_str(&match (l.gps_off_s, l.source_switched_height_m) {
                 (Some(s), Some(h)) => format!(

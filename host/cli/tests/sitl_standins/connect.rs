@@ -12,7 +12,9 @@
 //! the run sends is in BODY_FRD and points at the pad as the
 //! script has it (the horizontal components, which the script holds constant, within a few
 //! centimetres); enough of them arrive; and the run reports the touchdown where the script
-//! put the vehicle down. That is the whole connected path: ground truth decoded from the
+//! put the vehicle down; with TD_VPE_EN 1, every VISION_POSITION_ESTIMATE the board sends is
+//! matched to its frame and right to centimetres in the run's own check. That is the whole
+//! connected path: ground truth decoded from the
 //! SITL's messages, the frames rendered from it, the per-frame path and the companion on
 //! them, and the bytes both ways over TCP in wall-clock time.
 
@@ -47,6 +49,35 @@ fn height(t: f64) -> f64 {
 
 #[test]
 fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
+    let json = land_on_the_standin(&[]);
+    // No VISION_POSITION_ESTIMATE sent (TD_VPE_EN 0): no figure for it.
+    assert!(json.get("vision_accuracy").is_none(), "{json}");
+}
+
+/// With TD_VPE_EN bit 0 the run sets each VISION_POSITION_ESTIMATE the board sends against
+/// the stand-in's truth at its frame's time (the stand-in answers TIMESYNC, so the stamps
+/// are in its clock): every one finds its frame, the hover and the descent above the
+/// airborne height give a figure, and with an ideal camera over a still vehicle the
+/// position is right to centimetres. Only watching: no figure while holding.
+#[test]
+fn the_boards_vision_position_is_checked_against_the_truth() {
+    let json = land_on_the_standin(&["--board-params", "TD_VPE_EN=1"]);
+    let v = &json["vision_accuracy"];
+    let messages = v["messages"].as_u64().expect("messages");
+    assert!(messages >= 10, "{v}");
+    assert_eq!(v["without_truth"], 0, "{v}");
+    assert!(v.get("holding").is_none(), "{v}");
+    let airborne = &v["airborne"];
+    assert!(airborne["messages"].as_u64().expect("airborne") >= 5, "{v}");
+    let max = airborne["horizontal_max_m"].as_f64().expect("max");
+    assert!(max < 0.05, "{v}");
+    let pct = airborne["within_2sigma_pct"].as_f64().expect("pct");
+    assert!((0.0..=100.0).contains(&pct), "{v}");
+}
+
+/// Flies `touchdown sitl --json` (with `extra` arguments) against the stand-in, asserts what
+/// every such landing must show, and returns its JSON line.
+fn land_on_the_standin(extra: &[&str]) -> serde_json::Value {
     let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
     let port = listener.local_addr().expect("addr").port();
     let pad_at = format!("{},{},{}", PAD[0], PAD[1], PAD[2]);
@@ -65,6 +96,7 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
             "40",
             "--json",
         ])
+        .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -244,4 +276,5 @@ fn a_landing_against_a_sitl_over_tcp_is_rendered_from_its_ground_truth() {
         "only {targets} LANDING_TARGETs arrived: {json}"
     );
     assert!(worst_cm < 5.0, "a target {worst_cm:.1} cm off the pad");
+    json
 }

@@ -185,6 +185,17 @@ impl Flight {
         self.log.landing_s
     }
 
+    /// Whether the vehicle is holding a position it was sent to: at the top of the climb
+    /// while a GPS-denied rehearsal waits for its GPS loss, or settled at the start point
+    /// before the landing (for the board position's accuracy while holding).
+    pub fn holding(&self) -> bool {
+        match self.stage {
+            Stage::TakingOff { .. } => self.log.climbed_s.is_some(),
+            Stage::Moving { settled_s, .. } => settled_s.is_some(),
+            Stage::Arming { .. } | Stage::Landing { .. } | Stage::Disarmed { .. } => false,
+        }
+    }
+
     /// One step: reads the link, and sends what the stage needs. `truth` is the vehicle's
     /// true state in the pad frame (x east, y north, z up), `pad` the pad's geodetic origin,
     /// `board` what the board's position is at (VISION_POSITION_ESTIMATEs).
