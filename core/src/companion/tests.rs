@@ -680,14 +680,18 @@ fn vision_estimate_is_the_vehicle_origin_with_the_mount_error_in_its_covariance(
     let got = Vector3::new(vpe.x, vpe.y, vpe.z);
     assert!((got - expected).amax() < 1e-5, "{got} vs {expected}");
     assert!((got + rel).amax() > 0.1, "the lever arm is applied");
-    // The mount's 2 degrees across 12 m of line of sight: 0.42 m one sigma, north and east
-    // alike, beside which the track's 2 cm is small; hardly anything along the line (down).
-    let turned = crate::filter::turn_covariance(&rel, 2.0f32.to_radians());
+    // The mount's 2 degrees and the attitude's slow error across 12 m of line of sight:
+    // 0.42 m one sigma, north and east alike, beside which the track's 2 cm and the heading's
+    // turn of the 0.58 m beside the pad are small; hardly anything along the line (down).
+    let tilt_deg = libm::hypotf(2.0, crate::filter::ATTITUDE_BIAS_DEG);
+    let turned = crate::filter::turn_covariance(&rel, tilt_deg.to_radians())
+        + super::vision::heading_covariance(&rel, super::vision::HEADING_SIGMA_DEG.to_radians());
     let north = vpe.covariance[0];
     let east = vpe.covariance[6];
     let down = vpe.covariance[11];
     assert!((north - (0.0004 + turned[(0, 0)])).abs() < 1e-5, "{north}");
     assert!((east - (0.0004 + turned[(1, 1)])).abs() < 1e-5, "{east}");
+    assert!(turned[(0, 0)] > crate::filter::turn_covariance(&rel, 2f32.to_radians())[(0, 0)]);
     assert!(
         (libm::sqrtf(north) - 0.42).abs() < 0.01,
         "{}",
@@ -702,7 +706,29 @@ fn vision_estimate_is_the_vehicle_origin_with_the_mount_error_in_its_covariance(
         1_000_000,
     );
     let north = vpe.unwrap().covariance[0];
-    assert!(libm::sqrtf(north) < 0.04, "{}", libm::sqrtf(north));
+    assert!(libm::sqrtf(north) < 0.07, "{}", libm::sqrtf(north));
+}
+
+#[test]
+fn a_heading_error_turns_a_vehicle_beside_the_pad_around_it() {
+    // 10 m beside the pad, 2 m up: the heading's turn moves the vehicle across the line to
+    // the pad (east, for a pad due north) by 10 m times the heading's sigma; along it
+    // (north) hardly at all.
+    let mut c = vision_companion(&[]);
+    let rel = Vector3::new(10.0, 0.0, 2.0);
+    let (vpe, _) = vision_sent(
+        &mut c,
+        &vision_frame(1_000_000, rel, 0.0001, 0.0),
+        1_000_000,
+    );
+    let cov = vpe.expect("an estimate").covariance;
+    let across = 10.0 * super::vision::HEADING_SIGMA_DEG.to_radians();
+    assert!(
+        (libm::sqrtf(cov[6]) - across).abs() < 0.02 * across,
+        "{}",
+        cov[6]
+    );
+    assert!(libm::sqrtf(cov[0]) < 0.2 * across, "{}", cov[0]);
 }
 
 #[test]
@@ -753,7 +779,7 @@ fn fit_to_navigate_is_announced_when_it_changes() {
     // Calibrated: fit, said once.
     assert_eq!(
         feed(&mut c, 0.1, true),
-        ["touchdown: position fit to navigate +-0.03 m"]
+        ["touchdown: position fit to navigate +-0.06 m"]
     );
     assert!(feed(&mut c, 0.1, true).is_empty());
     assert!(c.stats().vision_fit);

@@ -8,12 +8,14 @@
 //!   on the autopilot's side (ArduPilot's VISO_POS_*, PX4's EKF2_EV_POS_* stay 0). It is the
 //!   same offset the PX4 profile's targets add.
 //! - **The covariance holds what the board does not know**: the level track's (the fixes'
-//!   noise and the attitude's frame-to-frame noise), plus the mount's tilt error turned over
-//!   the line of sight ([`crate::filter::turn_covariance`],
-//!   [`LevelEstimate::mount_sigma_deg`]). A mount error is the same in every frame, so no
-//!   filtering removes it, and it grows with height: before the in-flight calibration, the
-//!   position high above the pad is worth decimetres, and an estimator that fuses it must be
-//!   told so rather than trust centimetres.
+//!   noise and the attitude's frame-to-frame noise), plus the tilt errors that no filtering
+//!   removes, turned over the line of sight ([`crate::filter::turn_covariance`]): the
+//!   mount's ([`LevelEstimate::mount_sigma_deg`]) and the autopilot's slowly varying roll and
+//!   pitch error ([`ATTITUDE_BIAS_DEG`]), and the autopilot's heading error
+//!   ([`HEADING_SIGMA_DEG`]) turned about the pad's vertical. Each grows with the distance:
+//!   before the mount calibration the position high above the pad is worth decimetres, and
+//!   a heading error moves a vehicle beside the pad around it; an estimator that fuses the
+//!   position must be told so rather than trust centimetres.
 //! - **The reset counter steps when the stream resumes after a gap** ([`RESUME_GAP_US`]):
 //!   the track that resumes is a new one, whose first positions need not continue the old
 //!   track's last. Both autopilots take a stepped counter as a jump to adopt (ArduPilot's
@@ -34,9 +36,9 @@
 use core::fmt::Write;
 
 use super::State;
-use crate::filter::{turn_covariance, Attitude, LevelEstimate};
+use crate::filter::{turn_covariance, Attitude, LevelEstimate, ATTITUDE_BIAS_DEG};
 use mavlink::dialects::common::{MavSeverity, VISION_POSITION_ESTIMATE_DATA};
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 /// A VISION_POSITION_ESTIMATE this long after the previous one starts a new track (the reset
 /// counter steps) and ends a fit position ("pad lost"), µs: longer than a few dropped frames
@@ -182,11 +184,25 @@ fn horizontal_sigma(data: &VISION_POSITION_ESTIMATE_DATA) -> f32 {
     libm::sqrtf(north.max(east))
 }
 
+/// One sigma of the autopilot's heading error, degrees: the board levels the pad with the
+/// autopilot's attitude, heading included, so the pad-centred frame is turned by the
+/// autopilot's heading error, a compass's: a few degrees.
+pub const HEADING_SIGMA_DEG: f32 = 2.0;
+
+/// The covariance a heading error of `sigma_rad` gives the end of `p` (NED): a turn about
+/// the vertical, which moves it horizontally, across its horizontal part, by `sigma` times
+/// that part's length.
+pub(super) fn heading_covariance(p: &Vector3<f32>, sigma_rad: f32) -> Matrix3<f32> {
+    let across = Vector3::new(-p.y, p.x, 0.0);
+    across * across.transpose() * (sigma_rad * sigma_rad)
+}
+
 /// VISION_POSITION_ESTIMATE: the vehicle's origin in a pad-centred frame with NED axes
 /// (origin at the pad), i.e. minus the pad's level position from the origin, with the
 /// vehicle's attitude; covariance upper triangle (x, y, z, roll, pitch, yaw), row-major: the
-/// level track's position covariance plus the mount's tilt error across the line of sight,
-/// the attitude entries (0.05 rad)², since the attitude is the autopilot's own.
+/// level track's position covariance plus the mount's and the attitude's tilt errors across
+/// the line of sight and the heading's about the vertical, the attitude entries (0.05 rad)²,
+/// since the attitude is the autopilot's own.
 fn vision_estimate(
     time_usec: u64,
     level: &LevelEstimate,
@@ -199,8 +215,10 @@ fn vision_estimate(
     let q = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z));
     let (roll, pitch, yaw) = q.euler_angles();
     let mut full = nalgebra::Matrix6::<f32>::zeros();
-    let position_covariance =
-        e.position_covariance + turn_covariance(&e.position, level.mount_sigma_deg.to_radians());
+    let tilt_deg = libm::hypotf(level.mount_sigma_deg, ATTITUDE_BIAS_DEG);
+    let position_covariance = e.position_covariance
+        + turn_covariance(&e.position, tilt_deg.to_radians())
+        + heading_covariance(&e.position, HEADING_SIGMA_DEG.to_radians());
     full.fixed_view_mut::<3, 3>(0, 0)
         .copy_from(&position_covariance);
     for k in 3..6 {

@@ -57,8 +57,8 @@ pub use estimator::{
 };
 pub use mount_calibration::{
     roll_pitch_aligning, MountCalibrationConfig, MountCalibrationMode, MountCalibrationStats,
-    MountCalibrator, MountCorrection, MountEstimate, MountRefusal, FRAME_DECORRELATION_US,
-    MIN_REREPORT_DEG, REREPORT_SIGMAS, RESTART_AFTER_OUTLIERS,
+    MountCalibrator, MountCorrection, MountEstimate, MountRefusal, ATTITUDE_BIAS_DEG,
+    FRAME_DECORRELATION_US, MIN_REREPORT_DEG, REREPORT_SIGMAS, RESTART_AFTER_OUTLIERS,
 };
 pub use paper::{PaperConfig, PaperKalman};
 pub use tracker::{

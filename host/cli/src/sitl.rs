@@ -245,6 +245,16 @@ pub struct SitlArgs {
     )]
     pub yaw: Option<f64>,
 
+    /// With --gcs: how long the vehicle holds still at the start point before the landing,
+    /// seconds (the board's position is checked against the truth while it holds)
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 3.0,
+        help_heading = "A running SITL"
+    )]
+    pub hold: f64,
+
     /// With --gcs: the autopilot's own parameters to set too, NAME=VALUE,... (after the
     /// precision-landing ones, replacing any of them; a parameter that needs a reboot takes
     /// effect at the autopilot's next start)
@@ -335,6 +345,7 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
         ("--wind-mps", args.wind_mps),
         ("--gust-mps", args.gust_mps),
         ("--turbulence", args.turbulence),
+        ("--hold", args.hold),
     ] {
         if !non_negative(v) {
             return Err(CliError(format!("{flag} must be a number >= 0")));

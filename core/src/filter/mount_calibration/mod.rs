@@ -79,6 +79,12 @@ use super::axes::{Attitude, CameraMount};
 use crate::pose::PadFix;
 use nalgebra::{Matrix3, Vector3};
 
+/// One sigma of a multicopter autopilot's slowly varying roll and pitch error in flight,
+/// degrees: its EKF's attitude drifts by a few tenths of a degree over tens of seconds
+/// (accelerometer bias, the filter's tuning). The calibration's default
+/// ([`MountCalibrationConfig::attitude_bias_deg`]), and what a position levelled with that
+/// attitude is worth besides its mount ([`crate::companion`]'s VISION_POSITION_ESTIMATE).
+pub const ATTITUDE_BIAS_DEG: f32 = 0.25;
 /// At most one effective sample per this much time span (see the module docs), µs.
 pub const FRAME_DECORRELATION_US: u64 = 100_000;
 /// A later estimate is reported when it moved by more than this many sigma from the last
@@ -169,7 +175,7 @@ impl Default for MountCalibrationConfig {
             min_span_us: 10_000_000,
             max_noise_sigma_deg: 0.1,
             max_sigma_deg: 0.5,
-            attitude_bias_deg: 0.25,
+            attitude_bias_deg: ATTITUDE_BIAS_DEG,
             attitude_bias_time_s: 20.0,
         }
     }

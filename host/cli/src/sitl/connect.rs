@@ -498,6 +498,10 @@ struct RehearsalJson {
     start_held: bool,
     landing_to_touchdown_s: Option<f64>,
     disarmed_s: Option<f64>,
+    /// When the autopilot had its EKF origin, and when the board's mount calibration was in
+    /// force (first seen; null: never).
+    origin_set_s: Option<f64>,
+    mount_ready_s: Option<f64>,
     autopilot_messages: Vec<(f64, String)>,
     /// Only with --gps-loss-height: the key is absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -560,6 +564,7 @@ fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>, vision_velocity: bool
         start_north_m: args.offset * bearing.cos(),
         start_east_m: args.offset * bearing.sin(),
         yaw_deg: args.yaw,
+        hold_s: args.hold,
         extra,
         wind: Some(gcs::SitlWind {
             speed_mps: args.wind_mps as f32,
@@ -715,6 +720,8 @@ pub(super) fn run(
                     start_held: l.start_held,
                     landing_to_touchdown_s: landing_to_touchdown,
                     disarmed_s: l.disarmed_s,
+                    origin_set_s: l.origin_set_s,
+                    mount_ready_s: l.mount_ready_s,
                     autopilot_messages: r.link.texts.clone(),
                     gps_loss: args.gps_loss_height.map(|height_m| GpsLossJson {
                         height_m,

@@ -20,16 +20,15 @@ use crate::CliError;
 const ARMING_PATIENCE_S: f64 = 180.0;
 /// The climb to `--height` may take this long, s.
 const TAKEOFF_PATIENCE_S: f64 = 90.0;
-/// The move to the start point may take this long before the landing starts anyway, s.
+/// The move to the start point may take this long (besides `--hold`) before the landing
+/// starts anyway, s.
 const MOVE_PATIENCE_S: f64 = 30.0;
 /// At the start point: within this distance of it, horizontally, metres (PX4 may hold its
 /// own set point tens of centimetres off in truth)...
 const START_TOLERANCE_M: f64 = 1.0;
 /// ... slower than this, m/s ...
 const START_SPEED_MPS: f64 = 0.2;
-/// ... for this long, seconds, and turned to the heading asked for within this, degrees.
-const START_HOLD_S: f64 = 3.0;
-/// See [`START_HOLD_S`].
+/// ... for `--hold` seconds, and turned to the heading asked for within this, degrees.
 const START_HEADING_DEG: f64 = 5.0;
 /// Commands not yet taken are sent again after this long, seconds.
 const RETRY_S: f64 = 2.0;
@@ -325,7 +324,7 @@ impl Flight {
                 } else {
                     None
                 };
-                let held = settled_s.is_some_and(|s| t - s >= START_HOLD_S);
+                let held = settled_s.is_some_and(|s| t - s >= self.plan.hold_s);
                 if !gps_lost && t - since_s > MOVE_PATIENCE_S + GPS_LOSS_PATIENCE_S {
                     return Err(CliError(format!(
                         "GPS not lost by the landing: the board sent no VISION_POSITION_ESTIMATE \
@@ -333,12 +332,13 @@ impl Flight {
                         self.plan.gps_loss_height_m.unwrap_or_default()
                     )));
                 }
-                if gps_lost && (held || t - since_s > MOVE_PATIENCE_S) {
+                let patience_s = MOVE_PATIENCE_S + self.plan.hold_s;
+                if gps_lost && (held || t - since_s > patience_s) {
                     self.log.start_held = held;
                     if !held {
                         let _ = writeln!(
                             err,
-                            "{t:7.2} s  not settled at the start point in {MOVE_PATIENCE_S:.0} s: landing from here"
+                            "{t:7.2} s  not settled at the start point in {patience_s:.0} s: landing from here"
                         );
                     }
                     self.log.landing_start_ne = truth.map(|(s, _)| (s.position.y, s.position.x));

@@ -124,6 +124,8 @@ pub struct Plan {
     pub start_east_m: f64,
     /// The heading to turn to at the start point, degrees from north (`None`: as it is).
     pub yaw_deg: Option<f64>,
+    /// How long the vehicle holds still at the start point before the landing, seconds.
+    pub hold_s: f64,
     /// The user's own autopilot parameters (`--autopilot-params`), set after the recipe's.
     pub extra: Vec<(String, f32)>,
     /// ArduPilot SITL's wind: mean speed (m/s), direction it blows from (degrees), profile
@@ -366,6 +368,7 @@ mod tests {
             start_north_m: 1.0,
             start_east_m: 2.0,
             yaw_deg: None,
+            hold_s: 3.0,
             extra: vec![("PLND_EST_TYPE".into(), 0.0), ("PSC_POSXY_P".into(), 1.5)],
             wind: Some(SitlWind {
                 speed_mps: 3.0,
@@ -398,6 +401,7 @@ mod tests {
             start_north_m: 1.0,
             start_east_m: 2.0,
             yaw_deg: None,
+            hold_s: 3.0,
             extra: vec![("VISO_DELAY_MS".into(), 60.0)],
             wind: None,
             gps_loss_height_m: Some(12.0),
@@ -444,6 +448,7 @@ mod tests {
             start_north_m: 1.0,
             start_east_m: 2.0,
             yaw_deg: None,
+            hold_s: 3.0,
             extra: vec![],
             wind: None,
             gps_loss_height_m: None,
