@@ -101,7 +101,7 @@ impl Candidates<'_, '_, '_> {
         stats.refined += 1;
         let mut samples = 0u32;
         let corners = strategy.corners(self, &quad, &mut samples);
-        if !quad::check_shape(&corners, 0.8 * config.min_edge_px) {
+        if !quad::check_shape(&corners, 0.8 * config.min_edge_px) || !self.inside(&corners) {
             return tracer.charge(candidate_work(samples));
         }
         let mut bordered = false;
@@ -146,6 +146,19 @@ impl Candidates<'_, '_, '_> {
             stats.bordered += 1;
         }
         tracer.charge(candidate_work(samples))
+    }
+}
+
+impl Candidates<'_, '_, '_> {
+    /// Whether every corner lies on the image (pixel centres span `0..=size - 1`). A marker
+    /// cut by the frame's edge has its outline closed along the edge; the corners refined
+    /// from it land on or past the edge and its cells past the edge read the edge's pixels,
+    /// so it can still decode, with a corner pixels off that skews a multi-marker fix.
+    fn inside(&self, corners: &[crate::geometry::Point; 4]) -> bool {
+        let (w, h) = (self.image.width() as f32, self.image.height() as f32);
+        corners
+            .iter()
+            .all(|c| c.x >= 0.0 && c.y >= 0.0 && c.x <= w - 1.0 && c.y <= h - 1.0)
     }
 }
 

@@ -132,6 +132,10 @@ pub const SCENARIOS: &[(&str, &str)] = &[
         "the set-up guide's mount-calibration hover: 3 m over the nested pad, holding still, 20 s at 15 Hz (300 frames)",
     ),
     (
+        "rest",
+        "the vehicle resting on the nested-rest pad before take-off: the camera 0.1 m up, 2 cm from the landing point, still, 20 s at 15 Hz (300 frames)",
+    ),
+    (
         "sun",
         "hover at 20..1 m in strong sun with auto-exposure on grass: the white pad clips (60 frames)",
     ),
@@ -420,6 +424,29 @@ impl Scenario {
                 };
                 let frames = uniform_frames(duration - 0.5 / 15.0, 15.0);
                 base(name, nested, board_camera, trajectory, frames)
+            }
+            "rest" => {
+                // On the ground: the camera at a multicopter's gear height over the rest
+                // field, a little off the landing point, the vehicle still (no sway).
+                let at = [0.02, -0.01, 0.1];
+                let duration = 20.0;
+                let segments = vec![Segment {
+                    t0: 0.0,
+                    t1: duration,
+                    from: at,
+                    to: at,
+                    profile: Profile::Hold,
+                }];
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: Wobble::new(0.0, 1.0, 0.0, seed),
+                    tilt_with_acceleration: false,
+                    trim: (0.0, 0.0),
+                };
+                let frames = uniform_frames(duration - 0.5 / 15.0, 15.0);
+                let rest_pad = PrintedPad::design("nested-rest")?;
+                base(name, rest_pad, board_camera, trajectory, frames)
             }
             "sun" => {
                 let (trajectory, frames) = hover_set(1);

@@ -398,11 +398,13 @@ pub fn fly(
                 fit: companion.stats().vision_fit,
                 mount_ready: pipeline.estimator().mount_sigma_deg() <= MOUNT_READY_DEG,
             };
-            if r.flight
-                .poll(&mut r.link, t, now_truth, pad_at, board, err)?
-                .is_some()
-            {
-                break;
+            match r.flight.poll(&mut r.link, t, now_truth, pad_at, board, err) {
+                Ok(Some(_)) => break,
+                Ok(None) => {}
+                Err(e) => {
+                    say_mount_calibration(&pipeline, err);
+                    return Err(e);
+                }
             }
         }
         // A frame when one is due and the truth covers its time.
@@ -460,8 +462,14 @@ pub fn fly(
     }
     outcome.lag_s = (lag_count > 0).then(|| (lag_sum / lag_count as f64, lag_max));
     outcome.vision_accuracy = vision_check.report();
-    // The board's mount calibration: what it made of the flight (a GPS-denied rehearsal
-    // waits for it), for whoever wonders why the board's position was or was not fit.
+    say_mount_calibration(&pipeline, err);
+    Ok(outcome)
+}
+
+/// The board's mount calibration: what it made of the flight (a rehearsal without GPS waits
+/// for it), for whoever wonders why the board's position was or was not fit, or why the
+/// vehicle never armed.
+fn say_mount_calibration(pipeline: &FramePipeline, err: &mut dyn Write) {
     let calibrator = pipeline.estimator().mount_calibrator();
     let st = calibrator.stats();
     let estimate = calibrator
@@ -481,7 +489,6 @@ pub fn fly(
          tilt not measured {}, ambiguous {}, not level {}, outliers {}",
         st.accepted, st.poor_tilt, st.tilt_not_measured, st.ambiguous, st.not_level, st.outliers
     );
-    Ok(outcome)
 }
 
 /// The JSON record of a rehearsal's ground-station part (keys in docs/interfaces.md).

@@ -232,17 +232,26 @@ impl Flight {
                         next_try_s: t,
                     };
                 } else if t > ARMING_PATIENCE_S {
-                    return Err(CliError(format!(
-                        "{} never armed in {ARMING_PATIENCE_S:.0} s (estimator or GPS not ready?){}",
-                        autopilot.name(),
-                        last_refusal(link)
-                    )));
+                    return Err(CliError(match self.arming_wait_said {
+                        Some(wait) => format!(
+                            "{} never armed in {ARMING_PATIENCE_S:.0} s: still {}",
+                            autopilot.name(),
+                            wait.says()
+                        ),
+                        None => format!(
+                            "{} never armed in {ARMING_PATIENCE_S:.0} s (estimator or GPS not ready?){}",
+                            autopilot.name(),
+                            last_refusal(link)
+                        ),
+                    }));
                 } else if t >= next_try_s && self.pad.is_some() {
                     if let Some(wait) = self.arming_wait(link, board)? {
                         if self.arming_wait_said != Some(wait) {
                             self.arming_wait_said = Some(wait);
                             let _ = writeln!(err, "{t:7.2} s  {}", wait.says());
                         }
+                    } else if std::mem::take(&mut self.arming_wait_said).is_some() {
+                        // Nothing left to wait for: arm on the next try.
                     } else if autopilot == Autopilot::ArduPilot
                         && link.status.custom_mode != COPTER_GUIDED
                     {
