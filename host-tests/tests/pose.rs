@@ -621,7 +621,7 @@ fn a_marker_cut_by_the_frames_edge_is_not_detected() {
             let image =
                 touchdown_core::image::GrayImage::new(&frame.image.pixels, w, h).expect("image");
             let found = workspace
-                .detect(&mut detector, &image, &[&family])
+                .detect(&mut detector, &image, &[family])
                 .expect("detect");
             let (w, h) = (w as f32, h as f32);
             for d in &found {
