@@ -251,17 +251,20 @@ pub mod designs {
     /// | id 0 | 1.25 m | (0, 1.40) | 40.8 m | 3.9 m (offset) |
     /// | ids 1-4 | 0.40 m | (+-0.35, +-0.35) | 13.0 m | 1.05 m (offset) |
     /// | id 5 | 0.16 m | (0, 0) | 5.2 m | 0.19 m (80 % of frame) |
-    pub const NESTED: PadLayout<'static> = or_empty(PadLayout::new(
-        "nested",
-        &[
-            m("tag36h11", 0, 1.25, 0.0, 1.4),
-            m("tag36h11", 1, 0.40, -0.35, 0.35),
-            m("tag36h11", 2, 0.40, 0.35, 0.35),
-            m("tag36h11", 3, 0.40, 0.35, -0.35),
-            m("tag36h11", 4, 0.40, -0.35, -0.35),
-            m("tag36h11", 5, 0.16, 0.0, 0.0),
-        ],
-    ));
+    pub const NESTED: PadLayout<'static> = or_empty(PadLayout::new("nested", &{
+        let [a, b, c, d, e] = LARGE_AND_MIDDLE;
+        [a, b, c, d, e, m("tag36h11", 5, 0.16, 0.0, 0.0)]
+    }));
+
+    /// The large and middle markers of [`NESTED`] and [`NESTED_REST`] alike: same ids, same
+    /// places, so either pad's firmware finds the other's down to about a metre.
+    const LARGE_AND_MIDDLE: [PadMarker<'static>; 5] = [
+        m("tag36h11", 0, 1.25, 0.0, 1.4),
+        m("tag36h11", 1, 0.40, -0.35, 0.35),
+        m("tag36h11", 2, 0.40, 0.35, 0.35),
+        m("tag36h11", 3, 0.40, 0.35, -0.35),
+        m("tag36h11", 4, 0.40, -0.35, -0.35),
+    ];
 
     /// The rest field of [`NESTED_REST`]: markers per side.
     const REST_SIDE: usize = 5;
@@ -273,17 +276,20 @@ pub mod designs {
     /// Id of the rest field's first marker (top left; then row by row, left to right).
     const REST_FIRST_ID: u16 = 10;
     /// The markers of [`NESTED_REST`] besides its rest field.
-    const NESTED_REST_FRAME: [PadMarker<'static>; 9] = [
-        m("tag36h11", 0, 1.25, 0.0, 1.4),
-        m("tag36h11", 1, 0.40, -0.35, 0.35),
-        m("tag36h11", 2, 0.40, 0.35, 0.35),
-        m("tag36h11", 3, 0.40, 0.35, -0.35),
-        m("tag36h11", 4, 0.40, -0.35, -0.35),
-        m("tag36h11", 6, 0.12, 0.0, 0.16),
-        m("tag36h11", 7, 0.12, 0.16, 0.0),
-        m("tag36h11", 8, 0.12, 0.0, -0.16),
-        m("tag36h11", 9, 0.12, -0.16, 0.0),
-    ];
+    const NESTED_REST_FRAME: [PadMarker<'static>; 9] = {
+        let [a, b, c, d, e] = LARGE_AND_MIDDLE;
+        [
+            a,
+            b,
+            c,
+            d,
+            e,
+            m("tag36h11", 6, 0.12, 0.0, 0.16),
+            m("tag36h11", 7, 0.12, 0.16, 0.0),
+            m("tag36h11", 8, 0.12, 0.0, -0.16),
+            m("tag36h11", 9, 0.12, -0.16, 0.0),
+        ]
+    };
     /// Markers of [`NESTED_REST`].
     const NESTED_REST_LEN: usize = NESTED_REST_FRAME.len() + REST_SIDE * REST_SIDE;
 

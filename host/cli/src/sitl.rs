@@ -32,8 +32,8 @@ use touchdown_formats::recording::RecordingWriter;
 pub const LONG_HELP: &str = "\
 Closed-loop landings: the vehicle flies on the targets touchdown sends.
 
-Per camera frame: the simulator renders the camera's view of the landing scenario's nested \
-pad from the vehicle's TRUE pose (with the flight effects, as `touchdown simulate`: rolling \
+Per camera frame: the simulator renders the camera's view of the pad (--pad: nested for the \
+model's landings, nested-rest against a running SITL) from the vehicle's TRUE pose (with the flight effects, as `touchdown simulate`: rolling \
 shutter, vibration on the mount, mount misalignment; --ideal for none), the camera board's \
 per-frame path (detector, pad fix, estimator) and MAVLink companion run on it, and talk \
 MAVLink bytes with the autopilot model over a simulated UART (TIMESYNC, \

@@ -12,7 +12,8 @@
 //! second until it flows: in the companion's own sequence, so the SITL's link statistics see
 //! one sender, as they would see the board. From that truth, linearised about each
 //! frame's time exactly as the model's closed loop does, the simulator renders the camera's
-//! view of the landing scenario's nested pad; the board's per-frame path
+//! view of the pad (`--pad`, by default the nested-rest pad, which stays in view with the
+//! vehicle resting on it); the board's per-frame path
 //! ([`touchdown_core::pipeline::FramePipeline`]) and its
 //! [`touchdown_core::companion::Companion`] run on it, and every byte the companion sends goes
 //! to the SITL over the link, every byte from it to the companion: the SITL sees exactly what

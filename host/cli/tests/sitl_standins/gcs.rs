@@ -383,47 +383,34 @@ fn gps_loss_options_out_of_place_are_usage_errors() {
 
 #[test]
 fn no_gps_and_pad_options_out_of_place_are_usage_errors() {
-    let run = |args: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_touchdown"))
-            .args(args)
+    const LINKS: [&str; 4] = ["--tcp", "127.0.0.1:9", "--gcs", "tcp:127.0.0.1:9"];
+    let cases: [(Vec<&str>, &[&str]); 5] = [
+        (
+            vec!["--tcp", "127.0.0.1:9", "--no-gps"],
+            &["--no-gps needs --gcs"],
+        ),
+        (vec!["--no-gps"], &["--no-gps", "running SITL"]),
+        (
+            [&LINKS[..], &["--no-gps", "--gps-loss-height", "8"]].concat(),
+            &["--no-gps", "--gps-loss-height"],
+        ),
+        (
+            [&LINKS[..], &["--no-gps", "--board-params", "TD_VPE_EN=0"]].concat(),
+            &["--no-gps: TD_VPE_EN = 0", "VISION_POSITION_ESTIMATE"],
+        ),
+        (
+            vec!["--pad", "round"],
+            &["--pad: no design `round`", "nested-rest"],
+        ),
+    ];
+    for (args, needles) in cases {
+        let output = Command::new(env!("CARGO_BIN_EXE_touchdown"))
+            .arg("sitl")
+            .args(&args)
             .output()
-            .expect("run touchdown")
-    };
-    assert_one_line_error(
-        &run(&["sitl", "--tcp", "127.0.0.1:9", "--no-gps"]),
-        &["--no-gps needs --gcs"],
-    );
-    assert_one_line_error(&run(&["sitl", "--no-gps"]), &["--no-gps", "running SITL"]);
-    assert_one_line_error(
-        &run(&[
-            "sitl",
-            "--tcp",
-            "127.0.0.1:9",
-            "--gcs",
-            "tcp:127.0.0.1:9",
-            "--no-gps",
-            "--gps-loss-height",
-            "8",
-        ]),
-        &["--no-gps", "--gps-loss-height"],
-    );
-    assert_one_line_error(
-        &run(&[
-            "sitl",
-            "--tcp",
-            "127.0.0.1:9",
-            "--gcs",
-            "tcp:127.0.0.1:9",
-            "--no-gps",
-            "--board-params",
-            "TD_VPE_EN=0",
-        ]),
-        &["--no-gps: TD_VPE_EN = 0", "VISION_POSITION_ESTIMATE"],
-    );
-    assert_one_line_error(
-        &run(&["sitl", "--pad", "round"]),
-        &["--pad: no design `round`", "nested-rest"],
-    );
+            .expect("run touchdown");
+        assert_one_line_error(&output, needles);
+    }
 }
 
 #[test]

@@ -222,10 +222,11 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
     list
 }
 
-/// ArduPilot set up to navigate on the board's VISION_POSITION_ESTIMATE once the ground
-/// station switches to source set 2 (docs/setup-ardupilot.md, "Without GPS"); set 1 (GPS)
-/// stays as it is, for the arming and the climb.
-fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
+/// ArduPilot set up to navigate on the board's VISION_POSITION_ESTIMATE with EKF source set
+/// `set` (docs/setup-ardupilot.md, "Without GPS"): the board's position, baro height, compass
+/// yaw; its velocity only when the board sends one.
+fn external_nav_recipe(set: u8, vision_velocity: bool) -> Vec<ParamSetting> {
+    let source = |what: &str, value: f32| setting(&format!("EK3_SRC{set}_{what}"), value);
     let mut list = vec![
         // The MAVLink visual-odometry backend, created at boot (AP_VisualOdom::init).
         ParamSetting {
@@ -235,19 +236,11 @@ fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
         // The estimate's age on arrival: the board's lag from exposure to sending (64-70 ms
         // in the SITL rehearsals, 50 ms of it the rendering's) plus the link.
         setting("VISO_DELAY_MS", 80.0),
-        // Source set 2: the board's position, baro height, compass yaw; its velocity only
-        // when the board sends one.
-        setting("EK3_SRC2_POSXY", 6.0),
-        setting("EK3_SRC2_VELXY", if vision_velocity { 6.0 } else { 0.0 }),
-        setting("EK3_SRC2_POSZ", 1.0),
-        setting("EK3_SRC2_VELZ", 0.0),
-        setting("EK3_SRC2_YAW", 1.0),
-        // The board sends nothing while the vehicle rests on the pad: skip the visual
-        // odometry arming check.
-        ParamSetting {
-            set_bits: Some(ARMING_SKIP_VISION),
-            ..setting("ARMING_SKIPCHK", 0.0)
-        },
+        source("POSXY", 6.0),
+        source("VELXY", if vision_velocity { 6.0 } else { 0.0 }),
+        source("POSZ", 1.0),
+        source("VELZ", 0.0),
+        source("YAW", 1.0),
     ];
     if vision_velocity {
         // ArduPilot weighs VISION_SPEED_ESTIMATE by this, not by the message's covariance:
@@ -258,37 +251,30 @@ fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
     list
 }
 
-/// ArduPilot without GPS from boot (docs/setup-ardupilot.md, "Without GPS"): source set 1 is
-/// the board's position, baro height and compass yaw, as a vehicle with no GPS receiver is set
-/// up. The visual-odometry arming check stays on: the board sends its position with the
-/// vehicle on the pad, and a vehicle that cannot see the pad must not take off on it.
+/// GPS lost in flight: source set 2 is the board's, set 1 (GPS) stays as it is for the arming
+/// and the climb, and the visual-odometry arming check is skipped (a pad without a rest field
+/// has nothing in view on the ground).
+fn gps_denied_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
+    let mut list = external_nav_recipe(VISION_SOURCE_SET, vision_velocity);
+    list.push(ParamSetting {
+        set_bits: Some(ARMING_SKIP_VISION),
+        ..setting("ARMING_SKIPCHK", 0.0)
+    });
+    list
+}
+
+/// No GPS from boot: source set 1 is the board's, as a vehicle with no GPS receiver is set up.
+/// The visual-odometry arming check stays on: the board sends its position with the vehicle on
+/// the pad, and a vehicle that cannot see the pad must not take off on it.
 fn no_gps_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
-    let mut list = vec![
-        ParamSetting {
-            needs_reboot: true,
-            ..setting("VISO_TYPE", 1.0)
-        },
-        setting("VISO_DELAY_MS", 80.0),
-        setting("EK3_SRC1_POSXY", 6.0),
-        setting("EK3_SRC1_VELXY", if vision_velocity { 6.0 } else { 0.0 }),
-        setting("EK3_SRC1_POSZ", 1.0),
-        setting("EK3_SRC1_VELZ", 0.0),
-        setting("EK3_SRC1_YAW", 1.0),
-        // No receiver: GPS1_TYPE (ArduPilot 4.6 and newer) or GPS_TYPE (older), read at boot.
-        ParamSetting {
+    let mut list = external_nav_recipe(1, vision_velocity);
+    // No receiver: GPS1_TYPE (ArduPilot 4.6 and newer) or GPS_TYPE (older), read at boot.
+    for name in ["GPS1_TYPE", "GPS_TYPE"] {
+        list.push(ParamSetting {
             needs_reboot: true,
             optional: true,
-            ..setting("GPS1_TYPE", 0.0)
-        },
-        ParamSetting {
-            needs_reboot: true,
-            optional: true,
-            ..setting("GPS_TYPE", 0.0)
-        },
-    ];
-    if vision_velocity {
-        // As in the GPS-loss recipe: ArduPilot weighs the velocity by this, not the message.
-        list.push(setting("VISO_VEL_M_NSE", 1.0));
+            ..setting(name, 0.0)
+        });
     }
     list
 }
