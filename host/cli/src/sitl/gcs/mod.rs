@@ -316,6 +316,23 @@ pub fn offset_lat_lon(lat: f64, lon: f64, north_m: f64, east_m: f64) -> (f64, f6
 mod tests {
     use super::*;
 
+    /// A plan 2.2 m off the pad at 12 m, nothing else asked for.
+    fn plain_plan() -> Plan {
+        Plan {
+            height_m: 12.0,
+            start_north_m: 1.0,
+            start_east_m: 2.0,
+            yaw_deg: None,
+            hold_s: 3.0,
+            extra: vec![],
+            wind: None,
+            gps_loss_height_m: None,
+            no_gps: false,
+            vision_velocity: false,
+            patience: Patience::default(),
+        }
+    }
+
     #[test]
     fn gcs_addresses_parse_and_bad_ones_say_why() {
         assert_eq!(
@@ -350,11 +367,6 @@ mod tests {
     #[test]
     fn ardupilot_recipe_enables_before_it_reboots_and_px4s_needs_no_reboot() {
         let plan = Plan {
-            height_m: 12.0,
-            start_north_m: 1.0,
-            start_east_m: 2.0,
-            yaw_deg: None,
-            hold_s: 3.0,
             extra: vec![("PLND_EST_TYPE".into(), 0.0), ("PSC_POSXY_P".into(), 1.5)],
             wind: Some(SitlWind {
                 speed_mps: 3.0,
@@ -362,10 +374,7 @@ mod tests {
                 profile: 1.0,
                 turbulence_mps: 1.0,
             }),
-            gps_loss_height_m: None,
-            no_gps: false,
-            vision_velocity: false,
-            patience: Patience::default(),
+            ..plain_plan()
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
         assert!(ap.iter().all(|s| !s.name.starts_with("VISO_")));
@@ -383,17 +392,10 @@ mod tests {
     #[test]
     fn the_gps_denied_recipe_comes_only_when_asked_and_adds_the_vision_check_bit() {
         let plan = Plan {
-            height_m: 12.0,
-            start_north_m: 1.0,
-            start_east_m: 2.0,
-            yaw_deg: None,
-            hold_s: 3.0,
             extra: vec![("VISO_DELAY_MS".into(), 60.0)],
-            wind: None,
             gps_loss_height_m: Some(12.0),
-            no_gps: false,
             vision_velocity: true,
-            patience: Patience::default(),
+            ..plain_plan()
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
         let names: Vec<&str> = ap.iter().map(|s| s.name.as_str()).collect();
@@ -430,17 +432,8 @@ mod tests {
     #[test]
     fn without_gps_from_boot_the_first_source_set_is_the_board_and_arming_is_checked() {
         let plan = Plan {
-            height_m: 12.0,
-            start_north_m: 1.0,
-            start_east_m: 2.0,
-            yaw_deg: None,
-            hold_s: 3.0,
-            extra: vec![],
-            wind: None,
-            gps_loss_height_m: None,
             no_gps: true,
-            vision_velocity: false,
-            patience: Patience::default(),
+            ..plain_plan()
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
         let value = |name: &str| ap.iter().find(|s| s.name == name).map(|s| s.value);
