@@ -233,8 +233,8 @@ fn external_nav_recipe(set: u8, vision_velocity: bool) -> Vec<ParamSetting> {
             needs_reboot: true,
             ..setting("VISO_TYPE", 1.0)
         },
-        // The estimate's age on arrival: the board's lag from exposure to sending (64-70 ms
-        // in the SITL rehearsals, 50 ms of it the rendering's) plus the link.
+        // The estimate's age on arrival: the board's lag from exposure to sending plus the
+        // link (docs/setup-ardupilot.md, VISO_DELAY_MS).
         setting("VISO_DELAY_MS", 80.0),
         source("POSXY", 6.0),
         source("VELXY", if vision_velocity { 6.0 } else { 0.0 }),
@@ -244,8 +244,8 @@ fn external_nav_recipe(set: u8, vision_velocity: bool) -> Vec<ParamSetting> {
     ];
     if vision_velocity {
         // ArduPilot weighs VISION_SPEED_ESTIMATE by this, not by the message's covariance:
-        // at its 0.1 m/s default the board's velocity (errors up to 1 m/s while the vehicle
-        // manoeuvres at 12 m, and some 0.3 s old) made the vehicle oscillate and lose the pad.
+        // at its default the board's velocity, noisy and late while the vehicle manoeuvres,
+        // made the vehicle oscillate and lose the pad (docs/setup-ardupilot.md).
         list.push(setting("VISO_VEL_M_NSE", 1.0));
     }
     list
