@@ -150,25 +150,6 @@ pub struct FrameReport {
 /// Oldest last fix whose translation places the pad's plane for the rolling-shutter
 /// correction, µs (a hover's drift over it is centimetres).
 const MAX_PLANE_AGE_US: u64 = 500_000;
-/// One sigma of the error of the autopilot's velocity estimate, m/s: what a GPS- or
-/// vision-aided EKF's velocity wanders by with the vehicle at rest. See [`trusted_velocity`].
-const VELOCITY_SIGMA_MPS: f32 = 0.1;
-
-/// The autopilot's velocity `v` as the rolling-shutter correction uses it: scaled by
-/// `|v|² / (|v|² + σ²)` ([`VELOCITY_SIGMA_MPS`]), the least-squares weight of a value
-/// measured with error σ. A vehicle in flight keeps its velocity; one at rest, whose
-/// estimate wanders by centimetres per second, is not "corrected" for the wander, which on
-/// the ground, 0.1 m from the pad, moves the rows by pixels and skews the pad into a tilt
-/// (the mount calibration made on the pad would take it for the mount's).
-fn trusted_velocity(v: Vector3<f32>) -> Vector3<f32> {
-    let speed2 = v.norm_squared();
-    let weight = speed2 / (speed2 + VELOCITY_SIGMA_MPS * VELOCITY_SIGMA_MPS);
-    if weight.is_finite() {
-        v * weight
-    } else {
-        Vector3::zeros()
-    }
-}
 
 /// Oldest fix whose pad's place is searched again when a frame gives none, µs: at 30 Hz
 /// fifteen frames, over which a hovering or descending vehicle moves the pad by less than the
@@ -591,9 +572,7 @@ impl<'a> FramePipeline<'a> {
             .attitude
             .as_ref()
             .zip(vehicle.position.as_ref())
-            .map(|(att, p)| {
-                camera_to_ned_matrix(att, mount).transpose() * trusted_velocity(p.velocity)
-            });
+            .map(|(att, p)| camera_to_ned_matrix(att, mount).transpose() * p.velocity);
         let normal = camera_from_level
             .or(self.last_rotation.as_ref())
             // The third column, as a product: a column view's `into_owned` keeps a panic
@@ -655,22 +634,6 @@ mod tests {
     use crate::family::tables;
     use crate::pad::designs;
     use crate::params::{ParamId, ParamSet};
-
-    #[test]
-    fn the_shutter_trusts_a_flying_velocity_and_not_the_wander_of_one_at_rest() {
-        let at = |speed: f32| trusted_velocity(Vector3::new(speed, 0.0, 0.0)).x / speed;
-        // At rest: a few centimetres per second of estimate wander count for little.
-        assert!(at(0.03) < 0.1, "{}", at(0.03));
-        // At the velocity's own error: half.
-        assert!((at(VELOCITY_SIGMA_MPS) - 0.5).abs() < 1e-6);
-        // Descending at 0.5 m/s, flying at 5: as it is, within a few percent.
-        assert!(at(0.5) > 0.96 && at(5.0) > 0.999, "{} {}", at(0.5), at(5.0));
-        assert_eq!(trusted_velocity(Vector3::zeros()), Vector3::zeros());
-        assert_eq!(
-            trusted_velocity(Vector3::new(f32::NAN, 0.0, 0.0)),
-            Vector3::zeros()
-        );
-    }
 
     #[test]
     fn the_second_look_searches_around_the_pad_within_half_the_frame() {

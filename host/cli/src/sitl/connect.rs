@@ -285,6 +285,8 @@ pub fn fly(
     let (mut lag_sum, mut lag_max, mut lag_count) = (0.0, 0.0_f64, 0usize);
     // The board's VISION_POSITION_ESTIMATEs: how many, and when the count last grew.
     let (mut vision_sent, mut vision_sent_s) = (0u32, f64::NEG_INFINITY);
+    // The board's mount calibration in force, as of the last frame (it changes only there).
+    let mut mount_ready = false;
     let mut vision_check = VisionCheck::new(rehearsal.is_some());
 
     let _ = writeln!(
@@ -397,7 +399,7 @@ pub fn fly(
             let board = gcs::BoardPosition {
                 flowing: t - vision_sent_s < VISION_FLOWING_S,
                 fit: companion.stats().vision_fit,
-                mount_ready: pipeline.estimator().mount_sigma_deg() <= MOUNT_READY_DEG,
+                mount_ready,
             };
             match r.flight.poll(&mut r.link, t, now_truth, pad_at, board, err) {
                 Ok(Some(_)) => break,
@@ -430,6 +432,7 @@ pub fn fly(
                         .map_err(|e| CliError(format!("frame {index}: {e:?}")))?;
                 let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
                 let report = pipeline.process(&image, t_us, companion.vehicle(), &mut buffers);
+                mount_ready = pipeline.estimator().mount_sigma_deg() <= MOUNT_READY_DEG;
                 outcome.frames += 1;
                 outcome.frames_with_fix += usize::from(report.fix.is_some());
                 let handed_s = now_s();

@@ -250,17 +250,18 @@ impl Flight {
                             self.arming_wait_said = Some(wait);
                             let _ = writeln!(err, "{t:7.2} s  {}", wait.says());
                         }
-                    } else if std::mem::take(&mut self.arming_wait_said).is_some() {
-                        // Nothing left to wait for: arm on the next try.
-                    } else if autopilot == Autopilot::ArduPilot
-                        && link.status.custom_mode != COPTER_GUIDED
-                    {
-                        link.set_mode(COPTER_GUIDED)?;
                     } else {
-                        link.command(
-                            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-                            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-                        )?;
+                        self.arming_wait_said = None;
+                        if autopilot == Autopilot::ArduPilot
+                            && link.status.custom_mode != COPTER_GUIDED
+                        {
+                            link.set_mode(COPTER_GUIDED)?;
+                        } else {
+                            link.command(
+                                MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                                [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                            )?;
+                        }
                     }
                     self.stage = Stage::Arming {
                         next_try_s: t + RETRY_S,
