@@ -104,6 +104,7 @@
 //! offset and the vehicle state (whose reboot count restarts the estimator's level track), and
 //! triggers a new TIMESYNC and new message-interval requests at once.
 
+mod bearing;
 mod framing;
 mod mount;
 mod profile;
@@ -267,10 +268,12 @@ enum Pending {
         target: (u8, u8),
     },
     ParamValue(ParamId),
-    /// NAMED_VALUE_FLOAT `TD_VIEW`: the view margin, metres (`vision`).
-    ViewMargin {
+    /// NAMED_VALUE_FLOAT: `TD_VIEW`, the view margin, metres (`vision`); `TD_PAD_BRG`, the
+    /// pad's bearing, degrees (`bearing`).
+    NamedValue {
+        name: &'static str,
         time_boot_ms: u32,
-        metres: f32,
+        value: f32,
     },
 }
 
@@ -364,6 +367,8 @@ struct State {
     vpe: Option<PendingVpe>,
     /// The vision estimate's reset counter and fit state (TD_VPE_EN bit 0).
     vision: vision::VisionState,
+    /// The turn that holds the vision estimate's frame to the pad (TD_PAD_YAW).
+    pad_bearing: bearing::PadBearing,
     velocity: Option<PendingVelocity>,
     /// The slope of the level positions, for the velocity (TD_VPE_EN bit 1).
     velocity_fit: velocity::VelocityFit,
@@ -429,6 +434,7 @@ impl Companion {
                 target: None,
                 vpe: None,
                 vision: vision::VisionState::default(),
+                pad_bearing: bearing::PadBearing::default(),
                 velocity: None,
                 velocity_fit: velocity::VelocityFit::new(),
                 sequence: 0,

@@ -13,6 +13,7 @@
 //! Then TD_RATE_HZ's pacing (by exposure time), the time base of `time_usec`, and the newest
 //! target replacing an unsent older one.
 
+use super::bearing::turn_matrix;
 use super::profile::{self, Profile, TargetFrame};
 use super::velocity::FittedVelocity;
 use super::{
@@ -25,7 +26,7 @@ use mavlink::dialects::common::{
     LandingTargetType, MavBool, MavEstimatorType, MavFrame, LANDING_TARGET_DATA, ODOMETRY_DATA,
     VISION_SPEED_ESTIMATE_DATA,
 };
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 impl State {
     pub(super) fn on_estimate(&mut self, frame: &FrameEstimate, now_us: u64) -> TargetOutcome {
@@ -40,6 +41,7 @@ impl State {
             return TargetOutcome::NoFix;
         }
         self.stats.frames_with_fix = self.stats.frames_with_fix.saturating_add(1);
+        self.observe_pad_bearing(frame, now_us);
         let t = frame.exposure_us;
         let Some(profile) = self.profile() else {
             self.stats.no_profile = self.stats.no_profile.saturating_add(1);
@@ -142,9 +144,17 @@ impl State {
             exposure_us: t,
             data,
         });
+        // Held to the pad (TD_PAD_YAW) or the autopilot's own frame; nothing until the pad's
+        // bearing is known, rather than a frame that turns once it is.
+        let turn = if self.params.get_int(ParamId::VpeEnable) != 0 {
+            self.pad_turn()
+        } else {
+            None
+        };
         if self.params.get_int(ParamId::VpeEnable) & VPE_POSITION != 0 {
-            if let Some((e, l)) = frame.estimate.as_ref().and_then(|e| Some((e, e.level?))) {
-                let data = self.vision_estimate_for(t, time_usec, &l);
+            let level = frame.estimate.as_ref().and_then(|e| Some((e, e.level?)));
+            if let Some(((e, l), turn)) = level.zip(turn) {
+                let data = self.vision_estimate_for(t, time_usec, &l, turn);
                 self.report_view_margin(t, e.view_margin_m, now_us);
                 self.vpe = Some(PendingVpe {
                     created_us: now_us,
@@ -152,11 +162,11 @@ impl State {
                 });
             }
         }
-        if let Some(f) = fitted {
+        if let Some((f, turn)) = fitted.zip(turn) {
             let message = match profile {
-                Profile::Px4 => VelocityMessage::Odometry(velocity_odometry(time_usec, &f)),
+                Profile::Px4 => VelocityMessage::Odometry(velocity_odometry(time_usec, &f, turn)),
                 Profile::ArduPilot | Profile::ArduPilotLocalFrd => {
-                    VelocityMessage::Speed(velocity_speed_estimate(time_usec, &f))
+                    VelocityMessage::Speed(velocity_speed_estimate(time_usec, &f, turn))
                 }
             };
             self.velocity = Some(PendingVelocity {
@@ -222,24 +232,35 @@ impl State {
     }
 }
 
-/// The vehicle's velocity over the ground, NED: the opposite of the slope of the pad's
-/// position against the vehicle, true for a pad that stays where it is.
-fn vehicle_velocity(f: &FittedVelocity) -> Vector3<f32> {
-    -f.velocity
+/// The vehicle's velocity over the ground, NED turned by `turn` (radians, see
+/// [`super::bearing`]), with its covariance: the opposite of the slope of the pad's position
+/// against the vehicle, true for a pad that stays where it is.
+fn vehicle_velocity(f: &FittedVelocity, turn: f32) -> (Vector3<f32>, Matrix3<f32>) {
+    let r = turn_matrix(turn);
+    let covariance = r * Matrix3::from_diagonal(&f.variance) * r.transpose();
+    (-(r * f.velocity), covariance)
 }
 
 /// ODOMETRY carrying the velocity alone (PX4's EKF2 fuses it with EKF2_EV_CTRL bit 2): position
-/// and attitude NaN (PX4 takes a field only when it is finite), the velocity in the autopilot's
-/// own NED axes (`child_frame_id` LOCAL_NED: the level estimate is turned by the autopilot's
-/// attitude, heading included), its variances from the fit, the angular rates unknown.
-fn velocity_odometry(time_usec: u64, f: &FittedVelocity) -> ODOMETRY_DATA {
-    let v = vehicle_velocity(f);
-    // The 6 x 6 upper triangle, row-major: the velocity variances at 0, 6 and 11 (the fit's
-    // axes are independent), the angular rates' at 15, 18 and 20 unknown.
+/// and attitude NaN (PX4 takes a field only when it is finite), the velocity in the vision
+/// estimate's NED axes turned by `turn` (`child_frame_id` LOCAL_NED: the level estimate is
+/// turned by the autopilot's attitude, heading included, then held to the pad, TD_PAD_YAW), its
+/// covariance from the fit, the angular rates unknown.
+fn velocity_odometry(time_usec: u64, f: &FittedVelocity, turn: f32) -> ODOMETRY_DATA {
+    let (v, cov) = vehicle_velocity(f, turn);
+    // The 6 x 6 upper triangle, row-major: the velocity's 3 x 3 block at 0-2, 6-7 and 11, the
+    // angular rates' variances at 15, 18 and 20 unknown.
     let mut velocity_covariance = [0.0f32; 21];
-    for (slot, variance) in [0, 6, 11].into_iter().zip(f.variance.iter()) {
-        if let Some(c) = velocity_covariance.get_mut(slot) {
-            *c = *variance;
+    for (slot, (r, c)) in [
+        (0, (0, 0)),
+        (1, (0, 1)),
+        (2, (0, 2)),
+        (6, (1, 1)),
+        (7, (1, 2)),
+        (11, (2, 2)),
+    ] {
+        if let (Some(out), Some(v)) = (velocity_covariance.get_mut(slot), cov.get((r, c))) {
+            *out = *v;
         }
     }
     for slot in [15, 18, 20] {
@@ -271,14 +292,18 @@ fn velocity_odometry(time_usec: u64, f: &FittedVelocity) -> ODOMETRY_DATA {
     }
 }
 
-/// VISION_SPEED_ESTIMATE (ArduPilot's AP_VisualOdom): the velocity, NED, with its 3 x 3
-/// covariance row-major (the fit's axes are independent: diagonal).
-fn velocity_speed_estimate(time_usec: u64, f: &FittedVelocity) -> VISION_SPEED_ESTIMATE_DATA {
-    let v = vehicle_velocity(f);
+/// VISION_SPEED_ESTIMATE (ArduPilot's AP_VisualOdom): the velocity, NED turned by `turn` (as
+/// the vision estimate), with its 3 x 3 covariance row-major.
+fn velocity_speed_estimate(
+    time_usec: u64,
+    f: &FittedVelocity,
+    turn: f32,
+) -> VISION_SPEED_ESTIMATE_DATA {
+    let (v, cov) = vehicle_velocity(f, turn);
     let mut covariance = [0.0f32; 9];
-    for (slot, variance) in [0, 4, 8].into_iter().zip(f.variance.iter()) {
-        if let Some(c) = covariance.get_mut(slot) {
-            *c = *variance;
+    for (k, slot) in covariance.iter_mut().enumerate() {
+        if let Some(c) = cov.get((k / 3, k % 3)) {
+            *slot = *c;
         }
     }
     VISION_SPEED_ESTIMATE_DATA {

@@ -817,11 +817,11 @@ fn the_view_margin_goes_out_twice_a_second_with_the_vision_estimates() {
             while let Some(n) = c.poll_transmit(t + 20_000, &mut out) {
                 parser.push(&out[..n], |f| {
                     if let Ok(MavMessage::NAMED_VALUE_FLOAT(v)) = f.decode() {
-                        sent.push((
-                            v.time_boot_ms,
-                            v.name.to_str().unwrap().to_string(),
-                            v.value,
-                        ));
+                        let name = v.name.to_str().unwrap().to_string();
+                        // The pad's bearing goes out beside it (its own test).
+                        if name != "TD_PAD_BRG" {
+                            sent.push((v.time_boot_ms, name, v.value));
+                        }
                     }
                 });
             }
@@ -843,4 +843,129 @@ fn the_view_margin_goes_out_twice_a_second_with_the_vision_estimates() {
     }
     // Only with the vision estimates (TD_VPE_EN bit 0).
     assert!(margins(2.0).is_empty());
+}
+
+/// A frame for the pad-bearing tests: the autopilot's heading `heading_error` (radians)
+/// clockwise of the truth, so that the pad relative to the vehicle (truly `rel_true`, NED) and
+/// the pad's top edge (truly at `pad_bearing`), levelled with that heading, are both seen
+/// turned clockwise by it.
+fn turned_frame(
+    exposure_us: u64,
+    rel_true: Vector3<f32>,
+    true_yaw: f32,
+    pad_bearing: f32,
+    heading_error: f32,
+) -> FrameEstimate {
+    use super::bearing::tests::flat_pad;
+    use super::bearing::turn_matrix;
+    let att = crate::filter::Attitude::from_euler(0.02, -0.01, true_yaw + heading_error).unwrap();
+    let mut frame = frame_at(
+        exposure_us,
+        turn_matrix(heading_error) * rel_true,
+        att,
+        None,
+    );
+    if let Some(e) = frame.estimate.as_mut() {
+        e.orientation_ned = Some(flat_pad(pad_bearing + heading_error));
+    }
+    frame
+}
+
+#[test]
+fn with_the_pad_bearing_set_the_vision_estimate_holds_the_pads_frame() {
+    let rel_true = Vector3::new(-1.5f32, 1.0, 12.0);
+    let (true_yaw, pad_bearing) = (0.7f32, 35f32.to_radians());
+    let truth = -rel_true;
+    let error = 3f32.to_radians();
+    // Unset: the autopilot's frame, turned by its heading error, and its own yaw.
+    let mut c = vision_companion(&[]);
+    let frame = turned_frame(1_000_000, rel_true, true_yaw, pad_bearing, error);
+    let vpe = vision_sent(&mut c, &frame, 1_000_000).0.unwrap();
+    let got = Vector3::new(vpe.x, vpe.y, vpe.z);
+    assert!((got - truth).xy().norm() > 0.08, "turned: {got}");
+    assert!((vpe.yaw - (true_yaw + error)).abs() < 1e-4);
+    // Set to the pad's bearing: the true position and heading, whatever the autopilot's error.
+    let mut c = vision_companion(&[(ParamId::PadYaw, 35.0)]);
+    for (k, e) in [error, error, -error].into_iter().enumerate() {
+        let t = 1_000_000 + k as u64 * super::vision::RESUME_GAP_US * 2;
+        let frame = turned_frame(t, rel_true, true_yaw, pad_bearing, e);
+        let (vpe, texts) = vision_sent(&mut c, &frame, t);
+        let vpe = vpe.unwrap();
+        let got = Vector3::new(vpe.x, vpe.y, vpe.z);
+        assert!((got - truth).amax() < 1e-4, "{got} vs {truth}");
+        assert!((vpe.yaw - true_yaw).abs() < 1e-4, "{}", vpe.yaw);
+        assert!(texts.iter().all(|t| !t.contains("TD_PAD_YAW")), "{texts:?}");
+    }
+    // Its covariance turned with it: the same, in the pad's frame, whatever the turn.
+    let covariance = |error: f32| {
+        let mut c = vision_companion(&[(ParamId::PadYaw, 35.0)]);
+        let frame = turned_frame(1_000_000, rel_true, true_yaw, pad_bearing, error);
+        vision_sent(&mut c, &frame, 1_000_000).0.unwrap().covariance
+    };
+    let (straight, turned) = (covariance(0.0), covariance(0.5));
+    for (a, b) in straight.iter().zip(turned.iter()) {
+        assert!((a - b).abs() < 1e-5, "{straight:?} vs {turned:?}");
+    }
+    assert!(
+        (straight[0] - straight[6]).abs() > 1e-3,
+        "not isotropic: the test can fail"
+    );
+}
+
+#[test]
+fn a_pad_bearing_far_from_the_heading_is_reported_and_nothing_is_sent_before_a_bearing() {
+    let mut c = vision_companion(&[(ParamId::PadYaw, 90.0)]);
+    // No usable pad rotation yet: no estimate rather than one in a frame about to turn.
+    let mut frame = turned_frame(1_000_000, Vector3::new(0.3, 0.2, 8.0), 0.0, 0.0, 0.0);
+    frame.estimate.as_mut().unwrap().orientation_ned = None;
+    assert!(vision_sent(&mut c, &frame, 1_000_000).0.is_none());
+    // The pad is truly at 0 degrees, the user said 90: the board says so, once.
+    let mut warnings = 0;
+    for k in 0..10u64 {
+        let t = 1_100_000 + k * 66_667;
+        let frame = turned_frame(t, Vector3::new(0.3, 0.2, 8.0), 0.0, 0.0, 0.0);
+        let (vpe, texts) = vision_sent(&mut c, &frame, t);
+        assert!(vpe.is_some());
+        warnings += texts
+            .iter()
+            .filter(|t| t.as_str() == "touchdown: pad 90 deg off heading: TD_PAD_YAW?")
+            .count();
+    }
+    assert_eq!(warnings, 1);
+}
+
+#[test]
+fn the_pads_bearing_goes_out_twice_a_second_whatever_td_vpe_en() {
+    // The pad truly at 35 degrees, the autopilot's heading 3 degrees clockwise of the truth:
+    // the board reports the bearing it sees, 38 degrees, for the user to set TD_PAD_YAW from
+    // in a flight whose heading GPS holds.
+    let mut c = vision_companion(&[(ParamId::VpeEnable, 0.0)]);
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let mut sent = std::vec::Vec::new();
+    for k in 0..30u64 {
+        let t = 1_000_000 + k * 33_333;
+        let frame = turned_frame(
+            t,
+            Vector3::new(0.2, 0.1, 6.0),
+            0.3,
+            35f32.to_radians(),
+            3f32.to_radians(),
+        );
+        let _ = c.on_estimate(&frame, t);
+        let mut parser = FrameParser::new();
+        while let Some(n) = c.poll_transmit(t, &mut out) {
+            parser.push(&out[..n], |f| {
+                if let Ok(MavMessage::NAMED_VALUE_FLOAT(v)) = f.decode() {
+                    sent.push((v.name.to_str().unwrap().to_string(), v.value, n));
+                }
+            });
+        }
+    }
+    assert_eq!(sent.len(), 2, "{sent:?}");
+    for (name, value, len) in &sent {
+        assert_eq!(name, "TD_PAD_BRG");
+        // On the wire (docs/setup-ardupilot.md, section 3a): an 18-byte payload and 12.
+        assert_eq!(*len, 30);
+        assert!((value - 38.0).abs() < 1e-3, "{value}");
+    }
 }

@@ -22,9 +22,6 @@ use mavlink::dialects::common::{
     PARAM_VALUE_DATA, STATUSTEXT_DATA, TIMESYNC_DATA,
 };
 
-/// NAMED_VALUE_FLOAT's name for the view margin (`vision`).
-const VIEW_MARGIN_NAME: &str = "TD_VIEW";
-
 /// Targets sent before the first report of their exposure-to-send delay; the report repeats
 /// each time the count doubles.
 const LATENCY_REPORT_FIRST: u32 = 100;
@@ -212,13 +209,14 @@ impl State {
                 param_id: id.def().name.into(),
                 param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
             }),
-            Pending::ViewMargin {
+            Pending::NamedValue {
+                name,
                 time_boot_ms,
-                metres,
+                value,
             } => MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
                 time_boot_ms,
-                value: metres,
-                name: VIEW_MARGIN_NAME.into(),
+                value,
+                name: name.into(),
             }),
         }
     }

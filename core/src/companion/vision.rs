@@ -16,6 +16,8 @@
 //!   before the mount calibration the position high above the pad is worth decimetres, and
 //!   a heading error moves a vehicle beside the pad around it; an estimator that fuses the
 //!   position must be told so rather than trust centimetres.
+//! - **The frame** is the autopilot's, or with TD_PAD_YAW the pad's ([`super::bearing`]):
+//!   position, covariance and yaw turned alike, so that what goes out is one frame.
 //! - **The reset counter steps when the stream resumes after a gap** ([`RESUME_GAP_US`]):
 //!   the track that resumes is a new one, whose first positions need not continue the old
 //!   track's last. Both autopilots take a stepped counter as a jump to adopt (ArduPilot's
@@ -35,6 +37,7 @@
 
 use core::fmt::Write;
 
+use super::bearing::turn_matrix;
 use super::State;
 use crate::filter::{turn_covariance, Attitude, LevelEstimate, ATTITUDE_BIAS_DEG};
 use mavlink::dialects::common::{MavSeverity, VISION_POSITION_ESTIMATE_DATA};
@@ -56,6 +59,9 @@ pub const UNFIT_SIGMA_M: f32 = 0.15;
 
 /// The view margin's period, µs: enough to watch, a small part of the link.
 pub const VIEW_MARGIN_PERIOD_US: u64 = 500_000;
+
+/// NAMED_VALUE_FLOAT's name for the view margin.
+pub const VIEW_MARGIN_NAME: &str = "TD_VIEW";
 
 /// The vision estimate's own state: its reset counter and whether it is fit to navigate.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -85,13 +91,14 @@ impl State {
     }
 
     /// With TD_VPE_EN bit 0, the frame's VISION_POSITION_ESTIMATE, stamped `time_usec`, from
-    /// `level` exposed at `exposure_us` (our clock); the reset counter and the fit state move
-    /// with it.
+    /// `level` exposed at `exposure_us` (our clock), turned by `turn` ([`super::bearing`]);
+    /// the reset counter and the fit state move with it.
     pub(super) fn vision_estimate_for(
         &mut self,
         exposure_us: u64,
         time_usec: u64,
         level: &LevelEstimate,
+        turn: f32,
     ) -> VISION_POSITION_ESTIMATE_DATA {
         if self.vision.gap_before(exposure_us) {
             self.vision.reset_counter = self.vision.reset_counter.wrapping_add(1);
@@ -103,6 +110,7 @@ impl State {
             level,
             &self.camera_position(),
             self.vision.reset_counter,
+            turn,
         );
         let sigma = horizontal_sigma(&data);
         let limit = if self.vision.fit {
@@ -131,9 +139,10 @@ impl State {
         self.vision.next_margin_us = exposure_us.saturating_add(VIEW_MARGIN_PERIOD_US);
         // MAVLink's milliseconds since boot wrap after 49 days, as the field does.
         let time_boot_ms = (now_us / 1000) as u32;
-        self.enqueue(super::Pending::ViewMargin {
+        self.enqueue(super::Pending::NamedValue {
+            name: VIEW_MARGIN_NAME,
             time_boot_ms,
-            metres,
+            value: metres,
         });
     }
 
@@ -184,9 +193,10 @@ fn horizontal_sigma(data: &VISION_POSITION_ESTIMATE_DATA) -> f32 {
     libm::sqrtf(north.max(east))
 }
 
-/// One sigma of the autopilot's heading error, degrees: the board levels the pad with the
+/// One sigma of the frame's heading error, degrees: the board levels the pad with the
 /// autopilot's attitude, heading included, so the pad-centred frame is turned by the
-/// autopilot's heading error, a compass's: a few degrees.
+/// autopilot's heading error, a compass's: a few degrees; or, held to the pad (TD_PAD_YAW), by
+/// the error of the bearing the user measured, no better known.
 pub const HEADING_SIGMA_DEG: f32 = 2.0;
 
 /// The covariance a heading error of `sigma_rad` gives the end of `p` (NED): a turn about
@@ -208,6 +218,7 @@ fn vision_estimate(
     level: &LevelEstimate,
     cam_pos_body: &Vector3<f32>,
     reset_counter: u8,
+    turn: f32,
 ) -> VISION_POSITION_ESTIMATE_DATA {
     let e = &level.estimate;
     let att: &Attitude = &level.attitude;
@@ -219,8 +230,9 @@ fn vision_estimate(
     let position_covariance = e.position_covariance
         + turn_covariance(&e.position, tilt_deg.to_radians())
         + heading_covariance(&e.position, HEADING_SIGMA_DEG.to_radians());
+    let r = turn_matrix(turn);
     full.fixed_view_mut::<3, 3>(0, 0)
-        .copy_from(&position_covariance);
+        .copy_from(&(r * position_covariance * r.transpose()));
     for k in 3..6 {
         if let Some(v) = full.get_mut((k, k)) {
             *v = 0.05 * 0.05;
@@ -235,7 +247,9 @@ fn vision_estimate(
             }
         }
     }
-    let p = -(att.body_to_ned(cam_pos_body) + e.position);
+    let p = -(r * (att.body_to_ned(cam_pos_body) + e.position));
+    // Wrapped into (-pi, pi], where Euler yaw lives.
+    let yaw = libm::atan2f(libm::sinf(yaw + turn), libm::cosf(yaw + turn));
     VISION_POSITION_ESTIMATE_DATA {
         usec: time_usec,
         x: p.x,

@@ -131,10 +131,14 @@ pub enum ParamId {
     /// against the vehicle's measured offset from the pad (the outer loop,
     /// `companion::shift`), metres; 0 turns it off.
     Px4OuterLoopAlt,
+    /// The bearing of the pad's top edge (+y), degrees clockwise from north: the vision
+    /// estimate's frame is held to it (`companion::bearing`); negative: the autopilot's
+    /// heading.
+    PadYaw,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 20;
+pub const PARAM_COUNT: usize = 21;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -339,6 +343,17 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "PX4 profile, experimental: below this camera height over the pad, shift the target to cancel PX4's steady offset, m (0 off; try 15)",
     },
+    // The pad's bearing (appended; companion::bearing). Unset by default: the vision
+    // estimate's frame then turns with the autopilot's heading, as it always did.
+    ParamDef {
+        name: "TD_PAD_YAW",
+        kind: ParamKind::Real,
+        default: -1.0,
+        min: -1.0,
+        max: 360.0,
+        zero_is_unset: false,
+        help: "bearing of the pad's top edge, degrees clockwise from north: VISION_POSITION_ESTIMATE's frame and yaw hold to it (-1 = the autopilot's heading)",
+    },
 ];
 
 impl ParamId {
@@ -364,6 +379,7 @@ impl ParamId {
         ParamId::CamPosY,
         ParamId::CamPosZ,
         ParamId::Px4OuterLoopAlt,
+        ParamId::PadYaw,
     ];
 
     /// The id at table `index`.

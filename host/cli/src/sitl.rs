@@ -263,14 +263,15 @@ pub struct SitlArgs {
 
     /// With --gcs on ArduPilot SITL: lose GPS on the climb at this height over the pad
     /// (at most --height): switch the EKF to source set 2, the board's
-    /// VISION_POSITION_ESTIMATE (TD_VPE_EN 1 unless set), then turn the SITL's GPS off; the
+    /// VISION_POSITION_ESTIMATE (TD_VPE_EN 1 and TD_PAD_YAW 0 unless set), then turn the
+    /// SITL's GPS off; the
     /// move and the landing fly on the board's position alone. Adds the external-navigation
     /// parameters to the recipe (docs/setup-ardupilot.md, "Without GPS")
     #[arg(long, value_name = "M", help_heading = "A running SITL")]
     pub gps_loss_height: Option<f64>,
 
     /// With --gcs on ArduPilot SITL: no GPS at all, from boot (GPS1_TYPE 0): the EKF's
-    /// position is the board's VISION_POSITION_ESTIMATE (TD_VPE_EN 1 unless set) from the
+    /// position is the board's VISION_POSITION_ESTIMATE (TD_VPE_EN 1, TD_PAD_YAW 0 unless set) from the
     /// ground up, its origin set at the pad; the vehicle arms once the board sends its
     /// position and has calibrated its mount on the pad (docs/setup-ardupilot.md, "Without
     /// GPS")

@@ -142,10 +142,11 @@ mod tests {
         assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 20 parameters (TD_PX4_OL_ALT
-        // appended to the 19 of the camera position's firmware, whose 448-byte slots, like the
-        // 16 parameters' 384-byte and the 13 parameters' 320-byte ones, still read back) take
-        // 15 words: 273 slots per sector after the first boot's free word.
+        // Format 2: a header word and the sequence number more; 21 parameters (TD_PAD_YAW
+        // appended to the 20 of the outer loop's firmware, whose 480-byte slots are the same
+        // size, and like the 19 parameters' 448-byte, the 16 parameters' 384-byte and the 13
+        // parameters' 320-byte ones still read back) take 15 words: 273 slots per sector after
+        // the first boot's free word.
         assert_eq!(SLOT_LEN, 480);
         assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 273);
     }
@@ -171,6 +172,22 @@ mod tests {
         let mut out = [0u8; 320];
         out.copy_from_slice(&older_slot(params, seq, 13, 10)[..320]);
         out
+    }
+
+    #[test]
+    fn a_slot_of_the_twenty_parameter_firmware_imports_with_the_pad_bearing_unset() {
+        use crate::params::ParamId;
+        let mut saved = values(7);
+        saved.set(ParamId::Px4OuterLoopAlt, 15.0).unwrap();
+        saved.set(ParamId::PadYaw, 90.0).unwrap();
+        // 20 records (408 bytes) took 15 words (480 bytes), as the current table does.
+        let slot = older_slot(&saved, 12, 20, 15);
+        let slot = &slot[..480];
+        let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied), (12, 20));
+        let mut want = saved;
+        want.set(ParamId::PadYaw, -1.0).unwrap();
+        assert_eq!(p, want);
     }
 
     #[test]

@@ -79,6 +79,8 @@ const RETAKEOFF_HEIGHT_M: f64 = 0.8;
 /// The landing's frames are late when they reach the companion more than this after their
 /// exposure, on average, seconds: the run then says it does not keep pace.
 pub const LAG_WARNING_S: f64 = 0.1;
+/// The bearing of the rehearsal pad's top edge, degrees: the simulator's pad +y is north.
+const REHEARSAL_PAD_BEARING_DEG: f32 = 0.0;
 /// Ground-truth rate asked for, µs between samples (50 Hz).
 const TRUTH_INTERVAL_US: u32 = 20_000;
 /// ArduPilot's ground truth, SIM_STATE (its own entry in ArduPilot's message-id map, beside
@@ -623,12 +625,18 @@ pub(super) fn run(
     // A GPS-denied rehearsal navigates on the board's VISION_POSITION_ESTIMATE: TD_VPE_EN 1
     // unless the user set it.
     let mut params = params;
-    if gps_denied
-        && params
+    let unset = |params: &[(String, f32)], param: &str| {
+        params
             .iter()
-            .all(|(name, _)| !name.eq_ignore_ascii_case("TD_VPE_EN"))
-    {
+            .all(|(name, _)| !name.eq_ignore_ascii_case(param))
+    };
+    if gps_denied && unset(&params, "TD_VPE_EN") {
         params.push(("TD_VPE_EN".to_string(), 1.0));
+    }
+    // ... held to the pad's frame: the rehearsal's pad lies with its top edge north, the
+    // bearing a user measures for theirs (docs/setup-ardupilot.md).
+    if gps_denied && unset(&params, "TD_PAD_YAW") {
+        params.push(("TD_PAD_YAW".to_string(), REHEARSAL_PAD_BEARING_DEG));
     }
     let vpe_en = params
         .iter()
