@@ -83,6 +83,9 @@ pub struct CompanionStats {
     pub timesync_samples: u32,
     /// TIMESYNC answers refused (not ours, or a round trip too long).
     pub timesync_rejected: u32,
+    /// TIMESYNC requests answered (sent): PX4 uses the board's time stamps only after some
+    /// hundreds of them (docs/setup-px4.md).
+    pub timesync_answers: u32,
     /// Where the clock offset comes from.
     pub time_source: Option<TimeSource>,
     /// Autopilot minus companion clock, µs.

@@ -115,6 +115,7 @@ impl State {
         self.tick(now_us);
         // TIMESYNC answers first: their round trip is what the autopilot measures.
         if let Some(p) = self.timesync_reply.take() {
+            self.stats.timesync_answers = self.stats.timesync_answers.saturating_add(1);
             let msg = self.message(p);
             return self.emit(&msg, out);
         }

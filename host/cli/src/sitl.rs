@@ -270,11 +270,11 @@ pub struct SitlArgs {
     #[arg(long, value_name = "M", help_heading = "A running SITL")]
     pub gps_loss_height: Option<f64>,
 
-    /// With --gcs on ArduPilot SITL: no GPS at all, from boot (GPS1_TYPE 0): the EKF's
+    /// With --gcs: no GPS at all, from boot (ArduPilot GPS1_TYPE 0, PX4 EKF2_GPS_CTRL 0): the EKF's
     /// position is the board's VISION_POSITION_ESTIMATE (TD_VPE_EN 1, TD_PAD_YAW 0 unless set) from the
     /// ground up, its origin set at the pad; the vehicle arms once the board sends its
-    /// position and has calibrated its mount on the pad (docs/setup-ardupilot.md, "Without
-    /// GPS")
+    /// position and has calibrated its mount on the pad, and on PX4 once PX4 has synced its
+    /// clock with the board's (docs/setup-ardupilot.md, "Without GPS"; docs/setup-px4.md)
     #[arg(
         long,
         help_heading = "A running SITL",

@@ -402,6 +402,7 @@ pub fn fly(
                 flowing: t - vision_sent_s < VISION_FLOWING_S,
                 fit: companion.stats().vision_fit,
                 mount_ready,
+                clock_synced: companion.stats().timesync_answers >= gcs::PX4_TIMESYNC_ANSWERS,
             };
             match r.flight.poll(&mut r.link, t, now_truth, pad_at, board, err) {
                 Ok(Some(_)) => break,

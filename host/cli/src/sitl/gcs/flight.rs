@@ -51,7 +51,16 @@ pub struct BoardPosition {
     /// The board's mount calibration is done and in force: its position stays right at
     /// height, not only on the ground.
     pub mount_ready: bool,
+    /// The board has answered enough of the autopilot's TIMESYNC requests for PX4 to stamp
+    /// its estimates with their exposure times ([`PX4_TIMESYNC_ANSWERS`]).
+    pub clock_synced: bool,
 }
+
+/// TIMESYNC answers after which PX4 has converged on the board's clock: its window is 500
+/// round trips (`Timesync.hpp`, CONVERGENCE_WINDOW); before, it stamps every estimate on
+/// arrival, some 70 ms later than its exposure, and EKF2_EV_DELAY cannot be right both before
+/// and after (docs/setup-px4.md).
+pub const PX4_TIMESYNC_ANSWERS: u32 = 520;
 
 /// What a rehearsal without GPS waits for before it arms, in order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,6 +71,8 @@ enum ArmingWait {
     BoardPosition,
     /// The board's mount calibration, made with the vehicle resting on the pad.
     Mount,
+    /// PX4's clock sync with the board.
+    ClockSync,
 }
 
 impl ArmingWait {
@@ -71,6 +82,9 @@ impl ArmingWait {
             ArmingWait::BoardPosition => "waiting for the board's VISION_POSITION_ESTIMATEs",
             ArmingWait::Mount => {
                 "waiting for the board's mount calibration (the vehicle resting on the pad)"
+            }
+            ArmingWait::ClockSync => {
+                "waiting for PX4's clock sync with the board (500 TIMESYNC round trips)"
             }
         }
     }
@@ -559,6 +573,8 @@ impl Flight {
             Some(ArmingWait::BoardPosition)
         } else if !board.mount_ready {
             Some(ArmingWait::Mount)
+        } else if link.autopilot == Autopilot::Px4 && !board.clock_synced {
+            Some(ArmingWait::ClockSync)
         } else {
             None
         })

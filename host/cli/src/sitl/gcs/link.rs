@@ -627,11 +627,6 @@ pub fn prepare(
             link.describe()
         )));
     }
-    if plan.no_gps && link.autopilot == Autopilot::Px4 {
-        return Err(CliError::new(
-            "--no-gps: not supported on PX4 yet (ArduPilot SITL only; docs/setup-px4.md)",
-        ));
-    }
     let gps_switch = match (plan.gps_loss_height_m, link.autopilot) {
         (None, _) => None,
         (Some(_), Autopilot::Px4) => {

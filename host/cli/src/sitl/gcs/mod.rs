@@ -30,7 +30,7 @@ use crate::companion::endpoint::EndpointSpec;
 mod flight;
 mod link;
 
-pub use flight::{BoardPosition, Flight, FlightEnd, FlightLog};
+pub use flight::{BoardPosition, Flight, FlightEnd, FlightLog, PX4_TIMESYNC_ANSWERS};
 pub use link::{prepare, GcsLink, GpsSwitch, Prepared, Status, CONNECT_PATIENCE, PARAM_TRY};
 
 /// The autopilot at the other end, from its HEARTBEAT.
@@ -197,8 +197,11 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
         // docs/setup-px4.md, section 3.
         Autopilot::Px4 => vec![setting("PLD_FAPPR_ALT", 0.5), setting("PLD_BTOUT", 5.0)],
     };
-    if autopilot == Autopilot::ArduPilot && plan.no_gps {
-        list.extend(no_gps_recipe(plan.vision_velocity));
+    if plan.no_gps {
+        list.extend(match autopilot {
+            Autopilot::ArduPilot => no_gps_recipe(plan.vision_velocity),
+            Autopilot::Px4 => px4_no_gps_recipe(),
+        });
     } else if let (Autopilot::ArduPilot, Some(_)) = (autopilot, plan.gps_loss_height_m) {
         let own_arming = plan.extra.iter().any(|(name, _)| name == "ARMING_CHECK");
         list.extend(
@@ -277,6 +280,19 @@ fn no_gps_recipe(vision_velocity: bool) -> Vec<ParamSetting> {
         });
     }
     list
+}
+
+/// No GPS from boot on PX4 (docs/setup-px4.md, "Without GPS"): EKF2 fuses no GPS, the
+/// board's horizontal position, baro height; the estimates' delay 0, since once PX4 has
+/// synced its clock with the board's (which arming waits for) their time stamps are their
+/// exposures.
+fn px4_no_gps_recipe() -> Vec<ParamSetting> {
+    vec![
+        setting("EKF2_GPS_CTRL", 0.0),
+        setting("EKF2_EV_CTRL", 1.0),
+        setting("EKF2_HGT_REF", 0.0),
+        setting("EKF2_EV_DELAY", 0.0),
+    ]
 }
 
 /// `--gcs`'s value: `tcp:HOST:PORT` (client), `udp:HOST:PORT` (client), `udpin:ADDR:PORT`
@@ -449,9 +465,18 @@ mod tests {
             .filter(|s| ["VISO_TYPE", "GPS1_TYPE", "GPS_TYPE"].contains(&s.name.as_str()))
             .all(|s| s.needs_reboot));
         assert!(ap.iter().all(|s| s.name != "ARMING_SKIPCHK"));
-        assert!(recipe(Autopilot::Px4, &plan)
+        // PX4: EKF2 on the board's horizontal position and the barometer, no GPS, the
+        // estimates' delay 0 (their stamps are their exposures once PX4 has synced its clock,
+        // which arming waits for).
+        let px4 = recipe(Autopilot::Px4, &plan);
+        let value = |name: &str| px4.iter().find(|s| s.name == name).map(|s| s.value);
+        assert_eq!(value("EKF2_GPS_CTRL"), Some(0.0));
+        assert_eq!(value("EKF2_EV_CTRL"), Some(1.0));
+        assert_eq!(value("EKF2_HGT_REF"), Some(0.0));
+        assert_eq!(value("EKF2_EV_DELAY"), Some(0.0));
+        assert!(px4
             .iter()
-            .all(|s| !s.name.starts_with("EK3_") && !s.name.starts_with("GPS")));
+            .all(|s| !s.name.starts_with("EK3_") && !s.name.starts_with("GPS") && !s.needs_reboot));
     }
 
     #[test]
