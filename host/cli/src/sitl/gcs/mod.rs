@@ -445,6 +445,11 @@ mod tests {
         assert!(px4.iter().all(|s| !s.name.starts_with("EK3_")));
     }
 
+    /// The value `list` sets `name` to, if it sets it.
+    fn value_in(list: &[ParamSetting], name: &str) -> Option<f32> {
+        list.iter().find(|s| s.name == name).map(|s| s.value)
+    }
+
     #[test]
     fn without_gps_from_boot_the_first_source_set_is_the_board_and_arming_is_checked() {
         let plan = Plan {
@@ -452,7 +457,7 @@ mod tests {
             ..plain_plan()
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
-        let value = |name: &str| ap.iter().find(|s| s.name == name).map(|s| s.value);
+        let value = |name: &str| value_in(&ap, name);
         assert_eq!(value("EK3_SRC1_POSXY"), Some(6.0));
         assert_eq!(value("EK3_SRC1_VELXY"), Some(0.0));
         assert_eq!(value("EK3_SRC1_POSZ"), Some(1.0));
@@ -469,7 +474,7 @@ mod tests {
         // estimates' delay 0 (their stamps are their exposures once PX4 has synced its clock,
         // which arming waits for).
         let px4 = recipe(Autopilot::Px4, &plan);
-        let value = |name: &str| px4.iter().find(|s| s.name == name).map(|s| s.value);
+        let value = |name: &str| value_in(&px4, name);
         assert_eq!(value("EKF2_GPS_CTRL"), Some(0.0));
         assert_eq!(value("EKF2_EV_CTRL"), Some(1.0));
         assert_eq!(value("EKF2_HGT_REF"), Some(0.0));
