@@ -623,32 +623,12 @@ pub(super) fn run(
             "{gps_flag} needs --gcs: the ground station sets the autopilot's sources"
         )));
     }
-    // A GPS-denied rehearsal navigates on the board's VISION_POSITION_ESTIMATE: TD_VPE_EN 1
-    // unless the user set it.
-    let mut params = params;
-    let unset = |params: &[(String, f32)], param: &str| {
+    let params = if gps_denied {
+        gps_denied_board_params(params, gps_flag)?
+    } else {
         params
-            .iter()
-            .all(|(name, _)| !name.eq_ignore_ascii_case(param))
     };
-    if gps_denied && unset(&params, "TD_VPE_EN") {
-        params.push(("TD_VPE_EN".to_string(), 1.0));
-    }
-    // ... held to the pad's frame: the rehearsal's pad lies with its top edge north, the
-    // bearing a user measures for theirs (docs/setup-ardupilot.md).
-    if gps_denied && unset(&params, "TD_PAD_YAW") {
-        params.push(("TD_PAD_YAW".to_string(), REHEARSAL_PAD_BEARING_DEG));
-    }
-    let vpe_en = params
-        .iter()
-        .rev()
-        .find(|(name, _)| name.eq_ignore_ascii_case("TD_VPE_EN"))
-        .map_or(0, |(_, v)| *v as i32);
-    if gps_denied && vpe_en & 1 == 0 {
-        return Err(CliError(format!(
-            "{gps_flag}: TD_VPE_EN = {vpe_en} sends no VISION_POSITION_ESTIMATE (bit 0)"
-        )));
-    }
+    let vpe_en = vpe_enable(&params);
     let landing = LandingConfig {
         effects: args.effect_terms.effects(args.ideal),
         params,
@@ -894,10 +874,77 @@ pub(super) fn run(
     }
 }
 
+/// The board's parameters for a GPS-denied rehearsal (`flag` names it in errors): the user's
+/// `params` as given, then TD_VPE_EN 1 (the VISION_POSITION_ESTIMATE it navigates on) and
+/// TD_PAD_YAW (the frame held to the rehearsal pad, whose top edge faces north) where the user
+/// set neither; an error when TD_VPE_EN, as set, sends no position.
+fn gps_denied_board_params(
+    mut params: Vec<(String, f32)>,
+    flag: &str,
+) -> Result<Vec<(String, f32)>, CliError> {
+    let unset = |params: &[(String, f32)], param: &str| {
+        params
+            .iter()
+            .all(|(name, _)| !name.eq_ignore_ascii_case(param))
+    };
+    if unset(&params, "TD_VPE_EN") {
+        params.push(("TD_VPE_EN".to_string(), 1.0));
+    }
+    if unset(&params, "TD_PAD_YAW") {
+        params.push(("TD_PAD_YAW".to_string(), REHEARSAL_PAD_BEARING_DEG));
+    }
+    let vpe_en = vpe_enable(&params);
+    if vpe_en & 1 == 0 {
+        return Err(CliError(format!(
+            "{flag}: TD_VPE_EN = {vpe_en} sends no VISION_POSITION_ESTIMATE (bit 0)"
+        )));
+    }
+    Ok(params)
+}
+
+/// TD_VPE_EN as `params` leave it (the last value given wins, as the board applies them; 0
+/// when not given, the board's default).
+fn vpe_enable(params: &[(String, f32)]) -> i32 {
+    params
+        .iter()
+        .rev()
+        .find(|(name, _)| name.eq_ignore_ascii_case("TD_VPE_EN"))
+        .map_or(0, |(_, v)| *v as i32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use touchdown_core::companion::mavlink::dialects::common::SIM_STATE_DATA;
+
+    #[test]
+    fn a_gps_denied_rehearsal_fills_in_what_the_user_left_out_and_keeps_what_they_set() {
+        let owned = |list: &[(&str, f32)]| -> Vec<(String, f32)> {
+            list.iter().map(|(n, v)| (n.to_string(), *v)).collect()
+        };
+        // Nothing given: the position, held to the rehearsal pad's bearing.
+        assert_eq!(
+            gps_denied_board_params(Vec::new(), "--no-gps").unwrap(),
+            owned(&[("TD_VPE_EN", 1.0), ("TD_PAD_YAW", 0.0)])
+        );
+        // The user's values, in any case, stay as given and first.
+        let given = owned(&[
+            ("td_vpe_en", 3.0),
+            ("TD_PAD_YAW", -1.0),
+            ("TD_CAM_ROLL", 1.2),
+        ]);
+        assert_eq!(
+            gps_denied_board_params(given.clone(), "--no-gps").unwrap(),
+            given
+        );
+        // A TD_VPE_EN without the position: refused, naming the flag.
+        let e =
+            gps_denied_board_params(owned(&[("TD_VPE_EN", 2.0)]), "--gps-loss-height").unwrap_err();
+        assert_eq!(
+            e.0,
+            "--gps-loss-height: TD_VPE_EN = 2 sends no VISION_POSITION_ESTIMATE (bit 0)"
+        );
+    }
 
     #[test]
     fn sim_state_reads_the_integer_position_and_the_float_one_in_either_unit() {
