@@ -21,12 +21,12 @@
 
 use core::fmt::Write;
 
-use super::vision::RESUME_GAP_US;
+use super::vision::{report_due, resumes_after_gap};
 use super::State;
 use crate::filter::FrameEstimate;
 use crate::params::ParamId;
 use mavlink::dialects::common::MavSeverity;
-use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 
 /// The smoothing's time constant, µs: many frames at any frame rate the board runs, short
 /// beside the time a heading error takes to grow.
@@ -85,12 +85,9 @@ pub(super) struct Turn {
 impl PadBearing {
     /// Takes the frame exposed at `exposure_us`, which shows the pad's top edge at `measured`
     /// (radians, [`pad_bearing_in_ned`]; `None`: not usable). A gap over
-    /// [`RESUME_GAP_US`] since the last frame starts a new track.
+    /// [`super::vision::RESUME_GAP_US`] since the last frame starts a new track.
     pub fn observe(&mut self, exposure_us: u64, measured: Option<f32>) {
-        if self
-            .last_us
-            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US)
-        {
+        if resumes_after_gap(self.last_us, exposure_us) {
             *self = PadBearing {
                 next_report_us: self.next_report_us,
                 ..PadBearing::default()
@@ -135,14 +132,13 @@ impl PadBearing {
         })
     }
 
-    /// The bearing in degrees, 0-360, if known and a report is due at `exposure_us` (every
-    /// [`super::vision::VIEW_MARGIN_PERIOD_US`], the view margin's period).
+    /// The bearing in degrees, 0-360, if known and a report is due at `exposure_us`
+    /// ([`report_due`]).
     fn due_report_deg(&mut self, exposure_us: u64) -> Option<f32> {
         let bearing = self.bearing()?;
-        if exposure_us < self.next_report_us {
+        if !report_due(&mut self.next_report_us, exposure_us) {
             return None;
         }
-        self.next_report_us = exposure_us.saturating_add(super::vision::VIEW_MARGIN_PERIOD_US);
         let degrees = libm::fmodf(bearing.to_degrees(), 360.0);
         Some(if degrees < 0.0 {
             degrees + 360.0
@@ -162,12 +158,7 @@ impl State {
             .and_then(pad_bearing_in_ned);
         self.pad_bearing.observe(frame.exposure_us, measured);
         if let Some(degrees) = self.pad_bearing.due_report_deg(frame.exposure_us) {
-            self.enqueue(super::Pending::NamedValue {
-                name: PAD_BEARING_NAME,
-                // MAVLink's milliseconds since boot wrap after 49 days, as the field does.
-                time_boot_ms: (now_us / 1000) as u32,
-                value: degrees,
-            });
+            self.queue_named_value(PAD_BEARING_NAME, degrees, now_us);
         }
     }
 
@@ -192,12 +183,12 @@ impl State {
 
 /// The rotation by `radians` about NED's down axis (clockwise seen from above).
 pub(super) fn turn_matrix(radians: f32) -> Matrix3<f32> {
-    let (s, c) = (libm::sinf(radians), libm::cosf(radians));
-    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
+    Rotation3::from_axis_angle(&Vector3::z_axis(), radians).into_inner()
 }
 
 #[cfg(test)]
 pub(super) mod tests {
+    use super::super::vision::RESUME_GAP_US;
     use super::*;
 
     /// `v` (NED) turned by `radians` about the down axis.

@@ -146,12 +146,13 @@ impl State {
         });
         // Held to the pad (TD_PAD_YAW) or the autopilot's own frame; nothing until the pad's
         // bearing is known, rather than a frame that turns once it is.
-        let turn = if self.params.get_int(ParamId::VpeEnable) != 0 {
+        let vpe_enable = self.params.get_int(ParamId::VpeEnable);
+        let turn = if vpe_enable != 0 {
             self.pad_turn()
         } else {
             None
         };
-        if self.params.get_int(ParamId::VpeEnable) & VPE_POSITION != 0 {
+        if vpe_enable & VPE_POSITION != 0 {
             let level = frame.estimate.as_ref().and_then(|e| Some((e, e.level?)));
             if let Some(((e, l), turn)) = level.zip(turn) {
                 let data = self.vision_estimate_for(t, time_usec, &l, turn);

@@ -30,7 +30,7 @@
 //!   `touchdown: position not fit: pad lost`), and keeps the state in its counters
 //!   ([`super::CompanionStats::vision_fit`]). A pilot or a ground station waits for the
 //!   first before making the board the only position source.
-//! - **The view margin**, NAMED_VALUE_FLOAT `TD_VIEW` every [`VIEW_MARGIN_PERIOD_US`] while
+//! - **The view margin**, NAMED_VALUE_FLOAT `TD_VIEW` every [`REPORT_PERIOD_US`] while
 //!   estimates flow: how far the vehicle can move before the pad leaves the view
 //!   ([`crate::pipeline::view_margin_m`]). Past it the autopilot coasts on its own estimate;
 //!   a ground station can plot it, and a pilot flying on the board keeps moves under it.
@@ -57,8 +57,9 @@ pub const FIT_SIGMA_M: f32 = 0.10;
 /// The horizontal one sigma over which a fit position stops being fit, metres.
 pub const UNFIT_SIGMA_M: f32 = 0.15;
 
-/// The view margin's period, µs: enough to watch, a small part of the link.
-pub const VIEW_MARGIN_PERIOD_US: u64 = 500_000;
+/// The period of the named values the board reports (the view margin, the pad's bearing),
+/// µs: enough to watch, a small part of the link.
+pub const REPORT_PERIOD_US: u64 = 500_000;
 
 /// NAMED_VALUE_FLOAT's name for the view margin.
 pub const VIEW_MARGIN_NAME: &str = "TD_VIEW";
@@ -79,9 +80,24 @@ pub(super) struct VisionState {
 impl VisionState {
     /// More than [`RESUME_GAP_US`] between the last estimate and an exposure at `exposure_us`.
     fn gap_before(&self, exposure_us: u64) -> bool {
-        self.last_exposure_us
-            .is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US)
+        resumes_after_gap(self.last_exposure_us, exposure_us)
     }
+}
+
+/// More than [`RESUME_GAP_US`] between `last_us` (none: nothing yet) and `exposure_us`: what
+/// resumes is a new track.
+pub(super) fn resumes_after_gap(last_us: Option<u64>, exposure_us: u64) -> bool {
+    last_us.is_some_and(|last| exposure_us.saturating_sub(last) > RESUME_GAP_US)
+}
+
+/// Whether a report every [`REPORT_PERIOD_US`] of exposures is due at `exposure_us`; if so
+/// `next_us`, the exposure after which the next one is, moves on.
+pub(super) fn report_due(next_us: &mut u64, exposure_us: u64) -> bool {
+    if exposure_us < *next_us {
+        return false;
+    }
+    *next_us = exposure_us.saturating_add(REPORT_PERIOD_US);
+    true
 }
 
 impl State {
@@ -133,16 +149,18 @@ impl State {
         let Some(metres) = margin_m.filter(|m| m.is_finite()) else {
             return;
         };
-        if exposure_us < self.vision.next_margin_us {
-            return;
+        if report_due(&mut self.vision.next_margin_us, exposure_us) {
+            self.queue_named_value(VIEW_MARGIN_NAME, metres, now_us);
         }
-        self.vision.next_margin_us = exposure_us.saturating_add(VIEW_MARGIN_PERIOD_US);
-        // MAVLink's milliseconds since boot wrap after 49 days, as the field does.
-        let time_boot_ms = (now_us / 1000) as u32;
+    }
+
+    /// Queues NAMED_VALUE_FLOAT `name` = `value`, stamped with `now_us`.
+    pub(super) fn queue_named_value(&mut self, name: &'static str, value: f32, now_us: u64) {
         self.enqueue(super::Pending::NamedValue {
-            name: VIEW_MARGIN_NAME,
-            time_boot_ms,
-            value: metres,
+            name,
+            // MAVLink's milliseconds since boot wrap after 49 days, as the field does.
+            time_boot_ms: (now_us / 1000) as u32,
+            value,
         });
     }
 

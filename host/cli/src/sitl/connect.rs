@@ -79,8 +79,12 @@ const RETAKEOFF_HEIGHT_M: f64 = 0.8;
 /// The landing's frames are late when they reach the companion more than this after their
 /// exposure, on average, seconds: the run then says it does not keep pace.
 pub const LAG_WARNING_S: f64 = 0.1;
-/// The bearing of the rehearsal pad's top edge, degrees: the simulator's pad +y is north.
-const REHEARSAL_PAD_BEARING_DEG: f32 = 0.0;
+/// The bearing of the rehearsal pad's top edge (its +y axis) in the simulator's NED
+/// ([`NED_FROM_PAD`]), degrees 0-360.
+fn rehearsal_pad_bearing_deg() -> f32 {
+    let top = NED_FROM_PAD * nalgebra::Vector3::y();
+    (top.y.atan2(top.x).to_degrees() as f32).rem_euclid(360.0)
+}
 /// Ground-truth rate asked for, µs between samples (50 Hz).
 const TRUTH_INTERVAL_US: u32 = 20_000;
 /// ArduPilot's ground truth, SIM_STATE (its own entry in ArduPilot's message-id map, beside
@@ -891,7 +895,7 @@ fn gps_denied_board_params(
         params.push(("TD_VPE_EN".to_string(), 1.0));
     }
     if unset(&params, "TD_PAD_YAW") {
-        params.push(("TD_PAD_YAW".to_string(), REHEARSAL_PAD_BEARING_DEG));
+        params.push(("TD_PAD_YAW".to_string(), rehearsal_pad_bearing_deg()));
     }
     let vpe_en = vpe_enable(&params);
     if vpe_en & 1 == 0 {
