@@ -419,8 +419,34 @@ fn vision_estimate_error_is_within_its_covariance_pymavlink() {
         "the mount's error is there to be covered"
     );
     assert!(share >= 0.95, "{share}");
-    // Not fit to navigate on: nothing announced as fit.
+    // Not fit to navigate on: nothing announced as fit, and SYS_STATUS (once a second)
+    // says the vision position is there, on, and not healthy.
     assert!(!status_texts(&msgs)
         .iter()
         .any(|t| t.starts_with("touchdown: position fit")));
+    const VISION_POSITION: u64 = 128;
+    let health: Vec<(u64, u64, u64)> = msgs
+        .iter()
+        .filter(|m| m["_type"] == "SYS_STATUS")
+        .map(|m| {
+            for k in ["present", "enabled", "health"] {
+                let extended = format!("onboard_control_sensors_{k}_extended");
+                assert_eq!(m[&extended].as_u64(), Some(0), "{m}");
+            }
+            let bits = |k: &str| m[k].as_u64().unwrap() & VISION_POSITION;
+            (
+                bits("onboard_control_sensors_present"),
+                bits("onboard_control_sensors_enabled"),
+                bits("onboard_control_sensors_health"),
+            )
+        })
+        .collect();
+    let seconds = (s.duration_us / 1_000_000) as usize;
+    assert!(health.len() >= seconds, "{} SYS_STATUS", health.len());
+    assert!(
+        health
+            .iter()
+            .all(|&h| h == (VISION_POSITION, VISION_POSITION, 0)),
+        "{health:?}"
+    );
 }

@@ -126,6 +126,7 @@ pub use profile::{Profile, ProfileSetting};
 pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig, ShiftMeasurement};
 pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
+pub use vision::TAKE_OFF_MOUNT_SIGMA_DEG;
 
 use crate::filter::{FrameEstimate, VehicleState};
 use crate::params::{ParamError, ParamId, ParamSet};
@@ -268,6 +269,8 @@ enum Pending {
         target: (u8, u8),
     },
     ParamValue(ParamId),
+    /// SYS_STATUS, with the vision position's health (TD_VPE_EN bit 0, `vision`).
+    SysStatus,
     /// NAMED_VALUE_FLOAT: `TD_VIEW`, the view margin, metres (`vision`); `TD_PAD_BRG`, the
     /// pad's bearing, degrees (`bearing`).
     NamedValue {
@@ -379,6 +382,8 @@ struct State {
     detected: Option<Profile>,
     /// The latched autopilot's mode from its HEARTBEAT: custom mode enabled, `custom_mode`.
     autopilot_mode: Option<(bool, u32)>,
+    /// The latched autopilot's last HEARTBEAT said it is armed (false until one has).
+    autopilot_armed: bool,
     /// The PX4 profile's outer loop.
     shift: PadShift,
     /// The auto profile last announced by STATUSTEXT.
@@ -442,6 +447,7 @@ impl Companion {
                 autopilot_rx_us: None,
                 detected: None,
                 autopilot_mode: None,
+                autopilot_armed: false,
                 shift: PadShift::new(),
                 announced: None,
                 next_heartbeat_us: 0,

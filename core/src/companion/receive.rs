@@ -82,6 +82,9 @@ impl State {
                     .base_mode
                     .contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED);
                 self.autopilot_mode = Some((custom, h.custom_mode));
+                self.autopilot_armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
                 self.refresh_profile();
             }
         }

@@ -45,6 +45,9 @@ pub struct CompanionStats {
     pub vision_resets: u32,
     /// The VISION_POSITION_ESTIMATE is fit to navigate on (see `companion::vision`).
     pub vision_fit: bool,
+    /// VISION_POSITION_ESTIMATEs held back: the autopilot disarmed and the position not fit
+    /// to take off on (see `companion::vision`).
+    pub vision_held: u32,
     /// Velocities sent (ODOMETRY or VISION_SPEED_ESTIMATE, TD_VPE_EN bit 1).
     pub vision_velocities: u32,
     /// PARAM_VALUEs sent.

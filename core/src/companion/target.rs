@@ -152,18 +152,25 @@ impl State {
         } else {
             None
         };
+        // A position held back before take-off holds its velocity back too: either would
+        // count as the board's estimates flowing for the autopilot's arming check.
+        let mut held = false;
         if vpe_enable & VPE_POSITION != 0 {
             let level = frame.estimate.as_ref().and_then(|e| Some((e, e.level?)));
             if let Some(((e, l), turn)) = level.zip(turn) {
-                let data = self.vision_estimate_for(t, time_usec, &l, turn);
-                self.report_view_margin(t, e.view_margin_m, now_us);
-                self.vpe = Some(PendingVpe {
-                    created_us: now_us,
-                    data,
-                });
+                match self.vision_estimate_for(t, time_usec, &l, turn) {
+                    Some(data) => {
+                        self.report_view_margin(t, e.view_margin_m, now_us);
+                        self.vpe = Some(PendingVpe {
+                            created_us: now_us,
+                            data,
+                        });
+                    }
+                    None => held = true,
+                }
             }
         }
-        if let Some((f, turn)) = fitted.zip(turn) {
+        if let Some((f, turn)) = fitted.zip(turn).filter(|_| !held) {
             let message = match profile {
                 Profile::Px4 => VelocityMessage::Odometry(velocity_odometry(time_usec, &f, turn)),
                 Profile::ArduPilot | Profile::ArduPilotLocalFrd => {

@@ -7,7 +7,7 @@ use std::string::{String, ToString};
 use super::*;
 use crate::filter::{FrameEstimate, PadEstimate};
 use mavlink::dialects::common::{
-    MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, HEARTBEAT_DATA,
+    MavAutopilot, MavMessage, MavModeFlag, MavState, MavSysStatusSensor, MavType, HEARTBEAT_DATA,
 };
 use nalgebra::Vector3;
 
@@ -72,12 +72,32 @@ fn status_text_is_sent_once_and_cut_to_the_field() {
 }
 
 fn heartbeat_from(c: &mut Companion, sys: u8, comp: u8, autopilot: MavAutopilot) {
+    heartbeat_with(c, sys, comp, autopilot, MavModeFlag::empty());
+}
+
+/// ArduPilot's HEARTBEAT from the board's own system, armed or not.
+fn ardupilot_heartbeat(c: &mut Companion, armed: bool) {
+    let mode = if armed {
+        MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED
+    } else {
+        MavModeFlag::empty()
+    };
+    heartbeat_with(c, 1, 1, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA, mode);
+}
+
+fn heartbeat_with(
+    c: &mut Companion,
+    sys: u8,
+    comp: u8,
+    autopilot: MavAutopilot,
+    base_mode: MavModeFlag,
+) {
     let mut out = [0u8; MAX_FRAME_LEN];
     let data = HEARTBEAT_DATA {
         custom_mode: 0,
         mavtype: MavType::MAV_TYPE_QUADROTOR,
         autopilot,
-        base_mode: MavModeFlag::empty(),
+        base_mode,
         system_status: MavState::MAV_STATE_ACTIVE,
         mavlink_version: 3,
     };
@@ -346,8 +366,8 @@ fn frame_at(
 }
 
 /// The LANDING_TARGET (and VISION_POSITION_ESTIMATE) frames the companion sends for `frame`,
-/// with TD_PROFILE `profile` and the parameters `params`: the decoded target and each
-/// message's length on the wire.
+/// with TD_PROFILE `profile` and the parameters `params`, the vehicle armed: the decoded
+/// target and each message's length on the wire.
 fn sent_for(
     profile: f32,
     params: &[(ParamId, f32)],
@@ -358,6 +378,7 @@ fn sent_for(
     for (id, v) in params {
         c.set_param(*id, *v).unwrap();
     }
+    ardupilot_heartbeat(&mut c, true);
     let mut out = [0u8; MAX_FRAME_LEN];
     while c.poll_transmit(0, &mut out).is_some() {}
     assert_eq!(c.on_estimate(frame, 1000), TargetOutcome::TargetQueued);
@@ -430,7 +451,8 @@ fn local_frd_removes_roll_and_pitch_and_falls_back_to_body_frd_without_attitude(
 }
 
 /// What the broadcast load in the docs is worked out from: a LANDING_TARGET is 72 bytes on
-/// the wire and a VISION_POSITION_ESTIMATE 128 (MAVLink 2 drops the zero reset_counter).
+/// the wire, a VISION_POSITION_ESTIMATE 128 (MAVLink 2 drops the zero reset_counter), a
+/// SYS_STATUS 43.
 #[test]
 fn target_and_vision_estimate_sizes_on_the_wire() {
     use crate::filter::Attitude;
@@ -446,6 +468,27 @@ fn target_and_vision_estimate_sizes_on_the_wire() {
     }
     let (_, _, vpe) = sent_for(0.0, &[], &frame);
     assert_eq!(vpe, None);
+    // SYS_STATUS beside the HEARTBEAT with TD_VPE_EN bit 0 (its extensions, all 0, dropped),
+    // and none without.
+    let sys_status_lengths = |vpe_enable: f32| {
+        let mut c = Companion::new(CompanionConfig::default());
+        c.set_param(ParamId::VpeEnable, vpe_enable).unwrap();
+        let mut out = [0u8; MAX_FRAME_LEN];
+        let mut lengths = std::vec::Vec::new();
+        let mut parser = FrameParser::new();
+        for now_us in [0, 1_000_000] {
+            while let Some(n) = c.poll_transmit(now_us, &mut out) {
+                parser.push(&out[..n], |f| {
+                    if let Ok(MavMessage::SYS_STATUS(_)) = f.decode() {
+                        lengths.push(n);
+                    }
+                });
+            }
+        }
+        lengths
+    };
+    assert_eq!(sys_status_lengths(1.0), [43, 43]);
+    assert!(sys_status_lengths(2.0).is_empty());
 }
 
 /// Every SET_MESSAGE_INTERVAL the companion sends in `[from_ms, to_ms)`, polled each
@@ -648,8 +691,8 @@ fn vision_sent(
     (vpe, texts)
 }
 
-/// A companion for the vision tests: ArduPilot profile, TD_VPE_EN 1, `params` on top, its
-/// start-up messages drained.
+/// A companion for the vision tests: ArduPilot profile, TD_VPE_EN 1, `params` on top, the
+/// autopilot armed (in flight), its start-up messages drained.
 fn vision_companion(params: &[(ParamId, f32)]) -> Companion {
     let mut c = Companion::new(CompanionConfig::default());
     c.set_param(ParamId::Profile, 0.0).unwrap();
@@ -657,6 +700,7 @@ fn vision_companion(params: &[(ParamId, f32)]) -> Companion {
     for (id, v) in params {
         c.set_param(*id, *v).unwrap();
     }
+    ardupilot_heartbeat(&mut c, true);
     let mut out = [0u8; MAX_FRAME_LEN];
     while c.poll_transmit(0, &mut out).is_some() {}
     c
@@ -796,6 +840,95 @@ fn fit_to_navigate_is_announced_when_it_changes() {
     let texts: std::vec::Vec<String> = (0..20).flat_map(|_| feed(&mut c, 0.1, false)).collect();
     assert_eq!(texts, ["touchdown: position not fit: pad lost"]);
     assert!(!c.stats().vision_fit);
+}
+
+/// What `c` sends at `now_us` after `frame`: the message ids, STATUSTEXTs, and the
+/// vision-position health of the last SYS_STATUS (`None`: none sent).
+fn sent_with_health(
+    c: &mut Companion,
+    frame: &FrameEstimate,
+    now_us: u64,
+) -> (std::vec::Vec<u32>, std::vec::Vec<String>, Option<bool>) {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let _ = c.on_estimate(frame, now_us);
+    let mut parser = FrameParser::new();
+    let (mut ids, mut texts, mut health) = (std::vec::Vec::new(), std::vec::Vec::new(), None);
+    while let Some(n) = c.poll_transmit(now_us, &mut out) {
+        parser.push(&out[..n], |f| {
+            ids.push(f.message_id);
+            match f.decode() {
+                Ok(MavMessage::STATUSTEXT(s)) => texts.push(s.text.to_str().unwrap().to_string()),
+                Ok(MavMessage::SYS_STATUS(s)) => {
+                    let vision = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_VISION_POSITION;
+                    assert!(s.onboard_control_sensors_present.contains(vision));
+                    health = Some(s.onboard_control_sensors_health.contains(vision));
+                }
+                _ => {}
+            }
+        });
+    }
+    (ids, texts, health)
+}
+
+#[test]
+fn before_take_off_only_a_position_fit_to_take_off_on_goes_out() {
+    const VPE: u32 = 102;
+    const SPEED: u32 = 103;
+    // On the pad, velocity too (TD_VPE_EN 3).
+    let rel = Vector3::new(0.02, -0.01, 0.25);
+    let mut c = vision_companion(&[(ParamId::VpeEnable, 3.0)]);
+    ardupilot_heartbeat(&mut c, false);
+    let mut t = 1_000_000u64;
+    let mut feed = |c: &mut Companion, mount_sigma_deg: f32| {
+        let r = sent_with_health(c, &vision_frame(t, rel, 0.0004, mount_sigma_deg), t);
+        t += 100_000;
+        r
+    };
+    // The mount not calibrated: nothing the autopilot's arming check could take, said once,
+    // unhealthy.
+    let mut held = std::vec::Vec::new();
+    let mut health = std::vec::Vec::new();
+    for _ in 0..20 {
+        let (ids, texts, h) = feed(&mut c, 2.0);
+        assert!(!ids.contains(&VPE) && !ids.contains(&SPEED), "{ids:?}");
+        held.extend(texts);
+        health.extend(h);
+    }
+    assert_eq!(held, ["touchdown: position held: mount not calibrated"]);
+    assert!(
+        !health.is_empty() && health.iter().all(|h| !h),
+        "{health:?}"
+    );
+    assert_eq!(c.stats().vision_held, 20);
+    assert!(!c.stats().vision_fit);
+    // Calibrated on the pad: fit, said, sent, healthy; the velocity follows.
+    let (ids, texts, _) = feed(&mut c, 0.3);
+    assert!(ids.contains(&VPE), "{ids:?}");
+    assert_eq!(texts, ["touchdown: position fit to navigate +-0.02 m"]);
+    let (mut ids, mut health) = (std::vec::Vec::new(), std::vec::Vec::new());
+    for _ in 0..20 {
+        let (i, _, h) = feed(&mut c, 0.3);
+        ids.extend(i);
+        health.extend(h);
+    }
+    assert!(ids.contains(&SPEED), "{ids:?}");
+    assert!(
+        !health.is_empty() && health.iter().all(|h| *h),
+        "{health:?}"
+    );
+    assert_eq!(c.stats().vision_held, 20);
+
+    // Armed, the same uncalibrated mount high up: sent, with its covariance, not fit.
+    let mut c = vision_companion(&[]);
+    let (vpe, texts) = vision_sent(&mut c, &vision_frame(t, rel * 40.0, 0.0004, 2.0), t);
+    assert!(vpe.is_some() && texts.is_empty(), "{texts:?}");
+    assert!(!c.stats().vision_fit);
+    // TD_CAM_CAL 0: the mount was set by hand, nothing to wait for.
+    let mut c = vision_companion(&[(ParamId::CamCal, 0.0)]);
+    ardupilot_heartbeat(&mut c, false);
+    let (vpe, _) = vision_sent(&mut c, &vision_frame(t, rel, 0.0004, 2.0), t);
+    assert!(vpe.is_some());
+    assert_eq!(c.stats().vision_held, 0);
 }
 
 #[test]

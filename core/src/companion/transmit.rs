@@ -18,8 +18,9 @@ use super::{
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
-    MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, NAMED_VALUE_FLOAT_DATA,
-    PARAM_VALUE_DATA, STATUSTEXT_DATA, TIMESYNC_DATA,
+    MavSysStatusSensor, MavSysStatusSensorExtended, MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
+    HEARTBEAT_DATA, NAMED_VALUE_FLOAT_DATA, PARAM_VALUE_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
+    TIMESYNC_DATA,
 };
 
 /// Targets sent before the first report of their exposure-to-send delay; the report repeats
@@ -34,6 +35,9 @@ impl State {
         // mavlink_stream fuzz target; fuzz/regressions/mavlink_stream/).
         if now_us >= self.next_heartbeat_us && self.next_heartbeat_us < u64::MAX {
             self.enqueue(Pending::Heartbeat);
+            if self.params.get_int(ParamId::VpeEnable) & crate::params::VPE_POSITION != 0 {
+                self.enqueue(Pending::SysStatus);
+            }
             self.next_heartbeat_us = now_us.saturating_add(self.config.heartbeat_period_us);
         }
         let alive = self.autopilot_alive(now_us);
@@ -172,6 +176,28 @@ impl State {
                 system_status: MavState::MAV_STATE_ACTIVE,
                 mavlink_version: 3,
             }),
+            Pending::SysStatus => {
+                let vision = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_VISION_POSITION;
+                MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+                    onboard_control_sensors_present: vision,
+                    onboard_control_sensors_enabled: vision,
+                    onboard_control_sensors_health: if self.vision_fit() {
+                        vision
+                    } else {
+                        MavSysStatusSensor::empty()
+                    },
+                    // The generated default of a bitflags field is its first flag, not
+                    // none.
+                    onboard_control_sensors_present_extended: MavSysStatusSensorExtended::empty(),
+                    onboard_control_sensors_enabled_extended: MavSysStatusSensorExtended::empty(),
+                    onboard_control_sensors_health_extended: MavSysStatusSensorExtended::empty(),
+                    // No battery: MAVLink's "unknown" values.
+                    voltage_battery: u16::MAX,
+                    current_battery: -1,
+                    battery_remaining: -1,
+                    ..SYS_STATUS_DATA::DEFAULT
+                })
+            }
             Pending::TimesyncRequest { ts1, target } => MavMessage::TIMESYNC(TIMESYNC_DATA {
                 tc1: 0,
                 ts1,
@@ -265,6 +291,7 @@ impl State {
         // paths; see nopanic/).
         let written = match msg {
             MavMessage::HEARTBEAT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::SYS_STATUS(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             MavMessage::TIMESYNC(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             MavMessage::COMMAND_LONG(d) => framing::write_v2_frame(out, seq, sys, comp, d),
             MavMessage::COMMAND_ACK(d) => framing::write_v2_frame(out, seq, sys, comp, d),

@@ -28,8 +28,19 @@
 //!   chatter). The board says so, and when it stops being so, in a STATUSTEXT
 //!   (`touchdown: position fit to navigate +-0.04 m`, `touchdown: position not fit +-0.31 m`,
 //!   `touchdown: position not fit: pad lost`), and keeps the state in its counters
-//!   ([`super::CompanionStats::vision_fit`]). A pilot or a ground station waits for the
-//!   first before making the board the only position source.
+//!   ([`super::CompanionStats::vision_fit`]), and in its SYS_STATUS health (the
+//!   vision-position sensor). A pilot or a ground station waits for the first before making
+//!   the board the only position source.
+//! - **Nothing unfit goes out before take-off**: while the autopilot is disarmed only a fit
+//!   position is sent, and a position seen on the ground counts as fit only once the mount is
+//!   known to [`TAKE_OFF_MOUNT_SIGMA_DEG`] (calibrated on the pad, or TD_CAM_CAL 0: set by
+//!   hand). On the ground the mount's error is a millimetre; at the take-off height it is
+//!   decimetres, too late to find out. The autopilots' own arming checks then hold the
+//!   vehicle: ArduPilot's visual odometry counts as unhealthy 0.3 s after its last estimate
+//!   (`PreArm: VisOdom: not healthy`) and neither autopilot has a position to arm a position
+//!   mode on. Once armed every estimate goes out, with its covariance: a vehicle in the air
+//!   is better off with a wide estimate than with none. STATUSTEXT `touchdown: position
+//!   held: mount not calibrated` says why, once each time a hold starts.
 //! - **The view margin**, NAMED_VALUE_FLOAT `TD_VIEW` every [`REPORT_PERIOD_US`] while
 //!   estimates flow: how far the vehicle can move before the pad leaves the view
 //!   ([`crate::pipeline::view_margin_m`]). Past it the autopilot coasts on its own estimate;
@@ -40,6 +51,7 @@ use core::fmt::Write;
 use super::bearing::turn_matrix;
 use super::State;
 use crate::filter::{turn_covariance, Attitude, LevelEstimate, ATTITUDE_BIAS_DEG};
+use crate::params::ParamId;
 use mavlink::dialects::common::{MavSeverity, VISION_POSITION_ESTIMATE_DATA};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -57,6 +69,12 @@ pub const FIT_SIGMA_M: f32 = 0.10;
 /// The horizontal one sigma over which a fit position stops being fit, metres.
 pub const UNFIT_SIGMA_M: f32 = 0.15;
 
+/// The mount's tilt error (one sigma, degrees) at or under which a position seen on the
+/// ground is fit to take off on: the calibrator's own confidence bound
+/// ([`crate::filter::MountCalibrationConfig::max_sigma_deg`]'s default), a tenth of a metre
+/// at 12 m.
+pub const TAKE_OFF_MOUNT_SIGMA_DEG: f32 = 0.5;
+
 /// The period of the named values the board reports (the view margin, the pad's bearing),
 /// µs: enough to watch, a small part of the link.
 pub const REPORT_PERIOD_US: u64 = 500_000;
@@ -73,6 +91,8 @@ pub(super) struct VisionState {
     reset_counter: u8,
     /// The position is fit to navigate (announced).
     fit: bool,
+    /// A hold before take-off has been announced and no estimate has gone out since.
+    hold_said: bool,
     /// The exposure after which the next view margin is due, our clock, µs.
     next_margin_us: u64,
 }
@@ -108,24 +128,22 @@ impl State {
 
     /// With TD_VPE_EN bit 0, the frame's VISION_POSITION_ESTIMATE, stamped `time_usec`, from
     /// `level` exposed at `exposure_us` (our clock), turned by `turn` ([`super::bearing`]);
-    /// the reset counter and the fit state move with it.
+    /// the reset counter and the fit state move with it. `None`: held back, the autopilot
+    /// disarmed and the position not fit to take off on.
     pub(super) fn vision_estimate_for(
         &mut self,
         exposure_us: u64,
         time_usec: u64,
         level: &LevelEstimate,
         turn: f32,
-    ) -> VISION_POSITION_ESTIMATE_DATA {
-        if self.vision.gap_before(exposure_us) {
-            self.vision.reset_counter = self.vision.reset_counter.wrapping_add(1);
-            self.stats.vision_resets = self.stats.vision_resets.saturating_add(1);
-        }
-        self.vision.last_exposure_us = Some(exposure_us);
+    ) -> Option<VISION_POSITION_ESTIMATE_DATA> {
+        let gap = self.vision.gap_before(exposure_us);
+        let reset_counter = self.vision.reset_counter.wrapping_add(u8::from(gap));
         let data = vision_estimate(
             time_usec,
             level,
             &self.camera_position(),
-            self.vision.reset_counter,
+            reset_counter,
             turn,
         );
         let sigma = horizontal_sigma(&data);
@@ -134,8 +152,32 @@ impl State {
         } else {
             FIT_SIGMA_M
         };
-        self.set_vision_fit(sigma <= limit, sigma);
-        data
+        // TD_CAM_CAL 0: the user set the mount by hand and the board has no way to know it
+        // better.
+        let mount_known = self.params.get_int(ParamId::CamCal) == 0
+            || level.mount_sigma_deg <= TAKE_OFF_MOUNT_SIGMA_DEG;
+        let fit = sigma <= limit && (self.autopilot_armed || mount_known);
+        self.set_vision_fit(fit, sigma);
+        if !fit && !self.autopilot_armed {
+            self.stats.vision_held = self.stats.vision_held.saturating_add(1);
+            if !self.vision.hold_said {
+                self.vision.hold_said = true;
+                let text = if mount_known {
+                    "touchdown: position held: not fit"
+                } else {
+                    "touchdown: position held: mount not calibrated"
+                };
+                self.queue_status_text(MavSeverity::MAV_SEVERITY_WARNING, text);
+            }
+            return None;
+        }
+        self.vision.hold_said = false;
+        if gap {
+            self.stats.vision_resets = self.stats.vision_resets.saturating_add(1);
+        }
+        self.vision.reset_counter = reset_counter;
+        self.vision.last_exposure_us = Some(exposure_us);
+        Some(data)
     }
 
     /// Queues the view margin of the frame exposed at `exposure_us` (our clock), if known and

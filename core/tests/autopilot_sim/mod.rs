@@ -95,13 +95,14 @@ pub fn encode(seq: &mut u8, sys: u8, comp: u8, msg: &MavMessage) -> Vec<u8> {
     raw.raw_bytes().to_vec()
 }
 
-/// A multicopter autopilot's HEARTBEAT of the given stack.
+/// A multicopter autopilot's HEARTBEAT of the given stack, armed: the flights here are in
+/// the air.
 pub fn heartbeat(autopilot: MavAutopilot) -> MavMessage {
     MavMessage::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: 0,
         mavtype: MavType::MAV_TYPE_QUADROTOR,
         autopilot,
-        base_mode: MavModeFlag::empty(),
+        base_mode: MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
         system_status: MavState::MAV_STATE_ACTIVE,
         mavlink_version: 3,
     })

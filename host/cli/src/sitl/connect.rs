@@ -40,7 +40,7 @@ use std::time::{Duration, Instant};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use touchdown_core::companion::mavlink::dialects::common::MavMessage;
-use touchdown_core::companion::{FrameParser, Profile, MAX_FRAME_LEN};
+use touchdown_core::companion::{FrameParser, Profile, MAX_FRAME_LEN, TAKE_OFF_MOUNT_SIGMA_DEG};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
@@ -95,10 +95,6 @@ const MSG_HIL_STATE_QUATERNION: u32 = 115;
 /// The pad a running SITL's rehearsal draws unless `--pad` says otherwise: the one whose
 /// markers stay in view with the vehicle resting on it.
 const REST_PAD: &str = "nested-rest";
-/// The board's mount counts as calibrated when the tilt it may still be off by is at most
-/// this, degrees: the calibrator's own confidence bound
-/// (`MountCalibrationConfig::max_sigma_deg`'s default).
-const MOUNT_READY_DEG: f32 = 0.5;
 /// How often the loop looks at the link and the clock.
 const TICK: Duration = Duration::from_millis(1);
 /// The board's VISION_POSITION_ESTIMATEs count as flowing while the last is this recent, s
@@ -439,7 +435,8 @@ pub fn fly(
                         .map_err(|e| CliError(format!("frame {index}: {e:?}")))?;
                 let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
                 let report = pipeline.process(&image, t_us, companion.vehicle(), &mut buffers);
-                mount_ready = pipeline.estimator().mount_sigma_deg() <= MOUNT_READY_DEG;
+                // The board's own rule for a position to take off on.
+                mount_ready = pipeline.estimator().mount_sigma_deg() <= TAKE_OFF_MOUNT_SIGMA_DEG;
                 outcome.frames += 1;
                 outcome.frames_with_fix += usize::from(report.fix.is_some());
                 let handed_s = now_s();

@@ -9,13 +9,19 @@ use touchdown_core::companion::mavlink::dialects::common::{
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 
-/// An ArduCopter HEARTBEAT (system 1, component 1) as MAVLink 2 bytes, sequence `seq`.
+/// An ArduCopter HEARTBEAT (system 1, component 1) as MAVLink 2 bytes, sequence `seq`,
+/// disarmed.
 pub fn ardupilot_heartbeat(seq: u8) -> Vec<u8> {
+    ardupilot_heartbeat_with(seq, MavModeFlag::empty())
+}
+
+/// An ArduCopter HEARTBEAT as [`ardupilot_heartbeat`]'s, with `base_mode`.
+pub fn ardupilot_heartbeat_with(seq: u8, base_mode: MavModeFlag) -> Vec<u8> {
     let msg = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: 0,
         mavtype: MavType::MAV_TYPE_QUADROTOR,
         autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
-        base_mode: MavModeFlag::empty(),
+        base_mode,
         system_status: MavState::MAV_STATE_ACTIVE,
         mavlink_version: 3,
     });

@@ -26,7 +26,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use touchdown_core::companion::mavlink::dialects::common::{
-    MavBool, MavCmd, MavFrame, MavMessage, ATTITUDE_QUATERNION_DATA, SIM_STATE_DATA,
+    MavBool, MavCmd, MavFrame, MavMessage, MavModeFlag, ATTITUDE_QUATERNION_DATA, SIM_STATE_DATA,
     SYSTEM_TIME_DATA, TIMESYNC_DATA,
 };
 use touchdown_core::companion::FrameParser;
@@ -158,7 +158,11 @@ fn land_on_the_standin(extra: &[&str]) -> serde_json::Value {
         let mut out = Vec::new();
         if t >= next_second {
             next_second += 1.0;
-            out.extend(common::ardupilot_heartbeat(seq));
+            // In the air from the start: armed.
+            out.extend(common::ardupilot_heartbeat_with(
+                seq,
+                MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED,
+            ));
             seq = seq.wrapping_add(1);
             out.extend(common::autopilot_frame(
                 &mut seq,

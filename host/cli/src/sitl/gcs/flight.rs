@@ -569,10 +569,12 @@ impl Flight {
             }
             return Ok(Some(ArmingWait::Origin));
         }
-        Ok(if !board.flowing {
-            Some(ArmingWait::BoardPosition)
-        } else if !board.mount_ready {
+        // The board holds its position back until its mount is calibrated (or set by hand,
+        // TD_CAM_CAL 0): what it sends is what arming may go on.
+        Ok(if !board.flowing && !board.mount_ready {
             Some(ArmingWait::Mount)
+        } else if !board.flowing {
+            Some(ArmingWait::BoardPosition)
         } else if link.autopilot == Autopilot::Px4 && !board.clock_synced {
             Some(ArmingWait::ClockSync)
         } else {
