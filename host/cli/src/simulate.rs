@@ -13,7 +13,7 @@ use clap::Args;
 
 use super::{CliError, Outcome};
 use crate::effects::EffectArgs;
-use crate::renderer::RendererArg;
+use crate::renderer::{PsfArg, RendererArg};
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
@@ -104,6 +104,17 @@ pub struct SimulateArgs {
     )]
     pub renderer: RendererArg,
 
+    /// The warp model's lens blur, in place of the scenario's: a comma-separated list of
+    /// gaussian:SIGMA, disc:DIAMETER, motion:LENGTH[@DEGREES], field:CORNER_SIGMA (pixels);
+    /// needs --renderer warp
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_parser = PsfArg::parse,
+        help_heading = "Advanced"
+    )]
+    pub psf: Option<PsfArg>,
+
     /// Rendering threads [default: all cores]
     #[arg(
         long,
@@ -184,14 +195,19 @@ pub fn run(
     if let Some(threads) = args.threads {
         simulator = simulator.with_threads(threads);
     }
-    let simulator = simulator.with_renderer(args.renderer.renderer());
+    let simulator = crate::renderer::configure(simulator, args.renderer, args.psf.as_ref())?;
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let mut writer = RecordingWriter::create_with_vehicle_attitude(&dir, &camera, &pad, true, true)
         .map_err(CliError::new)?;
     std::fs::write(
         dir.join("simulation.toml"),
-        simulation_toml(&simulator.scenario, &effects, args.renderer.renderer()),
+        simulation_toml(
+            &simulator.scenario,
+            &effects,
+            args.renderer.renderer(),
+            args.psf.as_ref(),
+        ),
     )
     .map_err(|e| {
         CliError(format!(
@@ -245,14 +261,25 @@ pub fn run(
 }
 
 /// `simulation.toml`: what produced the recording (informational; readers ignore it).
-fn simulation_toml(s: &Scenario, effects: &FlightEffects, renderer: Renderer) -> String {
+fn simulation_toml(
+    s: &Scenario,
+    effects: &FlightEffects,
+    renderer: Renderer,
+    psf: Option<&PsfArg>,
+) -> String {
     let lens = s.camera.model.distortion;
+    let psf = psf.map_or(String::new(), |PsfArg(psfs)| {
+        format!(
+            "psf = {}\n",
+            touchdown_formats::toml_string(&format!("{psfs:?}"))
+        )
+    });
     format!(
         "# How this recording was simulated (touchdown simulate); informational.\n\
          scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\
          supersampling = {}\nground = {}\ndistortion = {:?}\n\
          readout_ms = {:?}\nvibration_deg = {:?}\nmount_roll_deg = {:?}\nmount_pitch_deg = {:?}\n\
-         renderer = {}\n",
+         renderer = {}\n{}",
         touchdown_formats::toml_string(&s.name),
         touchdown_formats::toml_string(&s.description),
         s.seed,
@@ -265,6 +292,7 @@ fn simulation_toml(s: &Scenario, effects: &FlightEffects, renderer: Renderer) ->
         effects.vibration_deg,
         effects.mount_roll_deg,
         effects.mount_pitch_deg,
-        touchdown_formats::toml_string(renderer.name())
+        touchdown_formats::toml_string(renderer.name()),
+        psf
     )
 }

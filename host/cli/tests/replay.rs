@@ -328,7 +328,7 @@ fn truncated_frame_file_is_named() {
 
 #[test]
 fn bad_inputs_are_one_line_and_status_2() {
-    let cases: [(&[&str], &[&str]); 6] = [
+    let cases: [(&[&str], &[&str]); 9] = [
         (
             &["replay", "--scenario", "nosuch"],
             &["unknown scenario `nosuch`", "paper", "landing"],
@@ -347,6 +347,18 @@ fn bad_inputs_are_one_line_and_status_2() {
             &["--frames"],
         ),
         (&["replay", "some-dir", "--seed", "3"], &["--scenario only"]),
+        (
+            &["replay", "some-dir", "--psf", "disc:2"],
+            &["--psf", "--scenario only"],
+        ),
+        (
+            &["replay", "--scenario", "paper", "--psf", "disc:2"],
+            &["--psf", "--renderer warp"],
+        ),
+        (
+            &["replay", "--scenario", "paper", "--psf", "box:2"],
+            &["box:2", "gaussian:SIGMA"],
+        ),
     ];
     for (args, needles) in cases {
         assert_fails_with_one_line(&touchdown(args), needles);
@@ -702,4 +714,127 @@ fn calibration_hover_hands_the_mount_the_board_set_to_the_flight() {
         "--no-calibration",
     ]);
     assert_fails_with_one_line(&refused, &["--calibration-hover", "--no-calibration"]);
+}
+
+/// `--psf` reaches the warp model both ways: the paper's hover replayed in memory through a
+/// defocus disc gives the tables of its recording simulated through it, and not the tables
+/// of the scenario's own lens.
+#[test]
+fn a_psf_is_the_same_in_memory_and_on_disk() {
+    let frames = FRAMES.to_string();
+    let dir = scratch("paper-recording-disc");
+    let common = ["--scenario", "paper", "--ideal", "--renderer", "warp"];
+    let output = touchdown(
+        &[
+            &["simulate"][..],
+            &common,
+            &[
+                "--psf",
+                "disc:2.5",
+                "--frames",
+                &frames,
+                "--out",
+                path_str(&dir),
+            ],
+        ]
+        .concat(),
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    let toml = std::fs::read_to_string(dir.join("simulation.toml")).expect("simulation.toml");
+    assert!(
+        toml.contains("psf = \"[Disc { diameter_px: 2.5 }]\""),
+        "{toml}"
+    );
+    let replay = |psf: &[&str]| {
+        touchdown(
+            &[
+                &["replay"][..],
+                &common,
+                psf,
+                &["--frames", &frames, "--no-plots"],
+            ]
+            .concat(),
+        )
+    };
+    let (disc, own) = (replay(&["--psf", "disc:2.5"]), replay(&[]));
+    assert!(disc.status.success(), "{}", text(&disc.stderr));
+    assert!(own.status.success(), "{}", text(&own.stderr));
+    let from_disk = touchdown(&["replay", path_str(&dir), "--no-plots", "--ideal"]);
+    assert!(from_disk.status.success(), "{}", text(&from_disk.stderr));
+    let (d, o, f) = (
+        text(&disc.stdout),
+        text(&own.stdout),
+        text(&from_disk.stdout),
+    );
+    assert!(!set_point_table(&d).is_empty());
+    assert_eq!(set_point_table(&d), set_point_table(&f));
+    assert_ne!(set_point_table(&d), set_point_table(&o));
+}
+
+/// The far range's scale on more than one image model (issue 39): the paper's hovers at 30,
+/// 40 and 50 m replayed on the ray-casting model and on the warp model through three lenses.
+/// Wherever a hover has estimates, their mean is within 0.3 % of the range; at 30 and 40 m
+/// every one of these lenses gives a pose in at least 90 % of the frames. Not held yet, so
+/// not asserted (docs/accuracy.md, "Through other lenses"): 50 m behind the defocus disc and
+/// the motion line gives a pose in only a quarter to a third of the frames; corners blurred
+/// by 1 px read 50 m 0.35 % short; a Gaussian lens blur of 0.8 px or more loses 40 and 50 m.
+#[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
+fn the_far_range_scale_holds_within_0_3_percent_through_several_lenses() {
+    const MAX_SCALE_ERROR: f64 = 0.003;
+    const MIN_DETECTION: f64 = 0.9;
+    let models: [(&str, &[&str]); 4] = [
+        ("raster, the scenario's lens", &["--renderer", "raster"]),
+        ("warp, the scenario's lens", &["--renderer", "warp"]),
+        (
+            "warp, defocus disc 2 px",
+            &["--renderer", "warp", "--psf", "disc:2"],
+        ),
+        (
+            "warp, motion line 2 px at 30 deg",
+            &["--renderer", "warp", "--psf", "motion:2@30"],
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, args) in models {
+        let out = touchdown(
+            &[
+                &["replay", "--scenario", "paper", "--no-plots", "--json"][..],
+                args,
+            ]
+            .concat(),
+        );
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+        for height_m in [30.0, 40.0, 50.0] {
+            let label = format!("z={height_m}");
+            let row = doc["set_points"]
+                .as_array()
+                .and_then(|rows| rows.iter().find(|r| r["label"] == label.as_str()))
+                .unwrap_or_else(|| panic!("{name}: no {label} row"));
+            let ours = row["methods"]
+                .as_array()
+                .and_then(|m| m.iter().find(|m| m["name"] == "ours"))
+                .expect("ours");
+            let detection = ours["detection_rate"].as_f64().expect("detection rate");
+            let error_cm = ours["on_axis"]["mean_error_cm"].as_f64();
+            println!(
+                "{name}, {height_m} m: pose in {:.0} % of frames, mean error {}",
+                100.0 * detection,
+                error_cm.map_or("-".into(), |e| format!("{e:+.2} cm"))
+            );
+            if let Some(e) = error_cm {
+                if e.abs() / 100.0 > MAX_SCALE_ERROR * height_m {
+                    failures.push(format!("{name}, {height_m} m: {e:+.2} cm, over 0.3 %"));
+                }
+            }
+            if height_m < 45.0 && detection < MIN_DETECTION {
+                failures.push(format!(
+                    "{name}, {height_m} m: a pose in {:.0} % of frames",
+                    100.0 * detection
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
 }

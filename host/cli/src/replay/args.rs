@@ -5,7 +5,7 @@
 
 use super::CliError;
 use crate::effects::EffectArgs;
-use crate::renderer::RendererArg;
+use crate::renderer::{PsfArg, RendererArg};
 use clap::Args;
 use std::path::PathBuf;
 use touchdown_eval::flight::{AutopilotKind, ErrorModel};
@@ -333,6 +333,17 @@ pub struct ReplayArgs {
         help_heading = "Advanced"
     )]
     pub renderer: Option<RendererArg>,
+
+    /// The warp model's lens blur for --scenario, in place of the scenario's: a
+    /// comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH[@DEGREES],
+    /// field:CORNER_SIGMA (pixels); needs --renderer warp
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_parser = PsfArg::parse,
+        help_heading = "Advanced"
+    )]
+    pub psf: Option<PsfArg>,
 
     /// Rendering threads for --scenario [default: all cores]
     #[arg(

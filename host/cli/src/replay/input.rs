@@ -87,9 +87,13 @@ impl Input {
             )),
             (None, Some(name)) => Self::scenario(name, args, &super::flight_effects(args)),
             (Some(dir), None) => {
-                if args.seed.is_some() || args.threads.is_some() || args.renderer.is_some() {
+                if args.seed.is_some()
+                    || args.threads.is_some()
+                    || args.renderer.is_some()
+                    || args.psf.is_some()
+                {
                     return Err(CliError(
-                        "--seed, --threads and --renderer apply to --scenario only".into(),
+                        "--seed, --threads, --renderer and --psf apply to --scenario only".into(),
                     ));
                 }
                 if super::effect_flag_given(args) {
@@ -120,7 +124,7 @@ impl Input {
         if let Some(n) = args.frames {
             scenario.truncate(n);
         }
-        Ok(Self::rendered(scenario, args, effects))
+        Self::rendered(scenario, args, effects)
     }
 
     /// The set-up guide's mount-calibration hover (scenario `hover`) over scenario `main`'s
@@ -142,11 +146,15 @@ impl Input {
         hover.camera = main.camera;
         hover.optics = main.optics;
         hover.sensor = main.sensor;
-        Ok(Self::rendered(hover, args, effects))
+        Self::rendered(hover, args, effects)
     }
 
     /// `scenario` rendered in memory with `effects`.
-    fn rendered(mut scenario: Scenario, args: &ReplayArgs, effects: &FlightEffects) -> Input {
+    fn rendered(
+        mut scenario: Scenario,
+        args: &ReplayArgs,
+        effects: &FlightEffects,
+    ) -> Result<Input, CliError> {
         let (name, seed) = (scenario.name.clone(), scenario.seed);
         scenario.apply_effects(effects);
         let mount = scenario.mount.rotation;
@@ -155,8 +163,12 @@ impl Input {
         if let Some(threads) = args.threads {
             simulator = simulator.with_threads(threads);
         }
-        let simulator = simulator.with_renderer(args.renderer.unwrap_or_default().renderer());
-        Input {
+        let simulator = crate::renderer::configure(
+            simulator,
+            args.renderer.unwrap_or_default(),
+            args.psf.as_ref(),
+        )?;
+        Ok(Input {
             title: format!("scenario {name}, seed {seed}"),
             short_name: name.to_string(),
             camera: simulator.scenario.camera.model,
@@ -169,7 +181,7 @@ impl Input {
             board_exposure: simulator.scenario.board_exposure,
             truth_table: None,
             source: Source::Simulator(Box::new(simulator)),
-        }
+        })
     }
 
     pub(super) fn recording(dir: &Path, frames: Option<usize>) -> Result<Input, CliError> {
