@@ -105,8 +105,8 @@ pub struct SimulateArgs {
     pub renderer: RendererArg,
 
     /// The warp model's lens blur, in place of the scenario's: a comma-separated list of
-    /// gaussian:SIGMA, disc:DIAMETER, motion:LENGTH[@DEGREES], field:CORNER_SIGMA (pixels);
-    /// needs --renderer warp
+    /// gaussian:SIGMA, disc:DIAMETER, motion:LENGTH or motion:LENGTH@DEGREES,
+    /// field:CORNER_SIGMA (pixels); needs --renderer warp
     #[arg(
         long,
         value_name = "LIST",

@@ -335,8 +335,8 @@ pub struct ReplayArgs {
     pub renderer: Option<RendererArg>,
 
     /// The warp model's lens blur for --scenario, in place of the scenario's: a
-    /// comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH[@DEGREES],
-    /// field:CORNER_SIGMA (pixels); needs --renderer warp
+    /// comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH or
+    /// motion:LENGTH@DEGREES, field:CORNER_SIGMA (pixels); needs --renderer warp
     #[arg(
         long,
         value_name = "LIST",
