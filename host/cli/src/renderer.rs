@@ -45,6 +45,21 @@ impl RendererArg {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PsfArg(pub Vec<Psf>);
 
+/// `--psf`, shared by `touchdown simulate` and `touchdown replay`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct LensArgs {
+    /// The warp model's lens blur (with --renderer warp; replay: with --scenario), in place of
+    /// the scenario's: a comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH
+    /// or motion:LENGTH@DEGREES, field:CORNER_SIGMA (pixels)
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_parser = PsfArg::parse,
+        help_heading = "Advanced"
+    )]
+    pub psf: Option<PsfArg>,
+}
+
 /// The widest PSF `--psf` takes, pixels (sigma, diameter or length): the renderer cuts
 /// kernels at 32 px either side, and a blur this wide leaves no marker to read anyway.
 const MAX_PSF_PX: f64 = 20.0;

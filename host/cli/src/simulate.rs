@@ -13,7 +13,7 @@ use clap::Args;
 
 use super::{CliError, Outcome};
 use crate::effects::EffectArgs;
-use crate::renderer::{PsfArg, RendererArg};
+use crate::renderer::{LensArgs, PsfArg, RendererArg};
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
@@ -104,16 +104,8 @@ pub struct SimulateArgs {
     )]
     pub renderer: RendererArg,
 
-    /// The warp model's lens blur, in place of the scenario's: a comma-separated list of
-    /// gaussian:SIGMA, disc:DIAMETER, motion:LENGTH or motion:LENGTH@DEGREES,
-    /// field:CORNER_SIGMA (pixels); needs --renderer warp
-    #[arg(
-        long,
-        value_name = "LIST",
-        value_parser = PsfArg::parse,
-        help_heading = "Advanced"
-    )]
-    pub psf: Option<PsfArg>,
+    #[command(flatten)]
+    pub lens: LensArgs,
 
     /// Rendering threads [default: all cores]
     #[arg(
@@ -195,7 +187,7 @@ pub fn run(
     if let Some(threads) = args.threads {
         simulator = simulator.with_threads(threads);
     }
-    let simulator = crate::renderer::configure(simulator, args.renderer, args.psf.as_ref())?;
+    let simulator = crate::renderer::configure(simulator, args.renderer, args.lens.psf.as_ref())?;
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let mut writer = RecordingWriter::create_with_vehicle_attitude(&dir, &camera, &pad, true, true)
@@ -206,7 +198,7 @@ pub fn run(
             &simulator.scenario,
             &effects,
             args.renderer.renderer(),
-            args.psf.as_ref(),
+            args.lens.psf.as_ref(),
         ),
     )
     .map_err(|e| {

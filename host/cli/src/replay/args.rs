@@ -5,7 +5,7 @@
 
 use super::CliError;
 use crate::effects::EffectArgs;
-use crate::renderer::{PsfArg, RendererArg};
+use crate::renderer::{LensArgs, RendererArg};
 use clap::Args;
 use std::path::PathBuf;
 use touchdown_eval::flight::{AutopilotKind, ErrorModel};
@@ -334,16 +334,8 @@ pub struct ReplayArgs {
     )]
     pub renderer: Option<RendererArg>,
 
-    /// The warp model's lens blur for --scenario, in place of the scenario's: a
-    /// comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH or
-    /// motion:LENGTH@DEGREES, field:CORNER_SIGMA (pixels); needs --renderer warp
-    #[arg(
-        long,
-        value_name = "LIST",
-        value_parser = PsfArg::parse,
-        help_heading = "Advanced"
-    )]
-    pub psf: Option<PsfArg>,
+    #[command(flatten)]
+    pub lens: LensArgs,
 
     /// Rendering threads for --scenario [default: all cores]
     #[arg(

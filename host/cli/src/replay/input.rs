@@ -90,7 +90,7 @@ impl Input {
                 if args.seed.is_some()
                     || args.threads.is_some()
                     || args.renderer.is_some()
-                    || args.psf.is_some()
+                    || args.lens.psf.is_some()
                 {
                     return Err(CliError(
                         "--seed, --threads, --renderer and --psf apply to --scenario only".into(),
@@ -166,7 +166,7 @@ impl Input {
         let simulator = crate::renderer::configure(
             simulator,
             args.renderer.unwrap_or_default(),
-            args.psf.as_ref(),
+            args.lens.psf.as_ref(),
         )?;
         Ok(Input {
             title: format!("scenario {name}, seed {seed}"),
