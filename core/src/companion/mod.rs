@@ -126,7 +126,7 @@ pub use profile::{Profile, ProfileSetting};
 pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig, ShiftMeasurement};
 pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
-pub use vision::TAKE_OFF_MOUNT_SIGMA_DEG;
+pub use vision::{mount_known_for_take_off, TAKE_OFF_MOUNT_SIGMA_DEG};
 
 use crate::filter::{FrameEstimate, VehicleState};
 use crate::params::{ParamError, ParamId, ParamSet};

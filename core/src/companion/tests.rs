@@ -670,6 +670,35 @@ fn vision_frame(
     frame
 }
 
+/// Feeds `frame` at `now_us` to `c` and returns everything it then sends: each frame's
+/// message id and its decoded message.
+fn sent_after(
+    c: &mut Companion,
+    frame: &FrameEstimate,
+    now_us: u64,
+) -> std::vec::Vec<(u32, MavMessage)> {
+    let mut out = [0u8; MAX_FRAME_LEN];
+    let _ = c.on_estimate(frame, now_us);
+    let mut parser = FrameParser::new();
+    let mut sent = std::vec::Vec::new();
+    while let Some(n) = c.poll_transmit(now_us, &mut out) {
+        parser.push(&out[..n], |f| {
+            sent.push((f.message_id, f.decode().expect("our own frames decode")));
+        });
+    }
+    sent
+}
+
+/// The STATUSTEXTs among `sent`.
+fn texts_in(sent: &[(u32, MavMessage)]) -> std::vec::Vec<String> {
+    sent.iter()
+        .filter_map(|(_, m)| match m {
+            MavMessage::STATUSTEXT(s) => Some(s.text.to_str().unwrap().to_string()),
+            _ => None,
+        })
+        .collect()
+}
+
 /// Feeds `frame` at `now_us` to `c` and returns the VISION_POSITION_ESTIMATE and the
 /// STATUSTEXTs sent for it.
 fn vision_sent(
@@ -677,18 +706,12 @@ fn vision_sent(
     frame: &FrameEstimate,
     now_us: u64,
 ) -> (Option<VISION_POSITION_ESTIMATE_DATA>, std::vec::Vec<String>) {
-    let mut out = [0u8; MAX_FRAME_LEN];
-    let _ = c.on_estimate(frame, now_us);
-    let mut parser = FrameParser::new();
-    let (mut vpe, mut texts) = (None, std::vec::Vec::new());
-    while let Some(n) = c.poll_transmit(now_us, &mut out) {
-        parser.push(&out[..n], |f| match f.decode() {
-            Ok(MavMessage::VISION_POSITION_ESTIMATE(v)) => vpe = Some(v),
-            Ok(MavMessage::STATUSTEXT(s)) => texts.push(s.text.to_str().unwrap().to_string()),
-            _ => {}
-        });
-    }
-    (vpe, texts)
+    let sent = sent_after(c, frame, now_us);
+    let vpe = sent.iter().rev().find_map(|(_, m)| match m {
+        MavMessage::VISION_POSITION_ESTIMATE(v) => Some(v.clone()),
+        _ => None,
+    });
+    (vpe, texts_in(&sent))
 }
 
 /// A companion for the vision tests: ArduPilot profile, TD_VPE_EN 1, `params` on top, the
@@ -849,25 +872,17 @@ fn sent_with_health(
     frame: &FrameEstimate,
     now_us: u64,
 ) -> (std::vec::Vec<u32>, std::vec::Vec<String>, Option<bool>) {
-    let mut out = [0u8; MAX_FRAME_LEN];
-    let _ = c.on_estimate(frame, now_us);
-    let mut parser = FrameParser::new();
-    let (mut ids, mut texts, mut health) = (std::vec::Vec::new(), std::vec::Vec::new(), None);
-    while let Some(n) = c.poll_transmit(now_us, &mut out) {
-        parser.push(&out[..n], |f| {
-            ids.push(f.message_id);
-            match f.decode() {
-                Ok(MavMessage::STATUSTEXT(s)) => texts.push(s.text.to_str().unwrap().to_string()),
-                Ok(MavMessage::SYS_STATUS(s)) => {
-                    let vision = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_VISION_POSITION;
-                    assert!(s.onboard_control_sensors_present.contains(vision));
-                    health = Some(s.onboard_control_sensors_health.contains(vision));
-                }
-                _ => {}
-            }
-        });
-    }
-    (ids, texts, health)
+    let sent = sent_after(c, frame, now_us);
+    let vision = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_VISION_POSITION;
+    let health = sent.iter().rev().find_map(|(_, m)| match m {
+        MavMessage::SYS_STATUS(s) => {
+            assert!(s.onboard_control_sensors_present.contains(vision));
+            Some(s.onboard_control_sensors_health.contains(vision))
+        }
+        _ => None,
+    });
+    let ids = sent.iter().map(|(id, _)| *id).collect();
+    (ids, texts_in(&sent), health)
 }
 
 #[test]

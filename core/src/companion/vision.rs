@@ -51,7 +51,7 @@ use core::fmt::Write;
 use super::bearing::turn_matrix;
 use super::State;
 use crate::filter::{turn_covariance, Attitude, LevelEstimate, ATTITUDE_BIAS_DEG};
-use crate::params::ParamId;
+use crate::params::{ParamId, ParamSet};
 use mavlink::dialects::common::{MavSeverity, VISION_POSITION_ESTIMATE_DATA};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -74,6 +74,15 @@ pub const UNFIT_SIGMA_M: f32 = 0.15;
 /// ([`crate::filter::MountCalibrationConfig::max_sigma_deg`]'s default), a tenth of a metre
 /// at 12 m.
 pub const TAKE_OFF_MOUNT_SIGMA_DEG: f32 = 0.5;
+
+/// Whether the mount is known well enough to take off on the board's position: its one sigma
+/// (`mount_sigma_deg`, [`LevelEstimate::mount_sigma_deg`]) within
+/// [`TAKE_OFF_MOUNT_SIGMA_DEG`], or TD_CAM_CAL 0 in `params` (the user set the mount by hand,
+/// and the board has no way to know it better). What the board holds its position back for
+/// before take-off, and what a ground station waits for.
+pub fn mount_known_for_take_off(params: &ParamSet, mount_sigma_deg: f32) -> bool {
+    params.get_int(ParamId::CamCal) == 0 || mount_sigma_deg <= TAKE_OFF_MOUNT_SIGMA_DEG
+}
 
 /// The period of the named values the board reports (the view margin, the pad's bearing),
 /// µs: enough to watch, a small part of the link.
@@ -152,10 +161,7 @@ impl State {
         } else {
             FIT_SIGMA_M
         };
-        // TD_CAM_CAL 0: the user set the mount by hand and the board has no way to know it
-        // better.
-        let mount_known = self.params.get_int(ParamId::CamCal) == 0
-            || level.mount_sigma_deg <= TAKE_OFF_MOUNT_SIGMA_DEG;
+        let mount_known = mount_known_for_take_off(&self.params, level.mount_sigma_deg);
         let fit = sigma <= limit && (self.autopilot_armed || mount_known);
         self.set_vision_fit(fit, sigma);
         if !fit && !self.autopilot_armed {

@@ -124,15 +124,16 @@ pub fn configure(
     renderer: RendererArg,
     psf: Option<&PsfArg>,
 ) -> Result<Simulator, CliError> {
-    let simulator = simulator.with_renderer(renderer.renderer());
-    let Some(PsfArg(psfs)) = psf else {
-        return Ok(simulator);
-    };
-    if renderer != RendererArg::Warp {
+    // Refused before the warp model's world is rasterised.
+    if psf.is_some() && renderer != RendererArg::Warp {
         return Err(CliError(
             "--psf sets the warp model's optics: add --renderer warp".into(),
         ));
     }
+    let simulator = simulator.with_renderer(renderer.renderer());
+    let Some(PsfArg(psfs)) = psf else {
+        return Ok(simulator);
+    };
     let optics = WarpOptics {
         psfs: psfs.clone(),
         ..WarpOptics::of_scenario(&simulator.scenario)

@@ -186,51 +186,57 @@ fn replay_prints_the_set_point_table_and_writes_figures() {
     }
 }
 
+/// The set-point tables of the paper scenario's first [`FRAMES`] frames (ideal, no flight
+/// effects) replayed three ways: in memory with the image-model options `image`, in memory
+/// with `other` instead, and from its recording simulated with `image` into scratch `dir`;
+/// `check_recording` looks at that recording first.
+fn tables_in_memory_and_on_disk(
+    dir: &str,
+    image: &[&str],
+    other: &[&str],
+    check_recording: impl Fn(&Path),
+) -> (String, String, String) {
+    let frames = FRAMES.to_string();
+    let dir = scratch(dir);
+    let scenario = ["--scenario", "paper", "--ideal", "--frames", &frames];
+    let output = touchdown(
+        &[
+            &["simulate"][..],
+            &scenario,
+            image,
+            &["--out", path_str(&dir)],
+        ]
+        .concat(),
+    );
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    check_recording(&dir);
+    let replay = |options: &[&str]| {
+        let out = touchdown(&[&["replay"][..], &scenario, options, &["--no-plots"]].concat());
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        set_point_table(&text(&out.stdout))
+    };
+    let from_disk = touchdown(&["replay", path_str(&dir), "--no-plots", "--ideal"]);
+    assert!(from_disk.status.success(), "{}", text(&from_disk.stderr));
+    (
+        replay(image),
+        replay(other),
+        set_point_table(&text(&from_disk.stdout)),
+    )
+}
+
 /// `--renderer warp` reaches the simulator both ways: a scenario replayed in memory with it
 /// gives the tables of its recording simulated with it, and not the raster frames' tables.
 #[test]
 fn the_renderer_is_the_same_in_memory_and_on_disk() {
-    let frames = FRAMES.to_string();
-    let dir = scratch("paper-recording-warp");
-    let output = touchdown(&[
-        "simulate",
-        "--scenario",
-        "paper",
-        "--ideal",
-        "--renderer",
-        "warp",
-        "--frames",
-        &frames,
-        "--out",
-        path_str(&dir),
-    ]);
-    assert!(output.status.success(), "{}", text(&output.stderr));
-    let replay = |renderer: &str| {
-        touchdown(&[
-            "replay",
-            "--scenario",
-            "paper",
-            "--frames",
-            &frames,
-            "--no-plots",
-            "--ideal",
-            "--renderer",
-            renderer,
-        ])
-    };
-    let (warp, raster) = (replay("warp"), replay("raster"));
-    assert!(warp.status.success(), "{}", text(&warp.stderr));
-    assert!(raster.status.success(), "{}", text(&raster.stderr));
-    let from_disk = touchdown(&["replay", path_str(&dir), "--no-plots", "--ideal"]);
-    assert!(from_disk.status.success(), "{}", text(&from_disk.stderr));
-    let (w, r, d) = (
-        text(&warp.stdout),
-        text(&raster.stdout),
-        text(&from_disk.stdout),
+    let (warp, raster, from_disk) = tables_in_memory_and_on_disk(
+        "paper-recording-warp",
+        &["--renderer", "warp"],
+        &["--renderer", "raster"],
+        |_| {},
     );
-    assert!(!set_point_table(&w).is_empty());
-    assert_eq!(set_point_table(&w), set_point_table(&d));
-    assert_ne!(set_point_table(&w), set_point_table(&r));
+    assert!(!warp.is_empty());
+    assert_eq!(warp, from_disk);
+    assert_ne!(warp, raster);
 }
 
 #[test]
@@ -721,54 +727,22 @@ fn calibration_hover_hands_the_mount_the_board_set_to_the_flight() {
 /// of the scenario's own lens.
 #[test]
 fn a_psf_is_the_same_in_memory_and_on_disk() {
-    let frames = FRAMES.to_string();
-    let dir = scratch("paper-recording-disc");
-    let common = ["--scenario", "paper", "--ideal", "--renderer", "warp"];
-    let output = touchdown(
-        &[
-            &["simulate"][..],
-            &common,
-            &[
-                "--psf",
-                "disc:2.5",
-                "--frames",
-                &frames,
-                "--out",
-                path_str(&dir),
-            ],
-        ]
-        .concat(),
+    let (disc, own, from_disk) = tables_in_memory_and_on_disk(
+        "paper-recording-disc",
+        &["--renderer", "warp", "--psf", "disc:2.5"],
+        &["--renderer", "warp"],
+        |dir| {
+            let toml =
+                std::fs::read_to_string(dir.join("simulation.toml")).expect("simulation.toml");
+            assert!(
+                toml.contains("psf = \"[Disc { diameter_px: 2.5 }]\""),
+                "{toml}"
+            );
+        },
     );
-    assert!(output.status.success(), "{}", text(&output.stderr));
-    let toml = std::fs::read_to_string(dir.join("simulation.toml")).expect("simulation.toml");
-    assert!(
-        toml.contains("psf = \"[Disc { diameter_px: 2.5 }]\""),
-        "{toml}"
-    );
-    let replay = |psf: &[&str]| {
-        touchdown(
-            &[
-                &["replay"][..],
-                &common,
-                psf,
-                &["--frames", &frames, "--no-plots"],
-            ]
-            .concat(),
-        )
-    };
-    let (disc, own) = (replay(&["--psf", "disc:2.5"]), replay(&[]));
-    assert!(disc.status.success(), "{}", text(&disc.stderr));
-    assert!(own.status.success(), "{}", text(&own.stderr));
-    let from_disk = touchdown(&["replay", path_str(&dir), "--no-plots", "--ideal"]);
-    assert!(from_disk.status.success(), "{}", text(&from_disk.stderr));
-    let (d, o, f) = (
-        text(&disc.stdout),
-        text(&own.stdout),
-        text(&from_disk.stdout),
-    );
-    assert!(!set_point_table(&d).is_empty());
-    assert_eq!(set_point_table(&d), set_point_table(&f));
-    assert_ne!(set_point_table(&d), set_point_table(&o));
+    assert!(!disc.is_empty());
+    assert_eq!(disc, from_disk);
+    assert_ne!(disc, own);
 }
 
 /// The far range's scale on more than one image model (issue 39): the paper's hovers at 30,

@@ -40,7 +40,7 @@ use std::time::{Duration, Instant};
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use touchdown_core::companion::mavlink::dialects::common::MavMessage;
-use touchdown_core::companion::{FrameParser, Profile, MAX_FRAME_LEN, TAKE_OFF_MOUNT_SIGMA_DEG};
+use touchdown_core::companion::{mount_known_for_take_off, FrameParser, Profile, MAX_FRAME_LEN};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
@@ -436,7 +436,10 @@ pub fn fly(
                 let mut buffers = workspace.buffers(frame.image.width, frame.image.height);
                 let report = pipeline.process(&image, t_us, companion.vehicle(), &mut buffers);
                 // The board's own rule for a position to take off on.
-                mount_ready = pipeline.estimator().mount_sigma_deg() <= TAKE_OFF_MOUNT_SIGMA_DEG;
+                mount_ready = mount_known_for_take_off(
+                    companion.params(),
+                    pipeline.estimator().mount_sigma_deg(),
+                );
                 outcome.frames += 1;
                 outcome.frames_with_fix += usize::from(report.fix.is_some());
                 let handed_s = now_s();
