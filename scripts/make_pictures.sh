@@ -25,9 +25,9 @@ fi
 
 cd "$scratch"
 
-# The pad: the recommended nested-rest design at true size (pad.svg is in millimetres).
-"$touchdown" pad --design nested-rest --out pad >/dev/null
-cp pad/pad.svg "$out/pad-nested-rest.svg"
+# The pad: the recommended nested-field design at true size (pad.svg is in millimetres).
+"$touchdown" pad --design nested-field --out pad >/dev/null
+cp pad/pad.svg "$out/pad-nested-field.svg"
 
 # What the camera sees: the first frame of the set-up guide's calibration hover (3 m over the
 # nested pad, 640x480), with the markers touchdown finds outlined, shown at half size (a

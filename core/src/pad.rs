@@ -18,7 +18,7 @@
 //! several sizes. See [`designs`] and `pads/*.toml` for the arithmetic.
 
 /// Most markers on a pad.
-pub const MAX_PAD_MARKERS: usize = 40;
+pub const MAX_PAD_MARKERS: usize = 80;
 
 /// One marker on the pad.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -339,8 +339,127 @@ pub mod designs {
     pub const NESTED_REST: PadLayout<'static> =
         or_empty(PadLayout::new("nested-rest", &nested_rest_markers()));
 
+    /// The markers of [`NESTED_FIELD`] besides its rest field and its small markers: the
+    /// altitude marker where the other nested pads have it, three 0.40 m markers beside the
+    /// field (left, right, below) and four 0.10 m markers on its diagonals (reading order).
+    const FIELD_FRAME: [PadMarker<'static>; 8] = [
+        LARGE_AND_MIDDLE[0],
+        m("tag36h11", 35, 0.40, -0.6, 0.0),
+        m("tag36h11", 36, 0.40, 0.6, 0.0),
+        m("tag36h11", 37, 0.40, 0.0, -0.6),
+        m("tag36h11", 38, 0.10, -0.3, 0.3),
+        m("tag36h11", 39, 0.10, 0.3, 0.3),
+        m("tag36h11", 40, 0.10, 0.3, -0.3),
+        m("tag36h11", 41, 0.10, -0.3, -0.3),
+    ];
+    /// Edge of [`NESTED_FIELD`]'s small markers, metres.
+    const FIELD_SMALL_SIZE: f32 = 0.04;
+    /// Their lattice's pitch, metres.
+    const FIELD_PITCH: f32 = 0.1;
+    /// The eight lattice points around the rest field are pushed out to this pitch, so that
+    /// their quiet rings clear the rest field's.
+    const FIELD_INNER_PITCH: f32 = 0.11;
+    /// Lattice steps from the landing point, each way.
+    const FIELD_STEPS: i32 = 4;
+    /// Id of the first small marker (top row, left; then row by row, left to right).
+    const FIELD_FIRST_ID: u16 = 42;
+
+    /// Where the small marker at lattice step `(i, j)` lies, if there is one: every point
+    /// within 0.42 m of the landing point (17 squared steps), except the rest field's centre
+    /// and where a 0.40 m marker's quiet ring begins.
+    const fn field_small_at(i: i32, j: i32) -> Option<(f32, f32)> {
+        let (ai, aj) = (i.abs(), j.abs());
+        let outside = i * i + j * j > 17;
+        let taken = (ai == 0 && aj == 0) || ai >= 4 || j <= -4;
+        if outside || taken {
+            return None;
+        }
+        let pitch = if ai <= 1 && aj <= 1 {
+            FIELD_INNER_PITCH
+        } else {
+            FIELD_PITCH
+        };
+        Some((i as f32 * pitch, j as f32 * pitch))
+    }
+
+    /// How many small markers [`field_small_at`] places.
+    const fn field_small_count() -> usize {
+        let (mut count, mut j) = (0, FIELD_STEPS);
+        while j >= -FIELD_STEPS {
+            let mut i = -FIELD_STEPS;
+            while i <= FIELD_STEPS {
+                if field_small_at(i, j).is_some() {
+                    count += 1;
+                }
+                i += 1;
+            }
+            j -= 1;
+        }
+        count
+    }
+
+    /// Markers of [`NESTED_FIELD`].
+    const NESTED_FIELD_LEN: usize = FIELD_FRAME.len() + REST_SIDE * REST_SIDE + field_small_count();
+
+    /// [`NESTED_FIELD`]'s markers: its frame, the rest field (as [`NESTED_REST`]'s), then the
+    /// small markers.
+    const fn nested_field_markers() -> [PadMarker<'static>; NESTED_FIELD_LEN] {
+        let mut out = [PadMarker::EMPTY; NESTED_FIELD_LEN];
+        let (mut k, mut frame) = (0, FIELD_FRAME.as_slice());
+        while let [marker, rest @ ..] = frame {
+            out = place(out, k, *marker);
+            (k, frame) = (k + 1, rest);
+        }
+        let rest_field = nested_rest_markers();
+        let (_, mut field) = rest_field.split_at(NESTED_REST_FRAME.len());
+        while let [marker, rest @ ..] = field {
+            out = place(out, k, *marker);
+            (k, field) = (k + 1, rest);
+        }
+        let (mut id, mut j) = (FIELD_FIRST_ID, FIELD_STEPS);
+        while j >= -FIELD_STEPS {
+            let mut i = -FIELD_STEPS;
+            while i <= FIELD_STEPS {
+                if let Some((x, y)) = field_small_at(i, j) {
+                    out = place(out, k, m("tag36h11", id, FIELD_SMALL_SIZE, x, y));
+                    (k, id) = (k + 1, id + 1);
+                }
+                i += 1;
+            }
+            j -= 1;
+        }
+        out
+    }
+
+    /// The recommended pad, for landings in gusts: some marker stays whole in view with the
+    /// camera up to 30 cm off the landing point and tilted up to 10 degrees, facing anywhere,
+    /// from 8 m down to 0.2 m, and on the ground the rest field of [`NESTED_REST`] (same ids,
+    /// same places) keeps one in view from 0.1 m up. Around the rest field, a lattice of
+    /// 0.04 m markers at 0.1 m within 0.42 m of the landing point, four 0.10 m markers and
+    /// three 0.40 m markers beyond it; the altitude marker is [`NESTED`]'s id 0, in its place.
+    /// Its other ids (35-88) are on neither other nested pad, so no pad's markers are
+    /// mistaken for another's.
+    ///
+    /// | marker | size | centre | decodable up to |
+    /// |---|---|---|---|
+    /// | id 0 | 1.25 m | (0, 1.40) | 40.8 m |
+    /// | ids 35-37 | 0.40 m | (-0.6, 0), (0.6, 0), (0, -0.6) | 13.0 m |
+    /// | ids 38-41 | 0.10 m | (-+0.3, +-0.3) | 3.3 m |
+    /// | ids 42-88 | 0.04 m | a 0.1 m lattice within 0.42 m | 1.3 m |
+    /// | ids 10-34 | 0.027 m | the rest field | 0.88 m |
+    ///
+    /// `the_field_pad_keeps_a_marker_in_view_30_cm_off_and_tilted` checks the coverage for
+    /// the 60 degree 320x240 lens, the 70 degree 640x480 lens and a 100 degree 640x480 lens
+    /// with barrel distortion.
+    pub const NESTED_FIELD: PadLayout<'static> =
+        or_empty(PadLayout::new("nested-field", &nested_field_markers()));
+
+    /// The design the docs recommend, which `touchdown sitl` and the rehearsals draw unless
+    /// told otherwise.
+    pub const RECOMMENDED: &PadLayout<'static> = &NESTED_FIELD;
+
     /// Every shipped design.
-    pub const ALL: [&PadLayout<'static>; 3] = [&PAPER_SINGLE, &NESTED, &NESTED_REST];
+    pub const ALL: [&PadLayout<'static>; 4] = [&PAPER_SINGLE, &NESTED, &NESTED_REST, &NESTED_FIELD];
 }
 
 #[cfg(test)]

@@ -24,7 +24,7 @@ from .autopilot import PX4_MAX_RTT_NS, Autopilot
 from .flash import BANK_SIZE, SECTOR_SIZE
 
 FRAMES_DIR = os.path.join(os.path.dirname(__file__), "frames")
-DEFAULT_FRAME = {"qvga": "nested-qvga.pgm", "vga": "nested-vga.pgm"}
+DEFAULT_FRAME = {"qvga": "nested-field-qvga.pgm", "vga": "nested-field-vga.pgm"}
 # How far the firmware's pose may be from the truth: distance within this fraction, each
 # position component within this fraction of the distance, the angles within this (rad).
 # The autopilot reports the vehicle the frame was rendered from, so nothing but the

@@ -11,7 +11,7 @@ camera's position and the vehicle's attitude (what the emulated autopilot report
 
 Pixels outside the simulated view are mid grey. Run once; the result is committed. The
 committed frames come from `touchdown simulate --scenario descent --frames 480
---mount-roll-deg 0 --mount-pitch-deg 0 --vibration-deg 0`, frame 479: on the nominal mount,
+--mount-roll-deg 0 --mount-pitch-deg 0 --vibration-deg 0 --pad nested-field`, frame 479: on the nominal mount,
 so that the vehicle attitude in the truth is also the camera's.
 """
 

@@ -31,9 +31,9 @@ from .chip import build_chip
 from .fil import messages_since, position_problems, timed_messages
 
 PARAM = "TD_TAG_SIZE"
-# The firmware's built pad (firmware/src/config.rs: core's NESTED, which a host test keeps
-# identical to this file).
-PAD_FILE = os.path.join(os.path.dirname(__file__), "..", "..", "pads", "nested.toml")
+# The firmware's built pad (firmware/src/config.rs: core's NESTED_FIELD, which a host test
+# keeps identical to this file).
+PAD_FILE = os.path.join(os.path.dirname(__file__), "..", "..", "pads", "nested-field.toml")
 # The save delay (core's SAVE_DEBOUNCE_US, 2 s) plus room for the flash words.
 SAVE_WAIT_NS = 2.6e9
 # Emulated time after the PARAM_SET and after the second boot before the checks.

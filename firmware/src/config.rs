@@ -132,13 +132,15 @@ pub const fn camera_model(model: Model) -> &'static CameraModel {
 }
 
 /// The pad the firmware looks for: touchdown's recommended tag36h11 pad
-/// (`pads/nested-rest.toml`), at the size it is built with: its rest field keeps markers in
-/// view with the vehicle on the pad (a position to arm on without GPS, the mount calibrated
-/// before take-off). It shares the older `nested` pad's ids 0-4 and their places, so a
-/// printed `nested` pad is still found down to about a metre; for all of it, build with
-/// `designs::NESTED`. A pad printed at another scale is set with TD_TAG_SIZE (the edge of its
-/// largest marker as printed: the whole layout is scaled to it), no rebuild.
-pub const PAD: &PadLayout<'static> = &designs::NESTED_REST;
+/// (`pads/nested-field.toml`), at the size it is built with: a marker stays in view with the
+/// vehicle blown 30 cm off the landing point in the last metre, and its rest field keeps
+/// markers in view with the vehicle on the pad (a position to arm on without GPS, the mount
+/// calibrated before take-off). It shares the `nested-rest` pad's rest field (ids 10-34) and
+/// the nested pads' altitude marker (id 0), in their places; for a printed `nested-rest` or
+/// `nested` pad, build with `designs::NESTED_REST` or `designs::NESTED`. A pad printed at
+/// another scale is set with TD_TAG_SIZE (the edge of its largest marker as printed: the
+/// whole layout is scaled to it), no rebuild.
+pub const PAD: &PadLayout<'static> = designs::RECOMMENDED;
 
 /// The size `settings` (TD_TAG_SIZE) scales [`PAD`] to, in whole percent of its built size
 /// (for logs and STATUSTEXT; saturates, NaN gives 0).

@@ -34,6 +34,7 @@ use touchdown_core::geometry::Point;
 use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::pose::{
     marker_corners, marker_pose, pad_pose, pad_pose_with_prediction, Pose, PoseMethod,
+    MAX_FIX_MARKERS,
 };
 use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::image_io::load_gray;
@@ -536,6 +537,27 @@ fn pad_pose_of_the_nested_pad_over_the_landing() {
     assert_eq!(far.1, 1);
     assert!(near.1 >= 4, "{near:?}");
     assert!(far.2 > 100.0 * near.2, "{far:?} {near:?}");
+}
+
+/// The field pad from 1.2 m shows more of its markers than one fit takes: the fit uses the
+/// first MAX_FIX_MARKERS of them and is as good as a fit from fewer.
+#[test]
+fn a_fix_takes_at_most_max_fix_markers_of_a_crowded_view() {
+    let camera = lens();
+    let families = [by_name("tag36h11").expect("family")];
+    let layout = designs::NESTED_FIELD;
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let truth = camera_over_pad(0.02, -0.03, 1.2, 3.0, 0.3);
+    let detections = view_pad(&mut rng, &camera, &layout, "tag36h11", &truth, 0.3);
+    assert!(detections.len() > MAX_FIX_MARKERS, "{}", detections.len());
+    let fix = pad_pose(&detections, &families, &layout, &camera).expect("pad pose");
+    assert_eq!(usize::from(fix.markers_used), MAX_FIX_MARKERS);
+    let error = (fix.camera_position() - truth.translation).norm();
+    assert!(error < 0.01, "camera error {error} m");
+    // The same from the view's first 40 alone.
+    let first =
+        pad_pose(&detections[..MAX_FIX_MARKERS], &families, &layout, &camera).expect("pad pose");
+    assert_eq!(first.pose, fix.pose);
 }
 
 #[test]

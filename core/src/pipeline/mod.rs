@@ -85,9 +85,9 @@ use crate::filter::{
 };
 use crate::geometry::Point;
 use crate::image::{GrayImage, ImageRegion};
-use crate::pad::{PadError, PadLayout, MAX_PAD_MARKERS};
+use crate::pad::{PadError, PadLayout};
 use crate::params::{ParamSet, PipelineSettings};
-use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix, Pose};
+use crate::pose::{level_pad_fix, pad_pose_with_prediction, PadFix, Pose, MAX_FIX_MARKERS};
 use crate::sensor::{motion_cap_us, pad_levels, scene_levels, Metering, SCENE_STEP};
 use nalgebra::{Matrix3, Vector3};
 
@@ -295,7 +295,7 @@ impl Fixes<'_, '_> {
         let (families, pad, camera) = (self.families, self.pad, self.camera);
         // The pad's markers as a global shutter would have seen them (both fixes solve on
         // these); the count reported is the detector's.
-        let mut corrected = heapless::Vec::<Detection, MAX_PAD_MARKERS>::new();
+        let mut corrected = heapless::Vec::<Detection, MAX_FIX_MARKERS>::new();
         let detections = match self.readout_motion {
             Some(motion) => {
                 shutter::correct_pad_detections(raw, families, pad, camera, motion, &mut corrected);

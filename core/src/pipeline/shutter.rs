@@ -39,7 +39,8 @@ use crate::camera::CameraModel;
 use crate::detect::Detection;
 use crate::family::Family;
 use crate::geometry::Point;
-use crate::pad::{PadLayout, MAX_PAD_MARKERS};
+use crate::pad::PadLayout;
+use crate::pose::MAX_FIX_MARKERS;
 use nalgebra::Vector3;
 
 /// The pad's plane in the camera frame at the frame's time: the points `X` with
@@ -184,7 +185,7 @@ pub(crate) fn correct_pad_detections(
     pad: &PadLayout<'_>,
     camera: &CameraModel,
     motion: &ReadoutMotion,
-    out: &mut heapless::Vec<Detection, MAX_PAD_MARKERS>,
+    out: &mut heapless::Vec<Detection, MAX_FIX_MARKERS>,
 ) {
     out.clear();
     for detection in detections {
@@ -207,7 +208,7 @@ pub(crate) fn correct_pad_detections(
                 None => all = false,
             }
         }
-        // Full: every layout marker is in already (a pad has at most MAX_PAD_MARKERS).
+        // Full: as many markers as one fit takes (the pad fit's own limit).
         if out.push(if all { corrected } else { *detection }).is_err() {
             break;
         }

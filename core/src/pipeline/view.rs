@@ -148,19 +148,42 @@ mod tests {
         }
     }
 
-    /// Whether some marker of `pad` is in view and decodable from every heading and from
-    /// every point within `radius` m of the landing point (a grid of a twelfth of it),
-    /// `height` m up.
-    fn covered(pad: &PadLayout<'_>, camera: &CameraModel, height: f32, radius: f32) -> bool {
+    /// Whether some marker of `pad` is in view and decodable from every heading (every 5
+    /// degrees of a half turn: the image is a rectangle) and from every point within `radius`
+    /// m of the landing point (a grid of a twelfth of it), `height` m up; with `tilt_deg`,
+    /// also tilted that much toward each of eight directions.
+    fn covered(
+        pad: &PadLayout<'_>,
+        camera: &CameraModel,
+        height: f32,
+        radius: f32,
+        tilt_deg: f32,
+    ) -> bool {
         const STEPS: i32 = 6;
         let step = radius / STEPS as f32;
+        let tilts = if tilt_deg > 0.0 { 9 } else { 1 };
         (-STEPS..=STEPS).all(|i| {
             (-STEPS..=STEPS).all(|j| {
                 let (x, y) = (i as f32 * step, j as f32 * step);
                 x * x + y * y > radius * radius + 1e-6
-                    || (0..18).all(|k| {
+                    || (0..36).all(|k| {
                         let pose = above_turned(x, y, height, 5.0 * k as f32);
-                        view_margin_m(&pose, pad, camera).is_some()
+                        (0..tilts).all(|t| {
+                            let toward = 45f32.to_radians() * t as f32;
+                            let tilt = if t == 0 { 0.0 } else { tilt_deg.to_radians() };
+                            // A turn about a level axis through the camera, in its frame.
+                            let axis = nalgebra::Unit::new_normalize(Vector3::new(
+                                libm::cosf(toward),
+                                libm::sinf(toward),
+                                0.0,
+                            ));
+                            let turn = *nalgebra::Rotation3::from_axis_angle(&axis, tilt).matrix();
+                            let tilted = Pose {
+                                rotation: turn * pose.rotation,
+                                translation: turn * pose.translation,
+                            };
+                            view_margin_m(&tilted, pad, camera).is_some()
+                        })
                     })
             })
         })
@@ -177,7 +200,7 @@ mod tests {
         // landing point (a lever arm plus a landing's miss), facing anywhere.
         for camera in [qvga(), vga] {
             for height in [0.1f32, 0.15, 0.2, 0.3] {
-                assert!(covered(pad, &camera, height, 0.06), "{height} m");
+                assert!(covered(pad, &camera, height, 0.06, 0.0), "{height} m");
             }
         }
         // In the air: the camera within a tenth of its height of the landing point (a
@@ -186,7 +209,7 @@ mod tests {
             for height in [0.5f32, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0, 30.0] {
                 if height <= top {
                     assert!(
-                        covered(pad, &camera, height, (0.1 * height).min(1.0)),
+                        covered(pad, &camera, height, (0.1 * height).min(1.0), 0.0),
                         "{height} m, {} px",
                         camera.width
                     );
@@ -194,7 +217,55 @@ mod tests {
             }
         }
         // The earlier nested pad has nothing whole in view on the ground.
-        assert!(!covered(&designs::NESTED, &qvga(), 0.1, 0.0));
+        assert!(!covered(&designs::NESTED, &qvga(), 0.1, 0.0, 0.0));
+    }
+
+    /// The wide lens of the coverage claims: 640x480 behind 100 degrees, with barrel
+    /// distortion (the image's corners pulled in by about a tenth).
+    fn wide() -> CameraModel {
+        let f = 320.0 / libm::tanf(50f32.to_radians());
+        let mut camera = CameraModel::pinhole(640, 480, f, f, 319.5, 239.5);
+        camera.distortion = [-0.08, 0.01, 0.0, 0.0, 0.0];
+        camera
+    }
+
+    #[test]
+    fn the_field_pad_keeps_a_marker_in_view_30_cm_off_and_tilted() {
+        let vga = {
+            let f = 320.0 / libm::tanf(35f32.to_radians());
+            CameraModel::pinhole(640, 480, f, f, 319.5, 239.5)
+        };
+        let pad = &designs::NESTED_FIELD;
+        // On the ground, as the rest pad.
+        for camera in [qvga(), vga, wide()] {
+            for height in [0.1f32, 0.15] {
+                assert!(covered(pad, &camera, height, 0.06, 0.0), "{height} m");
+            }
+        }
+        // From 0.2 m up: a vehicle blown 30 cm off the landing point and tilted 10 degrees,
+        // facing anywhere, up to where the altitude marker takes over; above, the approach
+        // (within a tenth of the height, level).
+        for (camera, top) in [(qvga(), 20.0f32), (vga, 30.0), (wide(), 20.0)] {
+            for height in [
+                0.2f32, 0.25, 0.3, 0.4, 0.5, 0.7, 1.0, 1.5, 2.0, 3.0, 5.0, 8.0,
+            ] {
+                assert!(
+                    covered(pad, &camera, height, 0.3, 10.0),
+                    "{height} m, {} px",
+                    camera.width
+                );
+            }
+            for height in [12.0f32, 20.0, 30.0] {
+                if height <= top {
+                    assert!(
+                        covered(pad, &camera, height, 0.1 * height, 0.0),
+                        "{height} m"
+                    );
+                }
+            }
+        }
+        // The rest pad loses its markers over its 0.40 m ones at 0.3 m.
+        assert!(!covered(&designs::NESTED_REST, &qvga(), 0.3, 0.3, 0.0));
     }
 
     /// The envelope docs/setup-ardupilot.md quotes: the recommended pad's view margin with

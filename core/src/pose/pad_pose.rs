@@ -40,8 +40,13 @@ pub const PIXEL_NOISE_FLOOR_PX: f32 = 0.3;
 /// [`PIXEL_NOISE_FLOOR_PX`] counted as the floor), a prediction (if given) decides between
 /// them.
 pub const AMBIGUOUS_RMS_RATIO: f32 = 2.0;
+/// Most markers in one pad fit: the first this many of the pad's markers among a frame's
+/// detections. A pad may have more ([`MAX_PAD_MARKERS`]) and a view of its small ones may
+/// show more, but forty markers' corners already pin the pose, and the fit's buffers live on
+/// the firmware's stack.
+pub const MAX_FIX_MARKERS: usize = 40;
 /// Most corners in one pad fit.
-pub const MAX_PAD_POINTS: usize = 4 * MAX_PAD_MARKERS;
+pub const MAX_PAD_POINTS: usize = 4 * MAX_FIX_MARKERS;
 
 /// A pad pose measurement.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -161,6 +166,9 @@ pub fn pad_pose_with_prediction(
     let mut anchor: Option<(&PadMarker<'_>, [Point; 4], f32)> = None;
 
     for detection in detections {
+        if count + 4 > MAX_PAD_POINTS {
+            break;
+        }
         let Some((index, marker)) = layout_marker_index(layout, families, detection) else {
             continue;
         };
@@ -178,7 +186,7 @@ pub fn pad_pose_with_prediction(
             *m = *cp;
             *i = *ci;
         }
-        count = (count + 4).min(MAX_PAD_POINTS);
+        count += 4;
         markers_used = markers_used.saturating_add(1);
         let area = quad_area(&detection.corners);
         if anchor.is_none_or(|(_, _, best)| area > best) {

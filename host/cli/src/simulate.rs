@@ -16,6 +16,7 @@ use crate::effects::EffectArgs;
 use crate::renderer::{LensArgs, PsfArg, RendererArg};
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
+use touchdown_sim::pad::PrintedPad;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
 use touchdown_sim::{Renderer, Simulator};
 
@@ -83,6 +84,11 @@ pub struct SimulateArgs {
     /// Write into DIR even if it already holds files
     #[arg(long)]
     pub force: bool,
+
+    /// Draw this shipped pad design (nested-field, nested-rest, nested, paper-single) instead
+    /// of the scenario's own; the flight is the same
+    #[arg(long, value_name = "DESIGN")]
+    pub pad: Option<String>,
 
     /// The flight effects' terms.
     #[command(flatten)]
@@ -168,6 +174,14 @@ pub fn run(
             return Err(CliError("--frames must be at least 1".into()));
         }
         scenario.truncate(n);
+    }
+    if let Some(name) = &args.pad {
+        scenario.pad = PrintedPad::design(name).ok_or_else(|| {
+            CliError(format!(
+                "--pad: no design `{name}` (shipped: {})",
+                touchdown_sim::pad::design_names().join(", ")
+            ))
+        })?;
     }
     let effects = args.effects();
     scenario.apply_effects(&effects);

@@ -24,6 +24,7 @@ use super::{CliError, Outcome};
 use crate::companion::endpoint::EndpointSpec;
 use crate::effects::EffectArgs;
 use crate::renderer::RendererArg;
+use touchdown_core::pad::designs;
 use touchdown_eval::closed_loop::wind::WindProfile;
 use touchdown_eval::closed_loop::{self, LandingConfig, LandingOutcome};
 use touchdown_formats::recording::RecordingWriter;
@@ -32,8 +33,8 @@ use touchdown_formats::recording::RecordingWriter;
 pub const LONG_HELP: &str = "\
 Closed-loop landings: the vehicle flies on the targets touchdown sends.
 
-Per camera frame: the simulator renders the camera's view of the pad (--pad: nested for the \
-model's landings, nested-rest against a running SITL) from the vehicle's TRUE pose (with the flight effects, as `touchdown simulate`: rolling \
+Per camera frame: the simulator renders the camera's view of the pad (--pad, by default the \
+recommended nested-field) from the vehicle's TRUE pose (with the flight effects, as `touchdown simulate`: rolling \
 shutter, vibration on the mount, mount misalignment; --ideal for none), the camera board's \
 per-frame path (detector, pad fix, estimator) and MAVLink companion run on it, and talk \
 MAVLink bytes with the autopilot model over a simulated UART (TIMESYNC, \
@@ -137,9 +138,8 @@ pub struct SitlArgs {
     #[arg(long)]
     pub qvga: bool,
 
-    /// The pad drawn and looked for, a shipped design: nested-rest, nested or paper-single
-    /// [default: nested-rest against a running SITL, whose rehearsals start on the pad;
-    /// nested for the model's landings]
+    /// The pad drawn and looked for, a shipped design: nested-field, nested-rest, nested or
+    /// paper-single [default: nested-field, the recommended pad]
     #[arg(long, value_name = "DESIGN")]
     pub pad: Option<String>,
 
@@ -420,6 +420,7 @@ struct LandingJson {
     low_descent_s: Option<f64>,
     last_target_s: Option<f64>,
     last_target_height_m: Option<f64>,
+    last_target_offset_m: Option<f64>,
     longest_target_gap_s: f64,
     frames: usize,
     frames_with_fix: usize,
@@ -445,6 +446,7 @@ impl From<&LandingOutcome> for LandingJson {
             low_descent_s: o.low_s,
             last_target_s: o.last_target_s,
             last_target_height_m: o.last_target_height_m,
+            last_target_offset_m: o.last_target_offset_m,
             longest_target_gap_s: o.longest_gap_s,
             frames: o.frames,
             frames_with_fix: o.frames_with_fix,
@@ -577,8 +579,10 @@ fn landing_text(o: &LandingOutcome, config: &LandingConfig) -> String {
     t.push_str(&format!(
         "  {:>7}  last LANDING_TARGET received{}\n",
         seconds(o.last_target_s),
-        o.last_target_height_m
-            .map_or(String::new(), |h| format!(" (camera at {h:.2} m)"))
+        match (o.last_target_height_m, o.last_target_offset_m) {
+            (Some(h), Some(d)) => format!(" (camera at {h:.2} m, {:.0} cm off)", 100.0 * d),
+            _ => String::new(),
+        }
     ));
     match o.touchdown {
         Some(td) => {
@@ -646,7 +650,11 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             fps: args.fps,
             qvga: args.qvga,
             renderer: args.renderer.unwrap_or(RendererArg::Raster).renderer(),
-            pad: args.pad.clone(),
+            pad: Some(
+                args.pad
+                    .clone()
+                    .unwrap_or_else(|| designs::RECOMMENDED.name().to_string()),
+            ),
             threads: render_threads,
             max_flight_s: args.max_time,
             ..LandingConfig::issue_15(args.seed.wrapping_add(k))

@@ -47,6 +47,10 @@ pub struct PrintedMarker {
     pub margin_cells: f64,
     /// `cos yaw`, `sin yaw`.
     rotation: (f64, f64),
+    /// The grid's bounding box in the pad frame: the renderers skip a marker whose box a
+    /// point or footprint misses without turning into its frame (a pad of many small markers
+    /// would otherwise cost every sample a turn per marker).
+    pub bounds: Rect,
 }
 
 impl PrintedMarker {
@@ -177,6 +181,9 @@ impl PrintedPad {
             })?;
             let cell = m.size / pattern.edge_cells() as f64;
             let yaw = m.yaw_deg.to_radians();
+            let (cos, sin) = (yaw.cos(), yaw.sin());
+            // Half the grid's extent along x and y once turned.
+            let reach = 0.5 * cell * pattern.grid() as f64 * (cos.abs() + sin.abs());
             markers.push(PrintedMarker {
                 family: m.family.clone(),
                 id: m.id,
@@ -191,7 +198,13 @@ impl PrintedPad {
                 } else {
                     0.0
                 },
-                rotation: (yaw.cos(), yaw.sin()),
+                rotation: (cos, sin),
+                bounds: Rect {
+                    x0: m.x - reach,
+                    x1: m.x + reach,
+                    y0: m.y - reach,
+                    y1: m.y + reach,
+                },
             });
         }
         check_clearance(&markers)?;

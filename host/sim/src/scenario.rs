@@ -133,7 +133,7 @@ pub const SCENARIOS: &[(&str, &str)] = &[
     ),
     (
         "rest",
-        "the vehicle resting on the nested-rest pad before take-off: the camera 0.1 m up, 2 cm from the landing point, still, 20 s at 15 Hz (300 frames)",
+        "the vehicle resting on the recommended (nested-field) pad before take-off: the camera 0.1 m up, 2 cm from the landing point, still, 20 s at 15 Hz (300 frames)",
     ),
     (
         "sun",
@@ -445,7 +445,8 @@ impl Scenario {
                     trim: (0.0, 0.0),
                 };
                 let frames = uniform_frames(duration - 0.5 / 15.0, 15.0);
-                let rest_pad = PrintedPad::design("nested-rest")?;
+                let rest_pad =
+                    PrintedPad::from_layout(touchdown_core::pad::designs::RECOMMENDED).ok()?;
                 base(name, rest_pad, board_camera, trajectory, frames)
             }
             "sun" => {

@@ -175,6 +175,9 @@ impl World {
         }
         // Later markers lie on top of earlier ones.
         for m in self.pad.markers.iter().rev() {
+            if !m.bounds.contains(x, y) {
+                continue;
+            }
             let (col, row) = m.grid_coords(x, y);
             let n = m.grid() as f64;
             if col >= 0.0 && row >= 0.0 && col < n && row < n {
@@ -247,6 +250,9 @@ impl World {
         }
         let mut hit = None;
         for m in &self.pad.markers {
+            if !overlaps(&m.bounds) {
+                continue;
+            }
             let n = m.grid() as f64;
             let g = corners.map(|(x, y)| m.grid_coords(x, y));
             let (c0, c1) = g

@@ -12,7 +12,7 @@
 //! second until it flows: in the companion's own sequence, so the SITL's link statistics see
 //! one sender, as they would see the board. From that truth, linearised about each
 //! frame's time exactly as the model's closed loop does, the simulator renders the camera's
-//! view of the pad (`--pad`, by default the nested-rest pad, which stays in view with the
+//! view of the pad (`--pad`, by default the recommended pad, which stays in view with the
 //! vehicle resting on it); the board's per-frame path
 //! ([`touchdown_core::pipeline::FramePipeline`]) and its
 //! [`touchdown_core::companion::Companion`] run on it, and every byte the companion sends goes
@@ -42,6 +42,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use touchdown_core::companion::mavlink::dialects::common::MavMessage;
 use touchdown_core::companion::{mount_known_for_take_off, FrameParser, Profile, MAX_FRAME_LEN};
 use touchdown_core::image::GrayImage;
+use touchdown_core::pad::designs;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::closed_loop::{self, LandingConfig};
@@ -92,9 +93,6 @@ const TRUTH_INTERVAL_US: u32 = 20_000;
 const MSG_SIM_STATE: u32 = 108;
 /// PX4's ground truth, HIL_STATE_QUATERNION.
 const MSG_HIL_STATE_QUATERNION: u32 = 115;
-/// The pad a running SITL's rehearsal draws unless `--pad` says otherwise: the one whose
-/// markers stay in view with the vehicle resting on it.
-const REST_PAD: &str = "nested-rest";
 /// How often the loop looks at the link and the clock.
 const TICK: Duration = Duration::from_millis(1);
 /// The board's VISION_POSITION_ESTIMATEs count as flowing while the last is this recent, s
@@ -644,7 +642,11 @@ pub(super) fn run(
             .unwrap_or(crate::renderer::RendererArg::Warp)
             .renderer(),
         // A rehearsal starts with the vehicle resting on the pad: the pad it can see there.
-        pad: Some(args.pad.clone().unwrap_or_else(|| REST_PAD.to_string())),
+        pad: Some(
+            args.pad
+                .clone()
+                .unwrap_or_else(|| designs::RECOMMENDED.name().to_string()),
+        ),
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),

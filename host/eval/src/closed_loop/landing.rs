@@ -165,6 +165,8 @@ pub struct LandingOutcome {
     pub last_target_s: Option<f64>,
     /// The height of the camera then, metres.
     pub last_target_height_m: Option<f64>,
+    /// The camera's horizontal distance from the landing point then, metres.
+    pub last_target_offset_m: Option<f64>,
     /// Longest time between two targets the mode used, seconds.
     pub longest_gap_s: f64,
     /// Frames rendered and processed.
@@ -395,6 +397,7 @@ pub fn fly(
         last_shift_ne: (0.0, 0.0),
         last_target_s: None,
         last_target_height_m: None,
+        last_target_offset_m: None,
         longest_gap_s: 0.0,
         frames: 0,
         frames_with_fix: 0,
@@ -445,6 +448,8 @@ pub fn fly(
             outcome.first_target_s.get_or_insert(receipt_s);
             outcome.last_target_s = Some(receipt_s);
             outcome.last_target_height_m = Some(frame.truth.position[2]);
+            outcome.last_target_offset_m =
+                Some(frame.truth.position[0].hypot(frame.truth.position[1]));
             let shift = flight.companion.px4_shift();
             outcome.last_shift_ne = (f64::from(shift.x), f64::from(shift.y));
         }
