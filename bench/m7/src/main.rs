@@ -25,7 +25,11 @@
 //! what the firmware posts then).
 //!
 //! Frames ([`FRAMES`]): the typical ones are rendered by the simulator
-//! (`cargo run --release -p touchdown-host-tests --example m7_frames` writes `frames/*.pgm`); the
+//! (`cargo run --release -p touchdown-host-tests --example m7_frames` writes `frames/*.pgm`),
+//! but for `qvga-field-36`: the recommended pad 0.37 m below, 36 of its markers in view (the
+//! camera's work budget reaches 12 of them), the most the firmware's pad shows at once (frame 612 of `touchdown simulate --scenario landing
+//! --pad nested-field`, resampled to the firmware's 320x240 pinhole by
+//! `python3 -m emu.make_frame RECORDING 612 OUT.pgm qvga` in `firmware/`); the
 //! adversarial ones (noise, checkerboard, hundreds of small squares, marker look-alikes) and the flat ones (the
 //! floor: thresholding and the scan with nothing to trace) are generated here, outside the
 //! counted regions. Every frame is copied into one 32-byte-aligned RAM buffer first, as the
@@ -82,11 +86,15 @@ struct Frame {
     source: Source,
     /// The pad the pipeline searches for: one marker the frame shows (the benchmark frames
     /// are not pad layouts; a multi-marker pad adds four corners per marker to the one
-    /// refinement), the firmware's pad for frames without markers.
+    /// refinement), the firmware's pad for frames without markers, and the whole pad for the
+    /// frame of it.
     pad: &'static PadLayout<'static>,
     /// Markers the frame contains (typical frames); `None` for frames without markers, whose
     /// detections are printed but not checked.
     expected: Option<usize>,
+    /// The lens's focal length, pixels, when the frame is not the simulator's pinhole
+    /// ([`camera_for`]).
+    focal_px: Option<f32>,
 }
 
 const QVGA: (usize, usize) = (320, 240);
@@ -124,8 +132,8 @@ const PAD_VGA_LANDING_3: PadLayout<'static> = one_tag("vga-landing-3", 22);
 /// The simulator's camera for a frame (`PinholeCamera::for_frame` in touchdown-sim's renderer,
 /// host/sim/src/render/):
 /// focal length = the larger dimension, principal point at the centre, no distortion.
-fn camera_for(width: usize, height: usize) -> CameraModel {
-    let focal = width.max(height) as f32;
+fn camera_for(width: usize, height: usize, focal_px: Option<f32>) -> CameraModel {
+    let focal = focal_px.unwrap_or(width.max(height) as f32);
     CameraModel::pinhole(
         width as u32,
         height as u32,
@@ -145,6 +153,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Pgm(include_bytes!("../frames/qvga-landing-1.pgm")),
         pad: &PAD_LANDING_1,
         expected: Some(1),
+        focal_px: None,
     },
     Frame {
         name: "qvga-multi-6",
@@ -153,6 +162,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Pgm(include_bytes!("../frames/qvga-multi-6.pgm")),
         pad: &PAD_MULTI_6,
         expected: Some(6),
+        focal_px: None,
     },
     Frame {
         name: "qvga-far-1",
@@ -161,6 +171,18 @@ const FRAMES: &[Frame] = &[
         source: Source::Pgm(include_bytes!("../frames/qvga-far-1.pgm")),
         pad: &PAD_FAR_1,
         expected: Some(1),
+        focal_px: None,
+    },
+    Frame {
+        name: "qvga-field-36",
+        width: QVGA.0,
+        height: QVGA.1,
+        source: Source::Pgm(include_bytes!("../frames/qvga-field-36.pgm")),
+        pad: &designs::NESTED_FIELD,
+        // Of its 36 markers, the 12 the camera's work budget reaches (core's MIN_WORK_BUDGET):
+        // the scan stops there, which bounds the frame's time.
+        expected: Some(12),
+        focal_px: Some(233.5),
     },
     Frame {
         name: "qvga-flat",
@@ -169,6 +191,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Flat(128),
         pad: &designs::NESTED,
         expected: Some(0),
+        focal_px: None,
     },
     Frame {
         name: "qvga-adv-noise",
@@ -177,6 +200,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Noise { seed: 0x2545_f491 },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
     Frame {
         name: "qvga-adv-checker2",
@@ -185,6 +209,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Checker { cell: 2 },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
     Frame {
         name: "qvga-adv-checker8",
@@ -193,6 +218,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Checker { cell: 8 },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
     Frame {
         name: "qvga-adv-squares",
@@ -201,6 +227,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Squares { side: 4, pitch: 7 },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
     Frame {
         name: "qvga-adv-quads",
@@ -209,6 +236,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Squares { side: 8, pitch: 12 },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
     Frame {
         name: "qvga-adv-tags",
@@ -221,6 +249,7 @@ const FRAMES: &[Frame] = &[
         },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
     Frame {
         name: "vga-landing-3",
@@ -229,6 +258,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Pgm(include_bytes!("../frames/vga-landing-3.pgm")),
         pad: &PAD_VGA_LANDING_3,
         expected: Some(3),
+        focal_px: None,
     },
     Frame {
         name: "vga-flat",
@@ -237,6 +267,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Flat(128),
         pad: &designs::NESTED,
         expected: Some(0),
+        focal_px: None,
     },
     Frame {
         name: "vga-adv-noise",
@@ -245,6 +276,7 @@ const FRAMES: &[Frame] = &[
         source: Source::Noise { seed: 0x9e37_79b9 },
         pad: &designs::NESTED,
         expected: None,
+        focal_px: None,
     },
 ];
 
@@ -305,7 +337,7 @@ fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
     let Ok(pipeline) = FramePipeline::new(
         tables::DEFAULT,
         frame.pad,
-        camera_for(frame.width, frame.height),
+        camera_for(frame.width, frame.height, frame.focal_px),
         PipelineConfig::default(),
         PipelineSettings::default(),
     ) else {
