@@ -293,29 +293,50 @@ pub mod designs {
     /// Markers of [`NESTED_REST`].
     const NESTED_REST_LEN: usize = NESTED_REST_FRAME.len() + REST_SIDE * REST_SIDE;
 
-    /// [`NESTED_REST`]'s markers: its frame, then the rest field.
-    const fn nested_rest_markers() -> [PadMarker<'static>; NESTED_REST_LEN] {
-        let mut out = [PadMarker::EMPTY; NESTED_REST_LEN];
-        let (mut k, mut frame) = (0, NESTED_REST_FRAME.as_slice());
-        while let [marker, rest @ ..] = frame {
+    /// `markers` placed in `out` from slot `k` on; the array and the next free slot.
+    const fn place_all<const N: usize>(
+        mut out: [PadMarker<'static>; N],
+        mut k: usize,
+        mut markers: &[PadMarker<'static>],
+    ) -> ([PadMarker<'static>; N], usize) {
+        while let [marker, rest @ ..] = markers {
             out = place(out, k, *marker);
-            (k, frame) = (k + 1, rest);
+            (k, markers) = (k + 1, rest);
         }
+        (out, k)
+    }
+
+    /// The rest field's marker `cell` (row by row from the top, left to right), for
+    /// [`NESTED_REST`] and [`NESTED_FIELD`] alike.
+    const fn rest_marker(cell: usize) -> PadMarker<'static> {
         let half = (REST_SIDE - 1) as f32 / 2.0;
+        let (row, col) = ((cell / REST_SIDE) as f32, (cell % REST_SIDE) as f32);
+        m(
+            "tag36h11",
+            REST_FIRST_ID + cell as u16,
+            REST_SIZE,
+            (col - half) * REST_PITCH,
+            (half - row) * REST_PITCH,
+        )
+    }
+
+    /// The rest field placed in `out` from slot `k` on; the array and the next free slot.
+    const fn place_rest_field<const N: usize>(
+        mut out: [PadMarker<'static>; N],
+        mut k: usize,
+    ) -> ([PadMarker<'static>; N], usize) {
         let mut cell = 0;
         while cell < REST_SIDE * REST_SIDE {
-            let (row, col) = ((cell / REST_SIDE) as f32, (cell % REST_SIDE) as f32);
-            let marker = m(
-                "tag36h11",
-                REST_FIRST_ID + cell as u16,
-                REST_SIZE,
-                (col - half) * REST_PITCH,
-                (half - row) * REST_PITCH,
-            );
-            out = place(out, NESTED_REST_FRAME.len() + cell, marker);
-            cell += 1;
+            out = place(out, k, rest_marker(cell));
+            (k, cell) = (k + 1, cell + 1);
         }
-        out
+        (out, k)
+    }
+
+    /// [`NESTED_REST`]'s markers: its frame, then the rest field.
+    const fn nested_rest_markers() -> [PadMarker<'static>; NESTED_REST_LEN] {
+        let (out, k) = place_all([PadMarker::EMPTY; NESTED_REST_LEN], 0, &NESTED_REST_FRAME);
+        place_rest_field(out, k).0
     }
 
     /// The recommended pad: [`NESTED`]'s large and middle markers (same ids, same places), with
@@ -404,18 +425,8 @@ pub mod designs {
     /// [`NESTED_FIELD`]'s markers: its frame, the rest field (as [`NESTED_REST`]'s), then the
     /// small markers.
     const fn nested_field_markers() -> [PadMarker<'static>; NESTED_FIELD_LEN] {
-        let mut out = [PadMarker::EMPTY; NESTED_FIELD_LEN];
-        let (mut k, mut frame) = (0, FIELD_FRAME.as_slice());
-        while let [marker, rest @ ..] = frame {
-            out = place(out, k, *marker);
-            (k, frame) = (k + 1, rest);
-        }
-        let rest_field = nested_rest_markers();
-        let (_, mut field) = rest_field.split_at(NESTED_REST_FRAME.len());
-        while let [marker, rest @ ..] = field {
-            out = place(out, k, *marker);
-            (k, field) = (k + 1, rest);
-        }
+        let (out, k) = place_all([PadMarker::EMPTY; NESTED_FIELD_LEN], 0, &FIELD_FRAME);
+        let (mut out, mut k) = place_rest_field(out, k);
         let (mut id, mut j) = (FIELD_FIRST_ID, FIELD_STEPS);
         while j >= -FIELD_STEPS {
             let mut i = -FIELD_STEPS;

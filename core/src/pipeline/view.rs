@@ -65,6 +65,8 @@ pub fn view_margin_m(pose: &Pose, pad: &PadLayout<'_>, camera: &CameraModel) -> 
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
+
     use super::*;
     use crate::pad::designs;
     use nalgebra::Matrix3;
@@ -167,23 +169,28 @@ mod tests {
     ) -> bool {
         const STEPS: i32 = 6;
         let step = radius / STEPS as f32;
+        // Level, then (with a tilt) a turn about each of eight level axes through the camera,
+        // in its frame.
         let tilts = if tilt_deg > 0.0 { 9 } else { 1 };
+        let turns: std::vec::Vec<Matrix3<f32>> = (0..tilts)
+            .map(|t| {
+                let toward = 45f32.to_radians() * t as f32;
+                let tilt = if t == 0 { 0.0 } else { tilt_deg.to_radians() };
+                let axis = nalgebra::Unit::new_normalize(Vector3::new(
+                    libm::cosf(toward),
+                    libm::sinf(toward),
+                    0.0,
+                ));
+                *nalgebra::Rotation3::from_axis_angle(&axis, tilt).matrix()
+            })
+            .collect();
         (-STEPS..=STEPS).all(|i| {
             (-STEPS..=STEPS).all(|j| {
                 let (x, y) = (i as f32 * step, j as f32 * step);
                 x * x + y * y > radius * radius + 1e-6
                     || (0..36).all(|k| {
                         let pose = above_turned(x, y, height, 5.0 * k as f32);
-                        (0..tilts).all(|t| {
-                            let toward = 45f32.to_radians() * t as f32;
-                            let tilt = if t == 0 { 0.0 } else { tilt_deg.to_radians() };
-                            // A turn about a level axis through the camera, in its frame.
-                            let axis = nalgebra::Unit::new_normalize(Vector3::new(
-                                libm::cosf(toward),
-                                libm::sinf(toward),
-                                0.0,
-                            ));
-                            let turn = *nalgebra::Rotation3::from_axis_angle(&axis, tilt).matrix();
+                        turns.iter().all(|turn| {
                             let tilted = Pose {
                                 rotation: turn * pose.rotation,
                                 translation: turn * pose.translation,
@@ -271,7 +278,6 @@ mod tests {
     /// VGA lens (`cargo test -p touchdown-core --lib envelope -- --nocapture` prints it).
     #[test]
     fn envelope_of_the_recommended_pad() {
-        extern crate std;
         let heights = [
             0.1f32, 0.2, 0.3, 0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0, 30.0, 40.0,
         ];

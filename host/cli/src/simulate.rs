@@ -16,7 +16,7 @@ use crate::effects::EffectArgs;
 use crate::renderer::{LensArgs, PsfArg, RendererArg};
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
-use touchdown_sim::pad::PrintedPad;
+use touchdown_sim::pad::shipped_design;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
 use touchdown_sim::{Renderer, Simulator};
 
@@ -176,12 +176,7 @@ pub fn run(
         scenario.truncate(n);
     }
     if let Some(name) = &args.pad {
-        scenario.pad = PrintedPad::design(name).ok_or_else(|| {
-            CliError(format!(
-                "--pad: no design `{name}` (shipped: {})",
-                touchdown_sim::pad::design_names().join(", ")
-            ))
-        })?;
+        scenario.pad = shipped_design(name).map_err(|e| CliError(format!("--pad: {e}")))?;
     }
     let effects = args.effects();
     scenario.apply_effects(&effects);

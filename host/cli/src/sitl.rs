@@ -301,6 +301,15 @@ fn parse_timeout(text: &str) -> Result<f64, String> {
     }
 }
 
+impl SitlArgs {
+    /// The pad design to draw: `--pad`'s, or the recommended one.
+    fn pad_name(&self) -> String {
+        self.pad
+            .clone()
+            .unwrap_or_else(|| designs::RECOMMENDED.name().to_string())
+    }
+}
+
 fn parse_pad_at(text: &str) -> Result<[f64; 3], String> {
     let values: Vec<f64> = text
         .split(',')
@@ -372,13 +381,7 @@ fn check(args: &SitlArgs) -> Result<(), CliError> {
         }
     }
     if let Some(name) = &args.pad {
-        let names = touchdown_sim::pad::design_names();
-        if !names.iter().any(|n| n.eq_ignore_ascii_case(name)) {
-            return Err(CliError(format!(
-                "--pad: no design `{name}` (shipped: {})",
-                names.join(", ")
-            )));
-        }
+        touchdown_sim::pad::shipped_design(name).map_err(|e| CliError(format!("--pad: {e}")))?;
     }
     if args.seeds == 0 {
         return Err(CliError("--seeds must be at least 1".into()));
@@ -650,11 +653,7 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             fps: args.fps,
             qvga: args.qvga,
             renderer: args.renderer.unwrap_or(RendererArg::Raster).renderer(),
-            pad: Some(
-                args.pad
-                    .clone()
-                    .unwrap_or_else(|| designs::RECOMMENDED.name().to_string()),
-            ),
+            pad: Some(args.pad_name()),
             threads: render_threads,
             max_flight_s: args.max_time,
             ..LandingConfig::issue_15(args.seed.wrapping_add(k))

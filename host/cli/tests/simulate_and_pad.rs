@@ -171,6 +171,19 @@ fn simulate_renders_with_the_renderer_asked_for() {
 }
 
 #[test]
+fn simulate_draws_the_pad_asked_for_over_the_same_flight() {
+    let dir = scratch("simulate-pad");
+    let args = ["--scenario", "landing", "--frames", "1", "--threads", "2"];
+    let field = simulate(&[&args[..], &["--pad", "nested-field"]].concat(), &dir);
+    let toml = std::fs::read_to_string(dir.join("pad.toml")).unwrap();
+    assert!(toml.contains("name = \"nested-field\""), "{toml}");
+    let nested = simulate(&args, &scratch("simulate-pad-default"));
+    assert_eq!(field.frames[0].t_us, nested.frames[0].t_us);
+    assert_eq!(field.frames[0].truth, nested.frames[0].truth);
+    assert_ne!(field.frames[0].image, nested.frames[0].image);
+}
+
+#[test]
 fn bad_options_are_one_line_and_status_2() {
     for args in [
         vec!["simulate", "--scenario", "moon"],
@@ -179,6 +192,7 @@ fn bad_options_are_one_line_and_status_2() {
         vec!["simulate", "--scenario", "paper", "--readout-ms", "-1"],
         vec!["simulate", "--scenario", "paper", "--mount-roll-deg", "90"],
         vec!["simulate", "--scenario", "paper", "--renderer", "gpu"],
+        vec!["simulate", "--scenario", "paper", "--pad", "round"],
         vec!["sitl", "--renderer", "ray"],
         vec!["replay", "--scenario", "paper", "--renderer", ""],
         vec!["replay", "/nonexistent", "--renderer", "warp"],

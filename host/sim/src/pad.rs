@@ -295,6 +295,17 @@ fn squares_overlap(a: &PrintedMarker, ha: f64, b: &PrintedMarker, hb: f64) -> bo
     })
 }
 
+/// A shipped design by name, as [`PrintedPad::design`], or the one-line error the tools print
+/// for a name that is none of them: "no design `NAME` (shipped: ...)".
+pub fn shipped_design(name: &str) -> Result<PrintedPad, String> {
+    PrintedPad::design(name).ok_or_else(|| {
+        format!(
+            "no design `{name}` (shipped: {})",
+            design_names().join(", ")
+        )
+    })
+}
+
 /// The names of the shipped designs.
 pub fn design_names() -> Vec<&'static str> {
     touchdown_core::pad::designs::ALL

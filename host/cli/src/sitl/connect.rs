@@ -42,7 +42,6 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use touchdown_core::companion::mavlink::dialects::common::MavMessage;
 use touchdown_core::companion::{mount_known_for_take_off, FrameParser, Profile, MAX_FRAME_LEN};
 use touchdown_core::image::GrayImage;
-use touchdown_core::pad::designs;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::closed_loop::{self, LandingConfig};
@@ -642,11 +641,7 @@ pub(super) fn run(
             .unwrap_or(crate::renderer::RendererArg::Warp)
             .renderer(),
         // A rehearsal starts with the vehicle resting on the pad: the pad it can see there.
-        pad: Some(
-            args.pad
-                .clone()
-                .unwrap_or_else(|| designs::RECOMMENDED.name().to_string()),
-        ),
+        pad: Some(args.pad_name()),
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),

@@ -8,7 +8,6 @@ use touchdown_core::image::GrayImage;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::camera::SimCamera;
 use touchdown_sim::effects::FlightEffects;
-use touchdown_sim::pad::PrintedPad;
 use touchdown_sim::scenario::{FramePlan, Scenario};
 use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
 use touchdown_sim::{Renderer, SimFrame, Simulator};
@@ -298,12 +297,7 @@ pub fn scene(config: &LandingConfig) -> Result<Scenario, String> {
         scenario.supersampling = QVGA_SUPERSAMPLING;
     }
     if let Some(name) = &config.pad {
-        scenario.pad = PrintedPad::design(name).ok_or_else(|| {
-            format!(
-                "no pad design `{name}` (shipped: {})",
-                touchdown_sim::pad::design_names().join(", ")
-            )
-        })?;
+        scenario.pad = touchdown_sim::pad::shipped_design(name)?;
     }
     scenario.frames.clear();
     scenario.apply_effects(&config.effects);
