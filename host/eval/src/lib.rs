@@ -1,8 +1,9 @@
 //! Evaluation of touchdown's per-frame path on frames with a known truth: set-point
 //! experiments scored as the reference paper scores its Tables 2-4 (this module), the paper's
 //! geometry simulated in memory ([`paper_geometry`]), a replay's per-frame record and the
-//! figures computed from it ([`trace`]), and a detector's output scored against a rendered
-//! frame's truth ([`scoring`]); [`workspace`] is the heap work memory the detector runs in.
+//! figures computed from it ([`trace`]), a detector's output scored against a rendered
+//! frame's truth ([`scoring`]) and the hard still set it is measured on ([`stills`]);
+//! [`workspace`] is the heap work memory the detector runs in.
 //!
 //! It is a library of measurements, not a tool: it prints tables as text but has no command
 //! line and draws no plots (that is `touchdown-cli`, whose `replay` runs it), and it renders
@@ -82,6 +83,7 @@ pub mod closed_loop;
 pub mod flight;
 pub mod paper_geometry;
 pub mod scoring;
+pub mod stills;
 pub mod trace;
 pub mod workspace;
 
