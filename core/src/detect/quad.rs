@@ -28,8 +28,9 @@ const MAX_VERTICES: usize = 12;
 const TOLERANCE_PER_PIXEL: f32 = 0.02;
 /// Smallest tolerance, pixels.
 const MIN_TOLERANCE: f32 = 1.0;
-/// |cos| of the sharpest and flattest accepted corner angle (about 14 and 166 degrees).
-pub(crate) const MIN_ANGLE_COS: f32 = 0.97;
+/// |cos| of the sharpest and flattest accepted corner angle (about 10 and 170 degrees): a
+/// marker seen 80 degrees off its normal along its diagonal has corners of 13-16 degrees.
+pub(crate) const MIN_ANGLE_COS: f32 = 0.985;
 /// Longest over shortest edge.
 const MAX_EDGE_RATIO: f32 = 12.0;
 
@@ -291,8 +292,10 @@ fn roughly_convex(contour: &[Pixel], clockwise: bool) -> bool {
 const MIN_DIAMETER_PER_EDGE2: f32 = 1.9;
 
 /// Smallest twice-area over squared boundary length of a candidate (see [`screen`]): a
-/// square traced along its axes gives 1/8, at 45 degrees 1/4, a 1:8 rectangle 1/20.
-const COMPACTNESS: f32 = 0.04;
+/// square traced along its axes gives 1/8, at 45 degrees 1/4, a 1:8 rectangle 1/20, a marker
+/// seen 80 degrees off its normal along its diagonal (a rhombus, diagonals about 1:6) about
+/// 1/33 at its ideal outline; the traced one, widened by blur, a little less.
+const COMPACTNESS: f32 = 0.025;
 
 /// A boundary that passed [`screen`]: worth the Douglas-Peucker fit ([`fit`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -690,8 +693,8 @@ mod tests {
         let ratio = |r: f32| quad([(0.0, 0.0), (r, 0.0), (r, 1.0), (0.0, 1.0)]);
         assert!(check_shape(&ratio(12.0), 1.0));
         assert!(!check_shape(&ratio(12.5), 1.0));
-        // A parallelogram whose sharp corners are 15 degrees passes, 13 degrees does not
-        // (the limit, acos 0.97, is 14.07 degrees).
+        // A parallelogram whose sharp corners are 11 degrees passes, 9 degrees does not
+        // (the limit, acos 0.985, is 9.93 degrees).
         let lean = |deg: f32| {
             let (dx, dy) = (
                 10.0 * libm::cosf(deg.to_radians()),
@@ -699,7 +702,7 @@ mod tests {
             );
             quad([(0.0, 0.0), (10.0, 0.0), (10.0 + dx, dy), (dx, dy)])
         };
-        assert!(check_shape(&lean(15.0), 1.0));
-        assert!(!check_shape(&lean(13.0), 1.0));
+        assert!(check_shape(&lean(11.0), 1.0));
+        assert!(!check_shape(&lean(9.0), 1.0));
     }
 }
