@@ -6,6 +6,7 @@ Usage
     pip install pupil-apriltags opencv-contrib-python-headless==4.14.0.94
     python3 scripts/compare_peers.py                       # the shared data sets
     python3 scripts/compare_peers.py --repeats 20 more.png some/dir --family aruco_6x6_250
+    python3 scripts/compare_peers.py --stills DIR --repeats 1 --rounds 1   # a still set
 
 Images: AprilTag 3's three test photos (tag36h11, 47 markers, all id 0), ViSP's rendered
 benchmark at 640x480 and 1920x1080 for tag16h5 / tag25h9 / tag36h11 (ids 0-4) and ViSP's
@@ -40,6 +41,13 @@ right id / expected; where reference corners exist a detection must also lie on 
 centre within half its edge), wrong ids (detections with an id not expected in the image)
 and other detections (any further detection), and the time ratios to touchdown (above 1 =
 touchdown is faster). A total over all images follows.
+
+`--stills DIR` compares on a still set written by `cargo run --release -p
+touchdown-host-tests --example hard_stills -- --write DIR` (its `truth.csv`: file, family, id,
+the four corners) instead of the shared data: recall and wrong ids per renderer and class
+(from the file names), over the stills each detector could run (OpenCV has no
+tagStandard41h12, AprilTag 3 no ArUco family). touchdown runs without `--camera` there, as the
+peers do (its long test gives the wide-lens stills their lens).
 
 The references are other detectors' output, not complete truth: AprilTag's photos hold more
 id-0 tags than its 47 (the cubes' steep top faces, tiny distant faces), so on those photos
@@ -147,9 +155,11 @@ def worker_main(args):
 class Case:
     """One image, its family and what should be found in it."""
 
-    def __init__(self, path, family, expected_ids=None, reference_corners=None):
+    def __init__(self, path, family, expected_ids=None, reference_corners=None, group=None):
         self.path = path
         self.family = family
+        # A still set's renderer and class, for its summary.
+        self.group = group
         # None: unknown (extra images). Else a list of ids (repeated ids allowed).
         self.expected_ids = expected_ids
         # Optional list of (id, 4 corners) in any pixel convention: used only for centres.
@@ -240,6 +250,43 @@ def extra_cases(paths, family):
         else:
             sys.exit("error: %s: no such file or directory" % path)
     return cases
+
+
+def still_cases(directory):
+    """A still set's truth.csv: file, family, id, x0, y0, ..., x3, y3 (contract corners)."""
+    truth = os.path.join(directory, "truth.csv")
+    if not os.path.isfile(truth):
+        sys.exit("error: %s: no truth.csv (write a still set with the hard_stills example's --write)" % directory)
+    cases = []
+    with open(truth) as f:
+        for line_number, line in enumerate(f.read().splitlines()[1:], start=2):
+            fields = line.split(",")
+            if len(fields) != 11:
+                sys.exit("error: %s:%d: expected 11 fields, found %d" % (truth, line_number, len(fields)))
+            name, family, tag_id = fields[0], fields[1], int(fields[2])
+            v = [float(x) for x in fields[3:]]
+            corners = [v[0:2], v[2:4], v[4:6], v[6:8]]
+            group = re.sub(r"-\d+\.png$", "", name)
+            cases.append(Case(os.path.join(directory, name), family, [tag_id], [(tag_id, corners)], group))
+    return cases
+
+
+def print_still_summary(cases, results, detectors):
+    """Recall and wrong ids per detector and still group, over the stills each one ran."""
+    groups = sorted({c.group for c in cases})
+    print("%-28s %-24s %10s %6s" % ("detector", "renderer-class", "recall", "wrong"))
+    for name, _ in detectors:
+        for group in groups:
+            found = expected = wrong = 0
+            for case in (c for c in cases if c.group == group):
+                result = results[(name, case.family)]
+                entry = None if isinstance(result, str) else result.get(case.path)
+                if entry is None:
+                    continue
+                f, e, w, _ = score(case, entry["detections"])
+                found, expected, wrong = found + f, expected + e, wrong + w
+            if expected:
+                print("%-28s %-24s %10s %6d" % (name, group, "%d/%d" % (found, expected), wrong))
 
 
 def run_worker(extra_args, images, repeats, family):
@@ -364,6 +411,8 @@ def main():
     parser.add_argument("--data", help="shared data directory (default $TOUCHDOWN_DATA or ../shared/data)")
     parser.add_argument("--touchdown", help="touchdown binary (default: build it with cargo --release)")
     parser.add_argument("--only-extra", action="store_true", help="skip the shared data sets")
+    parser.add_argument("--stills", metavar="DIR",
+                        help="a still set (hard_stills --write DIR) instead of the shared data: a summary per class")
     # Worker mode (internal).
     parser.add_argument("--worker", choices=["apriltag", "opencv"], help=argparse.SUPPRESS)
     parser.add_argument("--decimate", default="1", help=argparse.SUPPRESS)
@@ -379,8 +428,13 @@ def main():
         parser.error("--rounds must be at least 1")
 
     data = args.data or os.environ.get("TOUCHDOWN_DATA") or os.path.join(os.path.dirname(REPO), "shared", "data")
-    cases = [] if args.only_extra else builtin_cases(data)
-    if not args.only_extra and not cases:
+    if args.stills and args.paths:
+        parser.error("--stills takes no further images")
+    if args.stills:
+        cases = still_cases(args.stills)
+    else:
+        cases = [] if args.only_extra else builtin_cases(data)
+    if not args.only_extra and not args.stills and not cases:
         print("note: no shared data at %s; only extra images are compared" % data, file=sys.stderr)
     cases += extra_cases(args.paths, args.family)
     if not cases:
@@ -414,6 +468,10 @@ def main():
                 print("round %d/%d: running %s on %d %s image(s)..."
                       % (round_number, args.rounds, name, len(images), family), file=sys.stderr, flush=True)
                 merge_round(results, (name, family), run(images, family))
+
+    if args.stills:
+        print_still_summary(cases, results, detectors)
+        return
 
     print("Times: per image the fastest of %d rounds' medians of %d runs, ms, decoding excluded; "
           "ms / td = detector time / touchdown time (above 1: touchdown is faster)." % (args.rounds, args.repeats))

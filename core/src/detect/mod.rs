@@ -254,7 +254,8 @@ pub struct DetectorConfig {
     /// Pipeline variant.
     pub method: Method,
     /// Smallest local contrast (max - min grey level in a 12x12 neighbourhood) for a pixel
-    /// to be classified; flat regions are never dark.
+    /// to be classified; flat regions are never dark. A neighbourhood whose darkest level is
+    /// at most a quarter of its lightest (ink on paper in a deep shadow) needs only 12.
     pub min_contrast: u8,
     /// Smallest accepted marker edge, in pixels.
     pub min_edge_px: f32,

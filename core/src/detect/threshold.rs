@@ -4,7 +4,9 @@
 //! neighbouring tiles (a 12x12 window), and a pixel is dark when it lies below the window's
 //! mid-level. The threshold follows shadows and vignetting across the frame. Where the window
 //! has less than `min_contrast` there is no edge to find, so nothing there is dark: uniform
-//! areas (sky, tarmac, the inside of a big black cell) cost nothing downstream.
+//! areas (sky, tarmac, the inside of a big black cell) cost nothing downstream. A window whose
+//! dark level is a quarter of its light one or less needs only [`DARK_MIN_CONTRAST`]: a
+//! marker deep in a shadow, the camera exposed for the sun ([`has_contrast`]).
 //!
 //! # Across a hard shadow
 //!
@@ -168,13 +170,41 @@ fn packed_min_max(mins: u32, maxs: u32) -> u32 {
     byte_min(pairs, pairs >> 8)
 }
 
+/// The contrast a window needs where its darkest level is at most a quarter of its
+/// lightest (see [`has_contrast`]).
+pub(crate) const DARK_MIN_CONTRAST: u8 = 12;
+
+/// Whether a window whose extrema are `lo` and `hi` has an edge to find: a contrast of
+/// `min_contrast`, or of [`DARK_MIN_CONTRAST`] where `lo` is at most a quarter of `hi`.
+///
+/// A marker in a deep shadow, the camera exposed for the sunlit ground beside it, is ink of
+/// a few grey levels on paper of some twenty: every level scaled down by the shadow, its
+/// contrast near `min_contrast`, so that windows along its outline fall below it and the
+/// outline breaks. Lowering `min_contrast` itself lets the fainter texture of sunlit ground
+/// (grass, gravel) through, and its contours spend the work budget before the markers are
+/// reached (docs/accuracy.md, "Hard stills"). What tells the shadowed marker from texture is the
+/// ratio: ink against paper is dark against light whatever the light, a texture's levels
+/// differ by tens of percent. So a window as dark against its light as ink is, a quarter or
+/// less, needs only the lower contrast, which the noise of a dark frame (a few levels)
+/// does not reach.
+#[inline(always)]
+fn has_contrast(lo: u8, hi: u8, min_contrast: u8) -> bool {
+    let contrast = hi.saturating_sub(lo);
+    contrast >= min_contrast || (contrast >= DARK_MIN_CONTRAST && lo <= hi >> 2)
+}
+
 /// Per-byte threshold of four tiles from the minima `lo` and maxima `hi` of their windows
-/// (every byte of `hi` >= that of `lo`): the rounded-up mid-level, or 0 where the contrast
-/// is below `min_contrast` (that byte of `min_contrast` repeated in every byte).
+/// (every byte of `hi` >= that of `lo`): the rounded-up mid-level, or 0 where the window
+/// has no contrast ([`has_contrast`]; `min_contrast` is its byte repeated in every byte).
 #[inline(always)]
 fn tile_thresholds(lo: u32, hi: u32, min_contrast: u32) -> u32 {
+    const DARK: u32 = DARK_MIN_CONTRAST as u32 * 0x0101_0101;
+    const LOW6: u32 = 0x3F3F_3F3F;
     // hi - lo cannot borrow across bytes (no byte of hi is below lo's).
-    let enough = ge_mask(hi.wrapping_sub(lo), min_contrast);
+    let contrast = hi.wrapping_sub(lo);
+    // The three comparisons' flags (bit 7) combined first, spread to a mask once.
+    let dark = bytes_ge(contrast, DARK) & bytes_ge((hi >> 2) & LOW6, lo);
+    let enough = ((bytes_ge(contrast, min_contrast) | dark) >> 7).wrapping_mul(0xFF);
     // ceil((lo + hi) / 2) = (lo | hi) - ((lo ^ hi) >> 1), per byte without borrows.
     let mid = (lo | hi).wrapping_sub(((lo ^ hi) >> 1) & LOW7);
     mid & enough
@@ -659,7 +689,7 @@ impl Vectorised {
         }
         let threshold = |lo: u8, hi: u8| {
             let mid = (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8;
-            if hi.saturating_sub(lo) < min_contrast {
+            if !has_contrast(lo, hi, min_contrast) {
                 0
             } else {
                 mid
@@ -825,7 +855,7 @@ pub(crate) fn ratio_threshold(
             let lo = at(tmin, y).min(at(tmin, above));
             let hi = at(tmax, y).max(at(tmax, above));
             if let Some(cell) = tmin.get_mut(y * tw + x) {
-                *cell = if hi.saturating_sub(lo) < min_contrast {
+                *cell = if !has_contrast(lo, hi, min_contrast) {
                     0
                 } else {
                     ratio_level(lo, hi)
@@ -963,7 +993,7 @@ fn spread_down_to_thresholds(
                 (Some(hi), ..) => (*cell, hi),
                 _ => (*cell, *cell),
             };
-            *cell = if hi.saturating_sub(lo) < min_contrast {
+            *cell = if !has_contrast(lo, hi, min_contrast) {
                 0
             } else {
                 (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
@@ -1041,11 +1071,13 @@ mod tests {
                 }
                 let threshold = tile_thresholds(u32::from(a.min(b)), u32::from(a.max(b)), 20);
                 let (lo, hi) = (a.min(b), a.max(b));
-                let expected = if hi - lo < 20 {
-                    0
-                } else {
-                    (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
-                };
+                let contrast = hi - lo;
+                let expected =
+                    if contrast < 20 && !(contrast >= 12 && 4 * u16::from(lo) <= u16::from(hi)) {
+                        0
+                    } else {
+                        (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
+                    };
                 assert_eq!(threshold as u8, expected, "{lo} {hi}");
             }
         }
@@ -1463,7 +1495,9 @@ mod tests {
                                 }
                             }
                         }
-                        let dark = hi.saturating_sub(lo) >= 20
+                        let contrast = hi.saturating_sub(lo);
+                        let dark = (contrast >= 20
+                            || (contrast >= 12 && 4 * u16::from(lo) <= u16::from(hi)))
                             && px[y * w + x] < ((lo as u16 + hi as u16).div_ceil(2)) as u8;
                         let got = get_bit(&bitmap, words_per_row(w), x as isize, y as isize, w, h);
                         assert_eq!(got, dark, "{w}x{h} {max_rows:?} {way} at ({x}, {y})");
@@ -1471,5 +1505,39 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The word-wide thresholds equal the byte rule for every pair of extrema: the dark
+    /// window's lower contrast included, in every byte position.
+    #[test]
+    fn tile_thresholds_follow_the_contrast_rule_in_every_byte() {
+        let min_contrast = 20u8;
+        let repeated = u32::from(min_contrast) * 0x0101_0101;
+        for lo in 0..=255u8 {
+            for hi in lo..=255u8 {
+                let expected = if has_contrast(lo, hi, min_contrast) {
+                    (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
+                } else {
+                    0
+                };
+                for byte in 0..4 {
+                    // The other bytes a window with contrast, so a carry would show.
+                    let (mut los, mut his) = ([10u8; 4], [200u8; 4]);
+                    los[byte] = lo;
+                    his[byte] = hi;
+                    let got =
+                        tile_thresholds(u32::from_le_bytes(los), u32::from_le_bytes(his), repeated)
+                            .to_le_bytes();
+                    assert_eq!(got[byte], expected, "lo {lo} hi {hi} byte {byte}");
+                    assert_eq!(got[(byte + 1) % 4], 105, "lo {lo} hi {hi} byte {byte}");
+                }
+            }
+        }
+        // The rule itself: ink on shadowed paper passes, sunlit texture and dark noise do not.
+        assert!(has_contrast(3, 18, 20));
+        assert!(!has_contrast(60, 78, 20));
+        assert!(!has_contrast(3, 14, 20));
+        assert!(!has_contrast(5, 16, 20));
+        assert!(has_contrast(60, 80, 20));
     }
 }
