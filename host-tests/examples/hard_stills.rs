@@ -81,20 +81,10 @@ fn main() {
             std::process::exit(1);
         }
     }
-    println!("renderer class          recall  found/stills  wrong  worst corner px");
     for renderer in [Renderer::Raster, Renderer::Warp] {
         for &class in &args.classes {
             let score = score_class(class, args.count, renderer, args.seed);
-            println!(
-                "{:<8} {:<14} {:>7.3} {:>6}/{:<6} {:>6} {:>8.2}",
-                renderer.name(),
-                class.name(),
-                score.recall(),
-                score.found,
-                score.stills,
-                score.wrong.len(),
-                score.worst_corner_px
-            );
+            println!("{} {}: {}", renderer.name(), class.name(), score.summary());
             for w in &score.wrong {
                 println!("    wrong: {w}");
             }

@@ -28,16 +28,7 @@ fn the_hard_stills_are_found_on_both_renderers_without_a_wrong_id() {
     for renderer in [Renderer::Raster, Renderer::Warp] {
         for class in StillClass::ALL {
             let score = score_class(class, STILLS, renderer, 0);
-            println!(
-                "{} {}: recall {:.3} ({}/{}), wrong {}, worst corner {:.2} px",
-                renderer.name(),
-                class.name(),
-                score.recall(),
-                score.found,
-                score.stills,
-                score.wrong.len(),
-                score.worst_corner_px
-            );
+            println!("{} {}: {}", renderer.name(), class.name(), score.summary());
             for missed in &score.missed {
                 println!("    missed {missed}");
             }

@@ -172,7 +172,7 @@ fn packed_min_max(mins: u32, maxs: u32) -> u32 {
 
 /// The contrast a window needs where its darkest level is at most a quarter of its
 /// lightest (see [`has_contrast`]).
-pub(crate) const DARK_MIN_CONTRAST: u8 = 12;
+const DARK_MIN_CONTRAST: u8 = 12;
 
 /// Whether a window whose extrema are `lo` and `hi` has an edge to find: a contrast of
 /// `min_contrast`, or of [`DARK_MIN_CONTRAST`] where `lo` is at most a quarter of `hi`.
@@ -182,9 +182,9 @@ pub(crate) const DARK_MIN_CONTRAST: u8 = 12;
 /// contrast near `min_contrast`, so that windows along its outline fall below it and the
 /// outline breaks. Lowering `min_contrast` itself lets the fainter texture of sunlit ground
 /// (grass, gravel) through, and its contours spend the work budget before the markers are
-/// reached (docs/accuracy.md, "Hard stills"). What tells the shadowed marker from texture is the
-/// ratio: ink against paper is dark against light whatever the light, a texture's levels
-/// differ by tens of percent. So a window as dark against its light as ink is, a quarter or
+/// reached (docs/accuracy.md, "Hard stills"). What tells the shadowed marker from texture
+/// is the ratio: ink against paper is dark against light whatever the light, a texture's
+/// levels differ by tens of percent. So a window as dark against its light as ink is, a quarter or
 /// less, needs only the lower contrast, which the noise of a dark frame (a few levels)
 /// does not reach.
 #[inline(always)]

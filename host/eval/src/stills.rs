@@ -3,17 +3,19 @@
 //! ground, in one of four classes that a held-out set of stills rendered by somebody else
 //! found hard (issue 39):
 //!
-//! - [`StillClass::ShadowCorner`]: a hard shadow's edge through the white margin at one of
-//!   the marker's corners, 125-160 px;
-//! - [`StillClass::Oblique`]: the marker seen 60-72 degrees off its normal, a sliver whose
-//!   long side is 120-150 px;
+//! - [`StillClass::ShadowCorner`]: a hard shadow's edge (a shadow 9-23 % as bright as the
+//!   sun beside it, the camera exposed for the sun) through the white margin at one of the
+//!   marker's corners, or just across the black border's corner, 125-160 px;
+//! - [`StillClass::Oblique`]: the marker seen 60-80 degrees off its normal, turned anywhere
+//!   in the frame, a sliver whose longest side is 120-150 px;
 //! - [`StillClass::WideLens`]: 120-150 px toward a corner of a frame whose lens bends it
 //!   (k1 -0.18 to -0.29), the lens given to the detector as `touchdown detect --camera` gives
 //!   it;
 //! - [`StillClass::Small`]: 18-22 px.
 //!
-//! Each still is a pure function of its class, index, renderer and seed: family, id, size,
-//! place, heading, lens and ground are drawn from a ChaCha stream seeded by them. The truth is
+//! Each still is a pure function of its class, index, seed and renderer: family, id, size,
+//! place, heading, lens, light and ground are drawn from a ChaCha stream seeded by the first
+//! three, so both renderers draw the same scene. The truth is
 //! the simulator's own projection of the marker's corners. What it is for: recall and wrong
 //! ids on cases a generic hover never shows, measured on two image models
 //! ([`touchdown_sim::Renderer`]) so that a fix tuned to one shows on the other.
@@ -63,7 +65,7 @@ pub const HEIGHT: u32 = 480;
 pub enum StillClass {
     /// A hard shadow edge through the white margin at a corner.
     ShadowCorner,
-    /// Seen 60-72 degrees off the marker's normal.
+    /// Seen 60-80 degrees off the marker's normal.
     Oblique,
     /// Toward a corner of a frame through a lens with strong barrel distortion.
     WideLens,
@@ -517,6 +519,18 @@ pub struct ClassScore {
 }
 
 impl ClassScore {
+    /// One line: recall (found / rendered), wrong ids, worst corner error.
+    pub fn summary(&self) -> String {
+        format!(
+            "recall {:.3} ({}/{}), wrong {}, worst corner {:.2} px",
+            self.recall(),
+            self.found,
+            self.stills,
+            self.wrong.len(),
+            self.worst_corner_px
+        )
+    }
+
     /// Found over rendered (1 for an empty class).
     pub fn recall(&self) -> f64 {
         if self.stills == 0 {
