@@ -40,7 +40,7 @@ use crate::detect::Detection;
 use crate::family::Family;
 use crate::geometry::Point;
 use crate::pad::PadLayout;
-use crate::pose::MAX_FIX_MARKERS;
+use crate::pose::{layout_marker, MAX_FIX_MARKERS};
 use nalgebra::Vector3;
 
 /// The pad's plane in the camera frame at the frame's time: the points `X` with
@@ -165,14 +165,9 @@ fn rotate(theta: &Vector3<f32>, v: &Vector3<f32>) -> Vector3<f32> {
     v + cross * sin_term + theta.cross(&cross) * cos_term
 }
 
-/// Whether `detection` shows a marker of `pad` (its family by name, as the pad fix matches).
+/// Whether `detection` shows a marker of `pad` (matched as the pad fix matches it).
 fn on_pad(detection: &Detection, families: &[&Family<'_>], pad: &PadLayout<'_>) -> bool {
-    let Some(family) = families.get(usize::from(detection.family)) else {
-        return false;
-    };
-    pad.markers()
-        .iter()
-        .any(|m| m.id == detection.id && m.family.eq_ignore_ascii_case(family.name))
+    layout_marker(pad, families, detection).is_some()
 }
 
 /// The detections of `pad`'s markers (each layout marker once, the first seen, as the pad fix

@@ -41,7 +41,7 @@ mod levenberg_marquardt;
 mod pad_pose;
 
 pub(crate) use level::level_pad_fix;
-pub(crate) use pad_pose::{largest_layout_marker, marker_to_pad};
+pub(crate) use pad_pose::{largest_layout_marker, layout_marker, marker_to_pad};
 pub use pad_pose::{
     pad_pose, pad_pose_with_prediction, PadFix, MAX_FIX_MARKERS, PIXEL_NOISE_FLOOR_PX,
 };
