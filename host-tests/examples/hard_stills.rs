@@ -16,7 +16,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use touchdown_eval::stills::{render_still, score_class, StillClass};
+use touchdown_eval::stills::{score_class_showing, Still, StillClass};
 use touchdown_formats::image_io::save_png;
 use touchdown_sim::Renderer;
 
@@ -75,15 +75,31 @@ fn main() {
             std::process::exit(2);
         }
     };
+    let mut truth = String::from("file,family,id,x0,y0,x1,y1,x2,y2,x3,y3\n");
     if let Some(dir) = &args.write {
-        if let Err(e) = write_stills(dir, &args) {
-            eprintln!("hard_stills: {e}");
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            eprintln!("hard_stills: {}: {e}", dir.display());
             std::process::exit(1);
         }
     }
+    let mut failed = None;
     for renderer in [Renderer::Raster, Renderer::Warp] {
         for &class in &args.classes {
-            let score = score_class(class, args.count, renderer, args.seed);
+            let save = |index: u64, still: &Still| {
+                let Some(dir) = &args.write else {
+                    return;
+                };
+                let name = format!("{}-{}-{index:03}.png", renderer.name(), class.name());
+                if let Err(e) = save_png(&dir.join(&name), &still.image) {
+                    failed.get_or_insert(format!("{name}: {e}"));
+                }
+                let _ = write!(truth, "{name},{},{}", still.family, still.id);
+                for c in still.corners {
+                    let _ = write!(truth, ",{:.3},{:.3}", c[0], c[1]);
+                }
+                truth.push('\n');
+            };
+            let score = score_class_showing(class, args.count, renderer, args.seed, save);
             println!("{} {}: {}", renderer.name(), class.name(), score.summary());
             for w in &score.wrong {
                 println!("    wrong: {w}");
@@ -95,26 +111,11 @@ fn main() {
             }
         }
     }
-}
-
-fn write_stills(dir: &PathBuf, args: &Args) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let mut truth = String::from("file,family,id,x0,y0,x1,y1,x2,y2,x3,y3\n");
-    for renderer in [Renderer::Raster, Renderer::Warp] {
-        for &class in &args.classes {
-            for index in 0..args.count {
-                let Some(still) = render_still(class, index, renderer, args.seed) else {
-                    continue;
-                };
-                let name = format!("{}-{}-{index:03}.png", renderer.name(), class.name());
-                save_png(&dir.join(&name), &still.image).map_err(|e| format!("{name}: {e}"))?;
-                let _ = write!(truth, "{name},{},{}", still.family, still.id);
-                for c in still.corners {
-                    let _ = write!(truth, ",{:.3},{:.3}", c[0], c[1]);
-                }
-                truth.push('\n');
-            }
+    if let Some(dir) = &args.write {
+        let written = std::fs::write(dir.join("truth.csv"), truth);
+        if let Some(e) = failed.or(written.err().map(|e| format!("truth.csv: {e}"))) {
+            eprintln!("hard_stills: {e}");
+            std::process::exit(1);
         }
     }
-    std::fs::write(dir.join("truth.csv"), truth).map_err(|e| format!("truth.csv: {e}"))
 }

@@ -7,6 +7,7 @@
 
 use touchdown_core::detect::Detection;
 use touchdown_core::family::Family;
+use touchdown_core::geometry::Point;
 
 use touchdown_sim::render::MarkerTruth;
 
@@ -41,6 +42,12 @@ impl FrameScore {
     }
 }
 
+/// Whether a detection centred at `found` lies on a marker centred at `center` whose
+/// shortest side is `min_side_px`: within half that side (at least 2 px).
+pub fn on_marker(center: Point, min_side_px: f32, found: Point) -> bool {
+    center.distance(found) <= (0.5 * min_side_px).max(2.0)
+}
+
 /// Matches detections to the rendered markers: a detection matches when its family name and
 /// id are those of a rendered marker whose true centre is within half the marker's shortest
 /// side (at least 2 px) of the reported centre. Everything else is "wrong".
@@ -58,7 +65,7 @@ pub fn score_frame(
         let hit = expected.iter().position(|e| {
             e.family == name
                 && e.id == d.id
-                && e.truth.center.distance(d.center) <= (0.5 * e.truth.min_side_px()).max(2.0)
+                && on_marker(e.truth.center, e.truth.min_side_px(), d.center)
         });
         match hit {
             Some(k) => {

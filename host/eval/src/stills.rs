@@ -29,8 +29,8 @@ use touchdown_core::geometry::Point;
 use touchdown_core::image::GrayImage;
 use touchdown_formats::image_io::GrayFrame;
 use touchdown_formats::pad::{MarkerConfig, PadConfig};
-use touchdown_sim::camera::{CameraMount, SimCamera};
-use touchdown_sim::math::{mul, mul_vec, normalize, rot_z, scale};
+use touchdown_sim::camera::{CameraMount, CameraPose, SimCamera};
+use touchdown_sim::math::{mul, mul_vec, normalize, rot_z, scale, Vec3};
 use touchdown_sim::pad::{PrintedPad, Rect};
 use touchdown_sim::scenario::{FramePlan, Scenario};
 use touchdown_sim::sensor::{Exposure, Optics, Sensor};
@@ -39,6 +39,7 @@ use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
 use touchdown_sim::world::{Lighting, ShadowEdge};
 use touchdown_sim::{Renderer, Simulator};
 
+use crate::scoring::on_marker;
 use crate::workspace::HostWorkspace;
 
 /// The families the stills are drawn from: with and without error correction, with and
@@ -192,16 +193,36 @@ pub fn render_still(class: StillClass, index: u64, renderer: Renderer, seed: u64
     let setup = draw_setup(class, &mut rng);
     let texture_seed = rng.random::<u64>();
 
-    // The camera along the ray through the target pixel, at the distance that gives the
-    // wanted side, refined twice (under perspective and distortion the side is not exactly
-    // inversely proportional to the distance).
+    let mut scenario = still_scenario(&setup, family_name, id, texture_seed)?;
+    // The camera's orientation does not depend on where it is: take it once, then put the
+    // camera on the ray through the target pixel, at the distance that gives the wanted side
+    // (refined twice: under perspective and distortion the side is not exactly inversely
+    // proportional to the distance).
+    let rotation = Simulator::new(scenario.clone())
+        .camera_pose(STILL_TIME_S)
+        .rotation;
+    let (x, y) = setup
+        .camera
+        .undistort(setup.target_px[0], setup.target_px[1])?;
+    let ray = mul_vec(&rotation, normalize([x, y, 1.0]));
+    if ray[2] >= -0.05 {
+        return None;
+    }
+    let black = scenario.pad.markers.first()?.corners();
+    let corners_from = |distance: f64| {
+        let pose = CameraPose {
+            rotation,
+            position: scale(ray, -distance),
+        };
+        let corner = |k: usize| setup.camera.project(pose.to_camera(black[k]));
+        Some([corner(0)?, corner(1)?, corner(2)?, corner(3)?])
+    };
     let mut distance = f64::from(setup.camera.model.fx) * MARKER_SIZE_M / setup.side_px;
     for _ in 0..2 {
-        let sim = simulator(&setup, family_name, id, distance, texture_seed)?;
-        let corners = sim.marker_corners(&sim.camera_pose(STILL_TIME_S))[0]?;
-        distance *= side_measure(class, &corners) / setup.side_px;
+        distance *= side_measure(class, &corners_from(distance)?) / setup.side_px;
     }
-    let sim = simulator(&setup, family_name, id, distance, texture_seed)?
+    scenario.trajectory = hold(&setup, scale(ray, -distance));
+    let sim = Simulator::new(scenario)
         .with_threads(1)
         .with_renderer(renderer);
     let corners = sim.marker_corners(&sim.camera_pose(STILL_TIME_S))[0]?;
@@ -232,15 +253,8 @@ fn side_measure(class: StillClass, corners: &[[f64; 2]; 4]) -> f64 {
     }
 }
 
-/// The one-marker world of a still, the camera `distance` metres from the marker along the
-/// ray through the setup's target pixel.
-fn simulator(
-    setup: &Setup,
-    family: &str,
-    id: u16,
-    distance: f64,
-    texture_seed: u64,
-) -> Option<Simulator> {
+/// The one-marker world of a still, the camera anywhere over it (the caller places it).
+fn still_scenario(setup: &Setup, family: &str, id: u16, texture_seed: u64) -> Option<Scenario> {
     let config = PadConfig {
         name: "still".to_string(),
         markers: vec![MarkerConfig {
@@ -268,21 +282,8 @@ fn simulator(
     let mut lighting = setup.lighting;
     lighting.shadow = setup.shadow.as_ref().map(|s| shadow_at_corner(s, cell));
 
-    let hold = |position| Trajectory {
-        segments: vec![Segment {
-            t0: 0.0,
-            t1: 1.0,
-            from: position,
-            to: position,
-            profile: Profile::Hold,
-        }],
-        yaw: setup.yaw,
-        wobble: Wobble::none(),
-        tilt_with_acceleration: false,
-        trim: setup.trim,
-    };
     let base = Scenario::named("paper", texture_seed)?;
-    let mut scenario = Scenario {
+    Some(Scenario {
         name: "still".to_string(),
         description: String::new(),
         camera: setup.camera,
@@ -296,28 +297,31 @@ fn simulator(
         },
         sensor: exposed_for(&setup.lighting),
         exposure_time_s: 0.004,
-        trajectory: hold([0.0, 0.0, 10.0]),
+        trajectory: hold(setup, [0.0, 0.0, 10.0]),
         frames: vec![FramePlan {
             t_us: (STILL_TIME_S * 1e6) as u64,
             label: None,
         }],
         board_exposure: false,
         ..base
-    };
-    // The camera's orientation does not depend on where it is: take it from any position,
-    // then put the camera on the ray through the target pixel.
-    let rotation = Simulator::new(scenario.clone())
-        .camera_pose(STILL_TIME_S)
-        .rotation;
-    let (x, y) = setup
-        .camera
-        .undistort(setup.target_px[0], setup.target_px[1])?;
-    let ray = mul_vec(&rotation, normalize([x, y, 1.0]));
-    if ray[2] >= -0.05 {
-        return None;
+    })
+}
+
+/// The setup's vehicle holding still at `position` (pad frame), its heading and trim.
+fn hold(setup: &Setup, position: Vec3) -> Trajectory {
+    Trajectory {
+        segments: vec![Segment {
+            t0: 0.0,
+            t1: 1.0,
+            from: position,
+            to: position,
+            profile: Profile::Hold,
+        }],
+        yaw: setup.yaw,
+        wobble: Wobble::none(),
+        tilt_with_acceleration: false,
+        trim: setup.trim,
     }
-    scenario.trajectory = hold(scale(ray, -distance));
-    Some(Simulator::new(scenario))
 }
 
 /// The board camera's sensor, its fixed exposure scaled so that sunlit paper comes out as
@@ -448,8 +452,8 @@ pub struct StillOutcome {
 }
 
 /// Runs `detector` on `still` as `touchdown detect --family FAMILY` would (with `--camera`
-/// for [`StillClass::WideLens`]): found when a detection has the marker's id with its centre
-/// within half the marker's shortest side of the truth's; any other detection is wrong.
+/// for [`StillClass::WideLens`]): found when a detection has the marker's id and lies on it
+/// ([`on_marker`], the rendered-frame tests' rule); any other detection is wrong.
 pub fn detect_still(
     detector: &mut Detector,
     workspace: &mut HostWorkspace,
@@ -473,15 +477,17 @@ pub fn detect_still(
     let center = still
         .corners
         .iter()
-        .fold([0.0; 2], |a, p| [a[0] + 0.25 * p[0], a[1] + 0.25 * p[1]]);
-    let near = 0.5 * still.shortest_side_px().max(4.0);
+        .fold(Point { x: 0.0, y: 0.0 }, |a, p| Point {
+            x: a.x + 0.25 * p[0] as f32,
+            y: a.y + 0.25 * p[1] as f32,
+        });
+    let min_side = still.shortest_side_px() as f32;
     let mut outcome = StillOutcome {
         corner_error_px: None,
         wrong: Vec::new(),
     };
     for d in &detections {
-        let off = (f64::from(d.center.x) - center[0]).hypot(f64::from(d.center.y) - center[1]);
-        if d.id == still.id && off <= near {
+        if d.id == still.id && on_marker(center, min_side, d.center) {
             let error = corner_error(&d.corners, &still.corners);
             outcome.corner_error_px = Some(outcome.corner_error_px.map_or(error, |e| e.min(error)));
         } else {
@@ -544,6 +550,18 @@ impl ClassScore {
 /// Renders `count` stills of `class` with `renderer` and scores touchdown's offline detector
 /// ([`DetectorConfig::offline`], `touchdown detect`'s) on them.
 pub fn score_class(class: StillClass, count: u64, renderer: Renderer, seed: u64) -> ClassScore {
+    score_class_showing(class, count, renderer, seed, |_, _| {})
+}
+
+/// [`score_class`], showing each still rendered (its index and itself) to `show` first: to
+/// save the stills without rendering them twice.
+pub fn score_class_showing(
+    class: StillClass,
+    count: u64,
+    renderer: Renderer,
+    seed: u64,
+    mut show: impl FnMut(u64, &Still),
+) -> ClassScore {
     let mut detector = Detector::new(DetectorConfig::offline());
     let mut workspace = HostWorkspace::new();
     let mut score = ClassScore::default();
@@ -553,6 +571,7 @@ pub fn score_class(class: StillClass, count: u64, renderer: Renderer, seed: u64)
             score.missed.push(format!("#{index}: not rendered"));
             continue;
         };
+        show(index, &still);
         let outcome = detect_still(&mut detector, &mut workspace, &still);
         let label = format!(
             "#{index} {} id {} sides {:.0}-{:.0} px",
