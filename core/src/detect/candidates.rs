@@ -7,7 +7,8 @@
 
 use super::{
     contour, decode, lens, quad, DetectStats, Detection, DetectorConfig, Look, Strategy,
-    MAX_DETECTIONS, WORK_CANDIDATE, WORK_FIT, WORK_PER_SAMPLE_X2,
+    MAX_DETECTIONS, WORK_CANDIDATE, WORK_COMPLETION_PER_PIXEL, WORK_FIT, WORK_PER_SAMPLE_X2,
+    WORK_SCREEN_PIXELS,
 };
 use crate::camera::CameraModel;
 use crate::family::Family;
@@ -53,41 +54,99 @@ impl Candidates<'_, '_, '_> {
             points: boundary,
             length,
         } = boundary;
-        let Some(screened) = quad::screen(boundary, length, config.min_edge_px, self.quiet_margins)
-        else {
-            return true;
-        };
-        // Through the lens first, for boundaries long enough to be bent (see `lens`): the fit
-        // on the boundary as an ideal lens draws it, its corners taken back into the frame.
+        let screened = quad::screen(boundary, length, config.min_edge_px, self.quiet_margins);
         let mut quad = None;
-        if let Some(camera) = self.camera.filter(|_| length >= lens::MIN_LENS_LENGTH) {
-            let count = boundary.len().min(lens::MAX_LENS_POINTS) as u32;
-            if !tracer.charge(WORK_FIT + count * (1 + lens::WORK_UNDISTORT)) {
-                return false;
+        if let Ok(screened) = &screened {
+            // Through the lens first, for boundaries long enough to be bent (see `lens`): the
+            // fit on the boundary as an ideal lens draws it, its corners taken back into the
+            // frame.
+            if let Some(camera) = self.camera.filter(|_| length >= lens::MIN_LENS_LENGTH) {
+                let count = boundary.len().min(lens::MAX_LENS_POINTS) as u32;
+                if !tracer.charge(WORK_FIT + count * (1 + lens::WORK_UNDISTORT)) {
+                    return false;
+                }
+                let mut straight = [contour::Pixel::default(); lens::MAX_LENS_POINTS];
+                quad = lens::straighten(camera, boundary, &mut straight).and_then(|s| {
+                    let points = straight.get(..s.points)?;
+                    let screened = quad::screen(points, length, config.min_edge_px, false).ok()?;
+                    let fitted = quad::fit(points, &screened, config.min_edge_px)?;
+                    lens::bend_back(camera, &s, &fitted)
+                });
             }
-            let mut straight = [contour::Pixel::default(); lens::MAX_LENS_POINTS];
-            quad = lens::straighten(camera, boundary, &mut straight).and_then(|s| {
-                let points = straight.get(..s.points)?;
-                let screened = quad::screen(points, length, config.min_edge_px, false)?;
-                let fitted = quad::fit(points, &screened, config.min_edge_px)?;
-                lens::bend_back(camera, &s, &fitted)
-            });
-        }
-        if quad.is_none() {
-            if !tracer.charge(WORK_FIT + boundary.len() as u32) {
-                return false;
+            if quad.is_none() {
+                if !tracer.charge(WORK_FIT + boundary.len() as u32) {
+                    return false;
+                }
+                quad = quad::fit(boundary, screened, config.min_edge_px);
             }
-            quad = quad::fit(boundary, &screened, config.min_edge_px);
         }
-        let Some(quad) = quad else {
-            return true;
+        if let Some(quad) = quad {
+            return self.examine(&quad, detections, stats, tracer);
+        }
+        let area2 = match screened {
+            Ok(s) => s.area2,
+            Err(u) => u.area2,
         };
+        self.complete(boundary, length, area2, detections, stats, tracer)
+    }
+
+    /// A boundary that is not a quad whole: perhaps a marker joined at one corner by something
+    /// dark ([`quad::complete`]), for families whose outline is a clean quad. `area2` is the
+    /// screening's (twice the signed area; 0 when not measured). Returns false when the scan
+    /// must stop.
+    fn complete(
+        &self,
+        boundary: &[contour::Pixel],
+        length: usize,
+        area2: i32,
+        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+        stats: &mut DetectStats,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> bool {
+        let min_edge = self.config.min_edge_px;
+        if !self.quiet_margins
+            || !self.strategy.completes_corners()
+            || !quad::might_complete(length, area2, min_edge)
+            // Inside a marker already found: its cells, or its border's inner edge.
+            || within_detection(boundary, detections)
+        {
+            return true;
+        }
+        if !tracer.charge(boundary.len() as u32 / WORK_SCREEN_PIXELS) {
+            return false;
+        }
+        if !quad::worth_completing(boundary, length, min_edge) {
+            return true;
+        }
+        if !tracer.charge(WORK_FIT + boundary.len() as u32 * WORK_COMPLETION_PER_PIXEL) {
+            return false;
+        }
+        // By reference: a heapless vector's owning iterator has a panic path the no-panic
+        // check finds.
+        for quad in &quad::complete(boundary, min_edge) {
+            if !self.examine(quad, detections, stats, tracer) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Steps 4 to 6 for one quad: the quick look, refinement, decoding and de-duplication.
+    /// Returns false when the scan must stop.
+    fn examine(
+        &self,
+        quad: &quad::Quad,
+        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+        stats: &mut DetectStats,
+        tracer: &mut contour::Tracer<'_>,
+    ) -> bool {
+        let config = self.config;
         let strategy = self.strategy;
-        if !self.families.iter().any(|f| strategy.wanted(f, &quad)) {
+        if !self.families.iter().any(|f| strategy.wanted(f, quad)) {
             return true;
         }
         stats.quads += 1;
-        match strategy.quick_look(self, &quad, tracer) {
+        match strategy.quick_look(self, quad, tracer) {
             Look::Candidate => {}
             Look::Rejected => return true,
             Look::OutOfBudget => return false,
@@ -100,7 +159,7 @@ impl Candidates<'_, '_, '_> {
         }
         stats.refined += 1;
         let mut samples = 0u32;
-        let corners = strategy.corners(self, &quad, &mut samples);
+        let corners = strategy.corners(self, quad, &mut samples);
         if !quad::check_shape(&corners, 0.8 * config.min_edge_px) || !self.inside(&corners) {
             return tracer.charge(candidate_work(samples));
         }
@@ -109,7 +168,7 @@ impl Candidates<'_, '_, '_> {
         // (the default tag36h11 + aruco_6x6_250 pair) sample and threshold the cells once.
         let mut last: Option<(&Family<'_>, Option<decode::GridRead>)> = None;
         for (index, family) in self.families.iter().enumerate() {
-            if !strategy.wanted(family, &quad) {
+            if !strategy.wanted(family, quad) {
                 continue;
             }
             let grid = match last {
@@ -162,6 +221,28 @@ impl Candidates<'_, '_, '_> {
     }
 }
 
+/// Whether the boundary's first pixel lies inside the corners of a detected marker: the
+/// boundary is then the marker's own (a cell, its border's inner edge), no other marker's.
+fn within_detection(
+    boundary: &[contour::Pixel],
+    detections: &heapless::Vec<Detection, MAX_DETECTIONS>,
+) -> bool {
+    let Some(first) = boundary.first() else {
+        return false;
+    };
+    let p = crate::geometry::Point::new(f32::from(first.x), f32::from(first.y));
+    detections.iter().any(|d| {
+        let c = &d.corners;
+        // On the same side of every edge, whichever way round the corners run.
+        let side = |k: usize| {
+            let (a, b) = (cyclic(c, k), cyclic(c, k + 1));
+            (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x)
+        };
+        let sides = [side(0), side(1), side(2), side(3)];
+        sides.iter().all(|&s| s > 0.0) || sides.iter().all(|&s| s < 0.0)
+    })
+}
+
 /// Work units of a refined and read candidate that took `samples` weighted image reads.
 fn candidate_work(samples: u32) -> u32 {
     WORK_CANDIDATE.saturating_add(samples.saturating_mul(WORK_PER_SAMPLE_X2) / 2)
@@ -198,4 +279,38 @@ fn insert_unique(
         }
     }
     detections.push(new).is_ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Point;
+
+    /// A boundary starting inside a detected marker is its own, whichever way its corners
+    /// run; one starting outside is not.
+    #[test]
+    fn a_boundary_inside_a_detection_is_the_markers_own() {
+        let corners =
+            [(10.0, 10.0), (50.0, 12.0), (48.0, 50.0), (8.0, 48.0)].map(|(x, y)| Point::new(x, y));
+        let mut detections = heapless::Vec::new();
+        let detection = |corners| Detection {
+            family: 0,
+            id: 0,
+            hamming: 0,
+            corners,
+            center: Point::new(29.0, 30.0),
+            decision_margin: 1.0,
+            contrast: 100.0,
+        };
+        detections.push(detection(corners)).unwrap();
+        let at = |x, y| [contour::Pixel { x, y }];
+        assert!(within_detection(&at(30, 30), &detections));
+        assert!(!within_detection(&at(60, 30), &detections));
+        let mut reversed = corners;
+        reversed.reverse();
+        detections[0] = detection(reversed);
+        assert!(within_detection(&at(30, 30), &detections));
+        assert!(!within_detection(&at(30, 5), &detections));
+        assert!(!within_detection(&[], &detections));
+    }
 }

@@ -190,7 +190,7 @@ mod tests {
         let mut out = [Pixel::default(); MAX_LENS_POINTS];
         let straight = straighten(&camera, &boundary, &mut out).unwrap();
         let points = &out[..straight.points];
-        let screened = quad::screen(points, length, 7.0, true).unwrap();
+        let screened = quad::screen(points, length, 7.0, true).ok().unwrap();
         let fitted = quad::fit(points, &screened, 7.0).unwrap();
         let bent = bend_back(&camera, &straight, &fitted).unwrap();
         for t in truth {

@@ -17,8 +17,11 @@
 //!    white-on-black families.
 //! 3. `quad`: screen each boundary (length, compactness, sampled convexity, diameter), then
 //!    simplify the survivors with Douglas-Peucker and keep convex four-corner shapes with
-//!    sane edges and angles. A quick look at the rough corners (`decode::precheck`: border
-//!    ring, margin, flat interior) turns down most non-markers before step 4.
+//!    sane edges and angles. A boundary that is not a quad but holds three corners of one,
+//!    a marker joined at its fourth by a shadow's band or a dark stroke, has that corner
+//!    placed where its two sides meet (`quad::complete`). A quick look at the rough corners
+//!    (`decode::precheck`: border ring, margin, flat interior) turns down most non-markers
+//!    before step 4.
 //! 4. `refine`: move each edge onto the image's intensity edge with sub-pixel precision
 //!    (line fits to gradient peaks) and intersect neighbouring edges for the corners.
 //! 5. `decode`: map the family's cell grid through the corner homography, sample each cell
@@ -114,6 +117,10 @@ pub const WORK_SCREEN_PIXELS: u32 = 4;
 /// many, plus one per boundary pixel (its cost on the Cortex-M7: `docs/design/detection.md`,
 /// "Work budget").
 pub const WORK_FIT: u32 = 20;
+/// Work units per boundary pixel of the search for a marker with a hidden corner
+/// (`quad::complete`), on top of [`WORK_FIT`]: the diameter's two passes and a
+/// simplification that follows every turn of the boundary.
+pub const WORK_COMPLETION_PER_PIXEL: u32 = 2;
 /// [`DetectorConfig::work_budget_per_pixel`] of [`DetectorConfig::default`], for the camera:
 /// the bound on the time per frame (see [`DetectorConfig::work_budget_per_pixel`]).
 ///

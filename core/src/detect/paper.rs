@@ -88,6 +88,11 @@ impl Strategy for Paper {
     }
 
     /// The paper's corners are its own step-back from the edge band, nothing else.
+    /// The paper keeps four-corner shapes only.
+    fn completes_corners(&self) -> bool {
+        false
+    }
+
     fn fits_patterns(&self, _config: &DetectorConfig) -> bool {
         false
     }

@@ -193,50 +193,26 @@ fn farthest_of(first: &[Pixel], second: &[Pixel], measure: impl Fn(&Pixel) -> i3
 
 /// Douglas-Peucker vertices of the closed boundary, as positions `t` along it counted from
 /// `origin`, ascending (the first `count` of the array); `None` when it needs more than
-/// [`MAX_VERTICES`]. Positions are kept as `u16` (a boundary holds at most
-/// [`super::MAX_CONTOUR_POINTS`] points): the array is then zeroed in three stores, where
-/// one of `usize` took a memset call per fit.
-///
-/// The chords are taken in order along the boundary, each vertex found inserted after the
-/// start of its chord and the chord up to it taken next: the vertices stay sorted (no sort,
-/// no stack), and each chord is measured once, as with a stack. The vertex set does not
-/// depend on the order (a chord's vertex depends on its ends only), nor does running out of
-/// room (more than [`MAX_VERTICES`] vertices in all).
+/// [`MAX_VERTICES`] ([`simplify_streaming`], the whole held). Positions are kept as `u16` (a
+/// boundary holds at most [`super::MAX_CONTOUR_POINTS`] points): the array is then zeroed in
+/// three stores, where one of `usize` took a memset call per fit.
 fn simplify(
     contour: &[Pixel],
     origin: usize,
     split: usize,
     tolerance: f32,
 ) -> Option<([u16; MAX_VERTICES], usize)> {
-    let n = contour.len();
     let mut vertices = [0u16; MAX_VERTICES];
     let mut count = 0usize;
-    for t in [0, split] {
-        *vertices.get_mut(count)? = u16::try_from(t).ok()?;
+    let whole = simplify_streaming::<MAX_VERTICES>(contour, origin, split, tolerance, |t| {
+        let Some(slot) = vertices.get_mut(count) else {
+            return false;
+        };
+        *slot = t;
         count += 1;
-    }
-    // The chord from vertex k to the next one (to the end, back at 0, after the last).
-    let mut k = 0;
-    while k < count {
-        let i = usize::from(vertices.get(k).copied()?);
-        let j = vertices
-            .get(k + 1)
-            .filter(|_| k + 1 < count)
-            .map_or(n, |&t| usize::from(t));
-        match farthest_from_chord(contour, origin, i, j, tolerance) {
-            Some(t) if count < MAX_VERTICES => {
-                // Insert after vertex k, moving the later ones up by one.
-                let mut carry = u16::try_from(t).ok()?;
-                for slot in vertices.iter_mut().take(count + 1).skip(k + 1) {
-                    carry = core::mem::replace(slot, carry);
-                }
-                count += 1;
-            }
-            Some(_) => return None,
-            None => k += 1,
-        }
-    }
-    Some((vertices, count))
+        true
+    });
+    whole.then_some((vertices, count))
 }
 
 /// Most points [`roughly_convex`] samples along a boundary.
@@ -308,6 +284,16 @@ pub(crate) struct Screened {
     origin: usize,
     /// Position of the other end, counted from `origin`.
     split: usize,
+    /// Twice the signed area the boundary encloses ([`signed_area2_i32`]).
+    pub area2: i32,
+}
+
+/// A boundary that failed [`screen`], with what the screening measured of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Unscreened {
+    /// Twice the signed area the boundary encloses ([`signed_area2_i32`]); 0 when it was
+    /// too short to be measured.
+    pub area2: i32,
 }
 
 /// Fits a candidate quad to a closed boundary ([`screen`], then [`fit`]).
@@ -315,7 +301,7 @@ pub(crate) struct Screened {
 pub(crate) fn fit_quad(contour: &[Pixel], min_edge: f32) -> Option<Quad> {
     fit(
         contour,
-        &screen(contour, contour.len(), min_edge, true)?,
+        &screen(contour, contour.len(), min_edge, true).ok()?,
         min_edge,
     )
 }
@@ -334,29 +320,64 @@ pub(crate) fn screen(
     length: usize,
     min_edge: f32,
     convex: bool,
-) -> Option<Screened> {
+) -> Result<Screened, Unscreened> {
     let n = length.max(contour.len());
     // An edge of `min_edge` pixels at 45 degrees is min_edge / sqrt(2) steps.
     if (n as f32) < 2.8 * min_edge || contour.len() < 8 {
-        return None;
+        return Err(Unscreened { area2: 0 });
     }
     let area2 = signed_area2_i32(contour);
+    let unscreened = Unscreened { area2 };
     if area2 == 0 {
-        return None;
+        return Err(unscreened);
     }
     // Compactness: a quad's area is a good fraction of its squared perimeter (a 1:8
     // rectangle traced pixel by pixel still has area >= n^2 / 40 for n boundary steps),
     // while noise blobs and thin strokes are ragged outlines around little area. Rejecting
     // them here, before the Douglas-Peucker fit, is most of the cost of a noisy frame.
     if (area2.unsigned_abs() as f32) < COMPACTNESS * (n * n) as f32 {
-        return None;
+        return Err(unscreened);
     }
     if convex && !roughly_convex(contour, area2 > 0) {
-        return None;
+        return Err(unscreened);
     }
     let hole = area2 < 0;
-    // Split at two far-apart points: the farthest from the first, and the farthest from that.
-    // Squared integer distances: this runs on every traced contour (thousands on a noisy
+    let Some((origin, split_abs, split)) = far_apart(contour) else {
+        return Err(unscreened);
+    };
+    // The quad's corners will be boundary pixels, so its diagonals are at most the
+    // boundary's diameter; and a convex quad whose sides are all at least `min_edge` has a
+    // diagonal of at least sqrt(2) * min_edge (the square is the tightest). A boundary
+    // narrower than that cannot pass `check_shape`: stop before the fit (a frame of noise
+    // has hundreds of compact blobs just too small to be markers).
+    let diameter2 = match (contour.get(origin), contour.get(split_abs)) {
+        (Some(a), Some(b)) => {
+            let (dx, dy) = (
+                f32::from(a.x) - f32::from(b.x),
+                f32::from(a.y) - f32::from(b.y),
+            );
+            dx * dx + dy * dy
+        }
+        _ => 0.0,
+    };
+    if diameter2 < MIN_DIAMETER_PER_EDGE2 * min_edge * min_edge {
+        return Err(unscreened);
+    }
+    Ok(Screened {
+        hole,
+        length: n,
+        origin,
+        split,
+        area2: unscreened.area2,
+    })
+}
+
+/// Two far-apart boundary points, where the fit splits the boundary: the farthest from the
+/// first point (`origin`) and the farthest from that (at index `split_abs`, or `split`
+/// counted from `origin`); `None` when they coincide.
+#[inline(always)]
+fn far_apart(contour: &[Pixel]) -> Option<(usize, usize, usize)> {
+    // Squared integer distances: this runs on every screened boundary (thousands on a noisy
     // frame), and a square root per pixel was most of its cost on the Cortex-M7.
     let farthest = |from: usize| -> usize {
         let Some(f) = contour.get(from) else {
@@ -376,34 +397,8 @@ pub(crate) fn screen(
     let origin = farthest(0);
     let split_abs = farthest(origin);
     let points = contour.len();
-    let split = (split_abs + points - origin) % points;
-    if split == 0 {
-        return None;
-    }
-    // The quad's corners will be boundary pixels, so its diagonals are at most the
-    // boundary's diameter; and a convex quad whose sides are all at least `min_edge` has a
-    // diagonal of at least sqrt(2) * min_edge (the square is the tightest). A boundary
-    // narrower than that cannot pass `check_shape`: stop before the fit (a frame of noise
-    // has hundreds of compact blobs just too small to be markers).
-    let diameter2 = match (contour.get(origin), contour.get(split_abs)) {
-        (Some(a), Some(b)) => {
-            let (dx, dy) = (
-                f32::from(a.x) - f32::from(b.x),
-                f32::from(a.y) - f32::from(b.y),
-            );
-            dx * dx + dy * dy
-        }
-        _ => 0.0,
-    };
-    if diameter2 < MIN_DIAMETER_PER_EDGE2 * min_edge * min_edge {
-        return None;
-    }
-    Some(Screened {
-        hole,
-        length: n,
-        origin,
-        split,
-    })
+    let split = (split_abs + points - origin) % points.max(1);
+    (split != 0).then_some((origin, split_abs, split))
 }
 
 /// Drops the vertex that bends the outline least while more than four remain; false when
@@ -475,6 +470,7 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
         length,
         origin,
         split,
+        ..
     } = *screened;
     let tolerance = (TOLERANCE_PER_PIXEL * length as f32).max(MIN_TOLERANCE);
     let (vertices, count) = simplify(contour, origin, split, tolerance)?;
@@ -519,6 +515,241 @@ pub(crate) fn fit(contour: &[Pixel], screened: &Screened, min_edge: f32) -> Opti
         corners.reverse();
     }
     check_shape(&corners, min_edge).then_some(Quad { corners, hole })
+}
+
+/// Most quads [`complete`] finds on one boundary.
+pub(crate) const MAX_COMPLETIONS: usize = 2;
+/// [`complete`]'s simplification tolerance, pixels: fixed, not a share of the boundary's
+/// length, since most of the boundary is not the marker's.
+const COMPLETION_TOLERANCE: f32 = 3.0;
+/// Shortest whole side of a completed quad, in units of `min_edge`: a marker must be large
+/// beside what joins it for three of its corners to place the fourth.
+const COMPLETION_SIDE_PER_EDGE: f32 = 6.0;
+/// Shortest boundary, in steps per `min_edge`, that [`might_complete`] passes: two whole
+/// sides and two thirds of a side, 2.67 sides, at up to sqrt(2) pixels a step (1.9 sides'
+/// steps, less a little for rounding).
+pub(crate) const MIN_COMPLETION_LENGTH_PER_EDGE: f32 = 1.8 * COMPLETION_SIDE_PER_EDGE;
+/// Longest boundary [`complete`] follows, in multiples of the way around its bounding box:
+/// a marker's outline with a band or a stroke running off it goes round its box about once,
+/// twice with the band's two sides; the ragged blobs of noise and texture many times.
+const COMPLETION_MAX_LENGTH_PER_BOX: usize = 2;
+/// Smallest twice-area of a completed quad, and of the region whose outline [`complete`]
+/// follows, over the squared shortest whole side ([`COMPLETION_SIDE_PER_EDGE`]): half a
+/// square of that side, so a square marker at least that large, or a larger one seen
+/// obliquely. The region holds the marker (or, for a hole, its margin), so it is at least
+/// as large; the rim of a pad or a paper, an L or a strip a few pixels wide, is not.
+const COMPLETION_MIN_AREA2_PER_SIDE2: f32 = 1.0;
+/// How far the hidden corner may lie from where the outline left each of its sides, as a
+/// multiple of the side's visible part (which is then at least a third of the side).
+const COMPLETION_MAX_EXTENSION: f32 = 3.0;
+/// How far short of where the outline left a side the hidden corner may lie, as a share of
+/// the visible part: the simplification places that vertex a pixel or two past the turn.
+const COMPLETION_MIN_EXTENSION: f32 = 0.9;
+
+/// Quads whose outline ran into something dark at one corner: a shadow's edge along which
+/// the binarisation turned the shadowed paper dark up to the marker's border, a stroke or a
+/// skid touching it. The boundary then follows three corners of the marker and leaves the
+/// two sides beside the fourth part of the way along them; the fourth corner is where
+/// those two sides' lines meet. The refinement then puts every edge on the image's own edge
+/// and the decoder decides, as for any candidate.
+///
+/// For a boundary that did not fit a quad whole and passed [`might_complete`] and
+/// [`worth_completing`]: an outer one, or a hole's where holes are followed (a convex dark
+/// region's corners turn the same way on either, the walk keeping the dark on one side). It
+/// is simplified at a fixed tolerance ([`COMPLETION_TOLERANCE`]) and searched for three consecutive convex
+/// corners with two whole sides of at least [`COMPLETION_SIDE_PER_EDGE`] `min_edge` between
+/// them, whose outer sides, extended, meet within [`COMPLETION_MAX_EXTENSION`] times their
+/// visible length. At most [`MAX_COMPLETIONS`] are returned, in the order found.
+pub(crate) fn complete(contour: &[Pixel], min_edge: f32) -> heapless::Vec<Quad, MAX_COMPLETIONS> {
+    let mut found = heapless::Vec::new();
+    // Both ends of the diameter are extreme points of the boundary, so neither lies inside a
+    // straight side: the simplification's forced vertices are true turns.
+    let Some((origin, _, split)) = far_apart(contour) else {
+        return found;
+    };
+    let n = contour.len();
+    let side = COMPLETION_SIDE_PER_EDGE * min_edge;
+    let mut window = Window {
+        side2: side * side,
+        min_edge,
+        last: [Point::default(); 5],
+        seen: 0,
+        first: [Point::default(); 4],
+    };
+    let closed =
+        simplify_streaming::<STREAM_DEPTH>(contour, origin, split, COMPLETION_TOLERANCE, |t| {
+            let t = origin + usize::from(t);
+            let t = if t >= n { t - n } else { t };
+            let p = contour.get(t).copied().map(pt).unwrap_or_default();
+            window.push(p, &mut found);
+            true
+        });
+    if closed {
+        // Around the start once more: the corners on either side of position 0.
+        let first = window.first;
+        for p in first.into_iter().take(window.seen.min(4)) {
+            window.push(p, &mut found);
+        }
+    }
+    found
+}
+
+/// The first of [`complete`]'s tests, on what the screening measured: long enough for two
+/// whole sides of the smallest completed quad and parts of the other two, and enclosing at
+/// least its area ([`COMPLETION_MIN_AREA2_PER_SIDE2`]).
+pub(crate) fn might_complete(length: usize, area2: i32, min_edge: f32) -> bool {
+    let side = COMPLETION_SIDE_PER_EDGE * min_edge;
+    (length as f32) >= MIN_COMPLETION_LENGTH_PER_EDGE * min_edge
+        && (area2.unsigned_abs() as f32) >= COMPLETION_MIN_AREA2_PER_SIDE2 * side * side
+}
+
+/// The second of [`complete`]'s tests, one pass over the boundary: as wide and as high as a
+/// whole side and half of one, and not ragged: a marker's outline, with a band or a stroke
+/// running off it, goes round its box about once, twice with the band's two sides
+/// ([`COMPLETION_MAX_LENGTH_PER_BOX`]); the blobs of noise and texture many times.
+pub(crate) fn worth_completing(contour: &[Pixel], length: usize, min_edge: f32) -> bool {
+    let side = COMPLETION_SIDE_PER_EDGE * min_edge;
+    let (mut x0, mut y0, mut x1, mut y1) = (u16::MAX, u16::MAX, 0u16, 0u16);
+    for p in contour {
+        (x0, x1, y0, y1) = (x0.min(p.x), x1.max(p.x), y0.min(p.y), y1.max(p.y));
+    }
+    let (w, h) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+    let around = 2 * (usize::from(w) + usize::from(h));
+    let wide = f32::from(w.max(h)) >= side && f32::from(w.min(h)) >= 0.5 * side;
+    wide && length <= COMPLETION_MAX_LENGTH_PER_BOX * around
+}
+
+/// Pending vertices of [`simplify_streaming`]: the depth of the chord splitting, not the
+/// number of vertices.
+const STREAM_DEPTH: usize = 24;
+
+/// The last five vertices of a boundary's simplification as they come, tested each time
+/// for a quad with a hidden corner ([`complete`]).
+struct Window {
+    side2: f32,
+    min_edge: f32,
+    last: [Point; 5],
+    /// Vertices pushed so far.
+    seen: usize,
+    /// The first four, pushed again at the end to close the loop.
+    first: [Point; 4],
+}
+
+impl Window {
+    fn push(&mut self, p: Point, found: &mut heapless::Vec<Quad, MAX_COMPLETIONS>) {
+        if let Some(slot) = self.first.get_mut(self.seen) {
+            *slot = p;
+        }
+        self.seen += 1;
+        self.last = [self.last[1], self.last[2], self.last[3], self.last[4], p];
+        if self.seen < 5 || found.is_full() {
+            return;
+        }
+        let [j1, a, b, c, j2] = self.last;
+        // Three convex corners (clockwise on screen, as an outer boundary runs) and two
+        // whole sides between them.
+        if !(cross(j1, a, b) > 0.0 && cross(a, b, c) > 0.0 && cross(b, c, j2) > 0.0) {
+            return;
+        }
+        if a.distance_squared(b) < self.side2 || b.distance_squared(c) < self.side2 {
+            return;
+        }
+        let Some(x) = hidden_corner(a, j1, c, j2) else {
+            return;
+        };
+        let corners = [a, b, c, x];
+        let area2 = cross(a, b, c) + cross(a, c, x);
+        if area2 >= COMPLETION_MIN_AREA2_PER_SIDE2 * self.side2
+            && check_shape(&corners, self.min_edge)
+        {
+            let _ = found.push(Quad {
+                corners,
+                hole: false,
+            });
+        }
+    }
+}
+
+/// Douglas-Peucker vertices of the closed boundary, each handed to `emit` (as its position
+/// counted from `origin`, ascending) once no later vertex can come before it; `emit`
+/// returns false to stop. Only the vertices not yet handed on are held, at most `N`, so a
+/// boundary of any number of vertices can be simplified. False when stopped, or when the
+/// splitting went deeper than `N` (the vertices handed on so far are still the boundary's,
+/// in order).
+///
+/// The chords are taken in order along the boundary, each vertex found inserted after the
+/// start of its chord and the chord up to it taken next: the vertices stay sorted (no sort,
+/// no stack), and each chord is measured once, as with a stack. The vertices before the
+/// current chord's start are then final. The vertex set does not depend on the order (a
+/// chord's vertex depends on its ends only), nor on `N`.
+fn simplify_streaming<const N: usize>(
+    contour: &[Pixel],
+    origin: usize,
+    split: usize,
+    tolerance: f32,
+    mut emit: impl FnMut(u16) -> bool,
+) -> bool {
+    let n = contour.len();
+    let (Ok(split16), true) = (u16::try_from(split), N >= 2) else {
+        return false;
+    };
+    let mut vertices = [0u16; N];
+    if let Some(slot) = vertices.get_mut(1) {
+        *slot = split16;
+    }
+    let mut count = 2usize;
+    let mut k = 0;
+    while k < count {
+        let i = usize::from(vertices.get(k).copied().unwrap_or_default());
+        let j = vertices
+            .get(k + 1)
+            .filter(|_| k + 1 < count)
+            .map_or(n, |&t| usize::from(t));
+        let Some(t) = farthest_from_chord(contour, origin, i, j, tolerance) else {
+            k += 1;
+            continue;
+        };
+        if count == N {
+            if k == 0 {
+                return false;
+            }
+            // Hand on the final ones, those before the current chord's start.
+            for &v in vertices.iter().take(k) {
+                if !emit(v) {
+                    return false;
+                }
+            }
+            vertices.copy_within(k..count, 0);
+            count -= k;
+            k = 0;
+        }
+        // Insert after vertex k, moving the later ones up by one.
+        let Ok(mut carry) = u16::try_from(t) else {
+            return false;
+        };
+        for slot in vertices.iter_mut().take(count + 1).skip(k + 1) {
+            carry = core::mem::replace(slot, carry);
+        }
+        count += 1;
+    }
+    vertices.iter().take(count).all(|&v| emit(v))
+}
+
+/// Where the line from `a` through `j1` meets the line from `c` through `j2`, when that
+/// lies beyond both `j1` and `j2` by the visible parts' bounds of [`complete`].
+fn hidden_corner(a: Point, j1: Point, c: Point, j2: Point) -> Option<Point> {
+    let (ux, uy) = (j1.x - a.x, j1.y - a.y);
+    let (vx, vy) = (j2.x - c.x, j2.y - c.y);
+    let den = ux * vy - uy * vx;
+    if den.abs() < 1e-6 {
+        return None;
+    }
+    let (wx, wy) = (c.x - a.x, c.y - a.y);
+    // a + s u = c + t v: s and t in units of the visible parts.
+    let s = (wx * vy - wy * vx) / den;
+    let t = (wx * uy - wy * ux) / den;
+    let bounds = COMPLETION_MIN_EXTENSION..=COMPLETION_MAX_EXTENSION;
+    (bounds.contains(&s) && bounds.contains(&t)).then(|| Point::new(a.x + s * ux, a.y + s * uy))
 }
 
 /// Convex, edges long enough and not too unequal, no degenerate angle.
@@ -704,5 +935,129 @@ mod tests {
         };
         assert!(check_shape(&lean(11.0), 1.0));
         assert!(!check_shape(&lean(9.0), 1.0));
+    }
+
+    /// An 8-connected boundary through `vertices` in order, closed.
+    fn outline(vertices: &[(i32, i32)]) -> heapless::Vec<Pixel, 4096> {
+        let mut out = heapless::Vec::new();
+        for (k, &(x0, y0)) in vertices.iter().enumerate() {
+            let (x1, y1) = vertices[(k + 1) % vertices.len()];
+            let steps = (x1 - x0).abs().max((y1 - y0).abs());
+            for t in 0..steps {
+                let x = x0 as f32 + (x1 - x0) as f32 * t as f32 / steps as f32;
+                let y = y0 as f32 + (y1 - y0) as f32 * t as f32 / steps as f32;
+                out.push(Pixel {
+                    x: x.round() as u16,
+                    y: y.round() as u16,
+                })
+                .unwrap();
+            }
+        }
+        out
+    }
+
+    /// A 100-pixel square (clockwise on screen) whose bottom-right corner a 30-pixel band
+    /// covers on its way off to the right: the band leaves the right side 25 pixels above
+    /// the corner and comes back on the bottom side 17 pixels left of it.
+    fn square_with_band() -> heapless::Vec<Pixel, 4096> {
+        outline(&[
+            (50, 50),
+            (150, 50),
+            (150, 125),
+            (300, 170),
+            (300, 200),
+            (133, 150),
+            (50, 150),
+        ])
+    }
+
+    fn near_square(q: &Quad) -> bool {
+        let truth = [(50.0, 50.0), (150.0, 50.0), (150.0, 150.0), (50.0, 150.0)];
+        truth
+            .iter()
+            .all(|&(x, y)| q.corners.iter().any(|c| c.distance(Point::new(x, y)) < 2.0))
+    }
+
+    /// The square's fourth corner is where its two sides beside the band meet; the region
+    /// tests pass it (wide, not ragged, a square's area).
+    #[test]
+    fn a_marker_joined_at_a_corner_is_completed() {
+        let boundary = square_with_band();
+        assert!(
+            fit_quad(&boundary, 7.0).is_none(),
+            "the band spoils the fit"
+        );
+        let area2 = signed_area2_i32(&boundary);
+        assert!(area2 > 0);
+        assert!(might_complete(boundary.len(), area2, 7.0));
+        assert!(worth_completing(&boundary, boundary.len(), 7.0));
+        let found = complete(&boundary, 7.0);
+        assert!(found.iter().any(near_square), "{found:?}");
+        assert!(found.iter().all(|q| !q.hole));
+    }
+
+    /// No completion where the band hides most of a side (its visible part under a third of
+    /// it), where the sides are shorter than the completion's shortest, or on a ragged blob.
+    #[test]
+    fn completion_needs_three_corners_and_most_of_two_sides() {
+        let hidden_most = outline(&[
+            (50, 50),
+            (150, 50),
+            (150, 70),
+            (300, 170),
+            (300, 230),
+            (60, 150),
+            (50, 150),
+        ]);
+        assert!(!complete(&hidden_most, 7.0).iter().any(near_square));
+        // The same shape at a third of the size: sides of 33 pixels, below 6 x 7.
+        let small = outline(&[
+            (50, 50),
+            (83, 50),
+            (83, 75),
+            (133, 90),
+            (133, 100),
+            (77, 83),
+            (50, 83),
+        ]);
+        assert!(
+            complete(&small, 7.0).is_empty(),
+            "{:?}",
+            complete(&small, 7.0)
+        );
+        // A random walk closed on itself: ragged, no three corners with long sides.
+        let mut seed = 7u32;
+        let mut walk: heapless::Vec<(i32, i32), 600> = heapless::Vec::new();
+        let (mut x, mut y) = (200i32, 200i32);
+        for _ in 0..600 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            x += (seed >> 28) as i32 % 3 - 1;
+            y += (seed >> 24) as i32 % 3 - 1;
+            walk.push((x, y)).unwrap();
+        }
+        let ragged = outline(&walk);
+        assert!(!worth_completing(&ragged, ragged.len(), 7.0) || complete(&ragged, 7.0).is_empty());
+    }
+
+    /// The streaming simplification hands on the same vertices, in order, as the whole one,
+    /// however few it may hold pending.
+    #[test]
+    fn streaming_simplification_matches_the_whole() {
+        let boundary = square_with_band();
+        let (origin, _, split) = far_apart(&boundary).unwrap();
+        for tolerance in [1.0, 2.0, 3.0] {
+            let (whole, count) = simplify(&boundary, origin, split, tolerance).unwrap();
+            let mut streamed: heapless::Vec<u16, 64> = heapless::Vec::new();
+            assert!(simplify_streaming::<6>(
+                &boundary,
+                origin,
+                split,
+                tolerance,
+                |t| streamed.push(t).is_ok()
+            ));
+            // More vertices than it may hold: it handed some on before the end.
+            assert!(count > 6, "tolerance {tolerance}: {count}");
+            assert_eq!(&whole[..count], &streamed[..], "tolerance {tolerance}");
+        }
     }
 }

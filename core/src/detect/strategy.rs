@@ -61,6 +61,9 @@ pub(super) trait Strategy {
     ) -> Option<decode::GridRead>;
     /// Most bits the code look-up may correct.
     fn max_hamming(&self, config: &DetectorConfig) -> u8;
+    /// Whether a boundary that is not a quad is searched for a marker joined at one corner
+    /// ([`quad::complete`]).
+    fn completes_corners(&self) -> bool;
     /// Step 7: whether the small markers' corners are fitted with their decoded pattern
     /// ([`super::pattern_fit`]).
     fn fits_patterns(&self, config: &DetectorConfig) -> bool;
@@ -207,6 +210,10 @@ impl Strategy for Robust {
 
     fn fits_patterns(&self, config: &DetectorConfig) -> bool {
         config.refine_edges && config.fit_small_markers
+    }
+
+    fn completes_corners(&self) -> bool {
+        true
     }
 }
 
