@@ -7,8 +7,8 @@
 //! corner of the black border or of the margin beside it, each at 0.9 (it reads 0.933 on
 //! seed 0; its misses are in docs/accuracy.md, "Hard stills").
 //!
-//! Not long: two shadow-corner stills whose markers the shadow's band joins at a corner, one
-//! by its outline (`quad::complete`), one as a hole of the paper's rim (the hole regions).
+//! Not long: two shadow-corner stills whose markers the shadow's band joins at a corner, found
+//! only by completing the outline's hidden corner (`quad::complete`).
 
 use touchdown_core::detect::{Detector, DetectorConfig};
 use touchdown_eval::stills::{detect_still, render_still, score_class, StillClass};
@@ -71,9 +71,9 @@ fn the_hard_stills_are_found_on_both_renderers_without_a_wrong_id() {
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
-/// Seed 1's shadow-corner stills 11 (the band runs from the marker's corner off the paper:
-/// its outline is three corners and a band) and 4 (the band joins the border to the dark rim
-/// around the paper: the outline is a hole of the rim), on both image models.
+/// Seed 1's shadow-corner stills 11 and 4, on both image models: the band along the shadow's
+/// edge joins the marker's outline at a corner, so the outline is three corners of the marker
+/// and the band (both missed before `quad::complete`).
 #[test]
 fn markers_joined_at_a_corner_by_a_shadows_band_are_found() {
     let mut detector = Detector::new(DetectorConfig::offline());

@@ -626,7 +626,9 @@ const STREAM_DEPTH: usize = 24;
 /// The last five vertices of a boundary's simplification as they come, tested each time
 /// for a quad with a hidden corner ([`complete`]).
 struct Window {
+    /// The shortest whole side, squared.
     side2: f32,
+    /// The quad's shortest edge ([`check_shape`]).
     min_edge: f32,
     last: [Point; 5],
     /// Vertices pushed so far.
@@ -636,6 +638,8 @@ struct Window {
 }
 
 impl Window {
+    /// Takes the next vertex and adds to `found`, while it has room, the quad that the last
+    /// five complete.
     fn push(&mut self, p: Point, found: &mut heapless::Vec<Quad, MAX_COMPLETIONS>) {
         if let Some(slot) = self.first.get_mut(self.seen) {
             *slot = p;
