@@ -19,8 +19,8 @@
 //! cheaper than either (the costs and errors: `docs/design/floating-point.md`).
 
 use super::contour::Pixel;
-use crate::geometry::cyclic;
 use crate::geometry::Point;
+use crate::geometry::{cyclic, quad_area};
 
 /// Most Douglas-Peucker vertices kept before a boundary is given up as not a quad.
 const MAX_VERTICES: usize = 12;
@@ -204,7 +204,9 @@ fn simplify(
 ) -> Option<([u16; MAX_VERTICES], usize)> {
     let mut vertices = [0u16; MAX_VERTICES];
     let mut count = 0usize;
-    let whole = simplify_streaming::<MAX_VERTICES>(contour, origin, split, tolerance, |t| {
+    // Held whole: a boundary that needs more vertices is no quad, and is given up as soon as
+    // it does (most boundaries of a noisy frame end here).
+    let whole = simplify_streaming::<MAX_VERTICES>(contour, origin, split, tolerance, false, |t| {
         let Some(slot) = vertices.get_mut(count) else {
             return false;
         };
@@ -576,14 +578,20 @@ pub(crate) fn complete(contour: &[Pixel], min_edge: f32) -> heapless::Vec<Quad, 
         seen: 0,
         first: [Point::default(); 4],
     };
-    let closed =
-        simplify_streaming::<STREAM_DEPTH>(contour, origin, split, COMPLETION_TOLERANCE, |t| {
+    let closed = simplify_streaming::<STREAM_DEPTH>(
+        contour,
+        origin,
+        split,
+        COMPLETION_TOLERANCE,
+        true,
+        |t| {
             let t = origin + usize::from(t);
             let t = if t >= n { t - n } else { t };
             let p = contour.get(t).copied().map(pt).unwrap_or_default();
             window.push(p, &mut found);
             true
-        });
+        },
+    );
     if closed {
         // Around the start once more: the corners on either side of position 0.
         let first = window.first;
@@ -662,8 +670,7 @@ impl Window {
             return;
         };
         let corners = [a, b, c, x];
-        let area2 = cross(a, b, c) + cross(a, c, x);
-        if area2 >= COMPLETION_MIN_AREA2_PER_SIDE2 * self.side2
+        if 2.0 * quad_area(&corners) >= COMPLETION_MIN_AREA2_PER_SIDE2 * self.side2
             && check_shape(&corners, self.min_edge)
         {
             let _ = found.push(Quad {
@@ -676,10 +683,10 @@ impl Window {
 
 /// Douglas-Peucker vertices of the closed boundary, each handed to `emit` (as its position
 /// counted from `origin`, ascending) once no later vertex can come before it; `emit`
-/// returns false to stop. Only the vertices not yet handed on are held, at most `N`, so a
-/// boundary of any number of vertices can be simplified. False when stopped, or when the
-/// splitting went deeper than `N` (the vertices handed on so far are still the boundary's,
-/// in order).
+/// returns false to stop. With `stream`, only the vertices not yet handed on are held, at
+/// most `N`, so a boundary of any number of vertices can be simplified; without it all are
+/// held and handed on at the end. False when stopped, or when more than `N` had to be held
+/// (the vertices handed on so far are still the boundary's, in order).
 ///
 /// The chords are taken in order along the boundary, each vertex found inserted after the
 /// start of its chord and the chord up to it taken next: the vertices stay sorted (no sort,
@@ -691,6 +698,7 @@ fn simplify_streaming<const N: usize>(
     origin: usize,
     split: usize,
     tolerance: f32,
+    stream: bool,
     mut emit: impl FnMut(u16) -> bool,
 ) -> bool {
     let n = contour.len();
@@ -714,7 +722,7 @@ fn simplify_streaming<const N: usize>(
             continue;
         };
         if count == N {
-            if k == 0 {
+            if k == 0 || !stream {
                 return false;
             }
             // Hand on the final ones, those before the current chord's start.
@@ -1057,6 +1065,7 @@ mod tests {
                 origin,
                 split,
                 tolerance,
+                true,
                 |t| streamed.push(t).is_ok()
             ));
             // More vertices than it may hold: it handed some on before the end.

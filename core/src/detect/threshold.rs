@@ -193,6 +193,19 @@ fn has_contrast(lo: u8, hi: u8, min_contrast: u8) -> bool {
     contrast >= min_contrast || (contrast >= DARK_MIN_CONTRAST && lo <= hi >> 2)
 }
 
+/// The threshold of one window with extrema `lo` and `hi`: the rounded-up mid-level, or 0
+/// where it has no contrast ([`has_contrast`]); [`tile_thresholds`] for a byte.
+#[inline(always)]
+fn mid_threshold(lo: u8, hi: u8, min_contrast: u8) -> u8 {
+    // The mid-level first, then a select: the vectorised pass's loops stay branch-free.
+    let mid = (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8;
+    if has_contrast(lo, hi, min_contrast) {
+        mid
+    } else {
+        0
+    }
+}
+
 /// Per-byte threshold of four tiles from the minima `lo` and maxima `hi` of their windows
 /// (every byte of `hi` >= that of `lo`): the rounded-up mid-level, or 0 where the window
 /// has no contrast ([`has_contrast`]; `min_contrast` is its byte repeated in every byte).
@@ -687,14 +700,7 @@ impl Vectorised {
             pair_byte_rows(tmin, tw, y, u8::min);
             pair_byte_rows(tmax, tw, y, u8::max);
         }
-        let threshold = |lo: u8, hi: u8| {
-            let mid = (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8;
-            if !has_contrast(lo, hi, min_contrast) {
-                0
-            } else {
-                mid
-            }
-        };
+        let threshold = |lo: u8, hi: u8| mid_threshold(lo, hi, min_contrast);
         for y in (0..th).rev() {
             // Row y (a pair) and the pair above it; the top row's window is its own pair.
             let (Some((above_lo, row_lo)), Some((above_hi, row_hi))) = (
@@ -993,11 +999,7 @@ fn spread_down_to_thresholds(
                 (Some(hi), ..) => (*cell, hi),
                 _ => (*cell, *cell),
             };
-            *cell = if !has_contrast(lo, hi, min_contrast) {
-                0
-            } else {
-                (u16::from(lo) + u16::from(hi)).div_ceil(2) as u8
-            };
+            *cell = mid_threshold(lo, hi, min_contrast);
         }
     }
 }
