@@ -420,6 +420,7 @@ fn report(
         bordered,
         decoded,
         fitted,
+        deblurred,
         trace_steps,
         work,
         truncated,
@@ -432,7 +433,7 @@ fn report(
         }
     };
     hprintln!(
-        "  detections {} contours {} quads {} refined {} bordered {} decoded {} fitted {} trace_steps {} work {} truncated {}",
+        "  detections {} contours {} quads {} refined {} bordered {} decoded {} fitted {} deblurred {} trace_steps {} work {} truncated {}",
         count,
         contours,
         quads,
@@ -440,6 +441,7 @@ fn report(
         bordered,
         decoded,
         fitted,
+        deblurred,
         trace_steps,
         work,
         truncated

@@ -6,7 +6,7 @@
 //! each one to [`Candidates::process`]; the method's choices come from the [`Strategy`].
 
 use super::{
-    contour, decode, lens, quad, DetectStats, Detection, DetectorConfig, Look, Strategy,
+    contour, deblur, decode, lens, quad, DetectStats, Detection, DetectorConfig, Look, Strategy,
     MAX_DETECTIONS, WORK_CANDIDATE, WORK_COMPLETION_PER_PIXEL, WORK_FIT, WORK_PER_SAMPLE_X2,
     WORK_SCREEN_PIXELS,
 };
@@ -36,6 +36,9 @@ pub(super) struct Candidates<'f, 'i, 'a> {
     /// The lens, when the detector was given a distorting one: boundaries are fitted
     /// undistorted (`lens`).
     pub(super) camera: Option<&'f CameraModel>,
+    /// The largest small candidate so far whose first read found no code: whether it is a
+    /// hole, its corners and its area ([`Candidates::read_the_largest_unread`]).
+    pub(super) unread: core::cell::Cell<Option<(bool, [crate::geometry::Point; 4], f32)>>,
 }
 
 impl Candidates<'_, '_, '_> {
@@ -142,7 +145,7 @@ impl Candidates<'_, '_, '_> {
     ) -> bool {
         let config = self.config;
         let strategy = self.strategy;
-        if !self.families.iter().any(|f| strategy.wanted(f, quad)) {
+        if !self.families.iter().any(|f| strategy.wanted(f, quad.hole)) {
             return true;
         }
         stats.quads += 1;
@@ -163,18 +166,87 @@ impl Candidates<'_, '_, '_> {
         if !quad::check_shape(&corners, 0.8 * config.min_edge_px) || !self.inside(&corners) {
             return tracer.charge(candidate_work(samples));
         }
-        let mut bordered = false;
+        let (bordered, decoded) =
+            self.read_and_look_up(quad.hole, &corners, false, detections, stats, &mut samples);
+        if bordered {
+            stats.bordered += 1;
+        }
+        if !decoded && deblur::is_small(&corners, self.max_quad_cells) {
+            // The largest small candidate without a code is read again at the frame's end.
+            let size = crate::geometry::quad_area(&corners).abs();
+            if self.unread.get().is_none_or(|(_, _, s)| size > s) {
+                self.unread.set(Some((quad.hole, corners, size)));
+            }
+        }
+        tracer.charge(candidate_work(samples))
+    }
+
+    /// At the frame's end: the largest small candidate whose cells gave no code, read again
+    /// with the blur taken out ([`super::deblur`]). One a frame: a far frame has one marker
+    /// that far, and a frame of many small look-alikes (a sheet of random codes) pays for
+    /// one second read, not one each.
+    pub(super) fn read_the_largest_unread(
+        &self,
+        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+        stats: &mut DetectStats,
+        tracer: &mut contour::Tracer<'_>,
+    ) {
+        let Some((hole, corners, _)) = self.unread.take() else {
+            return;
+        };
+        // A candidate on a marker already found (one of its own boundaries, or the marker
+        // outlined again) would only read that marker again, from worse corners.
+        let centre = corners
+            .iter()
+            .fold(crate::geometry::Point::default(), |a, c| {
+                crate::geometry::Point::new(a.x + 0.25 * c.x, a.y + 0.25 * c.y)
+            });
+        if inside_detection(centre, detections) {
+            return;
+        }
+        // A second look, not part of the frame's search: nothing is missed without it.
+        if tracer.remaining() == 0 {
+            return;
+        }
+        let mut samples = 0u32;
+        self.read_and_look_up(hole, &corners, true, detections, stats, &mut samples);
+        // A method without the read (the paper's) reads nothing and pays nothing.
+        if samples > 0 {
+            stats.deblurred += 1;
+            tracer.charge(candidate_work(samples));
+        }
+    }
+
+    /// Reads the cells through `corners` for every family a candidate (a hole when `hole`)
+    /// can be, by the method's first read or (`deblurred`) its deblurred one, looks the codes
+    /// up and keeps what decodes. Returns whether some family's read found a marker grid and
+    /// whether some family decoded.
+    fn read_and_look_up(
+        &self,
+        hole: bool,
+        corners: &[crate::geometry::Point; 4],
+        deblurred: bool,
+        detections: &mut heapless::Vec<Detection, MAX_DETECTIONS>,
+        stats: &mut DetectStats,
+        samples: &mut u32,
+    ) -> (bool, bool) {
+        let strategy = self.strategy;
+        let (mut bordered, mut decoded) = (false, false);
         // The last layout read and its result: consecutive families with the same layout
         // (the default tag36h11 + aruco_6x6_250 pair) sample and threshold the cells once.
         let mut last: Option<(&Family<'_>, Option<decode::GridRead>)> = None;
         for (index, family) in self.families.iter().enumerate() {
-            if !strategy.wanted(family, quad) {
+            if !strategy.wanted(family, hole) {
                 continue;
             }
             let grid = match last {
                 Some((seen, grid)) if seen.same_layout(family) => grid,
                 _ => {
-                    let grid = strategy.read(self, family, &corners, &mut samples);
+                    let grid = if deblurred {
+                        strategy.read_deblurred(self, family, corners, samples)
+                    } else {
+                        strategy.read(self, family, corners, samples)
+                    };
                     last = Some((family, grid));
                     grid
                 }
@@ -183,11 +255,12 @@ impl Candidates<'_, '_, '_> {
                 continue;
             };
             bordered = true;
-            let max_hamming = strategy.max_hamming(config);
+            let max_hamming = strategy.max_hamming(self.config);
             let Some(read) = decode::lookup(family, &grid, max_hamming) else {
                 continue;
             };
             stats.decoded += 1;
+            decoded = true;
             let detection = Detection {
                 family: index as u8,
                 id: read.decoded.id,
@@ -201,10 +274,7 @@ impl Candidates<'_, '_, '_> {
                 stats.truncated = true;
             }
         }
-        if bordered {
-            stats.bordered += 1;
-        }
-        tracer.charge(candidate_work(samples))
+        (bordered, decoded)
     }
 }
 
@@ -231,6 +301,14 @@ fn within_detection(
         return false;
     };
     let p = crate::geometry::Point::new(f32::from(first.x), f32::from(first.y));
+    inside_detection(p, detections)
+}
+
+/// Whether `p` lies inside the corners of a detected marker.
+fn inside_detection(
+    p: crate::geometry::Point,
+    detections: &heapless::Vec<Detection, MAX_DETECTIONS>,
+) -> bool {
     detections.iter().any(|d| {
         let c = &d.corners;
         // On the same side of every edge, whichever way round the corners run.

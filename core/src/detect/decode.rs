@@ -22,9 +22,9 @@ use crate::geometry::{Homography, Point};
 use crate::image::GrayImage;
 
 /// Border cells allowed to read white, as a fraction of the ring (glare, a speck of dirt).
-const BORDER_ERROR_FRACTION: f32 = 0.125;
+pub(super) const BORDER_ERROR_FRACTION: f32 = 0.125;
 /// Margin cells allowed to read dark (a tight print margin, a neighbouring object).
-const MARGIN_ERROR_FRACTION: f32 = 0.25;
+pub(super) const MARGIN_ERROR_FRACTION: f32 = 0.25;
 /// Cells at least this many pixels wide are read as the mean of five points (the centre and
 /// four a quarter cell off it); smaller ones at their centre. One bilinear sample already
 /// averages four pixels, and a cell of fewer than eight pixels is read well enough by it
@@ -36,13 +36,13 @@ const MULTI_SAMPLE_CELL_PX: f32 = 8.0;
 const DECODE_SHARPENING: f32 = 0.25;
 /// A data cell whose reading lies closer to the threshold than this fraction of half the
 /// contrast is uncertain: it counts as an erasure in the look-up (see [`lookup`]).
-const UNCERTAIN_CELL_MARGIN: f32 = 0.2;
+pub(super) const UNCERTAIN_CELL_MARGIN: f32 = 0.2;
 /// Families whose minimum distance exceeds their correction by at most this many bits get
 /// the registration check of [`read_robust`]: for them, that many confidently misread cells
 /// make another code.
-const REGISTRATION_CHECK_SLACK: u8 = 5;
+pub(super) const REGISTRATION_CHECK_SLACK: u8 = 5;
 /// How far the registration check moves the sampling grid, cells.
-const REGISTRATION_SHIFT: f32 = 0.25;
+pub(super) const REGISTRATION_SHIFT: f32 = 0.25;
 /// Image samples' worth of work of undistorting a read's four corners through the lens
 /// ([`GridMap::new`]): a Newton inversion is about as much as four bilinear samples. (The
 /// lens's own cost per mapped point, a polynomial, is within the per-cell figure's slack.)
@@ -60,7 +60,7 @@ pub(crate) struct Read {
 
 /// Least-squares plane `a + b*u + c*v` through samples; falls back to the mean.
 #[derive(Default)]
-struct PlaneFit {
+pub(super) struct PlaneFit {
     n: f32,
     su: f32,
     sv: f32,
@@ -73,7 +73,7 @@ struct PlaneFit {
 }
 
 impl PlaneFit {
-    fn add(&mut self, u: f32, v: f32, z: f32) {
+    pub(super) fn add(&mut self, u: f32, v: f32, z: f32) {
         self.n += 1.0;
         self.su += u;
         self.sv += v;
@@ -85,7 +85,7 @@ impl PlaneFit {
         self.svz += v * z;
     }
 
-    fn mean(&self) -> f32 {
+    pub(super) fn mean(&self) -> f32 {
         if self.n > 0.0 {
             self.sz / self.n
         } else {
@@ -94,7 +94,7 @@ impl PlaneFit {
     }
 
     /// Coefficients (a, b, c).
-    fn solve(&self) -> (f32, f32, f32) {
+    pub(super) fn solve(&self) -> (f32, f32, f32) {
         let m = [
             [self.n, self.su, self.sv],
             [self.su, self.suu, self.suv],
@@ -173,7 +173,7 @@ impl GridMap {
 
 /// A map from grid points to frame pixels: the reads are generic over it, so that without a
 /// lens they map by the bare homography, as fast as before there was a lens to ask about.
-trait CellMap {
+pub(super) trait CellMap {
     /// The frame pixel of grid point (u, v).
     fn map(&self, u: f32, v: f32) -> Option<Point>;
 }
@@ -268,6 +268,24 @@ pub(crate) struct GridRead {
 }
 
 impl GridRead {
+    /// A read through `h` of the codes `readings` (the four rotations), with its decision
+    /// `margin`, black-to-white `contrast` and `uncertain` data cells.
+    pub(super) fn new(
+        h: GridMap,
+        readings: [u64; 4],
+        margin: f32,
+        contrast: f32,
+        uncertain: u8,
+    ) -> Self {
+        GridRead {
+            h,
+            readings,
+            margin,
+            contrast,
+            uncertain,
+        }
+    }
+
     /// A read without a notion of certainty (the paper's, [`super::paper`]): every cell
     /// counts as clear, the decision margin is 1.
     pub(crate) fn certain(h: Homography, readings: [u64; 4], contrast: f32) -> Self {
@@ -349,7 +367,7 @@ pub(crate) fn read_robust(
 
 /// The shorter of a quad's first two sides, squared: the size tests compare squared lengths
 /// (no square root: they run on every candidate).
-fn shorter_first_side_squared(quad: &[Point; 4]) -> f32 {
+pub(super) fn shorter_first_side_squared(quad: &[Point; 4]) -> f32 {
     quad[0]
         .distance_squared(quad[1])
         .min(quad[1].distance_squared(quad[2]))
@@ -808,7 +826,7 @@ pub(crate) fn uniform_grid_decodes(family: &Family<'_>) -> bool {
 
 /// Calls `f(row, col)` for every cell of ring `ring` of an `n x n` grid; the ring may lie
 /// outside the grid (ring -1 is the row of cells just outside it).
-fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
+pub(super) fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
     let lo = ring;
     let hi = n as isize - 1 - ring;
     if hi < lo {

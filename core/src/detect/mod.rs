@@ -80,6 +80,7 @@
 //! and `paper` (the paper's).
 mod candidates;
 mod contour;
+mod deblur;
 mod decode;
 mod lens;
 mod paper;
@@ -392,6 +393,9 @@ pub struct DetectStats {
     pub refined: u32,
     /// Detections whose corners came from the pattern fit (step 7).
     pub fitted: u32,
+    /// Small candidates read a second time with the blur taken out (step 5, `deblur`): the
+    /// largest one whose first read found no code, at most one a frame.
+    pub deblurred: u32,
     /// Contour-following steps spent.
     pub trace_steps: u32,
     /// Work units spent ([`DetectorConfig::work_budget_per_pixel`]): the binarisation's
@@ -595,6 +599,7 @@ impl Detector {
             uniform_decodes: families.iter().any(|f| decode::uniform_grid_decodes(f)),
             quiet_margins: families.iter().all(|f| f.quiet_rings >= f.border_ring),
             camera,
+            unread: core::cell::Cell::new(None),
         };
         let rule = strategy.start_rule(families);
         let bitmap: &[u32] = bitmap;
@@ -671,6 +676,7 @@ impl Detector {
             }
         }
         stats.truncated |= !binarised;
+        candidates.read_the_largest_unread(detections, stats, &mut tracer);
         if strategy.fits_patterns(config) {
             stats.fitted = u32::from(pattern_fit::fit_small_markers(
                 image,

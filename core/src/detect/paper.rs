@@ -48,7 +48,7 @@ impl Strategy for Paper {
 
     /// The edge map has no polarity: outer boundaries and holes alike are candidates, for
     /// the normal families (the paper has no white-on-black markers).
-    fn wanted(&self, family: &Family<'_>, _quad: &quad::Quad) -> bool {
+    fn wanted(&self, family: &Family<'_>, _hole: bool) -> bool {
         !family.reversed()
     }
 
@@ -80,6 +80,17 @@ impl Strategy for Paper {
         _samples: &mut u32,
     ) -> Option<GridRead> {
         read_cells(candidates.image, family, corners)
+    }
+
+    /// The paper reads each cell once, as its area's mean.
+    fn read_deblurred(
+        &self,
+        _candidates: &Candidates<'_, '_, '_>,
+        _family: &Family<'_>,
+        _corners: &[Point; 4],
+        _samples: &mut u32,
+    ) -> Option<GridRead> {
+        None
     }
 
     /// Exact template comparison.

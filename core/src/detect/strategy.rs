@@ -5,7 +5,7 @@
 //! methods' choices, and the choices of each method sit together.
 
 use super::{
-    contour, decode, quad, refine, threshold, Candidates, DetectorConfig, WORK_PRECHECK,
+    contour, deblur, decode, quad, refine, threshold, Candidates, DetectorConfig, WORK_PRECHECK,
     WORK_THRESHOLD_BLOCK,
 };
 use crate::camera::CameraModel;
@@ -33,8 +33,8 @@ pub(super) trait Strategy {
     ) -> u32;
     /// Which boundaries of the bitmap start a trace when searching for `families`.
     fn start_rule(&self, families: &[&Family<'_>]) -> contour::StartRule;
-    /// Whether `quad` can be a marker of `family`.
-    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool;
+    /// Whether a quad (a light region when `hole`) can be a marker of `family`.
+    fn wanted(&self, family: &Family<'_>, hole: bool) -> bool;
     /// The quick look at a candidate's rough corners before it is refined and read, charging
     /// its work to `tracer`.
     fn quick_look(
@@ -53,6 +53,15 @@ pub(super) trait Strategy {
     /// Reads the cells of `family`'s layout through `corners`, adding the image reads to
     /// `samples`.
     fn read(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        family: &Family<'_>,
+        corners: &[Point; 4],
+        samples: &mut u32,
+    ) -> Option<decode::GridRead>;
+    /// Reads the cells of a small candidate again with the blur taken out, when no family's
+    /// first read found a code ([`super::deblur`]); `None` when the method has no such read.
+    fn read_deblurred(
         &self,
         candidates: &Candidates<'_, '_, '_>,
         family: &Family<'_>,
@@ -141,8 +150,8 @@ impl Strategy for Robust {
 
     /// The binarisation knows polarity: a hole is a light region, which only the reversed
     /// families are detected by.
-    fn wanted(&self, family: &Family<'_>, quad: &quad::Quad) -> bool {
-        family.reversed() == quad.hole
+    fn wanted(&self, family: &Family<'_>, hole: bool) -> bool {
+        family.reversed() == hole
     }
 
     /// [`decode::precheck`], for dark-on-light families with a quiet margin (a hole is a
@@ -202,6 +211,18 @@ impl Strategy for Robust {
         let (image, config) = (candidates.image, candidates.config);
         let lens = lens_for(candidates, corners);
         decode::read_robust(image, family, corners, lens, config, samples)
+    }
+
+    fn read_deblurred(
+        &self,
+        candidates: &Candidates<'_, '_, '_>,
+        family: &Family<'_>,
+        corners: &[Point; 4],
+        samples: &mut u32,
+    ) -> Option<decode::GridRead> {
+        let (image, config) = (candidates.image, candidates.config);
+        let lens = lens_for(candidates, corners);
+        deblur::read_deblurred(image, family, corners, lens, config, samples)
     }
 
     fn max_hamming(&self, config: &DetectorConfig) -> u8 {

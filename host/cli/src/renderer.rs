@@ -1,8 +1,9 @@
 //! `--renderer raster|warp`, the image model `touchdown simulate`, `touchdown replay
-//! --scenario` and `touchdown sitl` render with, and `--psf`, the warp model's lens blur:
-//! one definition each, so that the commands take the same values with the same help.
+//! --scenario` and `touchdown sitl` render with, and `--psf` and `--response`, the warp
+//! model's lens blur and sensor response: one definition each, so that the commands take the
+//! same values with the same help.
 
-use touchdown_sim::warp::Psf;
+use touchdown_sim::warp::{Psf, Response};
 use touchdown_sim::{Renderer, Simulator, WarpOptics};
 
 use crate::CliError;
@@ -45,7 +46,19 @@ impl RendererArg {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PsfArg(pub Vec<Psf>);
 
-/// `--psf`, shared by `touchdown simulate` and `touchdown replay`.
+/// `--response`'s values: the warp model's sensor response, each one given in place of the
+/// scenario's, so that one flight can be replayed through a camera's DSP it was not tuned to.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ResponseArg {
+    /// `gamma:G`: the tone curve's gamma (1 linear; 2.2 about sRGB's).
+    pub gamma: Option<f64>,
+    /// `sharpen:S`: the 3x3 sharpening kernel's strength (0 none).
+    pub sharpen: Option<f64>,
+    /// `jpeg:Q`: block compression at this JPEG quality (1-100).
+    pub jpeg: Option<u8>,
+}
+
+/// `--psf` and `--response`, shared by `touchdown simulate` and `touchdown replay`.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct LensArgs {
     /// The warp model's lens blur (with --renderer warp; replay: with --scenario), in place of
@@ -58,6 +71,23 @@ pub struct LensArgs {
         help_heading = "Advanced"
     )]
     pub psf: Option<PsfArg>,
+    /// The warp model's sensor response (with --renderer warp; replay: with --scenario), each
+    /// item in place of the scenario's: a comma-separated list of gamma:G (1 linear, 2.2
+    /// about sRGB), sharpen:S (the 3x3 kernel's strength, 0 none), jpeg:Q (quality 1-100)
+    #[arg(
+        long,
+        value_name = "LIST",
+        value_parser = ResponseArg::parse,
+        help_heading = "Advanced"
+    )]
+    pub response: Option<ResponseArg>,
+}
+
+impl LensArgs {
+    /// Whether either option was given.
+    pub fn any(&self) -> bool {
+        self.psf.is_some() || self.response.is_some()
+    }
 }
 
 /// The widest PSF `--psf` takes, pixels (sigma, diameter or length): the renderer cuts
@@ -116,28 +146,94 @@ impl PsfArg {
     }
 }
 
-/// `simulator` rendering with `renderer` and, with `psf`, the warp model's lens blur replaced
-/// by it (its defocus with distance, motion blur, vignetting and sensor response kept);
-/// `--psf` without the warp model is a usage error.
+impl ResponseArg {
+    /// A comma-separated list of `gamma:G` (over 0, at most 5), `sharpen:S` (0 to 2) and
+    /// `jpeg:Q` (1 to 100), each at most once; anything else is one line saying what is
+    /// expected.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        const EXPECTED: &str = "expected gamma:G, sharpen:S or jpeg:QUALITY, comma-separated";
+        let mut response = ResponseArg::default();
+        for item in text.split(',') {
+            let (kind, value) = item
+                .trim()
+                .split_once(':')
+                .ok_or_else(|| format!("`{item}`: {EXPECTED}"))?;
+            let number: f64 = value
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .ok_or_else(|| format!("`{item}`: `{value}` is not a number"))?;
+            let kind = kind.trim().to_ascii_lowercase();
+            let twice = || format!("`{item}`: {kind} is given twice");
+            match kind.as_str() {
+                "gamma" => {
+                    if !(number > 0.0 && number <= 5.0) {
+                        return Err(format!("`{item}`: gamma must be over 0 and at most 5"));
+                    }
+                    if response.gamma.replace(number).is_some() {
+                        return Err(twice());
+                    }
+                }
+                "sharpen" => {
+                    if !(0.0..=2.0).contains(&number) {
+                        return Err(format!("`{item}`: sharpen must be 0 to 2"));
+                    }
+                    if response.sharpen.replace(number).is_some() {
+                        return Err(twice());
+                    }
+                }
+                "jpeg" => {
+                    if !(number.fract() == 0.0 && (1.0..=100.0).contains(&number)) {
+                        return Err(format!("`{item}`: jpeg quality must be a whole 1 to 100"));
+                    }
+                    if response.jpeg.replace(number as u8).is_some() {
+                        return Err(twice());
+                    }
+                }
+                _ => return Err(format!("`{item}`: {EXPECTED}")),
+            }
+        }
+        Ok(response)
+    }
+
+    /// `base` with the items given in place of its own.
+    pub fn apply(&self, base: Response) -> Response {
+        Response {
+            gamma: self.gamma.unwrap_or(base.gamma),
+            sharpen: self.sharpen.unwrap_or(base.sharpen),
+            block_quality: self.jpeg.or(base.block_quality),
+            ..base
+        }
+    }
+}
+
+/// `simulator` rendering with `renderer` and, with `lens`'s `--psf`, the warp model's lens
+/// blur replaced by it (its defocus with distance, motion blur and vignetting kept) and with
+/// its `--response` the items given of the sensor response; either without the warp model is
+/// a usage error.
 pub fn configure(
     simulator: Simulator,
     renderer: RendererArg,
-    psf: Option<&PsfArg>,
+    lens: &LensArgs,
 ) -> Result<Simulator, CliError> {
     // Refused before the warp model's world is rasterised.
-    if psf.is_some() && renderer != RendererArg::Warp {
+    if lens.any() && renderer != RendererArg::Warp {
         return Err(CliError(
-            "--psf sets the warp model's optics: add --renderer warp".into(),
+            "--psf and --response set the warp model's optics: add --renderer warp".into(),
         ));
     }
     let simulator = simulator.with_renderer(renderer.renderer());
-    let Some(PsfArg(psfs)) = psf else {
+    if !lens.any() {
         return Ok(simulator);
-    };
-    let optics = WarpOptics {
-        psfs: psfs.clone(),
-        ..WarpOptics::of_scenario(&simulator.scenario)
-    };
+    }
+    let mut optics = WarpOptics::of_scenario(&simulator.scenario);
+    if let Some(PsfArg(psfs)) = &lens.psf {
+        optics.psfs = psfs.clone();
+    }
+    if let Some(response) = &lens.response {
+        optics.response = response.apply(optics.response);
+    }
     Ok(simulator.with_warp_optics(optics))
 }
 
@@ -189,6 +285,52 @@ mod tests {
             ("gaussian:1,", "expected gaussian"),
         ] {
             let e = PsfArg::parse(bad).unwrap_err();
+            assert!(e.contains(says) && !e.contains('\n'), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn response_lists_parse_replace_only_what_they_name_and_bad_ones_are_one_line() {
+        let given = ResponseArg::parse("gamma:2.2, JPEG:80").unwrap();
+        assert_eq!(
+            given,
+            ResponseArg {
+                gamma: Some(2.2),
+                sharpen: None,
+                jpeg: Some(80)
+            }
+        );
+        let applied = given.apply(Response::board_camera());
+        assert_eq!(
+            applied,
+            Response {
+                gamma: 2.2,
+                block_quality: Some(80),
+                ..Response::board_camera()
+            }
+        );
+        assert_eq!(
+            ResponseArg::parse("sharpen:0")
+                .unwrap()
+                .apply(Response::board_camera()),
+            Response {
+                sharpen: 0.0,
+                ..Response::board_camera()
+            }
+        );
+        for (bad, says) in [
+            ("gamma", "expected gamma"),
+            ("contrast:2", "expected gamma"),
+            ("gamma:bright", "not a number"),
+            ("gamma:0", "over 0"),
+            ("gamma:inf", "not a number"),
+            ("sharpen:-1", "0 to 2"),
+            ("jpeg:80.5", "whole 1 to 100"),
+            ("jpeg:0", "whole 1 to 100"),
+            ("gamma:2,gamma:1", "twice"),
+            ("gamma:2,", "expected gamma"),
+        ] {
+            let e = ResponseArg::parse(bad).unwrap_err();
             assert!(e.contains(says) && !e.contains('\n'), "{bad}: {e}");
         }
     }

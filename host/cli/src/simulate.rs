@@ -196,7 +196,7 @@ pub fn run(
     if let Some(threads) = args.threads {
         simulator = simulator.with_threads(threads);
     }
-    let simulator = crate::renderer::configure(simulator, args.renderer, args.lens.psf.as_ref())?;
+    let simulator = crate::renderer::configure(simulator, args.renderer, &args.lens)?;
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let mut writer = RecordingWriter::create_with_vehicle_attitude(&dir, &camera, &pad, true, true)
@@ -207,7 +207,7 @@ pub fn run(
             &simulator.scenario,
             &effects,
             args.renderer.renderer(),
-            args.lens.psf.as_ref(),
+            &args.lens,
         ),
     )
     .map_err(|e| {
@@ -266,15 +266,21 @@ fn simulation_toml(
     s: &Scenario,
     effects: &FlightEffects,
     renderer: Renderer,
-    psf: Option<&PsfArg>,
+    optics: &LensArgs,
 ) -> String {
     let lens = s.camera.model.distortion;
-    let psf = psf.map_or(String::new(), |PsfArg(psfs)| {
+    let mut psf = optics.psf.as_ref().map_or(String::new(), |PsfArg(psfs)| {
         format!(
             "psf = {}\n",
             touchdown_formats::toml_string(&format!("{psfs:?}"))
         )
     });
+    if let Some(response) = &optics.response {
+        psf.push_str(&format!(
+            "response = {}\n",
+            touchdown_formats::toml_string(&format!("{response:?}"))
+        ));
+    }
     format!(
         "# How this recording was simulated (touchdown simulate); informational.\n\
          scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\

@@ -37,7 +37,7 @@
 //! the pattern's edges (a fixed scatter of them on the larger markers), and [`ITERATIONS`]
 //! iterations, so the time per marker is bounded whatever the image. A fit is kept only
 //! when the model explains the pixels, the blur and contrast are sane and no corner moved
-//! more than [`MAX_CORNER_SHIFT_PX`]; otherwise the edge corners stand.
+//! more than [`max_corner_shift`]; otherwise the edge corners stand.
 
 // The normal equations are fixed 12x12 arrays indexed by loop counters below 12, and the
 // normal tables by an index clamped to their length: never by data.
@@ -76,12 +76,28 @@ const MAX_RESIDUAL_OF_CONTRAST: f32 = 0.15;
 /// finite when a parameter is barely observed (the outside level of a marker in a wide
 /// margin).
 const DAMPING: f32 = 1e-3;
-/// A fit that moves a corner further than this (pixels) is not the small correction it is
-/// for (a wrong decode, an occluded marker, another marker in the margin): refused. The
-/// edge search's corners of an 11-pixel simulated marker were 0.43 px off, which the fit
-/// must be allowed to correct; at 0.75 px a fit on a real photo (the apriltag test set)
-/// moved a corner to 1.3 px from the truth.
-pub const MAX_CORNER_SHIFT_PX: f32 = 0.6;
+/// A fit that moves a corner further than [`max_corner_shift`] (pixels) is not the small
+/// correction it is for (a wrong decode, an occluded marker, clutter beside the marker that
+/// the model has no level for): refused. The bound is this many pixels on a marker of 20
+/// pixels and above; on a smaller one, this times 20 over its longest side, up to
+/// [`MAX_CORNER_SHIFT_PX`]. The edge search's corners are off by more the smaller the marker
+/// and the more its image is formed otherwise than by a plain Gaussian blur: a gamma-encoded
+/// camera moves each edge of a 14-pixel marker towards its dark side, its corners 0.2-0.7 px
+/// inward, which the fit must be allowed to correct (at 0.6 px it refused most of those
+/// fits, and the range read 2.4 % long; `docs/accuracy.md`, "Through other lenses and cameras"). On
+/// markers of 19-21 pixels on a printed margin beside grass, fits that moved a corner 0.7-
+/// 0.9 px made it worse (`hard_stills --class small`): there the edge corners stand.
+pub const MIN_CORNER_SHIFT_PX: f32 = 0.6;
+/// The largest [`max_corner_shift`], on markers of 12 pixels and below.
+pub const MAX_CORNER_SHIFT_PX: f32 = 1.0;
+/// Longest side (pixels) from which the bound is [`MIN_CORNER_SHIFT_PX`].
+const FULL_SHIFT_SIDE_PX: f32 = 20.0;
+
+/// How far (pixels) a fit may move a corner of a marker whose longest side is `side` pixels.
+pub(crate) fn max_corner_shift(side: f32) -> f32 {
+    (MIN_CORNER_SHIFT_PX * FULL_SHIFT_SIDE_PX / side.max(1.0))
+        .clamp(MIN_CORNER_SHIFT_PX, MAX_CORNER_SHIFT_PX)
+}
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 40 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
 /// qvga-far-1: one tag36h11 of 14 pixels): about 0.90 million instructions for its pixels
@@ -105,11 +121,12 @@ const INITIAL_BLUR_PX: f32 = 0.8;
 /// Parameters: 4 corners (x, y), blur (the logarithm of its width in grid cells: always
 /// positive, and a step of a given size means the same at any blur), black level, contrast,
 /// and the outside level of each side ([`model::SIDES`], from `OUTSIDE` on).
-const N: usize = 11 + model::SIDES;
+const N: usize = 12 + model::SIDES;
 const BLUR: usize = 8;
-const BLACK: usize = 9;
-const CONTRAST: usize = 10;
-const OUTSIDE: usize = 11;
+const BLUR_V: usize = 9;
+const BLACK: usize = 10;
+const CONTRAST: usize = 11;
+const OUTSIDE: usize = 12;
 /// Weight of the pull of each side's outside level towards the mean of the four, in pixels
 /// that lie wholly beyond that side: it keeps a side no pixel measures (a marker at the
 /// image's edge) at the others' level, and is too weak to hold a side that a row of pixels
@@ -249,7 +266,7 @@ pub(crate) enum Refusal {
     Residual,
     /// The blur or the contrast ended outside their ranges.
     Levels,
-    /// A corner moved more than [`MAX_CORNER_SHIFT_PX`].
+    /// A corner moved more than [`max_corner_shift`].
     Moved,
 }
 
@@ -279,6 +296,7 @@ pub(crate) fn fit(
         return Err(Refusal::Geometry);
     }
     params[BLUR] = libm::logf(INITIAL_BLUR_PX / cell_px);
+    params[BLUR_V] = params[BLUR];
     // The levels enter the model linearly: solved exactly for the start geometry and blur
     // (the outside level stays white, a printed margin, when no pixel lies beyond the known
     // area to measure it).
@@ -316,17 +334,18 @@ pub(crate) fn fit(
     }
     let fitted = fitted_corners(&params);
     let cells = pattern.quad_hi - pattern.quad_lo;
-    let blur = libm::expf(params[BLUR]) * mean_side(&fitted) / cells;
+    let blur = libm::expf(0.5 * (params[BLUR] + params[BLUR_V])) * mean_side(&fitted) / cells;
     // The fitted contrast must be the marker's: a fit that flattened it found something else.
     let contrast_ratio = params[CONTRAST] / contrast.max(1.0);
     let within = |x: f32, (lo, hi): (f32, f32)| x >= lo && x <= hi;
     if !within(blur, BLUR_RANGE_PX) || !within(contrast_ratio, CONTRAST_RANGE) {
         return Err(Refusal::Levels);
     }
+    let bound = max_corner_shift(longest_side(corners));
     if fitted
         .iter()
         .zip(corners.iter())
-        .any(|(f, c)| !(f.distance(*c) <= MAX_CORNER_SHIFT_PX))
+        .any(|(f, c)| !(f.distance(*c) <= bound))
     {
         return Err(Refusal::Moved);
     }
@@ -384,4 +403,4 @@ pub(super) fn fit_small_markers(
 }
 
 #[cfg(test)]
-mod tests;
+pub(super) mod tests;

@@ -7,7 +7,9 @@
 #![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
 use super::model::{blurred, Axis, Pattern, SIDES};
-use super::{fitted_corners, Refusal, Window, BLACK, BLUR, CONTRAST, N, OUTSIDE, OUTSIDE_PULL};
+use super::{
+    fitted_corners, Refusal, Window, BLACK, BLUR, BLUR_V, CONTRAST, N, OUTSIDE, OUTSIDE_PULL,
+};
 use crate::geometry::{Homography, Point};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
@@ -54,6 +56,7 @@ pub(super) fn linearise(
     let corners = fitted_corners(params);
     let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
     let (blur, black, contrast) = (libm::expf(params[BLUR]), params[BLACK], params[CONTRAST]);
+    let blur_v = libm::expf(params[BLUR_V]);
     let mut outside = [0.0f32; SIDES];
     for (level, p) in outside.iter_mut().zip(params.iter().skip(OUTSIDE)) {
         *level = *p;
@@ -73,7 +76,7 @@ pub(super) fn linearise(
         let (x, y) = (sample.x, sample.y);
         let g = map.map(f32::from(x), f32::from(y))?;
         au.set(g.x, blur, pattern.side)?;
-        av.set(g.y, blur, pattern.side)?;
+        av.set(g.y, blur_v, pattern.side)?;
         let b = blurred(pattern, &au, &av, &outside);
         let e = observed - (black + contrast * b.value);
         normal.cost += e * e;
@@ -114,7 +117,8 @@ pub(super) fn linearise(
             jac[2 * k] = -(along_s * a + along_t * c);
             jac[2 * k + 1] = -(along_s * b_ + along_t * d);
         }
-        jac[BLUR] = contrast * (b.d_width_u + b.d_width_v) * blur;
+        jac[BLUR] = contrast * b.d_width_u * blur;
+        jac[BLUR_V] = contrast * b.d_width_v * blur_v;
         jac[BLACK] = 1.0;
         jac[CONTRAST] = b.value;
         for (j, w) in jac.iter_mut().skip(OUTSIDE).zip(b.outside.iter()) {

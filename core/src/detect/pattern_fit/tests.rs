@@ -8,7 +8,8 @@ use std::vec::Vec;
 use super::*;
 use crate::family::tables::TAG36H11;
 
-const SIZE: usize = 64;
+/// Side of the drawn images, pixels.
+pub(in crate::detect) const SIZE: usize = 64;
 const BLACK: f32 = 40.0;
 const WHITE: f32 = 210.0;
 const GROUND: f32 = 120.0;
@@ -16,7 +17,13 @@ const GROUND: f32 = 120.0;
 /// A tag36h11 marker whose border square is `side` pixels, turned by `angle`, centred at
 /// `centre`, drawn with a blur of `sigma` pixels on a uniform grey ground; returns the pixels
 /// and the true corners.
-fn draw(id: u16, side: f32, angle: f32, centre: Point, sigma: f32) -> (Vec<u8>, [Point; 4]) {
+pub(in crate::detect) fn draw(
+    id: u16,
+    side: f32,
+    angle: f32,
+    centre: Point,
+    sigma: f32,
+) -> (Vec<u8>, [Point; 4]) {
     draw_on(id, side, angle, centre, sigma, &|_, _| GROUND)
 }
 

@@ -90,10 +90,11 @@ impl Input {
                 if args.seed.is_some()
                     || args.threads.is_some()
                     || args.renderer.is_some()
-                    || args.lens.psf.is_some()
+                    || args.lens.any()
                 {
                     return Err(CliError(
-                        "--seed, --threads, --renderer and --psf apply to --scenario only".into(),
+                        "--seed, --threads, --renderer, --psf and --response apply to --scenario only"
+                            .into(),
                     ));
                 }
                 if super::effect_flag_given(args) {
@@ -163,11 +164,8 @@ impl Input {
         if let Some(threads) = args.threads {
             simulator = simulator.with_threads(threads);
         }
-        let simulator = crate::renderer::configure(
-            simulator,
-            args.renderer.unwrap_or_default(),
-            args.lens.psf.as_ref(),
-        )?;
+        let simulator =
+            crate::renderer::configure(simulator, args.renderer.unwrap_or_default(), &args.lens)?;
         Ok(Input {
             title: format!("scenario {name}, seed {seed}"),
             short_name: name.to_string(),
