@@ -242,11 +242,7 @@ impl Candidates<'_, '_, '_> {
             let grid = match last {
                 Some((seen, grid)) if seen.same_layout(family) => grid,
                 _ => {
-                    let grid = if deblurred {
-                        strategy.read_deblurred(self, family, corners, samples)
-                    } else {
-                        strategy.read(self, family, corners, samples)
-                    };
+                    let grid = strategy.read(self, family, corners, deblurred, samples);
                     last = Some((family, grid));
                     grid
                 }

@@ -33,9 +33,9 @@
 #![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
 use super::decode::{
-    for_ring, grid_homography, shorter_first_side_squared, CellMap, GridMap, GridRead, PlaneFit,
-    BORDER_ERROR_FRACTION, MARGIN_ERROR_FRACTION, REGISTRATION_CHECK_SLACK, REGISTRATION_SHIFT,
-    UNCERTAIN_CELL_MARGIN,
+    flag_changed, for_ring, grid_homography, shorter_first_side_squared, CellMap, Decided, GridMap,
+    GridRead, PlaneFit, BORDER_ERROR_FRACTION, MARGIN_ERROR_FRACTION, REGISTRATION_CHECK_SLACK,
+    REGISTRATION_SHIFT, UNCERTAIN_CELL_MARGIN,
 };
 use super::DetectorConfig;
 use crate::camera::CameraModel;
@@ -154,32 +154,17 @@ pub(crate) fn read_deblurred(
             *samples = samples.saturating_add(grid_cost);
             sample(image, &map, m, shift, &mut work)?;
             unspill(&mut work, m, k);
-            for &(r, c) in &data {
-                let bit = levels.relative(&work, r as isize, c as isize) > 0.0;
-                let k = r as usize * n + c as usize;
-                if cells.get(k).copied() != Some(bit) {
-                    if let Some(flag) = uncertain_cells.get_mut(k) {
-                        *flag = true;
-                    }
-                }
-            }
+            flag_changed(&data, n, &cells, &mut uncertain_cells, |r, c| {
+                levels.relative(&work, r as isize, c as isize) > 0.0
+            });
         }
     }
-    let uncertain = data
-        .iter()
-        .filter(|&&(r, c)| uncertain_cells.get(r as usize * n + c as usize) == Some(&true))
-        .count();
-    let margin = margin_sum / data.len().max(1) as f32;
-    if margin < config.min_decision_margin {
-        return None;
-    }
-    Some(GridRead::new(
-        map,
-        family.codes_of_data_cells(cells.get(..n * n)?, &data),
-        margin,
-        levels.contrast,
-        u8::try_from(uncertain).unwrap_or(u8::MAX),
-    ))
+    let decided = Decided {
+        cells: &cells,
+        uncertain_cells: &uncertain_cells,
+        margin: margin_sum / data.len().max(1) as f32,
+    };
+    decided.read(map, family, &data, levels.contrast, config)
 }
 
 /// Whether a quad of `cells` cells across has cells of at most [`DEBLUR_MAX_CELL_PX`] (along
@@ -370,23 +355,10 @@ mod tests {
             let (pixels, truth) = draw(id, side, 0.03 * case as f32, centre, sigma);
             let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
             let mut samples = 0;
-            let read = |grid: Option<GridRead>| grid.and_then(|g| lookup(&TAG36H11, &g, 255));
-            let plain = read(read_robust(
-                &image,
-                &TAG36H11,
-                &truth,
-                None,
-                &config,
-                &mut samples,
-            ));
-            let deblurred = read(read_deblurred(
-                &image,
-                &TAG36H11,
-                &truth,
-                None,
-                &config,
-                &mut samples,
-            ));
+            let [plain, deblurred] = [read_robust, read_deblurred].map(|reader| {
+                reader(&image, &TAG36H11, &truth, None, &config, &mut samples)
+                    .and_then(|g| lookup(&TAG36H11, &g, 255))
+            });
             for found in [plain, deblurred].iter().flatten() {
                 assert_eq!(found.decoded.id, id, "case {case}: a wrong id");
             }

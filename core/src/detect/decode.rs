@@ -268,24 +268,6 @@ pub(crate) struct GridRead {
 }
 
 impl GridRead {
-    /// A read through `h` of the codes `readings` (the four rotations), with its decision
-    /// `margin`, black-to-white `contrast` and `uncertain` data cells.
-    pub(super) fn new(
-        h: GridMap,
-        readings: [u64; 4],
-        margin: f32,
-        contrast: f32,
-        uncertain: u8,
-    ) -> Self {
-        GridRead {
-            h,
-            readings,
-            margin,
-            contrast,
-            uncertain,
-        }
-    }
-
     /// A read without a notion of certainty (the paper's, [`super::paper`]): every cell
     /// counts as clear, the decision margin is 1.
     pub(crate) fn certain(h: Homography, readings: [u64; 4], contrast: f32) -> Self {
@@ -546,35 +528,76 @@ fn read_robust_counted<M: CellMap>(
             (0.0, -REGISTRATION_SHIFT),
         ] {
             read_data(shift, &mut shifted)?;
-            for &(r, c) in &data {
-                let (r, c) = (r as usize, c as usize);
-                let bit = decide(&shifted, r, c) > 0.0;
-                let k = r * n + c;
-                if cells.get(k).copied() != Some(bit) {
-                    if let Some(flag) = uncertain_cells.get_mut(k) {
-                        *flag = true;
-                    }
-                }
+            flag_changed(&data, n, &cells, &mut uncertain_cells, |r, c| {
+                decide(&shifted, r, c) > 0.0
+            });
+        }
+    }
+    let decided = Decided {
+        cells: &cells,
+        uncertain_cells: &uncertain_cells,
+        margin: margin_sum / data_count.max(1) as f32,
+    };
+    decided.read(grid, family, &data, contrast, config)
+}
+
+/// A read's decided data cells: each cell's bit, whether it is uncertain, and the decision
+/// margin (the mean over the data cells).
+pub(super) struct Decided<'a> {
+    pub(super) cells: &'a [bool; MAX_GRID * MAX_GRID],
+    pub(super) uncertain_cells: &'a [bool; MAX_GRID * MAX_GRID],
+    pub(super) margin: f32,
+}
+
+impl Decided<'_> {
+    /// The grid read through `h` of `family`'s `data` cells with black-to-white `contrast`;
+    /// `None` when its decision margin is below the configured one.
+    pub(super) fn read(
+        &self,
+        h: GridMap,
+        family: &Family<'_>,
+        data: &[(u8, u8)],
+        contrast: f32,
+        config: &DetectorConfig,
+    ) -> Option<GridRead> {
+        if self.margin < config.min_decision_margin {
+            return None;
+        }
+        let n = family.grid as usize;
+        // Only data cells are ever flagged: counted over them, not the whole array.
+        let uncertain = data
+            .iter()
+            .filter(|&&(r, c)| self.uncertain_cells.get(r as usize * n + c as usize) == Some(&true))
+            .count();
+        Some(GridRead {
+            h,
+            readings: family.codes_of_data_cells(self.cells.get(..n * n)?, data),
+            margin: self.margin,
+            contrast,
+            uncertain: u8::try_from(uncertain).unwrap_or(u8::MAX),
+        })
+    }
+}
+
+/// The registration check's step: flags as uncertain each of the `data` cells (grid of `n`)
+/// whose bit under a shifted read, `bit(row, column)`, differs from its bit in `cells`.
+#[inline]
+pub(super) fn flag_changed(
+    data: &[(u8, u8)],
+    n: usize,
+    cells: &[bool; MAX_GRID * MAX_GRID],
+    uncertain_cells: &mut [bool; MAX_GRID * MAX_GRID],
+    bit: impl Fn(usize, usize) -> bool,
+) {
+    for &(r, c) in data {
+        let (r, c) = (r as usize, c as usize);
+        let k = r * n + c;
+        if cells.get(k).copied() != Some(bit(r, c)) {
+            if let Some(flag) = uncertain_cells.get_mut(k) {
+                *flag = true;
             }
         }
     }
-    // Only data cells are ever flagged: counted over them, not the whole array.
-    let uncertain = data
-        .iter()
-        .filter(|&&(r, c)| uncertain_cells.get(r as usize * n + c as usize) == Some(&true))
-        .count();
-    let uncertain = u8::try_from(uncertain).unwrap_or(u8::MAX);
-    let margin = margin_sum / data_count.max(1) as f32;
-    if margin < config.min_decision_margin {
-        return None;
-    }
-    Some(GridRead {
-        h: grid,
-        readings: family.codes_of_data_cells(cells.get(..n * n)?, &data),
-        margin,
-        contrast,
-        uncertain,
-    })
 }
 
 /// Largest spread of a candidate's data cells, as a fraction of its black-to-white contrast,

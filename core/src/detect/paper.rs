@@ -72,25 +72,19 @@ impl Strategy for Paper {
         refine::offset_quad(quad, -EDGE_BAND_HALF_WIDTH)
     }
 
+    /// The paper reads each cell once, as its area's mean: no second, deblurred read.
     fn read(
         &self,
         candidates: &Candidates<'_, '_, '_>,
         family: &Family<'_>,
         corners: &[Point; 4],
+        deblurred: bool,
         _samples: &mut u32,
     ) -> Option<GridRead> {
+        if deblurred {
+            return None;
+        }
         read_cells(candidates.image, family, corners)
-    }
-
-    /// The paper reads each cell once, as its area's mean.
-    fn read_deblurred(
-        &self,
-        _candidates: &Candidates<'_, '_, '_>,
-        _family: &Family<'_>,
-        _corners: &[Point; 4],
-        _samples: &mut u32,
-    ) -> Option<GridRead> {
-        None
     }
 
     /// Exact template comparison.

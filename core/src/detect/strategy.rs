@@ -51,21 +51,15 @@ pub(super) trait Strategy {
         samples: &mut u32,
     ) -> [Point; 4];
     /// Reads the cells of `family`'s layout through `corners`, adding the image reads to
-    /// `samples`.
+    /// `samples`; with `deblurred`, the second read of a small candidate that no family's
+    /// first read found a code in, with the blur taken out ([`super::deblur`]; `None` when
+    /// the method has no such read).
     fn read(
         &self,
         candidates: &Candidates<'_, '_, '_>,
         family: &Family<'_>,
         corners: &[Point; 4],
-        samples: &mut u32,
-    ) -> Option<decode::GridRead>;
-    /// Reads the cells of a small candidate again with the blur taken out, when no family's
-    /// first read found a code ([`super::deblur`]); `None` when the method has no such read.
-    fn read_deblurred(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        family: &Family<'_>,
-        corners: &[Point; 4],
+        deblurred: bool,
         samples: &mut u32,
     ) -> Option<decode::GridRead>;
     /// Most bits the code look-up may correct.
@@ -206,23 +200,16 @@ impl Strategy for Robust {
         candidates: &Candidates<'_, '_, '_>,
         family: &Family<'_>,
         corners: &[Point; 4],
+        deblurred: bool,
         samples: &mut u32,
     ) -> Option<decode::GridRead> {
         let (image, config) = (candidates.image, candidates.config);
         let lens = lens_for(candidates, corners);
-        decode::read_robust(image, family, corners, lens, config, samples)
-    }
-
-    fn read_deblurred(
-        &self,
-        candidates: &Candidates<'_, '_, '_>,
-        family: &Family<'_>,
-        corners: &[Point; 4],
-        samples: &mut u32,
-    ) -> Option<decode::GridRead> {
-        let (image, config) = (candidates.image, candidates.config);
-        let lens = lens_for(candidates, corners);
-        deblur::read_deblurred(image, family, corners, lens, config, samples)
+        if deblurred {
+            deblur::read_deblurred(image, family, corners, lens, config, samples)
+        } else {
+            decode::read_robust(image, family, corners, lens, config, samples)
+        }
     }
 
     fn max_hamming(&self, config: &DetectorConfig) -> u8 {
