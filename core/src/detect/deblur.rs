@@ -44,8 +44,8 @@ use crate::geometry::Point;
 use crate::image::GrayImage;
 
 /// Widest cell (pixels along the quad's shorter first side) that gets the deblurred read.
-/// At three pixels a cell's centre lies a pixel and a half from its edges, beyond the reach
-/// of any blur the edge search still finds a marker through.
+/// Wider cells have their centres more than a pixel and a half from their edges, where a
+/// lens's blur of a pixel or less hardly reaches: the first read reads them.
 pub(crate) const DEBLUR_MAX_CELL_PX: f32 = 3.0;
 /// The spills tried, per neighbour and axis. Below a quarter: at a quarter the kernel's
 /// response to a grid of alternating cells is zero and the solve would divide by it.

@@ -27,11 +27,14 @@
 //! 5. `decode`: map the family's cell grid through the corner homography, sample each cell
 //!    centre, threshold against black/white levels learnt from the marker's own border and
 //!    margin, and look the code up in all four rotations with bounded error correction.
+//!    Once a frame, at its end, the largest small candidate no code was found in is read
+//!    again with the blur taken out (`deblur`): a far marker's cells run together.
 //! 6. De-duplicate: the same marker found twice (two contours, two families) is kept once,
 //!    with the fewest corrected bits and then the largest decision margin.
 //! 7. `pattern_fit`: on a far frame, where every marker is small, fit the largest markers'
 //!    corners with their decoded pattern, blurred, to the pixels: the edge search of step 4
-//!    is biased in scale when a cell is as narrow as the blur.
+//!    is biased in scale when a cell is as narrow as the blur, or the camera's tone curve
+//!    bends the blurred edges.
 //!
 //! ## Through the lens
 //! Given the camera ([`Detector::set_camera`]; the per-frame path,

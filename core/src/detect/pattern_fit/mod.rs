@@ -25,10 +25,12 @@
 //! A pixel at image point `x` (pixel centres at integers) reads `a + c * B(u)`, where `u` is
 //! `x` in grid coordinates (cells; the detected corners sit at the border's outer corners,
 //! see [`Family::quad_offset`]) and `B` is the blurred pattern (1 white, 0 black). The blur
-//! is a Gaussian (the optics and the pixel's own area together) of one width in grid cells
-//! along both grid axes: exact for a marker seen square on, as every far marker is, and the
-//! corners' moves then leave it alone, which keeps the derivatives simple. A Gaussian over a
-//! grid of squares is separable, so `B` and its derivatives are sums of products of
+//! is a Gaussian (the optics and the pixel's own area together) with a width in grid cells
+//! of its own along each grid axis: a motion line or an astigmatic lens blurs one way more
+//! than the other, and one width for both read the motion line's 50 m 0.41 % long. The
+//! widths are along the grid, exact for a marker seen square on, as every far marker is, and
+//! the corners' moves then leave them alone, which keeps the derivatives simple. A Gaussian
+//! over a grid of squares is separable, so `B` and its derivatives are sums of products of
 //! normal-distribution differences along the two axes.
 //!
 //! ## Cost and bounds
@@ -39,7 +41,7 @@
 //! when the model explains the pixels, the blur and contrast are sane and no corner moved
 //! more than [`max_corner_shift`]; otherwise the edge corners stand.
 
-// The normal equations are fixed 12x12 arrays indexed by loop counters below 12, and the
+// The normal equations are fixed N x N arrays indexed by loop counters below N, and the
 // normal tables by an index clamped to their length: never by data.
 #![allow(clippy::indexing_slicing)]
 
@@ -84,9 +86,10 @@ const DAMPING: f32 = 1e-3;
 /// and the more its image is formed otherwise than by a plain Gaussian blur: a gamma-encoded
 /// camera moves each edge of a 14-pixel marker towards its dark side, its corners 0.2-0.7 px
 /// inward, which the fit must be allowed to correct (at 0.6 px it refused most of those
-/// fits, and the range read 2.4 % long; `docs/accuracy.md`, "Through other lenses and cameras"). On
-/// markers of 19-21 pixels on a printed margin beside grass, fits that moved a corner 0.7-
-/// 0.9 px made it worse (`hard_stills --class small`): there the edge corners stand.
+/// fits, and the range read 1.7-2.4 % long; `docs/accuracy.md`, "Through other lenses and
+/// cameras"). On markers of 19-21 pixels on a printed margin beside grass, fits that moved a
+/// corner 0.7-0.9 px made it worse (`hard_stills --class small`): there the edge corners
+/// stand.
 pub const MIN_CORNER_SHIFT_PX: f32 = 0.6;
 /// The largest [`max_corner_shift`], on markers of 12 pixels and below.
 pub const MAX_CORNER_SHIFT_PX: f32 = 1.0;
@@ -118,8 +121,9 @@ const WINDOW_SIGMAS: f32 = 3.0;
 const MAX_WINDOW: usize = 8;
 /// Blur the fit starts from (pixels): typical of a small lens at focus.
 const INITIAL_BLUR_PX: f32 = 0.8;
-/// Parameters: 4 corners (x, y), blur (the logarithm of its width in grid cells: always
-/// positive, and a step of a given size means the same at any blur), black level, contrast,
+/// Parameters: 4 corners (x, y), the blur along the grid's u and v axes (the logarithm of its
+/// width in grid cells: always positive, and a step of a given size means the same at any
+/// blur), black level, contrast,
 /// and the outside level of each side ([`model::SIDES`], from `OUTSIDE` on).
 const N: usize = 12 + model::SIDES;
 const BLUR: usize = 8;
