@@ -33,9 +33,9 @@
 #![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
 use super::decode::{
-    flag_changed, for_ring, grid_homography, shorter_first_side_squared, CellMap, Decided, GridMap,
-    GridRead, PlaneFit, BORDER_ERROR_FRACTION, MARGIN_ERROR_FRACTION, REGISTRATION_CHECK_SLACK,
-    REGISTRATION_SHIFT, UNCERTAIN_CELL_MARGIN,
+    flag_changed, for_ring, grid_homography, ring_reads_as, shorter_first_side_squared, CellMap,
+    Decided, GridMap, GridRead, PlaneFit, BORDER_ERROR_FRACTION, MARGIN_ERROR_FRACTION,
+    REGISTRATION_CHECK_SLACK, REGISTRATION_SHIFT, UNCERTAIN_CELL_MARGIN,
 };
 use super::DetectorConfig;
 use crate::camera::CameraModel;
@@ -84,9 +84,9 @@ pub(crate) fn read_deblurred(
     *samples = samples.saturating_add(grid_cost);
     sample(image, &map, m, (0.0, 0.0), &mut sampled)?;
 
-    // The spill that leaves the known rings most uniform.
-    let mut work: Grid;
-    let mut best: Option<(f32, f32)> = None;
+    // The spill that leaves the known rings most uniform, its grid and levels kept.
+    let mut work: Grid = sampled;
+    let mut best: Option<(f32, f32, Levels, Grid)> = None;
     for k in SPILLS {
         work = sampled;
         unspill(&mut work, m, k);
@@ -94,37 +94,23 @@ pub(crate) fn read_deblurred(
             continue;
         };
         let spread = levels.spread(&work, n, b);
-        if best.is_none_or(|(_, s)| spread < s) {
-            best = Some((k, spread));
+        if best.as_ref().is_none_or(|(_, s, ..)| spread < *s) {
+            best = Some((k, spread, levels, work));
         }
     }
-    let (k, _) = best?;
-    work = sampled;
-    unspill(&mut work, m, k);
-    let levels = Levels::of(&work, n, b)?;
+    let (k, _, levels, grid) = best?;
     if !(levels.contrast >= config.min_contrast as f32 * 0.5) {
         return None;
     }
 
     // The border must read black and the ring beside it white, as in the first read.
-    let (mut border_errors, mut border_cells) = (0usize, 0usize);
-    for_ring(n, b, |r, c| {
-        border_cells += 1;
-        if levels.relative(&work, r, c) > 0.0 {
-            border_errors += 1;
-        }
+    let border_black = ring_reads_as(n, b, BORDER_ERROR_FRACTION, |r, c| {
+        levels.relative(&grid, r, c) > 0.0
     });
-    if border_errors as f32 > BORDER_ERROR_FRACTION * border_cells as f32 {
-        return None;
-    }
-    let (mut margin_errors, mut margin_cells) = (0usize, 0usize);
-    for_ring(n, b - 1, |r, c| {
-        margin_cells += 1;
-        if levels.relative(&work, r, c) < 0.0 {
-            margin_errors += 1;
-        }
+    let margin_white = ring_reads_as(n, b - 1, MARGIN_ERROR_FRACTION, |r, c| {
+        levels.relative(&grid, r, c) < 0.0
     });
-    if margin_errors as f32 > MARGIN_ERROR_FRACTION * margin_cells.max(1) as f32 {
+    if !(border_black && margin_white) {
         return None;
     }
 
@@ -133,7 +119,7 @@ pub(crate) fn read_deblurred(
     let mut uncertain_cells = [false; MAX_GRID * MAX_GRID];
     let mut margin_sum = 0.0f32;
     for &(r, c) in &data {
-        let d = levels.relative(&work, r as isize, c as isize);
+        let d = levels.relative(&grid, r as isize, c as isize);
         let k = r as usize * n + c as usize;
         let cell_margin = (d.abs() / (0.5 * levels.contrast)).min(1.0);
         if let (Some(cell), Some(flag)) = (cells.get_mut(k), uncertain_cells.get_mut(k)) {

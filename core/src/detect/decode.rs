@@ -416,33 +416,22 @@ fn read_robust_counted<M: CellMap>(
     }
 
     // The border must read black and the reference ring white.
-    let mut border_errors = 0usize;
-    let mut border_cells = 0usize;
-    for_ring(n, b, |r, c| {
-        border_cells += 1;
+    let border_black = ring_reads_as(n, b, BORDER_ERROR_FRACTION, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
-        if values
+        values
             .get(r as usize * n + c as usize)
             .copied()
             .unwrap_or(0.0)
             > threshold(u, v)
-        {
-            border_errors += 1;
-        }
     });
-    if border_errors as f32 > BORDER_ERROR_FRACTION * border_cells as f32 {
-        return None;
-    }
-    let mut margin_errors = 0usize;
     let mut k = 0usize;
-    for_ring(n, white_ring, |r, c| {
+    let margin_white = ring_reads_as(n, white_ring, MARGIN_ERROR_FRACTION, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
-        if white_samples.get(k).copied().unwrap_or(0.0) < threshold(u, v) {
-            margin_errors += 1;
-        }
+        let dark = white_samples.get(k).copied().unwrap_or(0.0) < threshold(u, v);
         k += 1;
+        dark
     });
-    if margin_errors as f32 > MARGIN_ERROR_FRACTION * white_count.max(1) as f32 {
+    if !(border_black && margin_white) {
         return None;
     }
 
@@ -577,6 +566,23 @@ impl Decided<'_> {
             uncertain: u8::try_from(uncertain).unwrap_or(u8::MAX),
         })
     }
+}
+
+/// Whether ring `ring` of a grid of `n` cells reads as it should: at most `fraction` of its
+/// cells `wrong(row, column)` (a border cell read light, a margin cell read dark).
+#[inline]
+pub(super) fn ring_reads_as(
+    n: usize,
+    ring: isize,
+    fraction: f32,
+    mut wrong: impl FnMut(isize, isize) -> bool,
+) -> bool {
+    let (mut errors, mut cells) = (0usize, 0usize);
+    for_ring(n, ring, |r, c| {
+        cells += 1;
+        errors += usize::from(wrong(r, c));
+    });
+    errors as f32 <= fraction * cells.max(1) as f32
 }
 
 /// The registration check's step: flags as uncertain each of the `data` cells (grid of `n`)

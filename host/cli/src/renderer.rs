@@ -102,11 +102,7 @@ impl PsfArg {
         const EXPECTED: &str = "expected gaussian:SIGMA, disc:DIAMETER, motion:LENGTH[@DEGREES] \
                                 or field:SIGMA (pixels), comma-separated";
         let mut psfs = Vec::new();
-        for item in text.split(',') {
-            let (kind, value) = item
-                .trim()
-                .split_once(':')
-                .ok_or_else(|| format!("`{item}`: {EXPECTED}"))?;
+        for (item, kind, value) in kind_values(text, EXPECTED)? {
             let (size, angle) = match value.split_once('@') {
                 Some((size, angle)) if kind.eq_ignore_ascii_case("motion") => (size, Some(angle)),
                 _ => (value, None),
@@ -153,11 +149,7 @@ impl ResponseArg {
     pub fn parse(text: &str) -> Result<Self, String> {
         const EXPECTED: &str = "expected gamma:G, sharpen:S or jpeg:QUALITY, comma-separated";
         let mut response = ResponseArg::default();
-        for item in text.split(',') {
-            let (kind, value) = item
-                .trim()
-                .split_once(':')
-                .ok_or_else(|| format!("`{item}`: {EXPECTED}"))?;
+        for (item, kind, value) in kind_values(text, EXPECTED)? {
             let number: f64 = value
                 .trim()
                 .parse()
@@ -206,6 +198,22 @@ impl ResponseArg {
             ..base
         }
     }
+}
+
+/// The items of a comma-separated list of `KIND:VALUE`, each with its kind and value; an
+/// item without a colon is one line naming it and what is `expected`.
+fn kind_values<'a>(
+    text: &'a str,
+    expected: &str,
+) -> Result<Vec<(&'a str, &'a str, &'a str)>, String> {
+    text.split(',')
+        .map(|item| {
+            item.trim()
+                .split_once(':')
+                .map(|(kind, value)| (item, kind, value))
+                .ok_or_else(|| format!("`{item}`: {expected}"))
+        })
+        .collect()
 }
 
 /// `simulator` rendering with `renderer` and, with `lens`'s `--psf`, the warp model's lens

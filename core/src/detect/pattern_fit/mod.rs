@@ -285,7 +285,8 @@ pub(crate) fn fit(
     corners: &[Point; 4],
     contrast: f32,
 ) -> Result<([Point; 4], Point), Refusal> {
-    if longest_side(corners) > MAX_SIDE_PX {
+    let side = longest_side(corners);
+    if side > MAX_SIDE_PX {
         return Err(Refusal::Large);
     }
     let pattern = Pattern::new(family, id).ok_or(Refusal::Layout)?;
@@ -345,7 +346,7 @@ pub(crate) fn fit(
     if !within(blur, BLUR_RANGE_PX) || !within(contrast_ratio, CONTRAST_RANGE) {
         return Err(Refusal::Levels);
     }
-    let bound = max_corner_shift(longest_side(corners));
+    let bound = max_corner_shift(side);
     if fitted
         .iter()
         .zip(corners.iter())
