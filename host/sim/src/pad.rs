@@ -208,30 +208,24 @@ impl PrintedPad {
             });
         }
         check_clearance(&markers)?;
-        let mut sheet = Rect {
-            x0: f64::INFINITY,
-            x1: f64::NEG_INFINITY,
-            y0: f64::INFINITY,
-            y1: f64::NEG_INFINITY,
-        };
-        for m in &markers {
-            let h = m.paper_half();
-            for (lx, ly) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
-                let [x, y] = m.to_pad(lx, ly);
-                sheet = Rect {
-                    x0: sheet.x0.min(x),
-                    x1: sheet.x1.max(x),
-                    y0: sheet.y0.min(y),
-                    y1: sheet.y1.max(y),
-                };
-            }
-        }
         Ok(PrintedPad {
             name: config.name.clone(),
+            sheet: sheet_of(&markers),
             markers,
-            sheet,
             config: config.clone(),
         })
+    }
+
+    /// The pad with `cells` more white paper printed around every marker (in that marker's
+    /// cells) and its sheet grown to hold it: a marker on a wider margin than the detector
+    /// knows of, with the ground further from its border.
+    pub fn with_wider_margins(mut self, cells: f64) -> Result<Self, PadBuildError> {
+        for m in &mut self.markers {
+            m.margin_cells += cells.max(0.0);
+        }
+        check_clearance(&self.markers)?;
+        self.sheet = sheet_of(&self.markers);
+        Ok(self)
     }
 
     /// From a core layout (a shipped design).
@@ -246,6 +240,29 @@ impl PrintedPad {
             .find(|l| l.name().eq_ignore_ascii_case(name))?;
         Self::from_layout(layout).ok()
     }
+}
+
+/// The bounding box of every marker's paper square (grid and margin).
+fn sheet_of(markers: &[PrintedMarker]) -> Rect {
+    let mut sheet = Rect {
+        x0: f64::INFINITY,
+        x1: f64::NEG_INFINITY,
+        y0: f64::INFINITY,
+        y1: f64::NEG_INFINITY,
+    };
+    for m in markers {
+        let h = m.paper_half();
+        for (lx, ly) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
+            let [x, y] = m.to_pad(lx, ly);
+            sheet = Rect {
+                x0: sheet.x0.min(x),
+                x1: sheet.x1.max(x),
+                y0: sheet.y0.min(y),
+                y1: sheet.y1.max(y),
+            };
+        }
+    }
+    sheet
 }
 
 /// Refuses a layout in which a marker's black border reaches into another marker's paper
@@ -339,6 +356,25 @@ mod tests {
         // The canonical top-left cell of the grid is at the marker's top-left.
         let (col, row) = m.grid_coords(c[0][0], c[0][1]);
         assert!((col - 1.0).abs() < 1e-9 && (row - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_wider_margin_grows_the_paper_and_the_sheet_by_whole_cells() {
+        let single = PrintedPad::design("paper-single").unwrap();
+        let wider = single.clone().with_wider_margins(1.0).unwrap();
+        // The paper's 1 m aruco_6x6_250: 8-cell border square, cells of 0.125 m.
+        let cell = single.markers[0].cell;
+        assert!((cell - 0.125).abs() < 1e-12);
+        let grown = wider.markers[0].paper_half() - single.markers[0].paper_half();
+        assert!((grown - cell).abs() < 1e-12, "{grown}");
+        assert!((wider.sheet.width() - single.sheet.width() - 2.0 * cell).abs() < 1e-12);
+        // Markers stay where they were; a negative width widens nothing.
+        assert_eq!(wider.markers[0].corners(), single.markers[0].corners());
+        let same = single.clone().with_wider_margins(-2.0).unwrap();
+        assert!((same.sheet.width() - single.sheet.width()).abs() < 1e-12);
+        // A margin that reaches another marker's border is refused, as in a layout.
+        let nested = PrintedPad::design("nested").unwrap();
+        assert!(nested.with_wider_margins(3.0).is_err());
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! | name | pad | what |
 //! |---|---|---|
 //! | `paper` | paper-single (1.0 m aruco_6x6_250) | the paper's set points: hover at Z = 5, 10, 15, 20, 25 m and on to 30, 40, 50 m; X and Y = 1.2 ... 6 m at 15 m |
+//! | `margin` | paper-single on a white margin of two cells | the paper's Z hovers, 5 to 50 m |
 //! | `lateral` | paper-single | fast 4 m dashes at 12 m (tilting up to ~30 degrees, motion blur) |
 //! | `descent` | nested | 1 m/s down from 20 m to 1 m while drifting 0.5 m/s onto the pad |
 //! | `landing` | nested | approach and landing from 40 m to 0.3 m |
@@ -114,6 +115,10 @@ pub const SCENARIOS: &[(&str, &str)] = &[
     (
         "paper",
         "the paper's set points over a 1.0 m aruco_6x6_250: Z = 5..50 m, X and Y = 1.2..6 m at 15 m (288 frames)",
+    ),
+    (
+        "margin",
+        "the paper's Z = 5..50 m hovers over its marker printed on a white margin of two cells, the ground beyond (128 frames)",
     ),
     (
         "lateral",
@@ -288,6 +293,31 @@ impl Scenario {
                         ..Optics::board_camera()
                     },
                     ..base(name, paper_pad, ideal_camera, trajectory, frames)
+                }
+            }
+            "margin" => {
+                // The paper's altitude hovers over its marker printed on a white margin of
+                // two cells, one more than the paper's: the ground's edge lies within a far
+                // marker's blur, where the detector knows nothing of what is printed.
+                let mut points: Vec<(String, Vec3)> = Vec::new();
+                for &z in TABLE_ALTITUDES_M.iter().chain(&EXTRA_ALTITUDES_M) {
+                    points.push((label("z", z), [0.0, 0.0, z]));
+                }
+                let (segments, frames) = set_points(&points, 16, 30.0, 1.0);
+                let trajectory = Trajectory {
+                    segments,
+                    yaw: 0.0,
+                    wobble: hover_wobble,
+                    tilt_with_acceleration: false,
+                    trim: (0.0, 0.0),
+                };
+                let pad = paper_pad.with_wider_margins(1.0).ok()?;
+                Scenario {
+                    optics: Optics {
+                        focus_distance_m: f64::INFINITY,
+                        ..Optics::board_camera()
+                    },
+                    ..base(name, pad, ideal_camera, trajectory, frames)
                 }
             }
             "lateral" => {

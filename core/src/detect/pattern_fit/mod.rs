@@ -13,13 +13,16 @@
 //! ring outside the border (the family's quiet ring, or the printed margin every family needs
 //! for its outline to be found). So the image of the marker is predicted, not searched:
 //! the known cells mapped through the corner homography, blurred by a Gaussian of unknown
-//! width, with unknown black and white levels and an unknown level beyond the known area on
-//! each of its four sides (a pad on grass has dark ground on some sides of a marker and the
-//! white sheet on others). A Gauss-Newton fit of the 4 corners, the blur, the two levels and
-//! the outside levels to every pixel over the marker moves the corners to where the whole
-//! pattern agrees: each
-//! edge is placed with its neighbours modelled instead of trimmed, so the scale is unbiased
-//! whatever the blur.
+//! width, with unknown black and white levels and, on each of its four sides, an unknown
+//! level beyond the known area, after a band of white paper of unknown width where the
+//! cells are small enough for the band's edge to be read. A pad on grass has dark ground on
+//! some sides of a marker and the white sheet on others, and a marker is printed on a margin
+//! of any width: the ground's edge a cell or two beyond the border lies within a far
+//! marker's blur, and with the level put right at the known area's end the fit moved the
+//! edges towards it. A Gauss-Newton fit of the 4 corners, the blur, the two levels, the
+//! outside levels and the bands to every pixel over the marker moves the corners to where
+//! the whole pattern agrees: each edge is placed with its neighbours modelled instead of
+//! trimmed, so the scale is unbiased whatever the blur.
 //!
 //! ## The model
 //! A pixel at image point `x` (pixel centres at integers) reads `a + c * B(u)`, where `u` is
@@ -54,7 +57,7 @@ use crate::family::Family;
 use crate::geometry::{Homography, Point};
 use crate::image::GrayImage;
 use model::Pattern;
-use solve::{linearise, solve_damped, solve_levels, Pass};
+use solve::{level_systems, linearise, solve_damped, solve_levels, LevelSystem, Pass};
 
 /// Longest marker side (pixels) that is fitted. At 40 pixels a cell of an 8-cell border
 /// square is 5 pixels, wider than any blur, and the edge search is unbiased there.
@@ -103,12 +106,12 @@ pub(crate) fn max_corner_shift(side: f32) -> f32 {
 }
 /// Work units of one fit (see `DetectorConfig::work_budget_per_pixel`; one unit is 40 to
 /// 100 Cortex-M7 instructions). Measured on the Cortex-M7 benchmark (`bench/m7`,
-/// qvga-far-1: one tag36h11 of 14 pixels): about 0.90 million instructions for its pixels
-/// and five passes, 10,000 units at the 90 instructions a unit of the first measurement
-/// (1.48 million and 16,500 units while each pixel's two axes were built, cleared and copied
-/// by value and the pattern read cell by cell; a fit never reads more pixels than there). It
-/// is charged before it starts and skipped when the frame's budget cannot pay for it.
-pub const WORK_PATTERN_FIT: u32 = 10_000;
+/// qvga-far-1: one tag36h11 of 14 pixels): about 1.15 million instructions for its pixels,
+/// the levels' pass and four passes of the model, 12,500 units at the 90 instructions a unit
+/// of the first measurement (0.90 million and 10,000 units before the printed bands; a fit
+/// never reads more pixels than there). It is charged before it starts and skipped when the
+/// frame's budget cannot pay for it.
+pub const WORK_PATTERN_FIT: u32 = 12_500;
 /// Most cells per side of a family grid the fit models.
 const MAX_GRID: usize = 16;
 /// Blur range (pixels) a fit may end in: below, the pixel's own area; above, the marker is
@@ -124,18 +127,34 @@ const INITIAL_BLUR_PX: f32 = 0.8;
 /// Parameters: 4 corners (x, y), the blur along the grid's u and v axes (the logarithm of its
 /// width in grid cells: always positive, and a step of a given size means the same at any
 /// blur), black level, contrast,
-/// and the outside level of each side ([`model::SIDES`], from `OUTSIDE` on).
-const N: usize = 12 + model::SIDES;
+/// the outside level of each side ([`model::SIDES`], from `OUTSIDE` on) and the width (cells)
+/// of the white printed band between the known area and that level on each side (from
+/// `BAND` on).
+const N: usize = 12 + 2 * model::SIDES;
 const BLUR: usize = 8;
 const BLUR_V: usize = 9;
 const BLACK: usize = 10;
 const CONTRAST: usize = 11;
 const OUTSIDE: usize = 12;
+const BAND: usize = OUTSIDE + model::SIDES;
 /// Weight of the pull of each side's outside level towards the mean of the four, in pixels
 /// that lie wholly beyond that side: it keeps a side no pixel measures (a marker at the
 /// image's edge) at the others' level, and is too weak to hold a side that a row of pixels
 /// measures (the tests' scale errors moved by under 0.01 % between 0.5 and 8).
 const OUTSIDE_PULL: f32 = 0.5;
+
+/// Weight of the pull of each printed band's width towards none, in pixels that lie wholly
+/// in it: it keeps a width no pixel measures (a band on a side whose level is as white as
+/// the paper, or wider than the window) from wandering, and is far too weak to hold one that
+/// a pixel sees (a stronger pull held two-cell bands near one, and the scale of the smallest
+/// markers out: `a_printed_margin_of_any_width_leaves_the_scale_unbiased`).
+const BAND_PULL: f32 = 1e-4;
+/// Widest printed band the fit may end with, cells: the window reaches about two cells
+/// beyond the known area on the smallest markers, and nothing further is measured.
+const MAX_BAND_CELLS: f32 = 3.0;
+/// Band widths (cells) the fit may start from: the one whose solved levels leave the least
+/// residual (see `fit`). The first is none: where the bands are not fitted, the only one.
+const BAND_STARTS: [f32; 3] = [0.0, 1.0, 2.0];
 
 /// One pixel a fit reads: its position and grey level.
 #[derive(Debug, Clone, Copy)]
@@ -153,6 +172,11 @@ struct Sample {
 /// the position, which unlike a lattice cannot beat against the cell grid) keeps that many.
 struct Window {
     samples: heapless::Vec<Sample, MAX_PIXELS>,
+    /// Whether the printed bands are fitted: only where a cell is at most [`EDGE_REACH_PX`],
+    /// so that a band's outer edge a cell out lies within the pixels read. On a larger
+    /// marker it lies beyond them, where a band's width is barely measured: fitted there,
+    /// it moved the corners of markers of 24-32 pixels (`recall_report`).
+    bands: bool,
 }
 
 /// Distance from a pattern edge (pixels) within which a pixel is read: the blur's reach (2.5
@@ -171,7 +195,8 @@ fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Opt
         hi_x = hi_x.max(p.x);
         hi_y = hi_y.max(p.y);
     }
-    // The blur reaches a little beyond the known area: read it, the outside level models it.
+    // The blur reaches a little beyond the known area: read it, the outside levels and the
+    // bands model it.
     let pad = 1.5;
     let x0 = libm::floorf(lo_x - pad).max(0.0);
     let y0 = libm::floorf(lo_y - pad).max(0.0);
@@ -221,7 +246,11 @@ fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Opt
             }
         }
     }
-    Some(Window { samples })
+    let cell_px = mean_side(corners) / (pattern.quad_hi - pattern.quad_lo);
+    Some(Window {
+        samples,
+        bands: cell_px <= EDGE_REACH_PX,
+    })
 }
 
 /// Whether pixel (x, y) is in a fixed scatter of one pixel in `step`.
@@ -305,10 +334,33 @@ pub(crate) fn fit(
     // The levels enter the model linearly: solved exactly for the start geometry and blur
     // (the outside level stays white, a printed margin, when no pixel lies beyond the known
     // area to measure it).
-    for level in params.iter_mut().skip(OUTSIDE) {
+    for level in params.iter_mut().skip(OUTSIDE).take(model::SIDES) {
         *level = 1.0;
     }
-    solve_levels(&pattern, &win, &mut params)?;
+    // A band's outer edge is a step one or two cells beyond the known area, too far from a
+    // start of none for the steps to find (from none, a two-cell band ended near one): the
+    // start is the width among `BAND_STARTS`, the same on every side, whose solved levels
+    // leave the least residual (one pass for all of them).
+    let starts = if win.bands {
+        &BAND_STARTS[..]
+    } else {
+        &BAND_STARTS[..1]
+    };
+    let mut systems = [LevelSystem::default(); BAND_STARTS.len()];
+    level_systems(&pattern, &win, &params, starts, &mut systems).ok_or(Refusal::Geometry)?;
+    let mut best: Option<(f32, [f32; N])> = None;
+    for (system, &band) in systems.iter().zip(starts.iter()) {
+        let mut trial = params;
+        for width in trial.iter_mut().skip(BAND) {
+            *width = band;
+        }
+        if let Ok(residual) = solve_levels(system, &mut trial) {
+            if best.as_ref().is_none_or(|(r, _)| residual < *r) {
+                best = Some((residual, trial));
+            }
+        }
+    }
+    params = best.ok_or(Refusal::Levels)?.1;
     // Levenberg-Marquardt: the start is within a few tenths of a pixel, where the model is
     // nearly linear and the first step usually lands. A step that does not lower the cost
     // is taken back and retried shorter.

@@ -92,6 +92,24 @@ pub(super) struct Axis {
     /// [`Blurred::outside`]); the known area's mass is the rest ([`Axis::known`]).
     beyond_lo: Cell,
     beyond_hi: Cell,
+    /// The mass beyond the printed band beyond each end (see [`Blurred::outside`]), with
+    /// its derivatives by the point and the width, and by the band's width in `d_band`.
+    far_lo: Far,
+    far_hi: Far,
+}
+
+/// The Gaussian's mass beyond the band of white paper beyond one end of the known area.
+#[derive(Clone, Copy)]
+struct Far {
+    cell: Cell,
+    d_band: f32,
+}
+
+impl Far {
+    const ZERO: Far = Far {
+        cell: Cell::ZERO,
+        d_band: 0.0,
+    };
 }
 
 /// Half-width of the normal tables, standard deviations: beyond it the distribution is 0 or
@@ -201,7 +219,7 @@ impl Axis {
     #[cfg(test)]
     pub(super) fn new(t: f32, width: f32, cells: usize) -> Option<Axis> {
         let mut axis = Axis::EMPTY;
-        axis.set(t, width, cells).map(|()| axis)
+        axis.set(t, width, cells, [0.0; 2]).map(|()| axis)
     }
 
     /// An axis of no cells, to be [`Axis::set`].
@@ -211,6 +229,8 @@ impl Axis {
         cells: [Cell::ZERO; MAX_WINDOW],
         beyond_lo: Cell::ZERO,
         beyond_hi: Cell::ZERO,
+        far_lo: Far::ZERO,
+        far_hi: Far::ZERO,
     };
 
     /// Makes this the axis at `t` ([`Axis::new`]) in place: `None` (and the axis unusable)
@@ -218,7 +238,47 @@ impl Axis {
     /// built and returned by value, each was cleared and copied (128 bytes, twice), which
     /// was a fifth of the fit's Cortex-M7 instructions. Only the first `len` cells are
     /// written; nothing reads beyond them.
-    pub(super) fn set(&mut self, t: f32, width: f32, cells: usize) -> Option<()> {
+    /// `bands` are the widths (cells) of the printed band beyond the low and the high end.
+    pub(super) fn set(&mut self, t: f32, width: f32, cells: usize, bands: [f32; 2]) -> Option<()> {
+        self.set_known(t, width, cells)?;
+        self.set_bands(t, width, cells, bands);
+        Some(())
+    }
+
+    /// The bands' part of [`Axis::set`], after [`Axis::set_known`] with the same `t`, `width`
+    /// and `cells`: the bands may change without the known area's masses being computed again.
+    pub(super) fn set_bands(&mut self, t: f32, width: f32, cells: usize, bands: [f32; 2]) {
+        // Beyond the bands: the distribution at their outer ends, `bands` cells beyond the
+        // known area's (the same forms as the known area's own ends).
+        let inverse = 1.0 / width;
+        let far = |z: f32, upper: bool| {
+            let (cdf, pdf) = normal(z);
+            let sign = if upper { 1.0 } else { -1.0 };
+            Far {
+                cell: Cell {
+                    mass: if upper { 1.0 - cdf } else { cdf },
+                    d_pos: sign * pdf * inverse,
+                    d_width: sign * pdf * z * inverse,
+                },
+                d_band: -pdf * inverse,
+            }
+        };
+        // Nothing lies beyond a band where nothing lies beyond the known area (the window
+        // does not reach that end): most pixels, and two table reads each saved.
+        self.far_lo = if self.beyond_lo.mass > 0.0 {
+            far((-bands[0] - t) * inverse, false)
+        } else {
+            Far::ZERO
+        };
+        self.far_hi = if self.beyond_hi.mass > 0.0 {
+            far((cells as f32 + bands[1] - t) * inverse, true)
+        } else {
+            Far::ZERO
+        };
+    }
+
+    /// The known area's part of [`Axis::set`].
+    pub(super) fn set_known(&mut self, t: f32, width: f32, cells: usize) -> Option<()> {
         let inverse = 1.0 / width;
         let reach = WINDOW_SIGMAS * width;
         let (lo, hi) = (t - reach, t + reach);
@@ -288,6 +348,30 @@ impl Axis {
         Some(())
     }
 
+    /// The Gaussian's mass in the printed bands beyond both ends, and its derivatives by
+    /// the point and the width.
+    fn band_mass(&self) -> Cell {
+        let (lo, hi) = (&self.beyond_lo, &self.beyond_hi);
+        let (far_lo, far_hi) = (&self.far_lo.cell, &self.far_hi.cell);
+        Cell {
+            mass: lo.mass - far_lo.mass + hi.mass - far_hi.mass,
+            d_pos: lo.d_pos - far_lo.d_pos + hi.d_pos - far_hi.d_pos,
+            d_width: lo.d_width - far_lo.d_width + hi.d_width - far_hi.d_width,
+        }
+    }
+
+    /// The Gaussian's mass past the bands, each end's weighted by its level (`low`, `high`)
+    /// less white, and its derivatives by the point and the width.
+    fn past_mass(&self, low: f32, high: f32) -> Cell {
+        let (lo, hi) = (&self.far_lo.cell, &self.far_hi.cell);
+        let (a, b) = (low - 1.0, high - 1.0);
+        Cell {
+            mass: a * lo.mass + b * hi.mass,
+            d_pos: a * lo.d_pos + b * hi.d_pos,
+            d_width: a * lo.d_width + b * hi.d_width,
+        }
+    }
+
     /// The Gaussian's mass over the known area and its derivatives: all that is not
     /// beyond either end.
     fn known(&self) -> Cell {
@@ -313,6 +397,8 @@ pub(super) struct Blurred {
     pub(super) d_v: f32,
     pub(super) d_width_u: f32,
     pub(super) d_width_v: f32,
+    /// By the width of the printed band beyond each side ([`SIDES`]).
+    pub(super) d_band: [f32; SIDES],
     /// Weight of each side's outside level ([`SIDES`]): the Gaussian's mass beyond the
     /// known area on that side. One level for all four sides was wrong wherever the ground
     /// differs around the pattern (a pad on grass: dark ground on three sides of the large
@@ -322,12 +408,28 @@ pub(super) struct Blurred {
     pub(super) outside: [f32; SIDES],
 }
 
+/// The blurred pattern at the point of `u` and `v`, outside levels `outside_levels`.
 pub(super) fn blurred(
     pattern: &Pattern,
     u: &Axis,
     v: &Axis,
     outside_levels: &[f32; SIDES],
 ) -> Blurred {
+    with_outside(&known_cells(pattern, u, v), u, v, outside_levels)
+}
+
+/// The known cells' part of [`blurred`]: its value and derivatives without the outside.
+pub(super) struct Known {
+    value: f32,
+    d_u: f32,
+    d_v: f32,
+    d_width_u: f32,
+    d_width_v: f32,
+}
+
+/// The known cells' part of the blurred pattern: the same whatever the bands and levels
+/// beyond them.
+pub(super) fn known_cells(pattern: &Pattern, u: &Axis, v: &Axis) -> Known {
     let (mut value, mut d_u, mut d_v, mut d_wu, mut d_wv) = (0.0f32, 0.0, 0.0, 0.0, 0.0);
     for (r, across) in v.cells.iter().enumerate().take(v.len) {
         let (mut row, mut row_d, mut row_w) = (0.0f32, 0.0f32, 0.0f32);
@@ -349,53 +451,114 @@ pub(super) fn blurred(
         d_v += across.d_pos * row;
         d_wv += across.d_width * row;
     }
+    Known {
+        value,
+        d_u,
+        d_v,
+        d_width_u: d_wu,
+        d_width_v: d_wv,
+    }
+}
+
+/// The blurred pattern from its known cells' part, `u` and `v`'s bands and the outside
+/// levels.
+pub(super) fn with_outside(
+    known: &Known,
+    u: &Axis,
+    v: &Axis,
+    outside_levels: &[f32; SIDES],
+) -> Blurred {
+    let (value, mut d_u, mut d_v) = (known.value, known.d_u, known.d_v);
+    let (mut d_wu, mut d_wv) = (known.d_width_u, known.d_width_v);
     let [left, right, top, bottom] = *outside_levels;
-    let (lo_u, hi_u, lo_v, hi_v) = (&u.beyond_lo, &u.beyond_hi, &v.beyond_lo, &v.beyond_hi);
     // Beyond the known u range (left and right) and beyond the known v range (top and
     // bottom), each weighted by its one-axis masses; a corner quadrant (beyond both) reads
     // the mean of its two sides, so no side is favoured there. The weight of the u sides is
-    // then their mass times (known v + half the rest), (1 + known v) / 2.
-    let beyond_u = left * lo_u.mass + right * hi_u.mass;
-    let beyond_v = top * lo_v.mass + bottom * hi_v.mass;
+    // then their mass times (known v + half the rest), (1 + known v) / 2. Each side is white
+    // paper for the band's width and its own level beyond it.
+    let lo_u = side(&u.beyond_lo, &u.far_lo, left);
+    let hi_u = side(&u.beyond_hi, &u.far_hi, right);
+    let lo_v = side(&v.beyond_lo, &v.far_lo, top);
+    let hi_v = side(&v.beyond_hi, &v.far_hi, bottom);
+    let beyond_u = lo_u.value + hi_u.value;
+    let beyond_v = lo_v.value + hi_v.value;
     let (known_u, known_v) = (u.known(), v.known());
     let (along_u, along_v) = (0.5 * (1.0 + known_v.mass), 0.5 * (1.0 + known_u.mass));
     // The outside's part of a derivative along one axis: that axis's two sides through their
-    // masses' derivatives (`lo`, `hi`), and the other axis's sides through this axis's known
-    // mass (`known`, half of it: the corner quadrants).
-    let part = |weight: f32, levels: (f32, f32), lo: f32, hi: f32, known: f32, other: f32| {
-        weight * (levels.0 * lo + levels.1 * hi) + 0.5 * known * other
-    };
-    let (lr, tb) = ((left, right), (top, bottom));
-    d_u += part(along_u, lr, lo_u.d_pos, hi_u.d_pos, known_u.d_pos, beyond_v);
-    d_v += part(along_v, tb, lo_v.d_pos, hi_v.d_pos, known_v.d_pos, beyond_u);
+    // own derivatives (`sides`), and the other axis's sides through this axis's known mass
+    // (`known`, half of it: the corner quadrants).
+    let part =
+        |weight: f32, sides: f32, known: f32, other: f32| weight * sides + 0.5 * known * other;
+    d_u += part(along_u, lo_u.d_pos + hi_u.d_pos, known_u.d_pos, beyond_v);
+    d_v += part(along_v, lo_v.d_pos + hi_v.d_pos, known_v.d_pos, beyond_u);
     d_wu += part(
         along_u,
-        lr,
-        lo_u.d_width,
-        hi_u.d_width,
+        lo_u.d_width + hi_u.d_width,
         known_u.d_width,
         beyond_v,
     );
     d_wv += part(
         along_v,
-        tb,
-        lo_v.d_width,
-        hi_v.d_width,
+        lo_v.d_width + hi_v.d_width,
         known_v.d_width,
         beyond_u,
     );
+    // The corner quadrants again: the mean of two sides is right where both are past their
+    // bands, or both in them, but where one is in its band and the other past its own, the
+    // point is off the sheet (a sheet's corner is square) and reads that other side's
+    // level, not the mean with white. Half of each such product is added back: with `W` an
+    // axis's mass in its bands and `P` its mass past them weighted by (level - 1), that is
+    // (W_v P_u + W_u P_v) / 2.
+    let (band_u, past_u) = (u.band_mass(), u.past_mass(left, right));
+    let (band_v, past_v) = (v.band_mass(), v.past_mass(top, bottom));
+    let corner = 0.5 * (band_v.mass * past_u.mass + band_u.mass * past_v.mass);
+    d_u += 0.5 * (band_v.mass * past_u.d_pos + band_u.d_pos * past_v.mass);
+    d_v += 0.5 * (band_v.d_pos * past_u.mass + band_u.mass * past_v.d_pos);
+    d_wu += 0.5 * (band_v.mass * past_u.d_width + band_u.d_width * past_v.mass);
+    d_wv += 0.5 * (band_v.d_width * past_u.mass + band_u.mass * past_v.d_width);
+    // A side's band moves its far mass out (`d_band`) and its band mass in by as much.
+    let band_term = |far: &Far, level: f32, other_band: f32, other_past: f32| {
+        0.5 * far.d_band * (other_band * (level - 1.0) - other_past)
+    };
     Blurred {
-        value: value + along_u * beyond_u + along_v * beyond_v,
+        value: value + along_u * beyond_u + along_v * beyond_v + corner,
         d_u,
         d_v,
         d_width_u: d_wu,
         d_width_v: d_wv,
-        outside: [
-            along_u * lo_u.mass,
-            along_u * hi_u.mass,
-            along_v * lo_v.mass,
-            along_v * hi_v.mass,
+        d_band: [
+            along_u * lo_u.d_band + band_term(&u.far_lo, left, band_v.mass, past_v.mass),
+            along_u * hi_u.d_band + band_term(&u.far_hi, right, band_v.mass, past_v.mass),
+            along_v * lo_v.d_band + band_term(&v.far_lo, top, band_u.mass, past_u.mass),
+            along_v * hi_v.d_band + band_term(&v.far_hi, bottom, band_u.mass, past_u.mass),
         ],
+        outside: [
+            (along_u + 0.5 * band_v.mass) * u.far_lo.cell.mass,
+            (along_u + 0.5 * band_v.mass) * u.far_hi.cell.mass,
+            (along_v + 0.5 * band_u.mass) * v.far_lo.cell.mass,
+            (along_v + 0.5 * band_u.mass) * v.far_hi.cell.mass,
+        ],
+    }
+}
+
+/// One side of the outside at a point: its part of the blurred pattern, and that part's
+/// derivatives.
+struct Side {
+    value: f32,
+    d_pos: f32,
+    d_width: f32,
+    d_band: f32,
+}
+
+/// The side whose mass beyond the known area is `beyond` and beyond its band `far`: white
+/// paper (1) in the band, `level` past it.
+fn side(beyond: &Cell, far: &Far, level: f32) -> Side {
+    let past = level - 1.0;
+    Side {
+        value: beyond.mass + past * far.cell.mass,
+        d_pos: beyond.d_pos + past * far.cell.d_pos,
+        d_width: beyond.d_width + past * far.cell.d_width,
+        d_band: past * far.d_band,
     }
 }
 

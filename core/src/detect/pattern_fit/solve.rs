@@ -6,9 +6,10 @@
 // counters index two arrays at once, which iterators made slower on the Cortex-M7).
 #![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
-use super::model::{blurred, Axis, Pattern, SIDES};
+use super::model::{blurred, known_cells, with_outside, Axis, Pattern, SIDES};
 use super::{
-    fitted_corners, Refusal, Window, BLACK, BLUR, BLUR_V, CONTRAST, N, OUTSIDE, OUTSIDE_PULL,
+    fitted_corners, Refusal, Window, BAND, BAND_PULL, BLACK, BLUR, BLUR_V, CONTRAST,
+    MAX_BAND_CELLS, N, OUTSIDE, OUTSIDE_PULL,
 };
 use crate::geometry::{Homography, Point};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
@@ -28,11 +29,6 @@ pub(super) enum Pass {
     Full,
     /// The cost only.
     Cost,
-    /// The least-squares normal equations of the levels alone, with one outside level for
-    /// all sides, which enter the model linearly: the pixel is `black + contrast * cells +
-    /// (contrast * outside) * beyond`, so the first three rows and columns hold the system
-    /// in (black, contrast, contrast * outside) against the pixels themselves.
-    Levels,
 }
 
 /// The model at every window pixel for `params`, accumulated as `pass` says; each side's
@@ -57,6 +53,15 @@ pub(super) fn linearise(
     let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
     let (blur, black, contrast) = (libm::expf(params[BLUR]), params[BLACK], params[CONTRAST]);
     let blur_v = libm::expf(params[BLUR_V]);
+    // The band is as wide as its parameter within 0 and `MAX_BAND_CELLS`; outside them the
+    // parameter has no derivative, and the pull below brings it back.
+    let (mut bands, mut band_free) = ([0.0f32; SIDES], [false; SIDES]);
+    if win.bands {
+        for k in 0..SIDES {
+            bands[k] = params[BAND + k].clamp(0.0, MAX_BAND_CELLS);
+            band_free[k] = bands[k] == params[BAND + k];
+        }
+    }
     let mut outside = [0.0f32; SIDES];
     for (level, p) in outside.iter_mut().zip(params.iter().skip(OUTSIDE)) {
         *level = *p;
@@ -75,31 +80,14 @@ pub(super) fn linearise(
         let observed = f32::from(sample.value);
         let (x, y) = (sample.x, sample.y);
         let g = map.map(f32::from(x), f32::from(y))?;
-        au.set(g.x, blur, pattern.side)?;
-        av.set(g.y, blur_v, pattern.side)?;
+        au.set(g.x, blur, pattern.side, [bands[0], bands[1]])?;
+        av.set(g.y, blur_v, pattern.side, [bands[2], bands[3]])?;
         let b = blurred(pattern, &au, &av, &outside);
         let e = observed - (black + contrast * b.value);
         normal.cost += e * e;
         normal.count += 1;
         match pass {
             Pass::Cost => continue,
-            Pass::Levels => {
-                let beyond: f32 = b.outside.iter().sum();
-                let cells = b.value
-                    - outside
-                        .iter()
-                        .zip(b.outside.iter())
-                        .map(|(level, w)| level * w)
-                        .sum::<f32>();
-                let regressors = [1.0, cells, beyond];
-                for (r, &x) in regressors.iter().enumerate() {
-                    normal.jte[r] += x * observed;
-                    for (c, &y) in regressors.iter().enumerate() {
-                        normal.jtj[r][c] += x * y;
-                    }
-                }
-                continue;
-            }
             Pass::Full => {}
         }
         // The model's gradient over the square (s, t), and the corners' moves of (s, t).
@@ -123,6 +111,13 @@ pub(super) fn linearise(
         jac[CONTRAST] = b.value;
         for (j, w) in jac.iter_mut().skip(OUTSIDE).zip(b.outside.iter()) {
             *j = contrast * w;
+        }
+        for k in 0..SIDES {
+            jac[BAND + k] = if band_free[k] {
+                contrast * b.d_band[k]
+            } else {
+                0.0
+            };
         }
         // The geometry, blur and levels in full; a side's row and column only where the
         // pixel sees that side (most pixels see none or one, and this loop is the fit's
@@ -150,7 +145,7 @@ pub(super) fn linearise(
     // The pull of each side towards the sides' mean: a residual of `OUTSIDE_PULL` pixels
     // wholly beyond each side, reading that mean. The mean itself stays free (the outside
     // is as unknown as before), so the pull never holds the levels to a stale value.
-    if pass != Pass::Levels {
+    {
         let mean = outside.iter().sum::<f32>() / SIDES as f32;
         let weight = OUTSIDE_PULL * contrast * contrast;
         for (k, level) in outside.iter().enumerate() {
@@ -164,6 +159,18 @@ pub(super) fn linearise(
                     let delta = if c == k { 1.0 } else { 0.0 };
                     normal.jtj[OUTSIDE + k][OUTSIDE + c] += weight * (delta - 1.0 / SIDES as f32);
                 }
+            }
+        }
+    }
+    // The pull of each band's width towards none: a residual of `BAND_PULL` pixels.
+    {
+        let weight = BAND_PULL * contrast * contrast;
+        for k in BAND..BAND + SIDES {
+            let width = params[k];
+            normal.cost += weight * width * width;
+            if pass == Pass::Full {
+                normal.jte[k] -= weight * width;
+                normal.jtj[k][k] += weight;
             }
         }
     }
@@ -196,18 +203,66 @@ pub(super) fn square_from_image(c: &[Point; 4]) -> Option<[[f32; 2]; 2]> {
     Some([[ty / det, -tx / det], [-sy / det, sx / det]])
 }
 
-/// Sets the levels of `params` to their least-squares values for its geometry and blur:
-/// the levels enter the model linearly, so one pass finds them exactly, and the nonlinear
-/// steps start with only the geometry and the blur to move. The decoder's contrast is a
-/// mean over blurred cells, often half the real one on a small marker. One outside level
-/// for all sides here (every side is set to it): the steps then tell the sides apart.
-pub(super) fn solve_levels(
+/// The least-squares system of the levels alone, which enter the model linearly: with one
+/// outside level for all sides, the pixel is `black + contrast * cells + (contrast *
+/// outside) * beyond`, so the system is in (black, contrast, contrast * outside).
+#[derive(Clone, Copy, Default)]
+pub(super) struct LevelSystem {
+    ata: [[f32; 3]; 3],
+    aty: [f32; 3],
+    /// The pixels' sum of squares: with the solution's products, the least-squares cost
+    /// without another pass.
+    yy: f32,
+}
+
+/// The levels' systems (into `systems`, one per width) for the geometry and blur of
+/// `params` with bands of each width in `widths` on every side, from one pass over the
+/// window: the known cells' part of each pixel is the same for all of them, and only the
+/// bands' ends are computed again.
+pub(super) fn level_systems(
     pattern: &Pattern,
     win: &Window,
-    params: &mut [f32; N],
-) -> Result<(), Refusal> {
-    let levels = linearise(pattern, win, params, Pass::Levels).ok_or(Refusal::Geometry)?;
-    let (a, b) = (&levels.jtj, &levels.jte);
+    params: &[f32; N],
+    widths: &[f32],
+    systems: &mut [LevelSystem],
+) -> Option<()> {
+    let corners = fitted_corners(params);
+    let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
+    let (blur, blur_v) = (libm::expf(params[BLUR]), libm::expf(params[BLUR_V]));
+    let (mut au, mut av) = (Axis::EMPTY, Axis::EMPTY);
+    for sample in &win.samples {
+        let observed = f32::from(sample.value);
+        let g = map.map(f32::from(sample.x), f32::from(sample.y))?;
+        au.set_known(g.x, blur, pattern.side)?;
+        av.set_known(g.y, blur_v, pattern.side)?;
+        let known = known_cells(pattern, &au, &av);
+        for (system, &width) in systems.iter_mut().zip(widths.iter()) {
+            au.set_bands(g.x, blur, pattern.side, [width; 2]);
+            av.set_bands(g.y, blur_v, pattern.side, [width; 2]);
+            // At outside levels of 0 the model is its cells and bands alone; the outside
+            // weights are each level's coefficient.
+            let b = with_outside(&known, &au, &av, &[0.0; SIDES]);
+            let regressors = [1.0, b.value, b.outside.iter().sum()];
+            system.yy += observed * observed;
+            for (r, &x) in regressors.iter().enumerate() {
+                system.aty[r] += x * observed;
+                for (c, &y) in regressors.iter().enumerate() {
+                    system.ata[r][c] += x * y;
+                }
+            }
+        }
+    }
+    Some(())
+}
+
+/// Sets the levels of `params` to the least-squares solution of `system` (see
+/// [`level_systems`]): the levels enter the model linearly, so the nonlinear steps start with
+/// only the geometry, the blur and the bands to move. The decoder's contrast is a mean over
+/// blurred cells, often half the real one on a small marker. One outside level for all
+/// sides here (every side is set to it): the steps then tell the sides apart. Returns the
+/// pixels' sum of squared residuals at the solved levels.
+pub(super) fn solve_levels(system: &LevelSystem, params: &mut [f32; N]) -> Result<f32, Refusal> {
+    let (a, b) = (&system.ata, &system.aty);
     let m = Matrix3::from_fn(|r, c| a[r][c]);
     let rhs = Vector3::new(b[0], b[1], b[2]);
     // A marker in a wide printed margin has almost no pixel beyond the known area: keep the
@@ -226,13 +281,15 @@ pub(super) fn solve_levels(
     if !(x[1] > 0.0) || !x.iter().all(|v| v.is_finite()) {
         return Err(Refusal::Levels);
     }
+    // |y - A x|^2 = y.y - 2 x.(A^T y) + x.(A^T A x), with A^T y and A^T A at hand.
+    let residual = system.yy - 2.0 * x.dot(&rhs) + x.dot(&(m * x));
     params[BLACK] = x[0];
     params[CONTRAST] = x[1];
     let outside = x[2] / x[1];
-    for level in params.iter_mut().skip(OUTSIDE) {
+    for level in params.iter_mut().skip(OUTSIDE).take(SIDES) {
         *level = outside;
     }
-    Ok(())
+    Ok(residual)
 }
 
 /// Solves `(A + lambda diag A) x = b` by Cholesky; `None` when not positive definite.

@@ -274,3 +274,48 @@ fn a_marker_at_the_image_border_is_fitted_or_refused_without_panic() {
         }
     }
 }
+
+/// A marker printed on a white margin wider than its known area, on darker ground: the
+/// ground's edge lies a cell or two beyond the known area, within the blur's reach on a far
+/// marker. A model with the outside's level right at the known area's end put the edges
+/// 1-3 % out on these markers (the fit's printed bands, `model::Axis::set`).
+#[test]
+fn a_printed_margin_of_any_width_leaves_the_scale_unbiased() {
+    let n = TAG36H11.grid as f32;
+    let mut worst = 0.0f32;
+    let mut case = 0;
+    for &(side, sigma) in &[(11.0, 0.7), (11.0, 1.0), (14.0, 0.8), (18.0, 1.0)] {
+        for &margin in &[0.0f32, 0.5, 1.0, 1.5, 2.0, 3.0] {
+            // The sheet's edge `margin` cells beyond the grid on every side, square at the
+            // corners; grass beyond.
+            let ground = move |u: f32, v: f32| {
+                let beyond = (-u).max(-v).max(u - n).max(v - n);
+                if beyond < margin {
+                    WHITE
+                } else {
+                    70.0
+                }
+            };
+            case += 1;
+            let centre = Point::new(32.2 + 0.13 * case as f32, 31.7 - 0.09 * case as f32);
+            let id = ((case * 41) % 500) as u16;
+            let (pixels, truth) = draw_on(id, side, 0.03 * case as f32, centre, sigma, &ground);
+            let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
+            let start = start_from(&truth);
+            let (fitted, _) = fit(&image, &TAG36H11, id, &start, WHITE - BLACK)
+                .ok()
+                .unwrap_or_else(|| panic!("side {side} blur {sigma} margin {margin}: refused"));
+            let scale = perimeter(&fitted) / perimeter(&truth) - 1.0;
+            std::println!(
+                "side {side:4.1} px blur {sigma:.1} px, margin {margin:.1} cells: scale {:+.3} %",
+                100.0 * scale
+            );
+            assert!(
+                scale.abs() < 0.004,
+                "side {side} blur {sigma} margin {margin}: scale {scale}"
+            );
+            worst = worst.max(scale.abs());
+        }
+    }
+    std::println!("worst scale error {:.3} %", 100.0 * worst);
+}

@@ -22,8 +22,8 @@ Input, one of:
                      frames.csv and optionally setpoints.csv), written by `touchdown simulate`
                      or dumped by the camera board
   --scenario NAME    render the scenario in memory (nothing is written to disk); NAME is one
-                     of paper, lateral, descent, landing, hover, rest, sun, shadow, occlusion (see
-                     `touchdown simulate --help`); --seed picks the randomness
+                     of paper, margin, lateral, descent, landing, hover, rest, sun, shadow,
+                     occlusion (see `touchdown simulate --help`); --seed picks the randomness
   --exposure WHO     who sets a scenario's exposure: board (the board's auto-exposure,
                      metering the decoded markers, closed around the rendering: each frame
                      rendered with the exposure time and gain it chose two frames before,
@@ -118,8 +118,8 @@ pub struct ReplayArgs {
     #[arg(value_name = "RECORDING")]
     pub recording: Option<PathBuf>,
 
-    /// Render this scenario in memory instead (paper, lateral, descent, landing, hover, rest,
-    /// sun, shadow, occlusion)
+    /// Render this scenario in memory instead (paper, margin, lateral, descent, landing, hover,
+    /// rest, sun, shadow, occlusion)
     #[arg(long, value_name = "NAME")]
     pub scenario: Option<String>,
 
