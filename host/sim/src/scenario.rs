@@ -266,12 +266,36 @@ impl Scenario {
             };
             (trajectory, frames)
         };
+        // The paper's Z set points, 5 to 50 m over the pad's centre.
+        let altitude_points = || -> Vec<(String, Vec3)> {
+            TABLE_ALTITUDES_M
+                .iter()
+                .chain(&EXTRA_ALTITUDES_M)
+                .map(|&z| (label("z", z), [0.0, 0.0, z]))
+                .collect()
+        };
+        // The paper's set points flown as hovers of 16 frames at 30 Hz over `pad`, the lens
+        // focused at infinity.
+        let paper_hovers = |points: &[(String, Vec3)], pad: PrintedPad| {
+            let (segments, frames) = set_points(points, 16, 30.0, 1.0);
+            let trajectory = Trajectory {
+                segments,
+                yaw: 0.0,
+                wobble: hover_wobble.clone(),
+                tilt_with_acceleration: false,
+                trim: (0.0, 0.0),
+            };
+            Scenario {
+                optics: Optics {
+                    focus_distance_m: f64::INFINITY,
+                    ..Optics::board_camera()
+                },
+                ..base(name, pad, ideal_camera, trajectory, frames)
+            }
+        };
         let scenario = match name {
             "paper" => {
-                let mut points: Vec<(String, Vec3)> = Vec::new();
-                for &z in TABLE_ALTITUDES_M.iter().chain(&EXTRA_ALTITUDES_M) {
-                    points.push((label("z", z), [0.0, 0.0, z]));
-                }
+                let mut points = altitude_points();
                 let h = OFFSET_ROWS_ALTITUDE_M;
                 for x in TABLE_OFFSETS_M {
                     points.push((label("x", x), [x, 0.0, h]));
@@ -279,46 +303,13 @@ impl Scenario {
                 for y in TABLE_OFFSETS_M {
                     points.push((label("y", y), [0.0, y, h]));
                 }
-                let (segments, frames) = set_points(&points, 16, 30.0, 1.0);
-                let trajectory = Trajectory {
-                    segments,
-                    yaw: 0.0,
-                    wobble: hover_wobble,
-                    tilt_with_acceleration: false,
-                    trim: (0.0, 0.0),
-                };
-                Scenario {
-                    optics: Optics {
-                        focus_distance_m: f64::INFINITY,
-                        ..Optics::board_camera()
-                    },
-                    ..base(name, paper_pad, ideal_camera, trajectory, frames)
-                }
+                paper_hovers(&points, paper_pad)
             }
             "margin" => {
                 // The paper's altitude hovers over its marker printed on a white margin of
                 // two cells, one more than the paper's: the ground's edge lies within a far
                 // marker's blur, where the detector knows nothing of what is printed.
-                let mut points: Vec<(String, Vec3)> = Vec::new();
-                for &z in TABLE_ALTITUDES_M.iter().chain(&EXTRA_ALTITUDES_M) {
-                    points.push((label("z", z), [0.0, 0.0, z]));
-                }
-                let (segments, frames) = set_points(&points, 16, 30.0, 1.0);
-                let trajectory = Trajectory {
-                    segments,
-                    yaw: 0.0,
-                    wobble: hover_wobble,
-                    tilt_with_acceleration: false,
-                    trim: (0.0, 0.0),
-                };
-                let pad = paper_pad.with_wider_margins(1.0).ok()?;
-                Scenario {
-                    optics: Optics {
-                        focus_distance_m: f64::INFINITY,
-                        ..Optics::board_camera()
-                    },
-                    ..base(name, pad, ideal_camera, trajectory, frames)
-                }
+                paper_hovers(&altitude_points(), paper_pad.with_wider_margins(1.0).ok()?)
             }
             "lateral" => {
                 let h = 12.0;

@@ -564,6 +564,7 @@ fn side(beyond: &Cell, far: &Far, level: f32) -> Side {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     /// The window as it was computed with libm's floor and ceiling, before micromath's:
@@ -585,6 +586,93 @@ mod tests {
         }
         let (first, len) = (first as usize, (last - first) as usize);
         (len <= MAX_WINDOW).then_some((first, len, f32::NAN, f32::NAN))
+    }
+
+    /// The model's derivatives are its own: central differences of the blurred value by the
+    /// point, the widths and each band, and the value's change per outside level, at points
+    /// inside, beside and beyond the known area, corners included.
+    #[test]
+    fn the_derivatives_are_the_models() {
+        let family = &crate::family::tables::TAG36H11;
+        let pattern = Pattern::new(family, 7).unwrap();
+        let cells = pattern.side;
+        let levels = [0.2f32, 0.45, 0.1, 0.7];
+        let bands = [0.8f32, 1.6, 0.4, 1.2];
+        let at = |u: f32, v: f32, wu: f32, wv: f32, bands: [f32; 4], levels: &[f32; 4]| {
+            let (mut au, mut av) = (Axis::EMPTY, Axis::EMPTY);
+            au.set(u, wu, cells, [bands[0], bands[1]]).unwrap();
+            av.set(v, wv, cells, [bands[2], bands[3]]).unwrap();
+            blurred(&pattern, &au, &av, levels)
+        };
+        let h = 1e-2f32;
+        let mut checked = 0;
+        for (u, v) in [
+            (4.3f32, 5.1f32),
+            (-0.4, 3.3),
+            (10.6, 6.2),
+            (2.2, -1.3),
+            (7.7, 11.1),
+            (-1.2, -0.9),
+            (11.4, 10.8),
+            (-2.3, 10.5),
+            (0.3, 9.8),
+        ] {
+            for (wu, wv) in [(0.5f32, 0.6f32), (0.9, 0.7)] {
+                // The known cells' window ends on whole cells 3 widths out, and its cells
+                // change where an end crosses one: no derivative there.
+                let near_whole = |x: f32| (x - libm::roundf(x)).abs() < 4.0 * h;
+                let ends = [u - 3.0 * wu, u + 3.0 * wu, v - 3.0 * wv, v + 3.0 * wv];
+                if ends.iter().any(|&e| near_whole(e)) {
+                    continue;
+                }
+                let b = at(u, v, wu, wv, bands, &levels);
+                let diff = |f: &dyn Fn(f32) -> f32| (f(h) - f(-h)) / (2.0 * h);
+                let mut pairs = std::vec![
+                    (
+                        "u",
+                        b.d_u,
+                        diff(&|d| at(u + d, v, wu, wv, bands, &levels).value)
+                    ),
+                    (
+                        "v",
+                        b.d_v,
+                        diff(&|d| at(u, v + d, wu, wv, bands, &levels).value)
+                    ),
+                    (
+                        "wu",
+                        b.d_width_u,
+                        diff(&|d| at(u, v, wu + d, wv, bands, &levels).value)
+                    ),
+                    (
+                        "wv",
+                        b.d_width_v,
+                        diff(&|d| at(u, v, wu, wv + d, bands, &levels).value)
+                    ),
+                ];
+                for k in 0..SIDES {
+                    let by_band = diff(&|d| {
+                        let mut moved = bands;
+                        moved[k] += d;
+                        at(u, v, wu, wv, moved, &levels).value
+                    });
+                    pairs.push(("band", b.d_band[k], by_band));
+                    let by_level = diff(&|d| {
+                        let mut l = levels;
+                        l[k] += d;
+                        at(u, v, wu, wv, bands, &l).value
+                    });
+                    pairs.push(("level", b.outside[k], by_level));
+                }
+                for (name, got, want) in pairs {
+                    assert!(
+                        (got - want).abs() < 2e-3 + 0.01 * want.abs(),
+                        "({u}, {v}) widths ({wu}, {wv}): d/d{name} {got} against {want}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 120, "{checked}");
     }
 
     #[test]

@@ -53,8 +53,9 @@ pub(super) fn linearise(
     let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
     let (blur, black, contrast) = (libm::expf(params[BLUR]), params[BLACK], params[CONTRAST]);
     let blur_v = libm::expf(params[BLUR_V]);
-    // The band is as wide as its parameter within 0 and `MAX_BAND_CELLS`; outside them the
-    // parameter has no derivative, and the pull below brings it back.
+    // A band is as wide as its parameter within 0 and `MAX_BAND_CELLS`; outside them the
+    // parameter has no derivative, and the pull below brings it back. None where the
+    // window does not fit bands.
     let (mut bands, mut band_free) = ([0.0f32; SIDES], [false; SIDES]);
     if win.bands {
         for k in 0..SIDES {
@@ -145,33 +146,29 @@ pub(super) fn linearise(
     // The pull of each side towards the sides' mean: a residual of `OUTSIDE_PULL` pixels
     // wholly beyond each side, reading that mean. The mean itself stays free (the outside
     // is as unknown as before), so the pull never holds the levels to a stale value.
-    {
-        let mean = outside.iter().sum::<f32>() / SIDES as f32;
-        let weight = OUTSIDE_PULL * contrast * contrast;
-        for (k, level) in outside.iter().enumerate() {
-            let gap = mean - level;
-            normal.cost += weight * gap * gap;
-            if pass == Pass::Full {
-                // The residuals' Jacobian is contrast * (I - 1/SIDES): its square is the
-                // same projection, and it maps the residuals to their own gaps.
-                normal.jte[OUTSIDE + k] += weight * gap;
-                for c in k..SIDES {
-                    let delta = if c == k { 1.0 } else { 0.0 };
-                    normal.jtj[OUTSIDE + k][OUTSIDE + c] += weight * (delta - 1.0 / SIDES as f32);
-                }
+    let mean = outside.iter().sum::<f32>() / SIDES as f32;
+    let weight = OUTSIDE_PULL * contrast * contrast;
+    for (k, level) in outside.iter().enumerate() {
+        let gap = mean - level;
+        normal.cost += weight * gap * gap;
+        if pass == Pass::Full {
+            // The residuals' Jacobian is contrast * (I - 1/SIDES): its square is the
+            // same projection, and it maps the residuals to their own gaps.
+            normal.jte[OUTSIDE + k] += weight * gap;
+            for c in k..SIDES {
+                let delta = if c == k { 1.0 } else { 0.0 };
+                normal.jtj[OUTSIDE + k][OUTSIDE + c] += weight * (delta - 1.0 / SIDES as f32);
             }
         }
     }
     // The pull of each band's width towards none: a residual of `BAND_PULL` pixels.
-    {
-        let weight = BAND_PULL * contrast * contrast;
-        for k in BAND..BAND + SIDES {
-            let width = params[k];
-            normal.cost += weight * width * width;
-            if pass == Pass::Full {
-                normal.jte[k] -= weight * width;
-                normal.jtj[k][k] += weight;
-            }
+    let band_weight = BAND_PULL * contrast * contrast;
+    for k in BAND..BAND + SIDES {
+        let width = params[k];
+        normal.cost += band_weight * width * width;
+        if pass == Pass::Full {
+            normal.jte[k] -= band_weight * width;
+            normal.jtj[k][k] += band_weight;
         }
     }
     for r in 0..N {
