@@ -33,9 +33,9 @@
 #![allow(clippy::indexing_slicing, clippy::needless_range_loop)]
 
 use super::decode::{
-    flag_changed, for_ring, grid_homography, ring_reads_as, shorter_first_side_squared, CellMap,
-    Decided, GridMap, GridRead, PlaneFit, BORDER_ERROR_FRACTION, MARGIN_ERROR_FRACTION,
-    REGISTRATION_CHECK_SLACK, REGISTRATION_SHIFT, UNCERTAIN_CELL_MARGIN,
+    for_ring, ring_reads_as, shorter_first_side_squared, CellMap, Decided, GridMap, GridRead,
+    PlaneFit, BORDER_ERROR_FRACTION, LENS_CORNERS_COST, MARGIN_ERROR_FRACTION,
+    REGISTRATION_CHECK_SLACK, REGISTRATION_SHIFTS,
 };
 use super::DetectorConfig;
 use crate::camera::CameraModel;
@@ -74,14 +74,13 @@ pub(crate) fn read_deblurred(
         return None;
     }
     let m = n + 2;
-    let map = match lens {
-        None => GridMap::homography(grid_homography(family, quad)?),
-        Some(_) => GridMap::new(family, quad, lens)?,
-    };
-    // One mapped point and one sample a cell, as the first read counts them.
+    let map = GridMap::new(family, quad, lens)?;
+    // One mapped point and one sample a cell, and the corners' undistortion through a lens,
+    // as the first read counts them.
     let grid_cost = 2 * (m * m) as u32;
+    let lens_cost = if lens.is_some() { LENS_CORNERS_COST } else { 0 };
     let mut sampled: Grid = [[0.0; SIDE]; SIDE];
-    *samples = samples.saturating_add(grid_cost);
+    *samples = samples.saturating_add(grid_cost + lens_cost);
     sample(image, &map, m, (0.0, 0.0), &mut sampled)?;
 
     // The spill that leaves the known rings most uniform, its grid and levels kept.
@@ -115,41 +114,21 @@ pub(crate) fn read_deblurred(
     }
 
     let data = family.data_cells()?;
-    let mut cells = [false; MAX_GRID * MAX_GRID];
-    let mut uncertain_cells = [false; MAX_GRID * MAX_GRID];
-    let mut margin_sum = 0.0f32;
-    for &(r, c) in &data {
-        let d = levels.relative(&grid, r as isize, c as isize);
-        let k = r as usize * n + c as usize;
-        let cell_margin = (d.abs() / (0.5 * levels.contrast)).min(1.0);
-        if let (Some(cell), Some(flag)) = (cells.get_mut(k), uncertain_cells.get_mut(k)) {
-            *cell = d > 0.0;
-            *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
-        }
-        margin_sum += cell_margin;
-    }
+    let mut decided = Decided::of(&data, n, levels.contrast, |r, c| {
+        levels.relative(&grid, r as isize, c as isize)
+    });
     // The first read's registration check, on the deblurred grid: read again with every
     // sample a quarter cell off each way; a cell whose bit changes is uncertain.
     if family.min_hamming.saturating_sub(family.max_correction) <= REGISTRATION_CHECK_SLACK {
-        for shift in [
-            (REGISTRATION_SHIFT, 0.0),
-            (-REGISTRATION_SHIFT, 0.0),
-            (0.0, REGISTRATION_SHIFT),
-            (0.0, -REGISTRATION_SHIFT),
-        ] {
+        for shift in REGISTRATION_SHIFTS {
             *samples = samples.saturating_add(grid_cost);
             sample(image, &map, m, shift, &mut work)?;
             unspill(&mut work, m, k);
-            flag_changed(&data, n, &cells, &mut uncertain_cells, |r, c| {
+            decided.flag_changed(&data, n, |r, c| {
                 levels.relative(&work, r as isize, c as isize) > 0.0
             });
         }
     }
-    let decided = Decided {
-        cells: &cells,
-        uncertain_cells: &uncertain_cells,
-        margin: margin_sum / data.len().max(1) as f32,
-    };
     decided.read(map, family, &data, levels.contrast, config)
 }
 

@@ -42,11 +42,18 @@ pub(super) const UNCERTAIN_CELL_MARGIN: f32 = 0.2;
 /// make another code.
 pub(super) const REGISTRATION_CHECK_SLACK: u8 = 5;
 /// How far the registration check moves the sampling grid, cells.
-pub(super) const REGISTRATION_SHIFT: f32 = 0.25;
+const REGISTRATION_SHIFT: f32 = 0.25;
+/// The registration check's moves of the sampling grid (cells): a quarter cell each way.
+pub(super) const REGISTRATION_SHIFTS: [(f32, f32); 4] = [
+    (REGISTRATION_SHIFT, 0.0),
+    (-REGISTRATION_SHIFT, 0.0),
+    (0.0, REGISTRATION_SHIFT),
+    (0.0, -REGISTRATION_SHIFT),
+];
 /// Image samples' worth of work of undistorting a read's four corners through the lens
 /// ([`GridMap::new`]): a Newton inversion is about as much as four bilinear samples. (The
 /// lens's own cost per mapped point, a polynomial, is within the per-cell figure's slack.)
-const LENS_CORNERS_COST: u32 = 16;
+pub(super) const LENS_CORNERS_COST: u32 = 16;
 
 /// A decoded marker before de-duplication.
 #[derive(Debug, Clone, Copy)]
@@ -485,24 +492,8 @@ fn read_robust_counted<M: CellMap>(
         z - threshold(c as f32 + 0.5, r as f32 + 0.5)
     };
     read_data((0.0, 0.0), &mut values)?;
-    let mut cells = [false; MAX_GRID * MAX_GRID];
-    let mut margin_sum = 0.0f32;
-    let mut data_count = 0usize;
     // Cells too close to their threshold, or (below) unstable under a shifted grid.
-    let mut uncertain_cells = [false; MAX_GRID * MAX_GRID];
-    for &(r, c) in &data {
-        let (r, c) = (r as usize, c as usize);
-        let d = decide(&values, r, c);
-        if let Some(cell) = cells.get_mut(r * n + c) {
-            *cell = d > 0.0;
-        }
-        let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
-        if let Some(flag) = uncertain_cells.get_mut(r * n + c) {
-            *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
-        }
-        margin_sum += cell_margin;
-        data_count += 1;
-    }
+    let mut decided = Decided::of(&data, n, contrast, |r, c| decide(&values, r, c));
     // Registration check for families where a few misread cells make another code: a grid
     // laid half a cell off (a blurred, steep marker whose short edges are a pixel off) reads
     // whole cells of its neighbours with full confidence. Read again with every sample
@@ -510,35 +501,76 @@ fn read_robust_counted<M: CellMap>(
     // grid a quarter cell stays inside each cell.
     if family.min_hamming.saturating_sub(family.max_correction) <= REGISTRATION_CHECK_SLACK {
         let mut shifted = values;
-        for shift in [
-            (REGISTRATION_SHIFT, 0.0),
-            (-REGISTRATION_SHIFT, 0.0),
-            (0.0, REGISTRATION_SHIFT),
-            (0.0, -REGISTRATION_SHIFT),
-        ] {
+        for shift in REGISTRATION_SHIFTS {
             read_data(shift, &mut shifted)?;
-            flag_changed(&data, n, &cells, &mut uncertain_cells, |r, c| {
-                decide(&shifted, r, c) > 0.0
-            });
+            decided.flag_changed(&data, n, |r, c| decide(&shifted, r, c) > 0.0);
         }
     }
-    let decided = Decided {
-        cells: &cells,
-        uncertain_cells: &uncertain_cells,
-        margin: margin_sum / data_count.max(1) as f32,
-    };
     decided.read(grid, family, &data, contrast, config)
 }
 
 /// A read's decided data cells: each cell's bit, whether it is uncertain, and the decision
-/// margin (the mean over the data cells).
-pub(super) struct Decided<'a> {
-    pub(super) cells: &'a [bool; MAX_GRID * MAX_GRID],
-    pub(super) uncertain_cells: &'a [bool; MAX_GRID * MAX_GRID],
-    pub(super) margin: f32,
+/// margin (the mean over the data cells). The first and the deblurred read decide alike.
+pub(super) struct Decided {
+    cells: [bool; MAX_GRID * MAX_GRID],
+    uncertain_cells: [bool; MAX_GRID * MAX_GRID],
+    margin: f32,
 }
 
-impl Decided<'_> {
+impl Decided {
+    /// Decides the `data` cells (grid of `n`) from `relative(row, column)`, a cell's reading
+    /// less its threshold, against the black-to-white `contrast`: a cell is white above its
+    /// threshold, and uncertain within [`UNCERTAIN_CELL_MARGIN`] of half the contrast of it.
+    #[inline]
+    pub(super) fn of(
+        data: &[(u8, u8)],
+        n: usize,
+        contrast: f32,
+        relative: impl Fn(usize, usize) -> f32,
+    ) -> Decided {
+        let mut decided = Decided {
+            cells: [false; MAX_GRID * MAX_GRID],
+            uncertain_cells: [false; MAX_GRID * MAX_GRID],
+            margin: 0.0,
+        };
+        let mut margin_sum = 0.0f32;
+        for &(r, c) in data {
+            let (r, c) = (r as usize, c as usize);
+            let d = relative(r, c);
+            let cell_margin = (d.abs() / (0.5 * contrast)).min(1.0);
+            let k = r * n + c;
+            if let (Some(cell), Some(flag)) =
+                (decided.cells.get_mut(k), decided.uncertain_cells.get_mut(k))
+            {
+                *cell = d > 0.0;
+                *flag = cell_margin < UNCERTAIN_CELL_MARGIN;
+            }
+            margin_sum += cell_margin;
+        }
+        decided.margin = margin_sum / data.len().max(1) as f32;
+        decided
+    }
+
+    /// The registration check's step: flags as uncertain each of the `data` cells (grid of
+    /// `n`) whose bit under a shifted read, `bit(row, column)`, differs from its decided one.
+    #[inline]
+    pub(super) fn flag_changed(
+        &mut self,
+        data: &[(u8, u8)],
+        n: usize,
+        bit: impl Fn(usize, usize) -> bool,
+    ) {
+        for &(r, c) in data {
+            let (r, c) = (r as usize, c as usize);
+            let k = r * n + c;
+            if self.cells.get(k).copied() != Some(bit(r, c)) {
+                if let Some(flag) = self.uncertain_cells.get_mut(k) {
+                    *flag = true;
+                }
+            }
+        }
+    }
+
     /// The grid read through `h` of `family`'s `data` cells with black-to-white `contrast`;
     /// `None` when its decision margin is below the configured one.
     pub(super) fn read(
@@ -583,27 +615,6 @@ pub(super) fn ring_reads_as(
         errors += usize::from(wrong(r, c));
     });
     errors as f32 <= fraction * cells.max(1) as f32
-}
-
-/// The registration check's step: flags as uncertain each of the `data` cells (grid of `n`)
-/// whose bit under a shifted read, `bit(row, column)`, differs from its bit in `cells`.
-#[inline]
-pub(super) fn flag_changed(
-    data: &[(u8, u8)],
-    n: usize,
-    cells: &[bool; MAX_GRID * MAX_GRID],
-    uncertain_cells: &mut [bool; MAX_GRID * MAX_GRID],
-    bit: impl Fn(usize, usize) -> bool,
-) {
-    for &(r, c) in data {
-        let (r, c) = (r as usize, c as usize);
-        let k = r * n + c;
-        if cells.get(k).copied() != Some(bit(r, c)) {
-            if let Some(flag) = uncertain_cells.get_mut(k) {
-                *flag = true;
-            }
-        }
-    }
 }
 
 /// Largest spread of a candidate's data cells, as a fraction of its black-to-white contrast,

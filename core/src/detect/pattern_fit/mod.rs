@@ -183,7 +183,13 @@ struct Window {
 /// of the widest blur the fit starts near) and the pixel's own half width.
 const EDGE_REACH_PX: f32 = 2.5;
 
-fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Option<Window> {
+/// The window of the marker at `corners`, whose cells are `cell_px` pixels across.
+fn window(
+    image: &GrayImage<'_>,
+    pattern: &Pattern,
+    corners: &[Point; 4],
+    cell_px: f32,
+) -> Option<Window> {
     let to_image = Homography::from_4_points(&pattern.corner_points(), corners)?;
     let to_grid = Homography::from_4_points(corners, &pattern.corner_points())?;
     let c = pattern.side as f32;
@@ -207,7 +213,7 @@ fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Opt
     }
     let (x0, y0, x1, y1) = (x0 as usize, y0 as usize, x1 as usize, y1 as usize);
     // The reach in grid cells: pixels times cells per pixel.
-    let reach = EDGE_REACH_PX * (pattern.quad_hi - pattern.quad_lo) / mean_side(corners).max(1.0);
+    let reach = EDGE_REACH_PX / cell_px;
     // A pixel is near an edge when the colour (None beyond the known area) at its grid point
     // differs from the colour `reach` cells away along either grid axis.
     let near_edge = |x: usize, y: usize| -> bool {
@@ -246,7 +252,6 @@ fn window(image: &GrayImage<'_>, pattern: &Pattern, corners: &[Point; 4]) -> Opt
             }
         }
     }
-    let cell_px = mean_side(corners) / (pattern.quad_hi - pattern.quad_lo);
     Some(Window {
         samples,
         bands: cell_px <= EDGE_REACH_PX,
@@ -319,15 +324,15 @@ pub(crate) fn fit(
         return Err(Refusal::Large);
     }
     let pattern = Pattern::new(family, id).ok_or(Refusal::Layout)?;
-    let win = window(image, &pattern, corners).ok_or(Refusal::Geometry)?;
+    let cell_px = mean_side(corners) / (pattern.quad_hi - pattern.quad_lo);
+    if !(cell_px > 0.0) {
+        return Err(Refusal::Geometry);
+    }
+    let win = window(image, &pattern, corners, cell_px).ok_or(Refusal::Geometry)?;
     let mut params = [0.0f32; N];
     for (k, c) in corners.iter().enumerate() {
         params[2 * k] = c.x;
         params[2 * k + 1] = c.y;
-    }
-    let cell_px = mean_side(corners) / (pattern.quad_hi - pattern.quad_lo);
-    if !(cell_px > 0.0) {
-        return Err(Refusal::Geometry);
     }
     params[BLUR] = libm::logf(INITIAL_BLUR_PX / cell_px);
     params[BLUR_V] = params[BLUR];

@@ -227,8 +227,10 @@ pub(super) fn level_systems(
     let map = Homography::from_4_points(&corners, &pattern.corner_points())?;
     let (blur, blur_v) = (libm::expf(params[BLUR]), libm::expf(params[BLUR_V]));
     let (mut au, mut av) = (Axis::EMPTY, Axis::EMPTY);
+    let mut yy = 0.0f32;
     for sample in &win.samples {
         let observed = f32::from(sample.value);
+        yy += observed * observed;
         let g = map.map(f32::from(sample.x), f32::from(sample.y))?;
         au.set_known(g.x, blur, pattern.side)?;
         av.set_known(g.y, blur_v, pattern.side)?;
@@ -240,7 +242,6 @@ pub(super) fn level_systems(
             // weights are each level's coefficient.
             let b = with_outside(&known, &au, &av, &[0.0; SIDES]);
             let regressors = [1.0, b.value, b.outside.iter().sum()];
-            system.yy += observed * observed;
             for (r, &x) in regressors.iter().enumerate() {
                 system.aty[r] += x * observed;
                 for (c, &y) in regressors.iter().enumerate() {
@@ -248,6 +249,9 @@ pub(super) fn level_systems(
                 }
             }
         }
+    }
+    for system in systems.iter_mut() {
+        system.yy = yy;
     }
     Some(())
 }
