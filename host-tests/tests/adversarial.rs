@@ -395,3 +395,53 @@ fn markers_cut_by_the_frame_edge() {
     println!("cut markers: {found_cut} of {cut} searches found the (right) marker; {controls} controls found");
     assert!(controls >= 8);
 }
+
+/// A far marker in the middle of a frame whose ground is clutter everywhere else (the
+/// independent renderer's cracked, patchy ground from 50 m ran the camera's budget out in
+/// row order above the middle): the scan searches the middle first and holds the far
+/// marker's pattern fit back from the clutter, so the marker is found and fitted although
+/// the frame's search is cut short.
+#[test]
+fn a_far_marker_amid_clutter_is_found_and_fitted_within_the_budget() {
+    let mut workspace = HostWorkspace::new();
+    for (w, h) in SIZES {
+        let edge = 14.0;
+        let placement = Placement::new(w as f64 * 0.5 + 0.3, h as f64 * 0.55, edge).rotated(9.0);
+        let options = FrameOptions {
+            noise_sigma: 1.0,
+            blur_sigma: 0.6,
+            ..FrameOptions::sized(w, h)
+        };
+        let (mut frame, truth) =
+            render_marker(&tables::TAG36H11, 21, &placement, &options).expect("a valid marker");
+        // Specks of ink on the ground everywhere but around the marker.
+        let (cx, cy) = (w as f64 * 0.5, h as f64 * 0.55);
+        for y in 0..h {
+            for x in 0..w {
+                let near = (x as f64 - cx).abs() < 2.0 * edge && (y as f64 - cy).abs() < 2.0 * edge;
+                if !near && x % 4 < 2 && y % 4 < 2 && !hash(x / 4, y / 4, 3).is_multiple_of(3) {
+                    frame.pixels[y * w + x] = 30;
+                }
+            }
+        }
+        let mut detector = Detector::new(DetectorConfig::default());
+        let label = format!("{w}x{h}");
+        let (found, stats) = detect_bounded(
+            &mut detector,
+            &mut workspace,
+            &frame,
+            tables::DEFAULT,
+            &label,
+        );
+        assert!(
+            stats.truncated,
+            "{label}: the clutter should outlast the budget"
+        );
+        assert_eq!(found.len(), 1, "{label}: {found:?}");
+        assert_eq!((found[0].family, found[0].id), (0, 21), "{label}");
+        assert_eq!(stats.fitted, 1, "{label}: the pattern fit did not run");
+        let error = truth.corner_error(&found[0].corners);
+        println!("{label}: worst corner {error:.3} px, work {}", stats.work);
+        assert!(error < 0.25, "{label}: worst corner {error:.3} px");
+    }
+}

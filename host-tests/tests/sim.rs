@@ -460,5 +460,7 @@ fn a_marker_cut_by_the_frames_edge_is_not_detected() {
             found_total += found.len();
         }
     }
-    assert!(found_total >= 36, "{found_total}");
+    // 36 in row order; the first frame, searched middle first as the detector has seen no
+    // marker yet (`Detector::search`), has its budget cut one marker earlier.
+    assert!(found_total >= 35, "{found_total}");
 }

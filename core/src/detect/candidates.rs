@@ -6,9 +6,9 @@
 //! each one to [`Candidates::process`]; the method's choices come from the [`Strategy`].
 
 use super::{
-    contour, deblur, decode, lens, quad, DetectStats, Detection, DetectorConfig, Look, Strategy,
-    MAX_DETECTIONS, WORK_CANDIDATE, WORK_COMPLETION_PER_PIXEL, WORK_FIT, WORK_PER_SAMPLE_X2,
-    WORK_SCREEN_PIXELS,
+    contour, deblur, decode, lens, pattern_fit, quad, DetectStats, Detection, DetectorConfig, Look,
+    Strategy, MAX_DETECTIONS, WORK_CANDIDATE, WORK_COMPLETION_PER_PIXEL, WORK_FIT,
+    WORK_PER_SAMPLE_X2, WORK_SCREEN_PIXELS,
 };
 use crate::camera::CameraModel;
 use crate::family::Family;
@@ -170,6 +170,18 @@ impl Candidates<'_, '_, '_> {
             self.read_and_look_up(quad.hole, &corners, false, detections, stats, &mut samples);
         if bordered {
             stats.bordered += 1;
+        }
+        // A lone small marker's scale is only as good as the pattern fit at the frame's end
+        // (without it a far marker's is off by a percent or two): its work is held back from
+        // the rest of the scan, so that a cluttered frame spends it on the marker found rather
+        // than on the clutter. Once a second marker is found the scan's own work is worth
+        // more (the markers' spread sets the scale, and the frame may hold more of them).
+        if decoded && strategy.fits_patterns(config) {
+            if detections.len() == 1 && pattern_fit::fits(&corners) {
+                tracer.hold(pattern_fit::WORK_PATTERN_FIT);
+            } else {
+                tracer.release();
+            }
         }
         if !decoded && deblur::is_small(&corners, self.max_quad_cells) {
             // The largest small candidate without a code is read again at the frame's end.

@@ -129,6 +129,8 @@ pub(crate) struct Tracer<'b> {
     stride: usize,
     /// Work units left for this frame (one per step, see `charge`).
     budget: u32,
+    /// Work units set aside from `budget` for a later step ([`Tracer::hold`]).
+    held: u32,
     /// Steps taken so far.
     steps: u32,
 }
@@ -160,6 +162,7 @@ impl<'b> Tracer<'b> {
             moves,
             stride,
             budget,
+            held: 0,
             steps: 0,
         }
     }
@@ -187,6 +190,22 @@ impl<'b> Tracer<'b> {
                 false
             }
         }
+    }
+
+    /// Sets `units` of the budget aside, if it has them and nothing is set aside yet: the
+    /// scan then stops that much earlier, and the step they are held for still runs when a
+    /// cluttered frame's scan uses up the rest ([`Tracer::release`]).
+    pub fn hold(&mut self, units: u32) {
+        if self.held == 0 && self.budget >= units {
+            self.budget -= units;
+            self.held = units;
+        }
+    }
+
+    /// Gives back what [`Tracer::hold`] set aside.
+    pub fn release(&mut self) {
+        self.budget = self.budget.saturating_add(self.held);
+        self.held = 0;
     }
 
     /// The visited bitmap's word `index` (all ones past the end, so nothing starts there).

@@ -98,6 +98,11 @@ impl Strategy for Paper {
         false
     }
 
+    // The paper's tables reproduce from its own order: every row in turn.
+    fn scans_middle_first(&self) -> bool {
+        false
+    }
+
     fn fits_patterns(&self, _config: &DetectorConfig) -> bool {
         false
     }

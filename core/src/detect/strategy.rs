@@ -67,6 +67,9 @@ pub(super) trait Strategy {
     /// Whether a boundary that is not a quad is searched for a marker joined at one corner
     /// ([`quad::complete`]).
     fn completes_corners(&self) -> bool;
+    /// Whether the scan takes the frame's middle quarter first (see `scan_rows`) rather
+    /// than every row in order.
+    fn scans_middle_first(&self) -> bool;
     /// Step 7: whether the small markers' corners are fitted with their decoded pattern
     /// ([`super::pattern_fit`]).
     fn fits_patterns(&self, config: &DetectorConfig) -> bool;
@@ -221,6 +224,10 @@ impl Strategy for Robust {
     }
 
     fn completes_corners(&self) -> bool {
+        true
+    }
+
+    fn scans_middle_first(&self) -> bool {
         true
     }
 }

@@ -1,7 +1,7 @@
 //! `--renderer raster|warp`, the image model `touchdown simulate`, `touchdown replay
-//! --scenario` and `touchdown sitl` render with, and `--psf` and `--response`, the warp
-//! model's lens blur and sensor response: one definition each, so that the commands take the
-//! same values with the same help.
+//! --scenario` and `touchdown sitl` render with, `--psf`, the lens blur of either model, and
+//! `--response`, the warp model's sensor response: one definition each, so that the commands
+//! take the same values with the same help.
 
 use touchdown_sim::warp::{Psf, Response};
 use touchdown_sim::{Renderer, Simulator, WarpOptics};
@@ -41,8 +41,8 @@ impl RendererArg {
     }
 }
 
-/// `--psf`'s values: the warp model's point-spread functions, in place of the scenario's lens
-/// blur, so that one flight can be replayed through optics it was not tuned to.
+/// `--psf`'s values: point-spread functions in place of the scenario's lens blur (either
+/// model), so that one flight can be replayed through optics it was not tuned to.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PsfArg(pub Vec<Psf>);
 
@@ -61,8 +61,8 @@ pub struct ResponseArg {
 /// `--psf` and `--response`, shared by `touchdown simulate` and `touchdown replay`.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct LensArgs {
-    /// The warp model's lens blur (with --renderer warp; replay: with --scenario), in place of
-    /// the scenario's: a comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH
+    /// The lens blur (either renderer; replay: with --scenario), in place of the scenario's:
+    /// a comma-separated list of gaussian:SIGMA, disc:DIAMETER, motion:LENGTH
     /// or motion:LENGTH@DEGREES, field:CORNER_SIGMA (pixels)
     #[arg(
         long,
@@ -216,33 +216,31 @@ fn kind_values<'a>(
         .collect()
 }
 
-/// `simulator` rendering with `renderer` and, with `lens`'s `--psf`, the warp model's lens
-/// blur replaced by it (its defocus with distance, motion blur and vignetting kept) and with
-/// its `--response` the items given of the sensor response; either without the warp model is
-/// a usage error.
+/// `simulator` rendering with `renderer`, with `lens`'s `--psf` in place of the scenario's
+/// lens blur (either model; its defocus with distance, motion blur and vignetting kept) and
+/// `--response`'s items of the warp model's sensor response (without the warp model a usage
+/// error).
 pub fn configure(
     simulator: Simulator,
     renderer: RendererArg,
     lens: &LensArgs,
 ) -> Result<Simulator, CliError> {
     // Refused before the warp model's world is rasterised.
-    if lens.any() && renderer != RendererArg::Warp {
+    if lens.response.is_some() && renderer != RendererArg::Warp {
         return Err(CliError(
-            "--psf and --response set the warp model's optics: add --renderer warp".into(),
+            "--response sets the warp model's sensor response: add --renderer warp".into(),
         ));
     }
-    let simulator = simulator.with_renderer(renderer.renderer());
-    if !lens.any() {
-        return Ok(simulator);
-    }
-    let mut optics = WarpOptics::of_scenario(&simulator.scenario);
-    if let Some(PsfArg(psfs)) = &lens.psf {
-        optics.psfs = psfs.clone();
-    }
+    let mut simulator = simulator.with_renderer(renderer.renderer());
     if let Some(response) = &lens.response {
+        let mut optics = WarpOptics::of_scenario(&simulator.scenario);
         optics.response = response.apply(optics.response);
+        simulator = simulator.with_warp_optics(optics);
     }
-    Ok(simulator.with_warp_optics(optics))
+    if let Some(PsfArg(psfs)) = &lens.psf {
+        simulator = simulator.with_lens_psfs(psfs.clone());
+    }
+    Ok(simulator)
 }
 
 #[cfg(test)]

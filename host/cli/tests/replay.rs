@@ -334,7 +334,7 @@ fn truncated_frame_file_is_named() {
 
 #[test]
 fn bad_inputs_are_one_line_and_status_2() {
-    let cases: [(&[&str], &[&str]); 12] = [
+    let cases: [(&[&str], &[&str]); 11] = [
         (
             &["replay", "--scenario", "nosuch"],
             &["unknown scenario `nosuch`", "paper", "landing"],
@@ -356,10 +356,6 @@ fn bad_inputs_are_one_line_and_status_2() {
         (
             &["replay", "some-dir", "--psf", "disc:2"],
             &["--psf", "--scenario only"],
-        ),
-        (
-            &["replay", "--scenario", "paper", "--psf", "disc:2"],
-            &["--psf", "--renderer warp"],
         ),
         (
             &["replay", "--scenario", "paper", "--psf", "box:2"],
@@ -742,27 +738,30 @@ fn calibration_hover_hands_the_mount_the_board_set_to_the_flight() {
     assert_fails_with_one_line(&refused, &["--calibration-hover", "--no-calibration"]);
 }
 
-/// `--psf` reaches the warp model both ways: the paper's hover replayed in memory through a
+/// `--psf` reaches either model both ways: the paper's hover replayed in memory through a
 /// defocus disc gives the tables of its recording simulated through it, and not the tables
 /// of the scenario's own lens.
 #[test]
 fn a_psf_is_the_same_in_memory_and_on_disk() {
-    let (disc, own, from_disk) = tables_in_memory_and_on_disk(
-        "paper-recording-disc",
-        &["--renderer", "warp", "--psf", "disc:2.5"],
-        &["--renderer", "warp"],
-        |dir| {
-            let toml =
-                std::fs::read_to_string(dir.join("simulation.toml")).expect("simulation.toml");
-            assert!(
-                toml.contains("psf = \"[Disc { diameter_px: 2.5 }]\""),
-                "{toml}"
-            );
-        },
-    );
-    assert!(!disc.is_empty());
-    assert_eq!(disc, from_disk);
-    assert_ne!(disc, own);
+    for renderer in ["raster", "warp"] {
+        let (disc, own, from_disk) = tables_in_memory_and_on_disk(
+            &format!("paper-recording-disc-{renderer}"),
+            &["--renderer", renderer, "--psf", "disc:2.5"],
+            &["--renderer", renderer],
+            |dir| {
+                let toml =
+                    std::fs::read_to_string(dir.join("simulation.toml")).expect("simulation.toml");
+                assert!(
+                    toml.contains("psf = \"[Disc { diameter_px: 2.5 }]\"")
+                        && toml.contains(&format!("renderer = \"{renderer}\"")),
+                    "{toml}"
+                );
+            },
+        );
+        assert!(!disc.is_empty());
+        assert_eq!(disc, from_disk, "{renderer}");
+        assert_ne!(disc, own, "{renderer}");
+    }
 }
 
 /// `--response` reaches the warp model both ways, as `--psf` does: the paper's hover replayed
@@ -789,26 +788,40 @@ fn a_response_is_the_same_in_memory_and_on_disk() {
 }
 
 /// The far range's scale on more than one image model (issue 39): the paper's hovers at 30,
-/// 40 and 50 m replayed on the ray-casting model and on the warp model through other lenses
-/// and other cameras' responses, and over the same marker printed on a margin a cell wider
+/// 40 and 50 m replayed on the ray-casting model and on the warp model, each through three
+/// lenses (the scenario's, a defocus disc, a motion line), the warp model through others and
+/// other cameras' responses too, and over the same marker printed on a margin a cell wider
 /// than the detector knows of (the `margin` scenario: the ground's edge within a far
 /// marker's blur). Wherever a hover has estimates, their mean is within 0.3 % of the range,
 /// on every row; at 30 and 40 m each row gives a pose in at least the share of frames it
 /// states. Not held yet, so not asserted (docs/accuracy.md, "Through other lenses"): a
-/// gamma-encoded camera gives no pose at 50 m and 69 % of the 40 m frames; the Gaussian of
-/// 0.8 px a quarter of the 50 m frames, the motion line two thirds; the wider margin behind a
-/// 0.8 px Gaussian, a 2 px disc or motion line or a lens sharp in the middle reads some
-/// heights 0.4-0.9 % short, through a gamma curve 0.8 % long.
+/// gamma-encoded camera gives no pose at 50 m and 69 % of the 40 m frames; at 50 m the
+/// Gaussian of 0.8 px keeps a quarter of the frames, the motion line and the raster model's
+/// disc about two thirds; the wider margin behind a 0.8 px Gaussian, a 2 px disc or motion
+/// line or a lens sharp in the middle reads some heights 0.4-1.3 % near, through a gamma
+/// curve 0.8 % far.
 #[test]
 #[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
 fn the_far_range_scale_holds_within_0_3_percent_through_several_lenses() {
     const MAX_SCALE_ERROR: f64 = 0.003;
     // (name, scenario, arguments, least share of the 30 and 40 m frames with a pose)
-    let models: [(&str, &str, &[&str], f64); 11] = [
+    let models: [(&str, &str, &[&str], f64); 13] = [
         (
             "raster, the scenario's lens",
             "paper",
             &["--renderer", "raster"],
+            0.9,
+        ),
+        (
+            "raster, defocus disc 2 px",
+            "paper",
+            &["--renderer", "raster", "--psf", "disc:2"],
+            0.9,
+        ),
+        (
+            "raster, motion line 2 px at 30 deg",
+            "paper",
+            &["--renderer", "raster", "--psf", "motion:2@30"],
             0.9,
         ),
         (
@@ -913,6 +926,85 @@ fn the_far_range_scale_holds_within_0_3_percent_through_several_lenses() {
                 }
             }
             if height_m < 45.0 && detection < min_detection {
+                failures.push(format!(
+                    "{name}, {height_m} m: a pose in {:.0} % of frames",
+                    100.0 * detection
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
+
+/// The far range on imagery of a third image model, one written from the file formats alone
+/// (`scripts/independent_render.py`: its own sampling, PSF, cluttered ground, noise and a
+/// marker on a white margin of two cells, or of one): the paper's hovers at 20 to 50 m read
+/// within 0.3 % of the range wherever there are estimates, with a pose in 90 % of the
+/// frames up to 40 m. Skipped (printed) without python3, numpy, OpenCV or the shared
+/// families.
+#[test]
+#[ignore = "long: in the long suite, `cargo test -- --ignored` (CI runs it)"]
+fn the_far_range_holds_on_an_independent_renderers_imagery() {
+    const MAX_SCALE_ERROR: f64 = 0.003;
+    // The camera and pad files the renderer takes: the paper scenario's.
+    let ours = scratch("independent-camera");
+    let out = touchdown(&[
+        "simulate",
+        "--scenario",
+        "paper",
+        "--frames",
+        "1",
+        "--out",
+        path_str(&ours),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let script =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/independent_render.py");
+    let mut failures = Vec::new();
+    for (name, margin) in [("margin of two cells", "2"), ("margin of one cell", "1")] {
+        let dir = scratch(&format!("independent-margin-{margin}"));
+        let rendered = Command::new("python3")
+            .arg(&script)
+            .args(["--camera-from", path_str(&ours), "--out", path_str(&dir)])
+            .args(["--heights", "20,30,40,50", "--frames-per-height", "8"])
+            .args(["--seed", "1", "--margin-cells", margin])
+            .output();
+        match rendered {
+            Ok(o) if o.status.success() => {}
+            Ok(o) if o.status.code() == Some(3) => {
+                println!("skipping: {}", text(&o.stderr).trim());
+                return;
+            }
+            Ok(o) => panic!("{name}: the renderer failed: {}", text(&o.stderr)),
+            Err(e) => {
+                println!("skipping: python3 does not run ({e})");
+                return;
+            }
+        }
+        let out = touchdown(&["replay", path_str(&dir), "--no-plots", "--json"]);
+        assert!(out.status.success(), "{name}: {}", text(&out.stderr));
+        let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+        for height_m in [20.0, 30.0, 40.0, 50.0] {
+            let label = format!("z={height_m}");
+            let ours = doc["set_points"]
+                .as_array()
+                .and_then(|rows| rows.iter().find(|r| r["label"] == label.as_str()))
+                .and_then(|row| row["methods"].as_array())
+                .and_then(|m| m.iter().find(|m| m["name"] == "ours"))
+                .unwrap_or_else(|| panic!("{name}: no {label} row for ours"));
+            let detection = ours["detection_rate"].as_f64().expect("detection rate");
+            let error_cm = ours["on_axis"]["mean_error_cm"].as_f64();
+            println!(
+                "{name}, {height_m} m: pose in {:.0} % of frames, mean error {}",
+                100.0 * detection,
+                error_cm.map_or("-".into(), |e| format!("{e:+.2} cm"))
+            );
+            if let Some(e) = error_cm {
+                if e.abs() / 100.0 > MAX_SCALE_ERROR * height_m {
+                    failures.push(format!("{name}, {height_m} m: {e:+.2} cm, over 0.3 %"));
+                }
+            }
+            if height_m < 45.0 && detection < 0.9 {
                 failures.push(format!(
                     "{name}, {height_m} m: a pose in {:.0} % of frames",
                     100.0 * detection

@@ -59,6 +59,7 @@ pub mod effects;
 pub mod math;
 mod noise;
 pub mod pad;
+pub mod psf;
 pub mod raster;
 pub mod render;
 pub mod scenario;
@@ -142,6 +143,9 @@ pub struct Simulator {
     /// the raster renderer.
     warp: Option<std::sync::Arc<warp::WarpScene>>,
     warp_optics: WarpOptics,
+    /// The raster renderer's lens blur in place of the scenario's Gaussian
+    /// ([`Simulator::with_lens_psfs`]); `None`: the scenario's.
+    raster_psfs: Option<Vec<psf::Psf>>,
 }
 
 /// A 64-bit mix of two numbers (splitmix64 finaliser), for per-frame seeds.
@@ -171,6 +175,7 @@ impl Simulator {
             threads,
             warp: None,
             warp_optics,
+            raster_psfs: None,
         }
     }
 
@@ -197,6 +202,17 @@ impl Simulator {
     /// the raster renderer ignores them.
     pub fn with_warp_optics(mut self, optics: WarpOptics) -> Self {
         self.warp_optics = optics;
+        self
+    }
+
+    /// The lens's blur as `psfs`, applied in turn to the radiance, in place of the scenario's
+    /// lens blur ([`sensor::Optics::blur_sigma_px`]) with either renderer: the defocus with
+    /// distance, motion blur, vignetting and sensor stay the scenario's (so a flight can be
+    /// replayed through a lens it was not tuned to on both image models). Sets the warp
+    /// model's [`WarpOptics::psfs`]: give [`Simulator::with_warp_optics`] first.
+    pub fn with_lens_psfs(mut self, psfs: Vec<psf::Psf>) -> Self {
+        self.warp_optics.psfs = psfs.clone();
+        self.raster_psfs = Some(psfs);
         self
     }
 
@@ -520,9 +536,14 @@ impl Simulator {
             supersampling,
             self.threads,
         );
-        let blur = s
-            .optics
-            .blur_sigma(s.camera.fx(), middle.axis_distance_to_ground());
+        let distance = middle.axis_distance_to_ground();
+        let (blur, psfs) = match &self.raster_psfs {
+            Some(psfs) => (
+                s.optics.defocus_sigma(s.camera.fx(), distance),
+                psfs.as_slice(),
+            ),
+            None => (s.optics.blur_sigma(s.camera.fx(), distance), &[][..]),
+        };
         let pixels = sensor::expose(
             radiance,
             w,
@@ -531,6 +552,7 @@ impl Simulator {
             &s.optics,
             sensor,
             blur,
+            psfs,
             mix(s.seed, index as u64 + 1),
         );
         (pixels, subframes)

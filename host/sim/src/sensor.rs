@@ -8,7 +8,9 @@
 //!    geometric: a lens of aperture `A` focused at `d_f` spreads a point at distance `d` over
 //!    a disc of `f_px A |1/d - 1/d_f|` pixels; the Gaussian with the disc's standard deviation
 //!    (a quarter of its diameter) stands in for it. Fixed-focus board cameras are focused far
-//!    away, so the pad blurs in the last metre of a landing.
+//!    away, so the pad blurs in the last metre of a landing. Other point-spread functions
+//!    ([`crate::psf`], [`crate::Simulator::with_lens_psfs`]) may replace the lens's spread:
+//!    applied in turn after the defocus's Gaussian.
 //! 3. **Exposure**: electrons = radiance x `electrons_per_radiance`, either fixed, or set per
 //!    frame by the sensor's own auto-exposure, which meters the mean of the frame (as
 //!    OpenMV's and most sensors' AE do: metering on dark grass makes a white pad clip, the
@@ -29,6 +31,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::noise::NormalPairs;
+use crate::psf::Psf;
 use crate::render::gaussian_blur;
 
 /// The lens.
@@ -79,10 +82,16 @@ impl Optics {
         focal_px * self.aperture_m * (1.0 / distance_m - inv_focus).abs()
     }
 
+    /// The defocus as a Gaussian of the blur circle's variance (a uniform disc of diameter d
+    /// has d^2 / 16 along each axis) for a scene `distance_m` away, pixels.
+    pub fn defocus_sigma(&self, focal_px: f64, distance_m: f64) -> f64 {
+        0.25 * self.defocus_diameter_px(focal_px, distance_m)
+    }
+
     /// The total blur's standard deviation for a scene `distance_m` away, pixels.
     pub fn blur_sigma(&self, focal_px: f64, distance_m: f64) -> f64 {
-        let defocus = 0.25 * self.defocus_diameter_px(focal_px, distance_m);
-        (self.blur_sigma_px.powi(2) + defocus.powi(2)).sqrt()
+        self.blur_sigma_px
+            .hypot(self.defocus_sigma(focal_px, distance_m))
     }
 }
 
@@ -219,6 +228,7 @@ pub fn expose(
     optics: &Optics,
     sensor: &Sensor,
     blur_sigma_px: f64,
+    psfs: &[Psf],
     noise_seed: u64,
 ) -> Vec<u8> {
     if optics.vignetting > 0.0 {
@@ -230,6 +240,9 @@ pub fn expose(
     }
     if blur_sigma_px > 0.05 {
         gaussian_blur(&mut radiance, width, height, blur_sigma_px);
+    }
+    for psf in psfs {
+        psf.apply(&mut radiance, width, height);
     }
     let scale = sensor.electrons_per_radiance(&radiance) as f32;
     let mut electrons: Vec<f32> = radiance.iter().map(|&v| v * scale).collect();
@@ -338,6 +351,7 @@ mod tests {
             &Optics::ideal(),
             &Sensor::ideal(),
             0.0,
+            &[],
             1,
         );
         assert_eq!(g, vec![0, 125, 250, 255]);
@@ -362,6 +376,7 @@ mod tests {
             &Optics::ideal(),
             &sensor,
             0.0,
+            &[],
             9,
         );
         let mean = g.iter().map(|&v| f64::from(v)).sum::<f64>() / n as f64;

@@ -73,6 +73,7 @@ fn frame(simulator: &Simulator, sampling: Sampling, supersampling: usize) -> (Ve
         &s.optics,
         &s.sensor,
         blur,
+        &[],
         7,
     );
     (pixels, poses.subframes())

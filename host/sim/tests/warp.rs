@@ -599,3 +599,68 @@ fn each_psf_blurs_an_edge_by_its_width() {
     let top = edge_variance(&narrow, cw, ch, 0);
     close(top, weight * 0.36, "narrow field blur in the top row");
 }
+
+/// Sum of squared differences between horizontal and vertical neighbours: how sharp a
+/// frame's edges are.
+fn gradient_energy(frame: &GrayFrame) -> f64 {
+    let (w, p) = (frame.width, &frame.pixels);
+    let mut sum = 0.0;
+    for (k, &v) in p.iter().enumerate() {
+        let v = f64::from(v);
+        if k % w + 1 < w {
+            sum += (f64::from(p[k + 1]) - v).powi(2);
+        }
+        if let Some(&below) = p.get(k + w) {
+            sum += (f64::from(below) - v).powi(2);
+        }
+    }
+    sum
+}
+
+#[test]
+fn either_model_takes_the_lens_as_point_spread_functions() {
+    let mut scenario = still(6.0, GroundKind::Flat(0.3));
+    // The board's lens blur, no defocus (focused at the pad), no noise.
+    scenario.optics = Optics {
+        aperture_m: 0.0,
+        ..Optics::board_camera()
+    };
+    let lens_sigma = scenario.optics.blur_sigma_px;
+    assert!(lens_sigma > 0.3, "the board's lens blurs: {lens_sigma}");
+    for renderer in [Renderer::Raster, Renderer::Warp] {
+        let model = || {
+            Simulator::new(scenario.clone())
+                .with_threads(2)
+                .with_renderer(renderer)
+        };
+        let own = model().render(0).expect("one frame").image;
+        // The lens given as its own Gaussian: the scenario's frame, to the blur's rounding
+        // (the warp model's softer corners are its lens's too; without them, near enough).
+        let as_given = model()
+            .with_lens_psfs(vec![Psf::Gaussian {
+                sigma_px: lens_sigma,
+            }])
+            .render(0)
+            .expect("one frame")
+            .image;
+        let (worst, mean) = own
+            .pixels
+            .iter()
+            .zip(&as_given.pixels)
+            .fold((0u8, 0.0), |(worst, sum), (a, b)| {
+                (worst.max(a.abs_diff(*b)), sum + f64::from(a.abs_diff(*b)))
+            });
+        let mean = mean / own.pixels.len() as f64;
+        println!("{renderer}: the lens as its Gaussian: worst {worst}, mean {mean:.3} grey levels");
+        assert!(mean < 0.05 && worst <= 3, "{renderer}: {worst} / {mean}");
+        // A defocus disc of 6 px in its place spreads every edge further.
+        let defocused = model()
+            .with_lens_psfs(vec![Psf::Disc { diameter_px: 6.0 }])
+            .render(0)
+            .expect("one frame")
+            .image;
+        let ratio = gradient_energy(&defocused) / gradient_energy(&own);
+        println!("{renderer}: a 6 px disc leaves {ratio:.2} of the gradient energy");
+        assert!(ratio < 0.6, "{renderer}: {ratio}");
+    }
+}

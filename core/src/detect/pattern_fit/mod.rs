@@ -14,12 +14,12 @@
 //! for its outline to be found). So the image of the marker is predicted, not searched:
 //! the known cells mapped through the corner homography, blurred by a Gaussian of unknown
 //! width, with unknown black and white levels and, on each of its four sides, an unknown
-//! level beyond the known area, after a band of white paper of unknown width where the
-//! cells are small enough for the band's edge to be read. A pad on grass has dark ground on
-//! some sides of a marker and the white sheet on others, and a marker is printed on a margin
-//! of any width: the ground's edge a cell or two beyond the border lies within a far
-//! marker's blur, and with the level put right at the known area's end the fit moved the
-//! edges towards it. A Gauss-Newton fit of the 4 corners, the blur, the two levels, the
+//! level beyond the known area, after a band of white paper of unknown width. A pad on grass
+//! has dark ground on some sides of a marker and the white sheet on others, and a marker is
+//! printed on a margin of any width: the ground's edge a cell or two beyond the border lies
+//! within a far marker's blur, or half a cell beyond it within the pixels read of a larger
+//! one, and with the level put right at the known area's end the fit moved the edges towards
+//! it (by 3 % on a marker of 22 pixels). A Gauss-Newton fit of the 4 corners, the blur, the two levels, the
 //! outside levels and the bands to every pixel over the marker moves the corners to where
 //! the whole pattern agrees: each edge is placed with its neighbours modelled instead of
 //! trimmed, so the scale is unbiased whatever the blur.
@@ -152,8 +152,12 @@ const BAND_PULL: f32 = 1e-4;
 /// Widest printed band the fit may end with, cells: the window reaches about two cells
 /// beyond the known area on the smallest markers, and nothing further is measured.
 const MAX_BAND_CELLS: f32 = 3.0;
+/// Largest change of a band's width (cells) in one step: the model is linear in a band's
+/// edge only within about the blur's width of it.
+const MAX_BAND_STEP_CELLS: f32 = 0.5;
 /// Band widths (cells) the fit may start from: the one whose solved levels leave the least
-/// residual (see `fit`). The first is none: where the bands are not fitted, the only one.
+/// residual (see `fit`). The first is none: on a marker whose cells are wider than
+/// [`EDGE_REACH_PX`], the only one (see `fit`).
 const BAND_STARTS: [f32; 3] = [0.0, 1.0, 2.0];
 
 /// One pixel a fit reads: its position and grey level.
@@ -172,11 +176,6 @@ struct Sample {
 /// the position, which unlike a lattice cannot beat against the cell grid) keeps that many.
 struct Window {
     samples: heapless::Vec<Sample, MAX_PIXELS>,
-    /// Whether the printed bands are fitted: only where a cell is at most [`EDGE_REACH_PX`],
-    /// so that a band's outer edge a cell out lies within the pixels read. On a larger
-    /// marker it lies beyond them, where a band's width is barely measured: fitted there,
-    /// it moved the corners of markers of 24-32 pixels (`recall_report`).
-    bands: bool,
 }
 
 /// Distance from a pattern edge (pixels) within which a pixel is read: the blur's reach (2.5
@@ -252,10 +251,7 @@ fn window(
             }
         }
     }
-    Some(Window {
-        samples,
-        bands: cell_px <= EDGE_REACH_PX,
-    })
+    Some(Window { samples })
 }
 
 /// Whether pixel (x, y) is in a fixed scatter of one pixel in `step`.
@@ -280,6 +276,11 @@ fn fitted_corners(params: &[f32; N]) -> [Point; 4] {
         *c = Point::new(params[2 * k], params[2 * k + 1]);
     }
     corners
+}
+
+/// Whether a marker at `corners` is small enough to be fitted.
+pub(crate) fn fits(corners: &[Point; 4]) -> bool {
+    longest_side(corners) <= MAX_SIDE_PX
 }
 
 /// The longest side of a quad, pixels.
@@ -345,8 +346,12 @@ pub(crate) fn fit(
     // A band's outer edge is a step one or two cells beyond the known area, too far from a
     // start of none for the steps to find (from none, a two-cell band ended near one): the
     // start is the width among `BAND_STARTS`, the same on every side, whose solved levels
-    // leave the least residual (one pass for all of them).
-    let starts = if win.bands {
+    // leave the least residual (one pass for all of them). Where a cell is wider than the
+    // pixels read reach, a band of a cell or more ends beyond them and its solved levels say
+    // nothing of it (started there, the corners of markers of 24-32 pixels moved:
+    // `recall_report`); such a marker starts from none, and a narrower band, whose edge the
+    // pixels do see, is fitted from there.
+    let starts = if cell_px <= EDGE_REACH_PX {
         &BAND_STARTS[..]
     } else {
         &BAND_STARTS[..1]
@@ -372,7 +377,11 @@ pub(crate) fn fit(
     let mut current = linearise(&pattern, &win, &params, Pass::Full).ok_or(Refusal::Geometry)?;
     let mut damping = DAMPING;
     for iteration in 0..ITERATIONS {
-        let step = solve_damped(&current.jtj, &current.jte, damping).ok_or(Refusal::Singular)?;
+        let mut step =
+            solve_damped(&current.jtj, &current.jte, damping).ok_or(Refusal::Singular)?;
+        for d in step.iter_mut().skip(BAND) {
+            *d = d.clamp(-MAX_BAND_STEP_CELLS, MAX_BAND_STEP_CELLS);
+        }
         let mut trial = params;
         for (p, d) in trial.iter_mut().zip(step.iter()) {
             *p += d;

@@ -54,14 +54,11 @@ pub(super) fn linearise(
     let (blur, black, contrast) = (libm::expf(params[BLUR]), params[BLACK], params[CONTRAST]);
     let blur_v = libm::expf(params[BLUR_V]);
     // A band is as wide as its parameter within 0 and `MAX_BAND_CELLS`; outside them the
-    // parameter has no derivative, and the pull below brings it back. None where the
-    // window does not fit bands.
+    // parameter has no derivative, and the pull below brings it back.
     let (mut bands, mut band_free) = ([0.0f32; SIDES], [false; SIDES]);
-    if win.bands {
-        for k in 0..SIDES {
-            bands[k] = params[BAND + k].clamp(0.0, MAX_BAND_CELLS);
-            band_free[k] = bands[k] == params[BAND + k];
-        }
+    for k in 0..SIDES {
+        bands[k] = params[BAND + k].clamp(0.0, MAX_BAND_CELLS);
+        band_free[k] = bands[k] == params[BAND + k];
     }
     let mut outside = [0.0f32; SIDES];
     for (level, p) in outside.iter_mut().zip(params.iter().skip(OUTSIDE)) {

@@ -277,14 +277,22 @@ fn a_marker_at_the_image_border_is_fitted_or_refused_without_panic() {
 
 /// A marker printed on a white margin wider than its known area, on darker ground: the
 /// ground's edge lies a cell or two beyond the known area, within the blur's reach on a far
-/// marker. A model with the outside's level right at the known area's end put the edges
-/// 1-3 % out on these markers (the fit's printed bands, `model::Axis::set`).
+/// marker, and within the pixels read on a larger one. A model with the outside's level
+/// right at the known area's end put the edges 1-3 % out on these markers (the fit's
+/// printed bands, `model::Axis::set`), on markers of 22 and 30 pixels too.
 #[test]
 fn a_printed_margin_of_any_width_leaves_the_scale_unbiased() {
     let n = TAG36H11.grid as f32;
     let mut worst = 0.0f32;
     let mut case = 0;
-    for &(side, sigma) in &[(11.0, 0.7), (11.0, 1.0), (14.0, 0.8), (18.0, 1.0)] {
+    for &(side, sigma) in &[
+        (11.0, 0.7),
+        (11.0, 1.0),
+        (14.0, 0.8),
+        (18.0, 1.0),
+        (22.0, 0.8),
+        (30.0, 1.0),
+    ] {
         for &margin in &[0.0f32, 0.5, 1.0, 1.5, 2.0, 3.0] {
             // The sheet's edge `margin` cells beyond the grid on every side, square at the
             // corners; grass beyond.

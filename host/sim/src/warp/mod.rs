@@ -13,8 +13,10 @@
 //! - **Motion blur**: the footprint swept along the image's path over the exposure (its
 //!   spread added to the box, its mean to the centre), measured at a sparse grid of knots;
 //!   no sub-frames. A rolling shutter stays a pose per row.
-//! - **Optics** ([`psf`]): a Gaussian, a defocus disc (the blur circle itself), a motion
-//!   line, a field-dependent blur growing toward the corners, chosen by [`WarpOptics`].
+//! - **Optics** ([`WarpOptics`]): the scenario's lens as a Gaussian whose corners are
+//!   softer ([`Psf::Field`]) and its defocus as the blur circle itself ([`Psf::Disc`]),
+//!   where the raster model has one Gaussian for both; either model takes other
+//!   point-spread functions in place of the lens's ([`crate::psf`]).
 //! - **Sensor** (`response`): the scenario's exposure and photometry, its own noise
 //!   (SplitMix64, sum of uniforms, seeded per row), gamma, a 3x3 sharpening kernel,
 //!   rounding, optional 8x8 block compression. No blooming.
@@ -23,14 +25,13 @@
 //! function of the pose as with the raster renderer; only the image differs. A frame is a
 //! pure function of the scenario, the optics and the seed, whatever the thread count.
 
-pub mod psf;
 mod response;
 mod sample;
 mod texture;
 
 use std::fmt;
 
-pub use psf::Psf;
+pub use crate::psf::Psf;
 pub use response::Response;
 
 use crate::camera::RayMap;

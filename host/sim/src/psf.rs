@@ -1,4 +1,5 @@
-//! The warp renderer's point-spread functions, applied to the radiance image: a Gaussian
+//! A lens's point-spread functions, applied to the radiance image by either renderer
+//! ([`crate::warp::WarpOptics::psfs`], [`crate::Simulator::with_lens_psfs`]): a Gaussian
 //! (the lens's own spread), a defocus disc (the geometric blur circle itself, not a
 //! Gaussian stand-in), a straight motion line (camera shake at a fixed length and angle),
 //! and a field-dependent blur that grows from nothing at the centre to a Gaussian at the
