@@ -135,6 +135,118 @@ impl PlaneFit {
     }
 }
 
+/// Most cells of one ring of a grid (ring -1, just outside the largest grid, has the most).
+const MAX_RING_CELLS: usize = 4 * MAX_GRID + 4;
+
+/// One ring's readings and the grid points they were read at, in the order read.
+pub(super) struct RingSamples {
+    points: [(f32, f32, f32); MAX_RING_CELLS],
+    count: usize,
+}
+
+impl Default for RingSamples {
+    fn default() -> Self {
+        RingSamples {
+            points: [(0.0, 0.0, 0.0); MAX_RING_CELLS],
+            count: 0,
+        }
+    }
+}
+
+impl RingSamples {
+    pub(super) fn push(&mut self, u: f32, v: f32, z: f32) {
+        if let Some(slot) = self.points.get_mut(self.count) {
+            *slot = (u, v, z);
+            self.count += 1;
+        }
+    }
+
+    /// The `k`-th reading (0 past the last).
+    pub(super) fn reading(&self, k: usize) -> f32 {
+        self.points
+            .get(k)
+            .filter(|_| k < self.count)
+            .map_or(0.0, |p| p.2)
+    }
+
+    fn readings(&self) -> impl Iterator<Item = f32> + '_ {
+        self.points.iter().take(self.count).map(|p| p.2)
+    }
+
+    /// The median reading (the upper of the middle two of an even count), 0 when empty.
+    fn median(&self) -> f32 {
+        let mut sorted = [0.0f32; MAX_RING_CELLS];
+        let count = self.count.min(MAX_RING_CELLS);
+        for (slot, z) in sorted.iter_mut().zip(self.readings()) {
+            *slot = z;
+        }
+        median_of(sorted.get_mut(..count).unwrap_or(&mut []))
+    }
+}
+
+/// The median of `items` (the upper of the middle two of an even count), sorting them; the
+/// default when empty. An insertion sort: a ring's few dozen cells, and only on a ring that
+/// a shadow splits ([`majority_fits`]).
+fn median_of<T: Copy + PartialOrd + Default>(items: &mut [T]) -> T {
+    for i in 1..items.len() {
+        let mut j = i;
+        while j > 0 {
+            // By pairs taken checked: `swap` has a panic path the no-panic check finds.
+            let Some([before, item]) = items.get_mut(j - 1..=j) else {
+                break;
+            };
+            if !(*item < *before) {
+                break;
+            }
+            core::mem::swap(before, item);
+            j -= 1;
+        }
+    }
+    items.get(items.len() / 2).copied().unwrap_or_default()
+}
+
+/// The black and the white level's planes (`fits`, through every cell of the border ring and
+/// of the reference ring, whose readings are `samples`), fitted again to each ring's
+/// majority where a hard shadow's edge crosses a ring.
+///
+/// A shadow scales the light under it, so a ring it crosses reads at two levels, the cells in
+/// the sun several times those in the shadow (a marker deep in a shadow, its paper 25 grey
+/// levels and its ink 3, with the paper's corner in the sun at 200): one plane through both
+/// fits neither, and the threshold halfway between the black and the white plane rises over
+/// the shadowed paper, which then reads dark (the margin test fails, or data cells flip). A
+/// gradient across the marker (vignetting, a soft shadow) keeps each ring's readings within
+/// the contrast of each other; a ring that spreads wider than the contrast between the two
+/// rings' means holds a step. Then each level is fitted again to the cells within half the
+/// contrast between the rings' medians of their own ring's median: the larger part of each
+/// ring, on one side of the edge. The other cells are judged against those planes as before
+/// (the margin and border tests allow a share of them to read wrong).
+fn majority_fits(fits: [PlaneFit; 2], samples: [&RingSamples; 2]) -> [PlaneFit; 2] {
+    let contrast = fits[1].mean() - fits[0].mean();
+    let spread = |ring: &RingSamples| {
+        let (lo, hi) = ring
+            .readings()
+            .fold((f32::MAX, f32::MIN), |(lo, hi), z| (lo.min(z), hi.max(z)));
+        hi - lo
+    };
+    if !samples.iter().any(|ring| spread(ring) > contrast) {
+        return fits;
+    }
+    let medians = samples.map(RingSamples::median);
+    let reach = 0.5 * (medians[1] - medians[0]);
+    if !(reach > 0.0) {
+        return fits;
+    }
+    let mut majority = [PlaneFit::default(), PlaneFit::default()];
+    for ((fit, ring), median) in majority.iter_mut().zip(samples).zip(medians) {
+        for &(u, v, z) in ring.points.iter().take(ring.count) {
+            if (z - median).abs() <= reach {
+                fit.add(u, v, z);
+            }
+        }
+    }
+    majority
+}
+
 /// Where the family's cell grid lies in the frame: a homography from the grid onto the
 /// marker's plane as the frame shows it or, through a distorting lens, as an ideal lens would
 /// (its ideal-lens pixels, `lens`), each mapped point then taken through the lens into the
@@ -393,27 +505,28 @@ fn read_robust_counted<M: CellMap>(
     let mut black = PlaneFit::default();
     let mut white = PlaneFit::default();
     let mut values = [0.0f32; MAX_GRID * MAX_GRID];
+    // Each ring's readings in `for_ring`'s order too, with the grid points they were read
+    // at, for the fits of their majorities (`majority_fits`).
+    let mut black_samples = RingSamples::default();
     for_ring(n, b, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
         if let Some(z) = read_cell(image, h, u, v, multi) {
             black.add(u, v, z);
+            black_samples.push(u, v, z);
             if let Some(slot) = values.get_mut(r as usize * n + c as usize) {
                 *slot = z;
             }
         }
     });
-    let mut white_samples = [0.0f32; 4 * MAX_GRID + 4];
-    let mut white_count = 0usize;
+    let mut white_samples = RingSamples::default();
     for_ring(n, white_ring, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
         if let Some(z) = read_cell(image, h, u, v, multi) {
             white.add(u, v, z);
-            if let Some(slot) = white_samples.get_mut(white_count) {
-                *slot = z;
-                white_count += 1;
-            }
+            white_samples.push(u, v, z);
         }
     });
+    let [black, white] = majority_fits([black, white], [&black_samples, &white_samples]);
     let (ba, bb, bc) = black.solve();
     let (wa, wb, wc) = white.solve();
     let threshold = |u: f32, v: f32| 0.5 * ((ba + bb * u + bc * v) + (wa + wb * u + wc * v));
@@ -434,7 +547,7 @@ fn read_robust_counted<M: CellMap>(
     let mut k = 0usize;
     let margin_white = ring_reads_as(n, white_ring, MARGIN_ERROR_FRACTION, |r, c| {
         let (u, v) = (c as f32 + 0.5, r as f32 + 0.5);
-        let dark = white_samples.get(k).copied().unwrap_or(0.0) < threshold(u, v);
+        let dark = white_samples.reading(k) < threshold(u, v);
         k += 1;
         dark
     });
@@ -732,14 +845,18 @@ fn precheck_sides<const N: usize>(
         *mean = read_ring(d, ring);
     }
     let ([border, margin], [black, white]) = (rings, means);
-    let contrast = white - black;
-    if !(contrast >= f32::from(min_contrast) * 0.5) {
-        return Precheck::NoBorder;
-    }
     // Cells of at least PRECHECK_BORDER_CELL_PX along the first two sides.
     let side2 = shorter_first_side_squared(quad);
     let min_side = PRECHECK_BORDER_CELL_PX * q;
-    if side2 >= min_side * min_side {
+    let judge_border = side2 >= min_side * min_side;
+    // A dark border ring in a light margin, judged against the levels `black` and `white`.
+    let bordered = |black: f32, white: f32| {
+        if !(white - black >= f32::from(min_contrast) * 0.5) {
+            return false;
+        }
+        if !judge_border {
+            return true;
+        }
         let mid = 0.5 * (black + white);
         let light = border
             .iter()
@@ -752,11 +869,34 @@ fn precheck_sides<const N: usize>(
             .filter(|&&z| f32::from(z) < mid)
             .count();
         let samples = (4 * N) as f32;
-        if light as f32 > PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * samples
-            || dark as f32 > PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * samples
-        {
+        light as f32 <= PRECHECK_ERROR_SLACK * BORDER_ERROR_FRACTION * samples
+            && dark as f32 <= PRECHECK_ERROR_SLACK * MARGIN_ERROR_FRACTION * samples
+    };
+    // Where a hard shadow's edge crosses a ring, its sunlit part pulls the ring's mean far
+    // from its shadowed part (`majority_fits` of the full read): judged again at the rings'
+    // medians, when a ring spreads wider than the contrast of the means. Only for a quad the
+    // means turned down, so the candidates that pass pay nothing.
+    let mut contrast = white - black;
+    if !bordered(black, white) {
+        let spread = |ring: &[[u8; N]; 4]| {
+            let (lo, hi) = ring
+                .iter()
+                .flatten()
+                .fold((u8::MAX, 0u8), |(lo, hi), &z| (lo.min(z), hi.max(z)));
+            f32::from(hi.saturating_sub(lo))
+        };
+        if !(spread(&border) > contrast || spread(&margin) > contrast) {
             return Precheck::NoBorder;
         }
+        let median = |ring: &[[u8; N]; 4]| {
+            let mut all = *ring;
+            f32::from(median_of(all.as_flattened_mut()))
+        };
+        let (black, white) = (median(&border), median(&margin));
+        if !bordered(black, white) {
+            return Precheck::NoBorder;
+        }
+        contrast = white - black;
     }
     if flat_rejects {
         // A lattice over the data cells, which span 1..q-1 cells of the square.
@@ -887,5 +1027,138 @@ pub(super) fn for_ring(n: usize, ring: isize, mut f: impl FnMut(isize, isize)) {
     }
     for r in (lo + 1..hi).rev() {
         f(r, lo);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use super::*;
+    use crate::family::tables::TAG36H11;
+
+    /// Frame side of [`shadowed_marker`], pixels.
+    const SIZE: usize = 120;
+    /// Cell side of [`shadowed_marker`], pixels.
+    const CELL: f32 = 8.0;
+    /// Where [`shadowed_marker`]'s grid starts: its cell edges lie on pixel edges.
+    const GRID_AT: f32 = 19.5;
+
+    /// tag36h11 `id`, cells of 8 pixels, on paper that fills the frame, deep in a shadow (ink
+    /// 3, paper 25: the camera exposed for the sun) but where `sunlit(x, y)`, which is eight
+    /// times as bright (paper 200); and the outer corners of its black border.
+    fn shadowed_marker(
+        id: u16,
+        sunlit: impl Fn(f32, f32) -> bool,
+    ) -> (std::vec::Vec<u8>, [Point; 4]) {
+        let family = &TAG36H11;
+        let n = family.grid as usize;
+        const SUB: usize = 4;
+        let mut pixels = std::vec![0u8; SIZE * SIZE];
+        for y in 0..SIZE {
+            for x in 0..SIZE {
+                let mut sum = 0.0;
+                for sy in 0..SUB {
+                    for sx in 0..SUB {
+                        let px = x as f32 - 0.5 + (sx as f32 + 0.5) / SUB as f32;
+                        let py = y as f32 - 0.5 + (sy as f32 + 0.5) / SUB as f32;
+                        let (u, v) = ((px - GRID_AT) / CELL, (py - GRID_AT) / CELL);
+                        let inside = u >= 0.0 && v >= 0.0 && u < n as f32 && v < n as f32;
+                        let white = !inside
+                            || family.cell_is_white(usize::from(id), v as usize, u as usize)
+                                == Some(true);
+                        let level = if white { 25.0 } else { 3.0 };
+                        sum += if sunlit(px, py) { 8.0 * level } else { level };
+                    }
+                }
+                pixels[y * SIZE + x] = (sum / (SUB * SUB) as f32).round() as u8;
+            }
+        }
+        let b = family.quad_offset() as f32;
+        let (lo, hi) = (GRID_AT + b * CELL, GRID_AT + (n as f32 - b) * CELL);
+        let corners = [
+            Point::new(lo, lo),
+            Point::new(hi, lo),
+            Point::new(hi, hi),
+            Point::new(lo, hi),
+        ];
+        (pixels, corners)
+    }
+
+    /// The edge of a hard shadow across the left side of the margin and its corner: the sun
+    /// on the paper beside the marker's top-left corner and along most of its left side, the
+    /// marker itself in the shadow but for the black border's corner.
+    fn sun_along_the_left(x: f32, y: f32) -> bool {
+        x + 0.25 * y < 41.0
+    }
+
+    /// A marker deep in a shadow whose margin the sun lights along one side: the full read
+    /// learns its white level from the shadowed paper, the larger part of the ring beside its
+    /// border, and reads the code (the plane through all of that ring, sunlit cells and
+    /// shadowed, rose over the shadowed paper, which then read dark).
+    #[test]
+    fn a_shadowed_marker_with_its_margin_partly_in_the_sun_is_read() {
+        let config = DetectorConfig::default();
+        for id in [0u16, 7, 301] {
+            let (pixels, corners) = shadowed_marker(id, sun_along_the_left);
+            let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
+            let mut samples = 0;
+            let read = read_robust(&image, &TAG36H11, &corners, None, &config, &mut samples)
+                .unwrap_or_else(|| panic!("id {id}: no marker grid read"));
+            let found = lookup(&TAG36H11, &read, u8::MAX).expect("a code");
+            assert_eq!(found.decoded.id, id);
+            assert_eq!(found.decoded.hamming, 0, "id {id}");
+            // The levels are the shadow's: ink 3, paper 25.
+            assert!(
+                (read.contrast - 22.0).abs() < 2.0,
+                "id {id}: {}",
+                read.contrast
+            );
+        }
+    }
+
+    /// The quick look at the same marker passes it on: at the rings' means the sunlit paper
+    /// put the mid-level above the shadowed paper, at their medians it does not.
+    #[test]
+    fn the_quick_look_passes_a_shadowed_marker_with_its_margin_partly_in_the_sun() {
+        let (pixels, corners) = shadowed_marker(7, sun_along_the_left);
+        let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
+        let cells = TAG36H11.quad_cells();
+        assert_eq!(
+            precheck(&image, cells, &corners, 20, true),
+            Precheck::Candidate
+        );
+        // Uniform light (the sun everywhere, or nowhere): passed as before; paper with no
+        // marker on it: turned down.
+        for sunlit in [|_: f32, _: f32| true, |_: f32, _: f32| false] {
+            let (pixels, corners) = shadowed_marker(7, sunlit);
+            let image = GrayImage::new(&pixels, SIZE, SIZE).unwrap();
+            assert_eq!(
+                precheck(&image, cells, &corners, 20, true),
+                Precheck::Candidate
+            );
+        }
+        let paper: std::vec::Vec<u8> = (0..SIZE * SIZE)
+            .map(|k| {
+                if sun_along_the_left((k % SIZE) as f32, (k / SIZE) as f32) {
+                    200
+                } else {
+                    25
+                }
+            })
+            .collect();
+        let image = GrayImage::new(&paper, SIZE, SIZE).unwrap();
+        assert_eq!(
+            precheck(&image, cells, &corners, 20, true),
+            Precheck::NoBorder
+        );
+    }
+
+    /// The median of a ring's readings is one of them, the middle one (the upper of two).
+    #[test]
+    fn the_median_is_the_middle_reading() {
+        assert_eq!(median_of(&mut [3u8, 200, 25, 24, 26]), 25);
+        assert_eq!(median_of(&mut [4.0f32, 1.0, 3.0, 2.0]), 3.0);
+        assert_eq!(median_of::<u8>(&mut []), 0);
     }
 }

@@ -575,8 +575,10 @@ pub(crate) fn complete(contour: &[Pixel], min_edge: f32) -> heapless::Vec<Quad, 
         side2: side * side,
         min_edge,
         last: [Point::default(); 5],
-        seen: 0,
-        first: [Point::default(); 4],
+        kept: 0,
+        first: [Point::default(); WINDOW_FIRST],
+        handed: 0,
+        first_window: None,
     };
     let closed = simplify_streaming::<STREAM_DEPTH>(
         contour,
@@ -593,9 +595,13 @@ pub(crate) fn complete(contour: &[Pixel], min_edge: f32) -> heapless::Vec<Quad, 
         },
     );
     if closed {
-        // Around the start once more: the corners on either side of position 0.
+        // Around the start once more: the windows across position 0, those that end before
+        // the vertex that closed the first window tested (all, when none was).
         let first = window.first;
-        for p in first.into_iter().take(window.seen.min(4)) {
+        let again = window
+            .first_window
+            .map_or(window.handed, |handed| handed.saturating_sub(1));
+        for p in first.into_iter().take(again) {
             window.push(p, &mut found);
         }
     }
@@ -631,6 +637,10 @@ pub(crate) fn worth_completing(contour: &[Pixel], length: usize, min_edge: f32) 
 /// number of vertices.
 const STREAM_DEPTH: usize = 24;
 
+/// Most of a boundary's first vertices [`Window`] keeps to close the loop: the five of the
+/// first window and a few the window dropped ([`Window::push`]).
+const WINDOW_FIRST: usize = 8;
+
 /// The last five vertices of a boundary's simplification as they come, tested each time
 /// for a quad with a hidden corner ([`complete`]).
 struct Window {
@@ -639,23 +649,46 @@ struct Window {
     /// The quad's shortest edge ([`check_shape`]).
     min_edge: f32,
     last: [Point; 5],
-    /// Vertices pushed so far.
-    seen: usize,
-    /// The first four, pushed again at the end to close the loop.
-    first: [Point; 4],
+    /// Vertices kept so far (the last five of them are `last`).
+    kept: usize,
+    /// The first vertices handed in, handed in again at the end to close the loop.
+    first: [Point; WINDOW_FIRST],
+    /// Vertices handed in so far.
+    handed: usize,
+    /// How many had been handed in when the first window was tested.
+    first_window: Option<usize>,
 }
 
 impl Window {
     /// Takes the next vertex and adds to `found`, while it has room, the quad that the last
-    /// five complete.
+    /// five kept complete.
+    ///
+    /// Douglas-Peucker keeps the farthest point of each chord, so where blur rounds a corner
+    /// it can keep two points on the curve, one a pixel or two off the line through its
+    /// neighbours: the corner is then two vertices, and no five consecutive ones hold three
+    /// corners. So the last vertex kept is dropped when the next one puts it within the
+    /// simplification's own tolerance of the line between its neighbours (`fit` drops such
+    /// vertices too, [`drop_least_bent`]).
     fn push(&mut self, p: Point, found: &mut heapless::Vec<Quad, MAX_COMPLETIONS>) {
-        if let Some(slot) = self.first.get_mut(self.seen) {
+        if let Some(slot) = self.first.get_mut(self.handed) {
             *slot = p;
         }
-        self.seen += 1;
-        self.last = [self.last[1], self.last[2], self.last[3], self.last[4], p];
-        if self.seen < 5 || found.is_full() {
+        self.handed += 1;
+        let [_, _, _, before, last] = self.last;
+        let straight = self.kept >= 2
+            && line_distance_squared(last, before, p)
+                <= COMPLETION_TOLERANCE * COMPLETION_TOLERANCE;
+        if straight {
+            self.last[4] = p;
+        } else {
+            self.kept += 1;
+            self.last = [self.last[1], self.last[2], self.last[3], self.last[4], p];
+        }
+        if self.kept < 5 || found.is_full() {
             return;
+        }
+        if self.first_window.is_none() {
+            self.first_window = Some(self.handed);
         }
         let [j1, a, b, c, j2] = self.last;
         // Three convex corners (clockwise on screen, as an outer boundary runs) and two
@@ -1049,6 +1082,51 @@ mod tests {
         }
         let ragged = outline(&walk);
         assert!(!worth_completing(&ragged, ragged.len(), 7.0) || complete(&ragged, 7.0).is_empty());
+    }
+
+    /// A corner the simplification left as two vertices, one on the side a few pixels short
+    /// of the corner and the corner itself (where blur rounds it, the farthest point from a
+    /// long chord): the window drops the first, within the tolerance of the side, and still
+    /// sees three corners between the band's two ends.
+    #[test]
+    fn a_corner_split_in_two_still_completes() {
+        let side = COMPLETION_SIDE_PER_EDGE * 7.0;
+        let completes = |walk: &[(f32, f32)]| {
+            let mut window = Window {
+                side2: side * side,
+                min_edge: 7.0,
+                last: [Point::default(); 5],
+                kept: 0,
+                first: [Point::default(); WINDOW_FIRST],
+                handed: 0,
+                first_window: None,
+            };
+            let mut found = heapless::Vec::new();
+            for &(x, y) in walk {
+                window.push(Point::new(x, y), &mut found);
+            }
+            found.iter().any(near_square)
+        };
+        // The square of `square_with_band` walked from the band's end on the bottom side round
+        // to where the band leaves the right side, its top-left corner whole and split in two.
+        let walk = |split: Option<(f32, f32)>| {
+            let mut walk: heapless::Vec<(f32, f32), 8> = heapless::Vec::new();
+            for p in [(300.0, 200.0), (133.0, 150.0), (50.0, 150.0)] {
+                walk.push(p).unwrap();
+            }
+            if let Some(p) = split {
+                walk.push(p).unwrap();
+            }
+            for p in [(50.0, 50.0), (150.0, 50.0), (150.0, 125.0), (300.0, 170.0)] {
+                walk.push(p).unwrap();
+            }
+            walk
+        };
+        assert!(completes(&walk(None)));
+        assert!(completes(&walk(Some((51.0, 58.0)))));
+        // A vertex farther off the side than the tolerance is a corner of its own: no three
+        // corners are then consecutive.
+        assert!(!completes(&walk(Some((54.0, 58.0)))));
     }
 
     /// The streaming simplification hands on the same vertices, in order, as the whole one,
