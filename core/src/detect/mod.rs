@@ -484,7 +484,10 @@ impl Detector {
     }
 
     /// Searches `image` for markers of `families`; the result stays readable through
-    /// [`Detector::detections`] until the next call.
+    /// [`Detector::detections`] until the next call. The last search's markers choose this
+    /// one's row order (none or one small marker: the frame's middle quarter first), which
+    /// matters only where the work budget cuts the search short: a frame's result depends on
+    /// the frame before it only then.
     pub fn detect(
         &mut self,
         image: &GrayImage<'_>,
