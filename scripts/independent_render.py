@@ -54,7 +54,7 @@ Run
 Options: --seed N (deterministic: same seed and options give the same bytes), --heights
 5,10,20,30,40,50, --frames-per-height 16, --margin-cells 2, --psf gaussian:0.5, --gamma 1,
 --shadows, --wobble-deg 2, --yaw-deg 10, --noise 2, --vignetting 0.25, --families-dir
-(default ../shared/data/families beside the repository, i.e. /work/shared/data/families),
+(default ../shared/data/families beside the repository),
 --force (replace an --out this script wrote earlier). Bad input: one line on stderr, exit status 2;
 a missing prerequisite (the modules below, the families directory): one line, exit status 3.
 Needs python3 (3.11+, tomllib), numpy and OpenCV (cv2).
