@@ -131,6 +131,8 @@ pub(crate) struct Tracer<'b> {
     budget: u32,
     /// Work units set aside from `budget` for a later step ([`Tracer::hold`]).
     held: u32,
+    /// The frame's whole budget.
+    total: u32,
     /// Steps taken so far.
     steps: u32,
 }
@@ -163,6 +165,7 @@ impl<'b> Tracer<'b> {
             stride,
             budget,
             held: 0,
+            total: budget,
             steps: 0,
         }
     }
@@ -192,11 +195,13 @@ impl<'b> Tracer<'b> {
         }
     }
 
-    /// Sets `units` of the budget aside, if it has them and nothing is set aside yet: the
-    /// scan then stops that much earlier, and the step they are held for still runs when a
-    /// cluttered frame's scan uses up the rest ([`Tracer::release`]).
+    /// Sets `units` of the budget aside, if it has them, they are at most a quarter of the
+    /// frame's budget and nothing is set aside yet: the scan then stops that much earlier,
+    /// and the step they are held for still runs when a cluttered frame's scan uses up the
+    /// rest ([`Tracer::release`]). Half a QVGA frame's budget held for a far marker's fit
+    /// lost a landing's last metre (the markers at the frame's edge not reached).
     pub fn hold(&mut self, units: u32) {
-        if self.held == 0 && self.budget >= units {
+        if self.held == 0 && self.budget >= units && units <= self.total / 4 {
             self.budget -= units;
             self.held = units;
         }
