@@ -107,6 +107,7 @@
 mod bearing;
 mod framing;
 mod mount;
+mod pad_motion;
 mod profile;
 mod receive;
 mod shift;
@@ -122,6 +123,7 @@ pub use mavlink;
 
 pub use framing::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
 pub use mavlink::dialects::common::MavSeverity;
+pub use pad_motion::PadMotionSetting;
 pub use profile::{Profile, ProfileSetting};
 pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig, ShiftMeasurement};
 pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
@@ -322,19 +324,20 @@ struct Stream {
     message_id: u32,
     /// The interval asked for, µs.
     interval_us: u32,
-    /// Asked for under the PX4 profile only (LOCAL_POSITION_NED: ArduPilot needs none of
-    /// our vehicle position).
-    px4_only: bool,
+    /// Asked for under the PX4 profile, or under any with TD_PAD_MOTION auto
+    /// (LOCAL_POSITION_NED: ArduPilot's targets need none of our vehicle position, the
+    /// pad's velocity over the ground does).
+    position: bool,
     last_rx_us: Option<u64>,
     next_request_us: u64,
 }
 
 impl Stream {
-    fn new(message_id: u32, interval_us: u32, px4_only: bool) -> Stream {
+    fn new(message_id: u32, interval_us: u32, position: bool) -> Stream {
         Stream {
             message_id,
             interval_us,
-            px4_only,
+            position,
             last_rx_us: None,
             next_request_us: 0,
         }
@@ -386,6 +389,8 @@ struct State {
     autopilot_armed: bool,
     /// The PX4 profile's outer loop.
     shift: PadShift,
+    /// Whether the pad moves, as TD_PAD_MOTION auto decides it.
+    pad_motion: pad_motion::PadMotionWatch,
     /// The auto profile last announced by STATUSTEXT.
     announced: Option<Profile>,
     next_heartbeat_us: u64,
@@ -449,6 +454,7 @@ impl Companion {
                 autopilot_mode: None,
                 autopilot_armed: false,
                 shift: PadShift::new(),
+                pad_motion: pad_motion::PadMotionWatch::default(),
                 announced: None,
                 next_heartbeat_us: 0,
                 next_timesync_us: 0,
@@ -546,6 +552,19 @@ impl Companion {
     /// point now (zero when off, inactive or under another profile).
     pub fn px4_shift(&self) -> nalgebra::Vector2<f32> {
         self.state.shift.shift()
+    }
+
+    /// Whether the board takes the pad as moving: TD_PAD_MOTION 1, or 2 (auto) once it has
+    /// decided so ([`PadMotionSetting`]).
+    pub fn pad_moving(&self) -> bool {
+        self.state.pad_moving()
+    }
+
+    /// The pad's velocity over the ground (north, east, m/s), low-passed, as TD_PAD_MOTION
+    /// auto judges it; `None` before a frame had both the level estimate and the vehicle's
+    /// velocity.
+    pub fn pad_velocity_ne(&self) -> Option<nalgebra::Vector2<f32>> {
+        self.state.pad_motion.velocity_ne()
     }
 
     /// True while the autopilot has been heard within the autopilot timeout.

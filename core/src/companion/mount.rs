@@ -25,7 +25,11 @@ use mavlink::dialects::common::MavSeverity;
 impl State {
     /// Adopts (or only reports) `c` as TD_CAM_CAL says.
     pub(super) fn on_mount_correction(&mut self, c: &MountCorrection) {
-        let mode = MountCalibrationMode::from_param(self.params.get_int(ParamId::CamCal));
+        let mode = match MountCalibrationMode::from_param(self.params.get_int(ParamId::CamCal)) {
+            // A moving pad's tilt is a deck's roll, not the mount's: report it, set nothing.
+            MountCalibrationMode::Apply if self.pad_moving() => MountCalibrationMode::Report,
+            mode => mode,
+        };
         let verdict = match mode {
             // The estimator was told to stop after this frame was estimated: nothing to say.
             MountCalibrationMode::Off => return,

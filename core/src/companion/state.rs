@@ -2,6 +2,7 @@
 //! parameters, our ids, which clock `time_usec` is in, and the queues.
 
 use super::framing::RawFrame;
+use super::pad_motion::PadMotionSetting;
 use super::profile::{Profile, ProfileSetting};
 use super::{Pending, State, StatusText, TimeBase, STATUS_TEXT_LEN};
 use crate::params::{ParamError, ParamId};
@@ -64,6 +65,19 @@ impl State {
             return false;
         }
         true
+    }
+
+    pub(super) fn pad_motion_setting(&self) -> PadMotionSetting {
+        PadMotionSetting::from_param(self.params.get_int(ParamId::PadMotion))
+    }
+
+    /// TD_PAD_MOTION 1, or 2 once the pad's velocity has decided it moves.
+    pub(super) fn pad_moving(&self) -> bool {
+        match self.pad_motion_setting() {
+            PadMotionSetting::AtRest => false,
+            PadMotionSetting::Moving => true,
+            PadMotionSetting::Auto => self.pad_motion.moving(),
+        }
     }
 
     pub(super) fn sysid(&self) -> u8 {

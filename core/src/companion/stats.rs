@@ -101,6 +101,9 @@ pub struct CompanionStats {
     pub mount_corrections: u32,
     /// Of those, set into TD_CAM_ROLL/TD_CAM_PITCH (TD_CAM_CAL = 2, in range).
     pub mount_corrections_applied: u32,
+    /// Times TD_PAD_MOTION auto decided that the pad moves or stands still again (each
+    /// announced by STATUSTEXT).
+    pub pad_motion_changes: u32,
 }
 
 /// Delay from a frame's exposure to the moment its LANDING_TARGET is handed to the link for

@@ -13,7 +13,10 @@
 //! Then TD_RATE_HZ's pacing (by exposure time), the time base of `time_usec`, and the newest
 //! target replacing an unsent older one.
 
+use core::fmt::Write;
+
 use super::bearing::turn_matrix;
+use super::pad_motion::{PadMotionChange, PadMotionSetting};
 use super::profile::{self, Profile, TargetFrame};
 use super::velocity::FittedVelocity;
 use super::{
@@ -23,8 +26,8 @@ use super::{
 use crate::filter::{Estimate, FrameEstimate};
 use crate::params::{ParamId, VPE_POSITION, VPE_VELOCITY};
 use mavlink::dialects::common::{
-    LandingTargetType, MavBool, MavEstimatorType, MavFrame, LANDING_TARGET_DATA, ODOMETRY_DATA,
-    VISION_SPEED_ESTIMATE_DATA,
+    LandingTargetType, MavBool, MavEstimatorType, MavFrame, MavSeverity, LANDING_TARGET_DATA,
+    ODOMETRY_DATA, VISION_SPEED_ESTIMATE_DATA,
 };
 use nalgebra::{Matrix3, Vector3};
 
@@ -42,6 +45,7 @@ impl State {
         }
         self.stats.frames_with_fix = self.stats.frames_with_fix.saturating_add(1);
         self.observe_pad_bearing(frame, now_us);
+        self.watch_pad_motion(frame);
         let t = frame.exposure_us;
         let Some(profile) = self.profile() else {
             self.stats.no_profile = self.stats.no_profile.saturating_add(1);
@@ -146,7 +150,12 @@ impl State {
         });
         // Held to the pad (TD_PAD_YAW) or the autopilot's own frame; nothing until the pad's
         // bearing is known, rather than a frame that turns once it is.
-        let vpe_enable = self.params.get_int(ParamId::VpeEnable);
+        // Nothing from the pad as a fixed point of the world while it moves (`pad_motion`).
+        let vpe_enable = if self.pad_moving() {
+            0
+        } else {
+            self.params.get_int(ParamId::VpeEnable)
+        };
         let turn = if vpe_enable != 0 {
             self.pad_turn()
         } else {
@@ -170,7 +179,7 @@ impl State {
                 }
             }
         }
-        if let Some((f, turn)) = fitted.zip(turn).filter(|_| !held) {
+        if let Some((f, turn)) = fitted.zip(turn).filter(|_| !held && vpe_enable != 0) {
             let message = match profile {
                 Profile::Px4 => VelocityMessage::Odometry(velocity_odometry(time_usec, &f, turn)),
                 Profile::ArduPilot | Profile::ArduPilotLocalFrd => {
@@ -183,6 +192,50 @@ impl State {
             });
         }
         TargetOutcome::TargetQueued
+    }
+
+    /// TD_PAD_MOTION auto: the frame's place of the pad on the ground (the vehicle's position
+    /// at the exposure plus the level estimate of the pad against it) into the watch,
+    /// and a STATUSTEXT when its decision changes (`pad_motion`).
+    fn watch_pad_motion(&mut self, frame: &FrameEstimate) {
+        if self.pad_motion_setting() != PadMotionSetting::Auto {
+            return;
+        }
+        let Some((l, p)) = frame
+            .estimate
+            .as_ref()
+            .and_then(|e| Some((e.level?, e.vehicle_position?)))
+        else {
+            return;
+        };
+        let place = l.estimate.position + p.position;
+        let change = self
+            .pad_motion
+            .update(frame.exposure_us, nalgebra::Vector2::new(place.x, place.y));
+        let mut text = heapless::String::<64>::new();
+        let severity = match change {
+            None => return,
+            Some(PadMotionChange::Moving(speed)) => {
+                // Tenths in integers: core's float formatting keeps panic paths (nopanic/).
+                let tenths = (speed.clamp(0.0, 999.0) * 10.0 + 0.5) as u32;
+                let _ = write!(
+                    text,
+                    "touchdown: pad moving {}.{} m/s",
+                    tenths / 10,
+                    tenths % 10
+                );
+                if self.params.get_int(ParamId::VpeEnable) != 0 {
+                    let _ = text.push_str(", vision msgs off");
+                }
+                MavSeverity::MAV_SEVERITY_WARNING
+            }
+            Some(PadMotionChange::AtRest) => {
+                let _ = text.push_str("touchdown: pad at rest again");
+                MavSeverity::MAV_SEVERITY_INFO
+            }
+        };
+        self.stats.pad_motion_changes = self.stats.pad_motion_changes.saturating_add(1);
+        self.queue_status_text(severity, &text);
     }
 
     /// With TD_VPE_EN bit 1, the frame's level position into the velocity fit, and the fit;

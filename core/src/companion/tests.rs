@@ -1117,3 +1117,83 @@ fn the_pads_bearing_goes_out_twice_a_second_whatever_td_vpe_en() {
         assert!((value - 38.0).abs() < 1e-3, "{value}");
     }
 }
+
+/// A pad driving 1 m/s north under a vehicle holding still at 12 m, frame by frame at 15 Hz
+/// from `t0_us` for `frames` frames: the vision frames (`vision_frame`'s attitude), the pad
+/// starting `start_north` metres north.
+fn driving_pad_frames(t0_us: u64, start_north: f32, frames: u64) -> std::vec::Vec<FrameEstimate> {
+    (0..frames)
+        .map(|k| {
+            let t = t0_us + k * 66_667;
+            let north = start_north + 0.066_667 * k as f32;
+            vision_frame(t, Vector3::new(north, 0.3, 12.0), 0.0004, 0.2)
+        })
+        .collect()
+}
+
+#[test]
+fn a_pad_driving_off_is_taken_as_moving_and_the_vision_estimates_stop() {
+    let mut c = vision_companion(&[]);
+    assert_eq!(c.params().get(ParamId::PadMotion), 2.0, "auto by default");
+    // Still for 3 s: vision estimates go out, nothing said about motion.
+    let mut t = 1_000_000;
+    for frame in driving_pad_frames(t, 0.0, 1).iter().cycle().take(45) {
+        let frame = FrameEstimate {
+            exposure_us: t,
+            ..*frame
+        };
+        let (vpe, texts) = vision_sent(&mut c, &frame, t + 20_000);
+        assert!(
+            vpe.is_some() && texts.iter().all(|s| !s.contains("pad")),
+            "{texts:?}"
+        );
+        t += 66_667;
+    }
+    assert!(!c.pad_moving());
+    // Then it drives off at 1 m/s: taken as moving once it has kept moving long enough.
+    let mut moving_at = None;
+    for frame in driving_pad_frames(t, 0.0, 60) {
+        let now = frame.exposure_us + 20_000;
+        let (vpe, texts) = vision_sent(&mut c, &frame, now);
+        if texts
+            .iter()
+            .any(|s| s == "touchdown: pad moving 1.0 m/s, vision msgs off")
+        {
+            moving_at = Some(frame.exposure_us - t);
+        }
+        if moving_at.is_some() {
+            assert!(vpe.is_none(), "a vision estimate on a moving pad");
+        }
+    }
+    let after_us = moving_at.expect("never taken as moving");
+    assert!((2_000_000..=3_000_000).contains(&after_us), "{after_us}");
+    assert!(c.pad_moving());
+    let v = c.pad_velocity_ne().expect("a velocity");
+    assert!((v - nalgebra::Vector2::new(1.0, 0.0)).norm() < 0.1, "{v}");
+    // A mount correction while it moves is reported, not set.
+    c.set_param(ParamId::CamCal, 2.0).unwrap();
+    c.on_estimate(&frame_with_correction(t + 5_000_000), t + 5_020_000);
+    assert_eq!(c.params().get(ParamId::CamRoll), 0.0);
+    let (texts, _) = drain_texts_and_params(&mut c, t + 5_020_000);
+    assert_eq!(texts, ["touchdown: mount r+1.21 p-1.58 deg +-0.06 not set"]);
+}
+
+#[test]
+fn with_td_pad_motion_1_nothing_is_decided_and_nothing_from_the_pad_as_ground_goes_out() {
+    let mut c = vision_companion(&[(ParamId::PadMotion, 1.0)]);
+    assert!(c.pad_moving());
+    for frame in driving_pad_frames(1_000_000, 0.0, 60) {
+        let (vpe, texts) = vision_sent(&mut c, &frame, frame.exposure_us + 20_000);
+        assert!(vpe.is_none() && texts.iter().all(|s| !s.contains("pad moving")));
+    }
+    assert_eq!(c.stats().pad_motion_changes, 0);
+    // With 0 the same drive is not watched: vision estimates go on (the user's word).
+    let mut c = vision_companion(&[(ParamId::PadMotion, 0.0)]);
+    let frames = driving_pad_frames(1_000_000, 0.0, 60);
+    let sent = frames
+        .iter()
+        .filter(|f| vision_sent(&mut c, f, f.exposure_us + 20_000).0.is_some())
+        .count();
+    assert_eq!(sent, frames.len());
+    assert!(!c.pad_moving() && c.pad_velocity_ne().is_none());
+}

@@ -10,6 +10,7 @@
 use core::fmt::Write;
 
 use super::framing;
+use super::pad_motion::PadMotionSetting;
 use super::profile::Profile;
 use super::{
     Pending, State, Stream, StreamError, VelocityMessage, MAX_FRAME_LEN, STATUS_TEXT_LEN,
@@ -47,7 +48,8 @@ impl State {
                 self.enqueue(Pending::TimesyncRequest { ts1, target });
                 self.next_timesync_us = now_us.saturating_add(self.config.timesync_period_us);
             }
-            let px4 = self.profile() == Some(Profile::Px4);
+            let position = self.profile() == Some(Profile::Px4)
+                || self.pad_motion_setting() == PadMotionSetting::Auto;
             let (timeout, period) = (
                 self.config.stream_timeout_us,
                 self.config.interval_request_period_us,
@@ -60,7 +62,7 @@ impl State {
                     .last_rx_us
                     .is_some_and(|t| now_us.saturating_sub(t) <= timeout);
                 let due = now_us >= s.next_request_us && s.next_request_us < u64::MAX;
-                if (s.px4_only && !px4) || flowing || !due {
+                if (s.position && !position) || flowing || !due {
                     continue;
                 }
                 s.next_request_us = now_us.saturating_add(period);

@@ -319,6 +319,14 @@ impl PadEstimator {
         level.or_else(|| self.camera.estimate(t_us).map(|e| e.position))
     }
 
+    /// The camera's velocity against the pad at `t_us` from the level track, NED, m/s: the
+    /// opposite of the pad's velocity against the vehicle, whether the pad stands still or
+    /// moves (a deck, a roof), where the autopilot's velocity is the vehicle's over the ground
+    /// and right only for a pad at rest. `None` without a confirmed level track.
+    pub fn velocity_against_pad(&self, t_us: u64) -> Option<Vector3<f32>> {
+        self.level.estimate(t_us).map(|e| -e.velocity)
+    }
+
     /// Feeds one frame: `fix` (if the pad was found), exposed at `vehicle.t_us`, with the
     /// vehicle state read at that time when the frame was processed. The mount calibrator
     /// gets `fix` too (see [`PadEstimator::update_with_image_fix`] for a levelled fix).

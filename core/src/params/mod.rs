@@ -135,10 +135,13 @@ pub enum ParamId {
     /// estimate's frame is held to it (`companion::bearing`); negative: the autopilot's
     /// heading.
     PadYaw,
+    /// Whether the pad moves: 0 at rest, 1 moving (a deck, a roof, a dock), 2 auto (decided
+    /// from its velocity over the ground, `companion::pad_motion`).
+    PadMotion,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 21;
+pub const PARAM_COUNT: usize = 22;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -354,6 +357,17 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "bearing of the pad's top edge, degrees clockwise from north: VISION_POSITION_ESTIMATE's frame and yaw hold to it (-1 = the autopilot's heading)",
     },
+    // Whether the pad moves (appended; companion::pad_motion). Auto by default: a pad at rest
+    // is decided at rest and loses nothing, and a user whose pad moves is told so.
+    ParamDef {
+        name: "TD_PAD_MOTION",
+        kind: ParamKind::Int,
+        default: 2.0,
+        min: 0.0,
+        max: 2.0,
+        zero_is_unset: false,
+        help: "the pad moves: 0 no, 1 yes (no vision estimates, no mount calibration applied), 2 auto (from its velocity over the ground)",
+    },
 ];
 
 impl ParamId {
@@ -380,6 +394,7 @@ impl ParamId {
         ParamId::CamPosZ,
         ParamId::Px4OuterLoopAlt,
         ParamId::PadYaw,
+        ParamId::PadMotion,
     ];
 
     /// The id at table `index`.

@@ -568,11 +568,17 @@ impl<'a> FramePipeline<'a> {
         }
         let mount = self.estimator.mount();
         let rate = mount.body_to_camera(&vehicle.body_rate?);
+        // Against the pad: the level track's where there is one (a pad that moves too), else
+        // the vehicle's over the ground (a pad at rest).
+        let against_pad = self
+            .estimator
+            .velocity_against_pad(vehicle.t_us)
+            .or_else(|| vehicle.position.as_ref().map(|p| p.velocity));
         let velocity = vehicle
             .attitude
             .as_ref()
-            .zip(vehicle.position.as_ref())
-            .map(|(att, p)| camera_to_ned_matrix(att, mount).transpose() * p.velocity);
+            .zip(against_pad)
+            .map(|(att, v)| camera_to_ned_matrix(att, mount).transpose() * v);
         let normal = camera_from_level
             .or(self.last_rotation.as_ref())
             // The third column, as a product: a column view's `into_owned` keeps a panic

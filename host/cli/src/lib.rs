@@ -19,6 +19,7 @@ pub mod detect;
 pub mod effects;
 pub mod overlay;
 pub mod pad;
+pub mod pad_motion;
 pub mod plot;
 pub mod renderer;
 pub mod replay;

@@ -13,10 +13,12 @@ use clap::Args;
 
 use super::{CliError, Outcome};
 use crate::effects::EffectArgs;
+use crate::pad_motion::PadMotionArgs;
 use crate::renderer::{LensArgs, PsfArg, RendererArg};
 use touchdown_formats::recording::RecordingWriter;
 use touchdown_sim::effects::FlightEffects;
 use touchdown_sim::pad::shipped_design;
+use touchdown_sim::pad_motion::PadMotion;
 use touchdown_sim::scenario::{Scenario, SCENARIOS};
 use touchdown_sim::{Renderer, Simulator};
 
@@ -93,6 +95,10 @@ pub struct SimulateArgs {
     /// The flight effects' terms.
     #[command(flatten)]
     pub effect_terms: EffectArgs,
+
+    /// How the pad moves (at rest by default).
+    #[command(flatten)]
+    pub pad_motion: PadMotionArgs,
 
     /// No flight effects: global shutter, no vibration, the nominal mount (the other effect
     /// flags then set only what they name)
@@ -178,6 +184,9 @@ pub fn run(
     if let Some(name) = &args.pad {
         scenario.pad = shipped_design(name).map_err(|e| CliError(format!("--pad: {e}")))?;
     }
+    // Over a moving pad the scenario's flight is flown against the pad, carried along.
+    scenario.pad_motion = args.pad_motion.motion(0.0)?;
+    scenario.flight_follows_pad = true;
     let effects = args.effects();
     scenario.apply_effects(&effects);
     scenario.camera.model.validate().map_err(|e| {
@@ -286,7 +295,7 @@ fn simulation_toml(
          scenario = {}\ndescription = {}\nseed = {}\nframes = {}\nexposure_time_s = {:?}\n\
          supersampling = {}\nground = {}\ndistortion = {:?}\n\
          readout_ms = {:?}\nvibration_deg = {:?}\nmount_roll_deg = {:?}\nmount_pitch_deg = {:?}\n\
-         renderer = {}\n{}",
+         renderer = {}\n{}{}",
         touchdown_formats::toml_string(&s.name),
         touchdown_formats::toml_string(&s.description),
         s.seed,
@@ -300,6 +309,26 @@ fn simulation_toml(
         effects.mount_roll_deg,
         effects.mount_pitch_deg,
         touchdown_formats::toml_string(renderer.name()),
-        psf
+        psf,
+        pad_motion_toml(&s.pad_motion)
+    )
+}
+
+/// The pad's motion in `simulation.toml` (nothing for a pad at rest).
+fn pad_motion_toml(m: &PadMotion) -> String {
+    if m.is_at_rest() {
+        return String::new();
+    }
+    format!(
+        "pad_velocity_ne_mps = [{:?}, {:?}]\npad_turn_rate_deg_s = {:?}\n\
+         deck_heave_m = {:?}\ndeck_heave_period_s = {:?}\n\
+         deck_roll_deg = {:?}\ndeck_roll_period_s = {:?}\n",
+        m.velocity_ne_mps[0],
+        m.velocity_ne_mps[1],
+        m.turn_rate_deg_s,
+        m.heave_m,
+        m.heave_period_s,
+        m.roll_deg,
+        m.roll_period_s
     )
 }

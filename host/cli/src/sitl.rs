@@ -23,8 +23,10 @@ mod vision_check;
 use super::{CliError, Outcome};
 use crate::companion::endpoint::EndpointSpec;
 use crate::effects::EffectArgs;
+use crate::pad_motion::PadMotionArgs;
 use crate::renderer::RendererArg;
 use touchdown_core::pad::designs;
+use touchdown_eval::closed_loop::land::LandParams;
 use touchdown_eval::closed_loop::wind::WindProfile;
 use touchdown_eval::closed_loop::{self, LandingConfig, LandingOutcome};
 use touchdown_formats::recording::RecordingWriter;
@@ -56,6 +58,17 @@ rotors' 0.24 /s on the airspeed, the body's 0.036 /m on its square), in a mean w
 average, seeded directions), the same at every height (--wind-profile sitl: scaled by \
 sqrt(height / 60 m) below 60 m, ArduPilot SITL's default SIM_WIND_T). Touchdown: the camera's true height reaching the pad; the error \
 is the true horizontal position then against the pad's centre (its origin, the landing point).
+
+A moving pad (--pad-velocity, --pad-turn-rate, --deck-heave, --deck-roll; it starts moving \
+with the LAND): the model flies with PLND_OPTIONS bit 0 (moving landing target) set whenever \
+one of those flags is given. AC_PrecLand's Kalman filter (PLND_EST_TYPE 1) then estimates \
+the pad's position and velocity per axis (process noise PLND_ACC_P_NSE 2.5, measurements \
+trusted to 1 cm per metre of depth plus 2 cm, outliers gated), settled in the hover before \
+the LAND (AC_PrecLand runs in every mode): it steers on the first target, and after 2 s \
+without one it holds and starts again, steering 2 s after its next first measurement; the \
+pad's velocity is fed forward to the position controller. The height LAND descends on is \
+over the deck under the camera, and the touchdown error is against the pad where it is at \
+touchdown. Without those flags the model is the one above (the option off).
 
 Output: the start, the timeline (first LANDING_TARGET received, target acquired by LAND, the \
 slow descent, the last target, touchdown, seconds from LAND), the touchdown error (north, \
@@ -162,6 +175,10 @@ pub struct SitlArgs {
     /// The flight effects' terms.
     #[command(flatten)]
     pub effect_terms: EffectArgs,
+
+    /// How the pad moves (at rest by default).
+    #[command(flatten)]
+    pub pad_motion: PadMotionArgs,
 
     /// No flight effects: global shutter, no vibration, the nominal mount
     #[arg(long, help_heading = "Flight effects")]
@@ -641,6 +658,13 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
     } else {
         (1, threads)
     };
+    let pad_motion = args.pad_motion.motion(0.0)?;
+    // A moving pad is what PLND_OPTIONS bit 0 is for: the model flies with it set then.
+    let land = if args.pad_motion.any_given() {
+        LandParams::ardupilot_moving_target()
+    } else {
+        LandParams::ardupilot()
+    };
     let configs: Vec<LandingConfig> = (0..args.seeds)
         .map(|k| LandingConfig {
             start_height_m: args.height,
@@ -656,6 +680,8 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             pad: Some(args.pad_name()),
             threads: render_threads,
             max_flight_s: args.max_time,
+            pad_motion,
+            land,
             ..LandingConfig::issue_15(args.seed.wrapping_add(k))
         })
         .collect();

@@ -334,7 +334,7 @@ fn truncated_frame_file_is_named() {
 
 #[test]
 fn bad_inputs_are_one_line_and_status_2() {
-    let cases: [(&[&str], &[&str]); 11] = [
+    let cases: [(&[&str], &[&str]); 14] = [
         (
             &["replay", "--scenario", "nosuch"],
             &["unknown scenario `nosuch`", "paper", "landing"],
@@ -380,6 +380,18 @@ fn bad_inputs_are_one_line_and_status_2() {
                 "gamma:2.2,jpeg:101",
             ],
             &["jpeg:101", "whole 1 to 100"],
+        ),
+        (
+            &["replay", "some-dir", "--pad-velocity", "1,0"],
+            &["--pad-velocity", "--scenario only"],
+        ),
+        (
+            &["replay", "--scenario", "paper", "--pad-velocity", "1"],
+            &["`1`", "N,E"],
+        ),
+        (
+            &["replay", "--scenario", "paper", "--deck-roll", "60@5"],
+            &["capsizing"],
         ),
     ];
     for (args, needles) in cases {
@@ -1004,4 +1016,50 @@ fn the_far_range_holds_on_an_independent_renderers_imagery() {
         far_rows_off(&doc, name, &[20.0, 30.0, 40.0, 50.0], 0.9, &mut failures);
     }
     assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
+
+/// A pad driving at 1 m/s under the landing scenario's flight (flown against the pad, carried
+/// along): the board sees what it sees over a pad at rest, sends the same targets, and takes
+/// the pad as moving within seconds of its track, from the autopilot's velocity over the
+/// ground; over the pad at rest it never does.
+#[test]
+fn a_pad_driving_under_the_flight_is_taken_as_moving_and_lands_the_same() {
+    let base = [
+        "replay",
+        "--scenario",
+        "landing",
+        "--frames",
+        "90",
+        "--json",
+    ];
+    let run = |extra: &[&str]| {
+        let output = touchdown(&[&base[..], extra].concat());
+        assert!(output.status.success(), "{}", text(&output.stderr));
+        let doc: serde_json::Value = serde_json::from_str(&text(&output.stdout)).expect("JSON");
+        let ours = doc["summary"]["methods"]
+            .as_array()
+            .and_then(|m| m.iter().find(|m| m["name"] == "ours"))
+            .cloned()
+            .expect("our method");
+        (
+            ours["flight"]["pad_moving_from_frame"].as_u64(),
+            ours["flight"]["sent"]["rms_error_cm"].clone(),
+        )
+    };
+    let (at_rest_from, at_rest_rms) = run(&[]);
+    let (moving_from, moving_rms) = run(&["--pad-velocity", "0.7,0.7"]);
+    assert_eq!(at_rest_from, None, "a pad at rest taken as moving");
+    let from = moving_from.expect("the moving pad never taken as moving");
+    // 15 frames a second: the filter and the two-second hold after the track is confirmed.
+    assert!(from <= 60, "taken as moving only after frame {from}");
+    for axis in ["x", "y", "z"] {
+        let (a, b) = (
+            at_rest_rms[axis].as_f64().expect("RMS"),
+            moving_rms[axis].as_f64().expect("RMS"),
+        );
+        assert!(
+            (a - b).abs() <= 0.05 * a.max(1.0),
+            "{axis}: {a} cm at rest, {b} cm moving"
+        );
+    }
 }

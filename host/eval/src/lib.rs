@@ -581,7 +581,10 @@ impl<'a> Pipeline<'a> {
                 let _ = pipeline.follow_params(flight.companion.params());
                 flight.advance_to(delivery + flight::SETTLE_US, truth);
                 let received = flight.take_targets().pop();
-                let mut outcome = FlightOutcome::default();
+                let mut outcome = FlightOutcome {
+                    pad_moving: flight.companion.pad_moving(),
+                    ..FlightOutcome::default()
+                };
                 let estimate_body = report
                     .estimate
                     .estimate

@@ -59,6 +59,7 @@ pub mod effects;
 pub mod math;
 mod noise;
 pub mod pad;
+pub mod pad_motion;
 pub mod psf;
 pub mod raster;
 pub mod render;
@@ -236,10 +237,11 @@ impl Simulator {
         self.scenario.frames.len()
     }
 
-    /// The camera pose at `t` seconds: the vehicle's, through the (true) mount, turned by
-    /// the camera's vibration on it at `t`.
+    /// The camera pose at `t` seconds in the pad's frame: the vehicle's, relative to the pad
+    /// where it is at `t` ([`pad_motion::PadMotion::relative`]), through the (true) mount,
+    /// turned by the camera's vibration on it at `t`.
     pub fn camera_pose(&self, t: f64) -> CameraPose {
-        let state = self.scenario.trajectory.state(t);
+        let state = self.scenario.pad_motion.relative(t, &self.vehicle_state(t));
         let vibration = &self.scenario.vibration;
         if vibration.is_none() {
             return CameraPose::of_vehicle(state.position, &state.attitude, &self.scenario.mount);
@@ -250,11 +252,23 @@ impl Simulator {
         CameraPose::of_vehicle(state.position, &state.attitude, &mount)
     }
 
+    /// The vehicle in the world at `t` seconds: the trajectory's state, carried along the
+    /// pad's drive when the scenario's flight follows a moving pad
+    /// ([`Scenario::flight_follows_pad`], [`pad_motion::PadMotion::carry`]).
+    pub fn vehicle_state(&self, t: f64) -> trajectory::VehicleState {
+        let state = self.scenario.trajectory.state(t);
+        if self.scenario.flight_follows_pad {
+            self.scenario.pad_motion.carry(t, &state)
+        } else {
+            state
+        }
+    }
+
     /// The vehicle's true attitude at `t` seconds: body FRD to NED (the simulator's NED:
     /// north = pad +y, east = pad +x, down = pad -z), without the camera's vibration, as a
     /// unit quaternion `[w, x, y, z]` with `w >= 0`.
     pub fn vehicle_attitude(&self, t: f64) -> Quat {
-        matrix_to_quat(&self.scenario.trajectory.state(t).attitude)
+        matrix_to_quat(&self.vehicle_state(t).attitude)
     }
 
     /// Rolling shutter: the time from one row's exposure to the next row's, seconds (0 for

@@ -41,6 +41,7 @@ use crate::camera::{CameraMount, SimCamera};
 use crate::effects::{FlightEffects, Vibration};
 use crate::math::Vec3;
 use crate::pad::PrintedPad;
+use crate::pad_motion::PadMotion;
 use crate::sensor::{Exposure, Optics, Sensor};
 use crate::texture::GroundKind;
 use crate::trajectory::{Profile, Segment, Trajectory, Wobble};
@@ -99,8 +100,15 @@ pub struct Scenario {
     pub exposure_time_s: f64,
     /// Sub-samples per pixel side (without motion blur).
     pub supersampling: usize,
-    /// The flight.
+    /// The flight: the vehicle in the world (the pad frame as the pad lay when it started to
+    /// move, if it moves).
     pub trajectory: Trajectory,
+    /// How the pad moves (at rest unless a scenario or `--pad-velocity` and its kin say).
+    pub pad_motion: PadMotion,
+    /// Whether `trajectory` is flown against the pad and carried along its drive (a scenario
+    /// flown over a moving pad), rather than the vehicle's own path in the world (a closed
+    /// loop's, a SITL's).
+    pub flight_follows_pad: bool,
     /// The frames.
     pub frames: Vec<FramePlan>,
     /// Whether a replay closes the board's auto-exposure loop around this scenario by default
@@ -249,6 +257,8 @@ impl Scenario {
             trajectory,
             frames,
             board_exposure: false,
+            pad_motion: PadMotion::at_rest(),
+            flight_follows_pad: false,
         };
         let hover_wobble = Wobble::new(0.02, 0.5, 0.4, seed);
         let hover_set = |seed_salt: u64| {
@@ -490,6 +500,8 @@ impl Scenario {
                     },
                     exposure_time_s: 0.001,
                     board_exposure: true,
+                    pad_motion: PadMotion::at_rest(),
+                    flight_follows_pad: false,
                     ..base(name, nested, board_camera, trajectory, frames)
                 }
             }
@@ -509,6 +521,8 @@ impl Scenario {
                         ..Sensor::board_camera()
                     },
                     board_exposure: true,
+                    pad_motion: PadMotion::at_rest(),
+                    flight_follows_pad: false,
                     ..base(name, nested, board_camera, trajectory, frames)
                 }
             }

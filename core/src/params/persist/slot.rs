@@ -142,13 +142,13 @@ mod tests {
         assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 21 parameters (TD_PAD_YAW
-        // appended to the 20 of the outer loop's firmware, whose 480-byte slots are the same
-        // size, and like the 19 parameters' 448-byte, the 16 parameters' 384-byte and the 13
-        // parameters' 320-byte ones still read back) take 15 words: 273 slots per sector after
-        // the first boot's free word.
-        assert_eq!(SLOT_LEN, 480);
-        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 273);
+        // Format 2: a header word and the sequence number more; 22 parameters (TD_PAD_MOTION
+        // appended to the 21 of the pad bearing's firmware, whose 480-byte slots still read
+        // back, like the 20 parameters' 480-byte, the 19 parameters' 448-byte, the 16
+        // parameters' 384-byte and the 13 parameters' 320-byte ones) take 16 words: 255 slots
+        // per sector after the first boot's free word.
+        assert_eq!(SLOT_LEN, 512);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 255);
     }
 
     /// A format-2 slot of an older firmware whose table ended after `records` parameters, in
@@ -180,13 +180,29 @@ mod tests {
         let mut saved = values(7);
         saved.set(ParamId::Px4OuterLoopAlt, 15.0).unwrap();
         saved.set(ParamId::PadYaw, 90.0).unwrap();
-        // 20 records (408 bytes) took 15 words (480 bytes), as the current table does.
+        // 20 records (408 bytes) took 15 words (480 bytes).
         let slot = older_slot(&saved, 12, 20, 15);
         let slot = &slot[..480];
         let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
         assert_eq!((seq, report.applied), (12, 20));
         let mut want = saved;
         want.set(ParamId::PadYaw, -1.0).unwrap();
+        assert_eq!(p, want);
+    }
+
+    #[test]
+    fn a_slot_of_the_twenty_one_parameter_firmware_imports_with_the_pad_motion_on_auto() {
+        use crate::params::ParamId;
+        let mut saved = values(8);
+        saved.set(ParamId::PadYaw, 90.0).unwrap();
+        saved.set(ParamId::PadMotion, 1.0).unwrap();
+        // 21 records (428 bytes) took 15 words (480 bytes).
+        let slot = older_slot(&saved, 13, 21, 15);
+        let slot = &slot[..480];
+        let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied), (13, 21));
+        let mut want = saved;
+        want.set(ParamId::PadMotion, 2.0).unwrap();
         assert_eq!(p, want);
     }
 
@@ -247,14 +263,14 @@ mod tests {
 
     #[test]
     fn slot_layout() {
-        assert_eq!(SLOT_LEN, 480);
+        assert_eq!(SLOT_LEN, 512);
         let mut slot = [0u8; SLOT_LEN];
         encode_v2(&values(3), 0x0102_0304, &mut slot);
         let mut other = [0u8; SLOT_LEN];
         encode_v2(&values(4), 7, &mut other);
         // The first word is the same in every slot (see the module documentation).
         assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
-        assert_eq!(&slot[..6], b"TDSL\x02\x0f");
+        assert_eq!(&slot[..6], b"TDSL\x02\x10");
         assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
         assert_eq!(slot[32..36], [4, 3, 2, 1]);
         // The export blob starts mid-word, so it can never pass for a format-1 slot.

@@ -5,6 +5,7 @@
 
 use super::CliError;
 use crate::effects::EffectArgs;
+use crate::pad_motion::PadMotionArgs;
 use crate::renderer::{LensArgs, RendererArg};
 use clap::Args;
 use std::path::PathBuf;
@@ -205,6 +206,10 @@ pub struct ReplayArgs {
     /// The flight effects' terms (--scenario only).
     #[command(flatten)]
     pub effect_terms: EffectArgs,
+
+    /// How the pad moves (--scenario only; at rest by default).
+    #[command(flatten)]
+    pub pad_motion: PadMotionArgs,
 
     /// Attitude white noise per sample, degrees [default: 0.02]
     #[arg(

@@ -61,12 +61,17 @@ struct SimulatorTruth<'a>(&'a Simulator);
 
 impl TruthSource for SimulatorTruth<'_> {
     fn at(&self, t_s: f64) -> Option<TrueState> {
-        let state = self.0.scenario.trajectory.state(t_s.max(0.0));
+        let state = self.0.vehicle_state(t_s.max(0.0));
         let a = state.attitude;
         Some(TrueState {
             position: Vector3::from(state.position),
             body_to_ned: Matrix3::from_fn(|i, j| a[i][j]),
         })
+    }
+
+    fn pad_origin(&self, t_s: f64) -> Vector3<f64> {
+        let o = self.0.scenario.pad_motion.pose(t_s.max(0.0)).origin_ned;
+        NED_FROM_PAD.transpose() * Vector3::new(o[0], o[1], o[2])
     }
 }
 
@@ -94,6 +99,13 @@ impl Input {
                 {
                     return Err(CliError(
                         "--seed, --threads, --renderer, --psf and --response apply to --scenario only"
+                            .into(),
+                    ));
+                }
+                if args.pad_motion.any_given() {
+                    return Err(CliError(
+                        "--pad-velocity, --pad-turn-rate, --deck-heave and --deck-roll apply to \
+                         --scenario only (a recording's pad moved as it was recorded)"
                             .into(),
                     ));
                 }
@@ -157,6 +169,9 @@ impl Input {
         effects: &FlightEffects,
     ) -> Result<Input, CliError> {
         let (name, seed) = (scenario.name.clone(), scenario.seed);
+        // Over a moving pad the scenario's flight is flown against the pad, carried along.
+        scenario.pad_motion = args.pad_motion.motion(0.0)?;
+        scenario.flight_follows_pad = true;
         scenario.apply_effects(effects);
         let mount = scenario.mount.rotation;
         let labels = distinct(scenario.frames.iter().map(|f| f.label.as_deref()));

@@ -177,6 +177,7 @@ pub(super) fn document(
                 Some((mean, max)) => json!({"mean": mean, "max": max}),
                 None => Value::Null,
             };
+            entry["flight"]["pad_moving_from_frame"] = json!(f.trace.pad_moving_from(m));
         }
     }
     if let Some(methods) = summary["methods"].as_array_mut() {

@@ -368,6 +368,22 @@ pub(super) fn flight_summary_table(flight: &FlightTrace, trace: &Trace) -> Strin
             None => "-".into(),
         },
     );
+    // Only where a board took the pad as moving (a moving pad, or a wrong decision).
+    if (0..methods).any(|m| flight.pad_moving_from(m).is_some()) {
+        row("pad taken as moving (TD_PAD_MOTION)", &|m| match (
+            flight.pad_moving_from(m),
+            trace.frames.first(),
+        ) {
+            (Some(k), Some(first)) => {
+                let t = trace
+                    .frames
+                    .get(k)
+                    .map_or(0.0, |f| f.t_us.saturating_sub(first.t_us) as f64 * 1e-6);
+                format!("from frame {k} ({t:.1} s)")
+            }
+            _ => "no".into(),
+        });
+    }
     table.finish()
 }
 

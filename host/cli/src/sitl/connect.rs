@@ -48,6 +48,7 @@ use touchdown_eval::closed_loop::{self, LandingConfig};
 use touchdown_eval::flight::{board_companion, TrueState, TruthSource, TruthTable, NED_FROM_PAD};
 use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
+use touchdown_sim::pad_motion::PadMotion;
 use touchdown_sim::Simulator;
 
 use super::gcs::{self, Flight, GcsLink};
@@ -62,6 +63,9 @@ const EARTH_RADIUS_M: f64 = 6_378_137.0;
 pub const GEAR_HEIGHT_M: f64 = 0.1;
 /// The body origin this close to the pad plane counts as on the ground, metres.
 pub const LANDED_HEIGHT_M: f64 = 0.3;
+/// The body origin this close to its resting height over the pad plane ([`GEAR_HEIGHT_M`])
+/// has reached the ground, metres.
+const CONTACT_MARGIN_M: f64 = 0.05;
 /// A landing counts only after the vehicle has been this high, metres.
 pub const AIRBORNE_HEIGHT_M: f64 = 2.0;
 /// On the ground at below [`LANDED_SPEED_MPS`] for this long: landed, seconds.
@@ -238,6 +242,9 @@ pub fn fly(
     let mut simulator = Simulator::new(scenario)
         .with_threads(config.landing.threads)
         .with_renderer(config.landing.renderer);
+    // The pad lies still until the LAND; from then on it moves as asked, on the run's clock.
+    let motion = simulator.scenario.pad_motion;
+    simulator.scenario.pad_motion = PadMotion::at_rest();
     let camera = simulator.scenario.camera.model;
     let pad = simulator.scenario.pad.config.clone();
     let layout = pad
@@ -274,6 +281,9 @@ pub fn fly(
     let mut truth_requested = false;
     let mut airborne = false;
     let mut on_ground_since: Option<(f64, Vector3<f64>)> = None;
+    // On a moving pad: when and where (in the world) the vehicle first reached the ground,
+    // since the pad goes on moving while it settles.
+    let mut contact: Option<(f64, Vector3<f64>)> = None;
     let frame_period_s = 1.0 / config.landing.fps;
     let mut next_frame_s = 0.0;
     let start = Instant::now();
@@ -287,6 +297,8 @@ pub fn fly(
     // The board's mount calibration in force, as of the last frame (it changes only there).
     let mut mount_ready = false;
     let mut vision_check = VisionCheck::new(rehearsal.is_some());
+    // What the board made of the pad's motion (TD_PAD_MOTION), as of the last frame.
+    let mut board_pad_moving = false;
 
     let _ = writeln!(
         err,
@@ -302,6 +314,23 @@ pub fn fly(
         if landing_s.is_some_and(|l| t - l > config.max_time_s) {
             break;
         }
+        if let (Some(_), Some(l), false) = (
+            rehearsal.as_deref(),
+            landing_s,
+            motion.is_at_rest() || !simulator.scenario.pad_motion.is_at_rest(),
+        ) {
+            simulator.scenario.pad_motion = PadMotion {
+                start_s: l,
+                ..motion
+            };
+            let [n, e] = motion.velocity_ne_mps;
+            let _ = writeln!(
+                err,
+                "{t:7.2} s  the pad starts to move: north {n:+.2}, east {e:+.2} m/s, turning {:.1} deg/s",
+                motion.turn_rate_deg_s
+            );
+        }
+        let pad_motion = simulator.scenario.pad_motion;
         if let Some(signal) = interrupt::received() {
             outcome.stopped = Some(format!("stopped by {}", signal.name()));
             break;
@@ -364,6 +393,17 @@ pub fn fly(
         if let Some((state, speed)) = now_truth {
             let height = state.position.z;
             airborne |= height > AIRBORNE_HEIGHT_M;
+            if airborne && outcome.touchdown.is_none() {
+                if height <= GEAR_HEIGHT_M + CONTACT_MARGIN_M && contact.is_none() {
+                    contact = Some((t, state.position));
+                    // The deck carries the vehicle on; the SITL's ground stands still.
+                    simulator.scenario.pad_motion.stop_s = t;
+                } else if height > LANDED_HEIGHT_M && contact.is_some() {
+                    // A bounce: the deck moves on under the vehicle until it is down again.
+                    contact = None;
+                    simulator.scenario.pad_motion.stop_s = f64::INFINITY;
+                }
+            }
             if let Some(td) = outcome.touchdown {
                 if height > RETAKEOFF_HEIGHT_M && outcome.retakeoff_s.is_none() {
                     outcome.retakeoff_s = Some(t);
@@ -376,6 +416,13 @@ pub fn fly(
             } else if airborne && height < LANDED_HEIGHT_M && speed < LANDED_SPEED_MPS {
                 let (since, at) = *on_ground_since.get_or_insert((t, state.position));
                 if t - since >= LANDED_HOLD_S {
+                    // On a moving pad, where the pad was when the vehicle reached the ground.
+                    let (since, at) = match contact {
+                        Some((t_c, p)) if !pad_motion.is_at_rest() => {
+                            (t_c, Vector3::from(pad_motion.point_relative(t_c, p.into())))
+                        }
+                        _ => (since, at),
+                    };
                     outcome.touchdown = Some(ConnectedTouchdown {
                         t_s: since,
                         north_m: at.y,
@@ -445,6 +492,15 @@ pub fn fly(
                     holding: rehearsal.as_deref().map(|r| r.flight.holding()),
                 });
                 companion.on_estimate(&report.estimate, (handed_s * 1e6) as u64);
+                if companion.pad_moving() != board_pad_moving {
+                    board_pad_moving = companion.pad_moving();
+                    let speed = companion.pad_velocity_ne().map_or(0.0, |v| v.norm());
+                    let _ = writeln!(
+                        err,
+                        "{handed_s:7.2} s  the board takes the pad as {} ({speed:.2} m/s over the ground)",
+                        if board_pad_moving { "moving" } else { "at rest" }
+                    );
+                }
                 let lag = handed_s - frame_s;
                 lag_sum += lag;
                 lag_max = lag_max.max(lag);
@@ -593,6 +649,7 @@ fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>, vision_velocity: bool
         gps_loss_height_m: args.gps_loss_height,
         no_gps: args.no_gps,
         vision_velocity,
+        moving_pad: args.pad_motion.any_given(),
         patience: gcs::Patience {
             connect: std::time::Duration::from_secs_f64(args.connect_timeout),
             param_try: std::time::Duration::from_secs_f64(args.param_timeout),
@@ -612,6 +669,27 @@ pub(super) fn run(
         return Err(CliError::new(
             "--seeds and --record fly the model; a running SITL flies one landing",
         ));
+    }
+    let motion = args.pad_motion.motion(0.0)?;
+    if !motion.is_at_rest() {
+        if args.gcs.is_none() {
+            return Err(CliError::new(
+                "a moving pad against a running SITL needs --gcs: its motion starts with the LAND \
+                 the ground station commands",
+            ));
+        }
+        if args.pad_motion.deck_heave.is_some() || args.pad_motion.deck_roll.is_some() {
+            return Err(CliError::new(
+                "--deck-heave and --deck-roll are for the model: the SITL's ground is flat and \
+                 still (give --pad-velocity alone, or fly the model without --tcp/--udp)",
+            ));
+        }
+        if args.gps_loss_height.is_some() || args.no_gps {
+            return Err(CliError::new(
+                "--no-gps and --gps-loss-height navigate on the board's position against the pad, \
+                 which means nothing on a moving pad (docs/setup-ardupilot.md, \"A moving pad\")",
+            ));
+        }
     }
     let gps_denied = args.gps_loss_height.is_some() || args.no_gps;
     let gps_flag = if args.no_gps {
@@ -645,6 +723,8 @@ pub(super) fn run(
         threads: args
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        // Its clock starts with the LAND ([`fly`] sets it).
+        pad_motion: args.pad_motion.motion(0.0)?,
         ..LandingConfig::issue_15(args.seed)
     };
     let config = ConnectConfig {

@@ -1,13 +1,14 @@
 //! The loop itself: render, run the board and the simulated autopilot, steer, step the
 //! vehicle (see [`super`]).
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use touchdown_core::image::GrayImage;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_sim::camera::SimCamera;
 use touchdown_sim::effects::FlightEffects;
+use touchdown_sim::pad_motion::PadMotion;
 use touchdown_sim::scenario::{FramePlan, Scenario};
 use touchdown_sim::trajectory::{Profile, Segment, Trajectory, Wobble};
 use touchdown_sim::{Renderer, SimFrame, Simulator};
@@ -17,7 +18,8 @@ use super::px4::{Px4Params, Px4PrecLand, Px4State};
 use super::vehicle::{Vehicle, VehicleParams};
 use super::wind::{Wind, WindProfile};
 use crate::flight::{
-    belief, relative_ned, AutopilotKind, ErrorModel, FlightSetup, TruthSource, TruthTable, PAD_NED,
+    belief, relative_ned, AutopilotKind, ErrorModel, FlightSetup, TruthSource, TruthTable,
+    NED_FROM_PAD, PAD_NED,
 };
 use crate::{Experiment, Frame, Method};
 
@@ -77,6 +79,9 @@ pub struct LandingConfig {
     pub land: LandParams,
     /// Which autopilot flies the landing.
     pub autopilot: Autopilot,
+    /// How the pad moves ([`PadMotion`]; at rest in [`LandingConfig::issue_15`]); its clock is
+    /// the flight's, which starts with the LAND.
+    pub pad_motion: PadMotion,
 }
 
 /// The autopilot of the closed loop.
@@ -116,6 +121,7 @@ impl LandingConfig {
             vehicle: VehicleParams::typical(),
             land: LandParams::ardupilot(),
             autopilot: Autopilot::ArduPilot,
+            pad_motion: PadMotion::at_rest(),
         }
     }
 }
@@ -125,11 +131,12 @@ impl LandingConfig {
 pub struct Touchdown {
     /// When, seconds from the start of LAND.
     pub t_s: f64,
-    /// North of the pad's origin, metres.
+    /// North of the pad's origin, metres (a moving pad's: along its own north where it is
+    /// then).
     pub north_m: f64,
     /// East of it, metres.
     pub east_m: f64,
-    /// Horizontal speed then, m/s.
+    /// Horizontal speed then (over the pad, a moving one's deck), m/s.
     pub speed_mps: f64,
 }
 
@@ -196,48 +203,101 @@ struct Air {
     truth: TruthTable,
     t_s: f64,
     touchdown: Option<Touchdown>,
+    /// How the pad moves (the flight's clock).
+    pad_motion: PadMotion,
+    /// The vehicle's rotation rate over the last step, rad/s (the autopilot's gyro).
+    gyro_rad_s: f64,
 }
 
 impl Air {
+    /// The height of the vehicle's body origin (the camera) over the pad's plane at `t_s`,
+    /// measured straight down (a rangefinder's): over the deck under it as the deck heaves
+    /// and rolls.
+    fn height_over_pad(&self, vehicle: &Vehicle, t_s: f64) -> f64 {
+        if self.pad_motion.is_at_rest() {
+            return vehicle.height_m();
+        }
+        let on_pad = self.on_pad(vehicle, t_s);
+        // The deck's up axis in the world: its vertical part turns the height along it into
+        // the height straight down.
+        let up = self.pad_motion.pose(t_s).rotation[2][2];
+        on_pad.z / up
+    }
+
+    /// The vehicle's body origin in the moving pad's frame at `t_s` (x east, y north, z up
+    /// along the pad's own axes).
+    fn on_pad(&self, vehicle: &Vehicle, t_s: f64) -> Vector3<f64> {
+        let world = NED_FROM_PAD * vehicle.position_ned;
+        Vector3::from(
+            self.pad_motion
+                .point_relative(t_s, [world.x, world.y, world.z]),
+        )
+    }
+
+    /// Where the touchdown was: the vehicle between `before` and `after` (a step ending at
+    /// `t_s`) where its height over the pad crossed zero, against the pad there and then.
+    fn touchdown_between(&self, before: &Vehicle, after: &Vehicle, t_s: f64) -> Touchdown {
+        let (h0, h1) = (
+            self.height_over_pad(before, t_s - STEP_S),
+            self.height_over_pad(after, t_s),
+        );
+        let w = h0 / (h0 - h1).max(1e-12);
+        let p = before.position_ned + (after.position_ned - before.position_ned) * w;
+        let at_s = t_s - STEP_S * (1.0 - w);
+        if self.pad_motion.is_at_rest() {
+            return Touchdown {
+                t_s: at_s,
+                north_m: p.x,
+                east_m: p.y,
+                speed_mps: after.velocity_ned.xy().norm(),
+            };
+        }
+        let crossing = Vehicle {
+            position_ned: p,
+            ..*after
+        };
+        let on_pad = self.on_pad(&crossing, at_s);
+        let deck = Vector3::from(self.pad_motion.velocity_ned(at_s));
+        Touchdown {
+            t_s: at_s,
+            north_m: on_pad.y,
+            east_m: on_pad.x,
+            speed_mps: (after.velocity_ned - deck).xy().norm(),
+        }
+    }
+
     /// Flies to `until_s` (or the touchdown); the autopilot steers on its estimates.
     fn fly_to(&mut self, until_s: f64, errors: &crate::flight::Realisation) {
         while self.t_s < until_s - 1e-9 && self.touchdown.is_none() {
             let own = PAD_NED + self.vehicle.position_ned + errors.position_error(self.t_s);
+            let height_m = self.height_over_pad(&self.vehicle, self.t_s);
             let command = match &mut self.land {
-                Mode::ArduPilot(land) => land.command(
-                    self.t_s,
-                    STEP_S,
-                    &own,
-                    &self.vehicle.velocity_ned,
-                    self.vehicle.height_m(),
-                ),
-                Mode::Px4(px4) => px4.command(
-                    self.t_s,
-                    STEP_S,
-                    &own,
-                    &self.vehicle.velocity_ned,
-                    self.vehicle.height_m(),
-                ),
+                Mode::ArduPilot(land) => {
+                    land.command(self.t_s, STEP_S, &own, &self.vehicle.velocity_ned, height_m)
+                }
+                Mode::Px4(px4) => {
+                    px4.command(self.t_s, STEP_S, &own, &self.vehicle.velocity_ned, height_m)
+                }
             };
             let before = self.vehicle;
             let wind = self.wind.at(self.t_s) * self.wind_profile.scale(self.vehicle.height_m());
             self.vehicle.step(STEP_S, &command, &wind);
             self.t_s += STEP_S;
             let after = self.vehicle;
-            if after.height_m() <= 0.0 {
-                // Where the height crossed zero within the step.
-                let w = before.height_m() / (before.height_m() - after.height_m()).max(1e-12);
-                let p = before.position_ned + (after.position_ned - before.position_ned) * w;
-                self.touchdown = Some(Touchdown {
-                    t_s: self.t_s - STEP_S * (1.0 - w),
-                    north_m: p.x,
-                    east_m: p.y,
-                    speed_mps: after.velocity_ned.xy().norm(),
-                });
+            self.gyro_rad_s = rotation_rate(&before.body_to_ned(), &after.body_to_ned(), STEP_S);
+            if self.height_over_pad(&after, self.t_s) <= 0.0 {
+                self.touchdown = Some(self.touchdown_between(&before, &after, self.t_s));
             }
             self.truth.push(self.t_s, self.vehicle.truth());
         }
     }
+}
+
+/// The rotation rate that turns `from` into `to` in `dt_s`, rad/s.
+fn rotation_rate(from: &Matrix3<f64>, to: &Matrix3<f64>, dt_s: f64) -> f64 {
+    let turn = from.transpose() * to;
+    let cos = ((turn.trace() - 1.0) / 2.0).clamp(-1.0, 1.0);
+    cos.acos() / dt_s
 }
 
 /// The simulator's trajectory for the frame at `t_s`: the vehicle's motion linearised about
@@ -300,6 +360,8 @@ pub fn scene(config: &LandingConfig) -> Result<Scenario, String> {
         scenario.pad = touchdown_sim::pad::shipped_design(name)?;
     }
     scenario.frames.clear();
+    config.pad_motion.validate()?;
+    scenario.pad_motion = config.pad_motion;
     scenario.apply_effects(&config.effects);
     scenario
         .camera
@@ -377,6 +439,8 @@ pub fn fly(
         truth: TruthTable::new(),
         t_s: 0.0,
         touchdown: None,
+        pad_motion: config.pad_motion,
+        gyro_rad_s: 0.0,
     };
     air.truth.push(0.0, vehicle.truth());
 
@@ -461,8 +525,9 @@ pub fn fly(
                 Mode::ArduPilot(land) => land.measure(
                     air.t_s,
                     reconstructed.t_us as f64 * 1e-6,
-                    &pad_ned,
-                    relative.z,
+                    &own.position_ned,
+                    &relative,
+                    air.gyro_rad_s,
                 ),
                 // PX4 stamps it with the converted time_usec and uses it at once.
                 Mode::Px4(px4) => px4.measure(reconstructed.t_us as f64 * 1e-6, &pad_ned),
@@ -527,5 +592,94 @@ mod tests {
         assert!((p5 - later.position).norm() < 1e-4);
         let m5 = nalgebra::Matrix3::from_fn(|i, j| traj.state(at + 0.005).attitude[i][j]);
         assert!((m5 - later.body_to_ned).norm() < 1e-4);
+    }
+
+    /// The flight's moving parts over a pad moving as `pad_motion`, the vehicle at `ned`.
+    fn air(pad_motion: PadMotion, ned: Vector3<f64>) -> Air {
+        let vehicle = Vehicle::hovering(VehicleParams::typical(), ned);
+        Air {
+            vehicle,
+            land: Mode::ArduPilot(LandController::new(LandParams::ardupilot(), &ned)),
+            wind: Wind::new(0.0, 0.0, 10.0, 1),
+            wind_profile: WindProfile::Uniform,
+            truth: TruthTable::new(),
+            t_s: 0.0,
+            touchdown: None,
+            pad_motion,
+            gyro_rad_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn touchdown_is_on_the_deck_where_it_is_then() {
+        // A deck driving 1 m/s north and heaving 0.5 m every 8 s: at 2 s it is 2 m north
+        // and at the top of its heave, 0.5 m up.
+        let deck = PadMotion {
+            velocity_ne_mps: [1.0, 0.0],
+            heave_m: 0.5,
+            heave_period_s: 8.0,
+            ..PadMotion::at_rest()
+        };
+        let a = air(deck, Vector3::zeros());
+        let t = 2.0;
+        let before = Vehicle {
+            position_ned: Vector3::new(2.1, -0.05, -0.6),
+            velocity_ned: Vector3::new(1.2, 0.0, 80.0),
+            ..a.vehicle
+        };
+        assert!((a.height_over_pad(&before, t - STEP_S) - 0.1).abs() < 1e-3);
+        let after = Vehicle {
+            position_ned: Vector3::new(2.1, -0.05, -0.4),
+            ..before
+        };
+        assert!((a.height_over_pad(&after, t) + 0.1).abs() < 1e-3);
+        // Half-way through the step, 0.5 m up: 10 cm north of the deck's centre (and the
+        // 1.25 mm it had still to drive), 5 cm west; 0.2 m/s faster than the deck.
+        let td = a.touchdown_between(&before, &after, t);
+        assert!((td.t_s - (t - 0.5 * STEP_S)).abs() < 1e-4, "{td:?}");
+        assert!((td.north_m - 0.10125).abs() < 1e-4, "{td:?}");
+        assert!((td.east_m + 0.05).abs() < 1e-9, "{td:?}");
+        assert!((td.speed_mps - 0.2).abs() < 1e-6, "{td:?}");
+        // Against the pad's start it would have been 2.1 m off.
+        let at_rest = air(PadMotion::at_rest(), Vector3::zeros());
+        assert!(at_rest.height_over_pad(&after, t) > 0.3);
+    }
+
+    #[test]
+    fn the_height_over_a_rolling_deck_is_straight_down_to_it() {
+        // Rolled 10 degrees about its keel (north) at the top of its roll: one edge down, the
+        // other up, the plane through its centre.
+        let deck = PadMotion {
+            roll_deg: 10.0,
+            roll_period_s: 4.0,
+            ..PadMotion::at_rest()
+        };
+        let t = 1.0;
+        let pose = deck.pose(t);
+        let a = air(deck, Vector3::zeros());
+        let over = |ned: Vector3<f64>| {
+            a.height_over_pad(
+                &Vehicle {
+                    position_ned: ned,
+                    ..a.vehicle
+                },
+                t,
+            )
+        };
+        // Over the centre, the height is the height.
+        assert!((over(Vector3::new(0.0, 0.0, -1.0)) - 1.0).abs() < 1e-9);
+        // A metre to either side, the deck is tan(10 degrees) nearer or farther.
+        let tilt = 10f64.to_radians().tan();
+        let (east, west) = (
+            over(Vector3::new(0.0, 1.0, -1.0)),
+            over(Vector3::new(0.0, -1.0, -1.0)),
+        );
+        assert!(
+            ((east - west).abs() - 2.0 * tilt).abs() < 1e-9,
+            "{east} {west}"
+        );
+        // The deck's own down axis says which side is low.
+        let side_down = pose.rotation[2][1];
+        assert_eq!(east > west, side_down > 0.0, "{east} {west} {side_down}");
     }
 }

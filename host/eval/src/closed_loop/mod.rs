@@ -16,6 +16,10 @@
 //! Touchdown is the moment the true height of the vehicle's body origin (the camera) over
 //! the pad reaches zero; its error is the true horizontal position then against the pad's
 //! origin (the landing point the pad's `pad.toml` defines, the point LANDING_TARGET aims at).
+//! A moving pad ([`LandingConfig::pad_motion`]: a boat's deck, a truck's roof) is where it is
+//! at each time: the height is over its plane straight below the camera (the deck heaving and
+//! rolling under it; also the height the autopilot's LAND descends on, a rangefinder's), and
+//! the error is the camera's position in the pad's own frame at the touchdown's time.
 //!
 //! # Timing
 //! The vehicle runs on a 2.5 ms step (ArduPilot's 400 Hz loop) and is simulated

@@ -97,6 +97,13 @@ pub trait TruthSource {
     /// The truth at `t_s` (the frames' clock, seconds; before the first frame the first
     /// frame's truth is fine), `None` when unknown.
     fn at(&self, t_s: f64) -> Option<TrueState>;
+
+    /// Where the pad's origin is at `t_s`, in the frame of [`TrueState::position`] (the pad
+    /// frame as the pad lay when it started to move): zero for a pad at rest, the default.
+    /// What the autopilot reconstructs is scored against the camera's position from it.
+    fn pad_origin(&self, _t_s: f64) -> Vector3<f64> {
+        Vector3::zeros()
+    }
 }
 
 /// A truth known at sample times, interpolated between them (linear position, spherical
@@ -189,6 +196,9 @@ pub struct FlightOutcome {
     pub ideal: Option<Scored>,
     /// The exposure-to-receipt time of the target, µs.
     pub latency_us: Option<u64>,
+    /// The board takes the pad as moving after this frame (TD_PAD_MOTION; the paper's method
+    /// has no such notion: false).
+    pub pad_moving: bool,
 }
 
 impl FlightOutcome {

@@ -200,6 +200,12 @@ impl FlightRun {
         truth.at(self.clock.frame_s(board_us))
     }
 
+    /// The camera's true position against the pad where it is at `board_us` (pad frame axes).
+    fn camera_from_pad(&self, truth: &dyn TruthSource, board_us: u64) -> Option<Vector3<f64>> {
+        let t_s = self.clock.frame_s(board_us);
+        Some(truth.at(t_s)?.position - truth.pad_origin(t_s))
+    }
+
     /// (a): a body FRD vector sent for the exposure at `exposure_us` (our clock), turned with
     /// the true attitude then, against `truth_position` (the frame's truth).
     pub fn sent(
@@ -273,7 +279,7 @@ impl FlightRun {
         } else {
             exposure_us
         };
-        let state = self.truth_at(truth, at)?;
+        let camera = self.camera_from_pad(truth, at)?;
         let b = belief(truth, &self.clock, &self.errors, &PAD_NED, at)?;
         let reconstruct = if local_frd {
             ardupilot_local_frd_relative_ned
@@ -283,7 +289,7 @@ impl FlightRun {
         let rel = reconstruct(xyz, distance, &b.body_to_ned, &Vector3::zeros())?;
         Some(Scored {
             t_us: self.clock.frame_us(at),
-            truth: state.position,
+            truth: camera,
             value: camera_in_pad(&rel),
         })
     }
@@ -311,12 +317,12 @@ impl FlightRun {
         truth: &dyn TruthSource,
     ) -> Option<Scored> {
         let at = self.px4_stamp_us(time_usec, receipt_us);
-        let state = self.truth_at(truth, at)?;
+        let camera = self.camera_from_pad(truth, at)?;
         let b = belief(truth, &self.clock, &self.errors, &PAD_NED, at)?;
         let rel = px4_relative_ned(absolute, &b.position_ned);
         Some(Scored {
             t_us: self.clock.frame_us(at),
-            truth: state.position,
+            truth: camera,
             value: camera_in_pad(&rel),
         })
     }
@@ -460,11 +466,19 @@ mod tests {
             // The autopilot's attitude: level and north within its errors (heading 0.5 deg).
             let angle = Rotation3::from_matrix_unchecked(att.matrix().cast::<f64>()).angle();
             assert!(angle.to_degrees() < 1.5, "{kind:?}: {}", angle.to_degrees());
-            // LOCAL_POSITION_NED is asked for by the PX4 profile only.
+            // LOCAL_POSITION_NED is asked for by the PX4 profile, and by any with TD_PAD_MOTION
+            // auto (the default: the pad's velocity over the ground needs the vehicle's).
+            assert!(at.position.is_some(), "{kind:?}");
+            let at_rest = FlightSetup {
+                params: vec![("TD_PAD_MOTION".into(), 0.0)],
+                ..FlightSetup::new(kind, ErrorModel::typical())
+            };
+            let mut still = FlightRun::new(&at_rest).unwrap();
+            still.advance_to(t, &truth);
             assert_eq!(
-                at.position.is_some(),
+                still.companion.vehicle().at(t).position.is_some(),
                 kind == AutopilotKind::Px4,
-                "{kind:?}"
+                "{kind:?} with TD_PAD_MOTION 0"
             );
             let stats = run.companion.stats();
             assert!(stats.timesync_samples >= 2, "{kind:?}: {stats:?}");

@@ -125,6 +125,14 @@ impl FlightTrace {
         )
     }
 
+    /// The first frame (index into `frames`) after which method `m`'s board took the pad as
+    /// moving; `None` if it never did.
+    pub fn pad_moving_from(&self, m: usize) -> Option<usize> {
+        self.frames
+            .iter()
+            .position(|f| f.get(m).is_some_and(|o| o.pad_moving))
+    }
+
     /// Method `m`'s exposure-to-receipt time of its targets: (mean, max), milliseconds.
     pub fn latency_ms(&self, m: usize) -> Option<(f64, f64)> {
         let l: Vec<f64> = self

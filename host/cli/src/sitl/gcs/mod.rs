@@ -139,6 +139,9 @@ pub struct Plan {
     pub no_gps: bool,
     /// The board sends its velocity too (TD_VPE_EN bit 1): the vision source set fuses it.
     pub vision_velocity: bool,
+    /// The pad moves (`--pad-velocity`): ArduPilot's precision landing tracks a moving target
+    /// (PLND_OPTIONS bit 0, docs/setup-ardupilot.md, "A moving pad").
+    pub moving_pad: bool,
     /// How long the ground station waits for the SITL.
     pub patience: Patience,
 }
@@ -197,6 +200,10 @@ pub fn recipe(autopilot: Autopilot, plan: &Plan) -> Vec<ParamSetting> {
         // docs/setup-px4.md, section 3.
         Autopilot::Px4 => vec![setting("PLD_FAPPR_ALT", 0.5), setting("PLD_BTOUT", 5.0)],
     };
+    if let (Autopilot::ArduPilot, true) = (autopilot, plan.moving_pad) {
+        // Bit 0: the target's velocity from AC_PrecLand's estimator is flown as a feed-forward.
+        list.push(setting("PLND_OPTIONS", 1.0));
+    }
     if plan.no_gps {
         list.extend(match autopilot {
             Autopilot::ArduPilot => no_gps_recipe(plan.vision_velocity),
@@ -345,6 +352,7 @@ mod tests {
             gps_loss_height_m: None,
             no_gps: false,
             vision_velocity: false,
+            moving_pad: false,
             patience: Patience::default(),
         }
     }
@@ -394,6 +402,17 @@ mod tests {
         };
         let ap = recipe(Autopilot::ArduPilot, &plan);
         assert!(ap.iter().all(|s| !s.name.starts_with("VISO_")));
+        assert!(ap.iter().all(|s| s.name != "PLND_OPTIONS"));
+        let moving = recipe(
+            Autopilot::ArduPilot,
+            &Plan {
+                moving_pad: true,
+                ..plain_plan()
+            },
+        );
+        assert!(moving
+            .iter()
+            .any(|s| s.name == "PLND_OPTIONS" && s.value == 1.0));
         assert_eq!(ap[0].name, "PLND_ENABLED");
         assert!(ap.iter().any(|s| s.name == "PLND_TYPE" && s.needs_reboot));
         assert!(ap
