@@ -19,8 +19,8 @@
 //!   wind and 3 m/s turbulence does), all of issue 15's 10 seeds: each within its 5 cm.
 //! - In still air, the vision, the link and the autopilot's reconstruction alone: within
 //!   5 cm.
-//! - On a moving pad (issue 41: 1 m/s north, 2 m/s east, from the start of the LAND), in
-//!   2 m/s of mean wind without gusts, the model flying with PLND_OPTIONS bit 0 (the target
+//! - On a moving pad (issue 41: 1 m/s north, 2 m/s east, from the start of the LAND at
+//!   12 m), in 2 m/s of mean wind without gusts, the model flying with PLND_OPTIONS bit 0 (the target
 //!   filter and the pad's velocity fed forward): each of 10 seeds within 10 cm, as the issue
 //!   asks.
 //! - Honest: a board that believes its camera is turned 90 degrees (TD_CAM_YAW = 90, every
@@ -177,9 +177,13 @@ fn moving_pads_at_1_and_2_m_s_in_2_m_s_of_wind_land_within_10_cm() {
     // of mean wind (seeded directions), no gusts; the model flies with PLND_OPTIONS bit 0.
     let seeds = MOVING_PAD_SEEDS.to_string();
     for velocity in ["1,0", "0,2"] {
+        // From 12 m (the slow last 10 m are the landing; the fast part above is not what a
+        // moving pad tests, and CI's time is short).
         let (code, report, stderr) = sitl(&[
             "--seeds",
             &seeds,
+            "--height",
+            "12",
             "--wind-mps",
             "2",
             "--gust-mps",

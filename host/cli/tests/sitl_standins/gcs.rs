@@ -384,7 +384,7 @@ fn gps_loss_options_out_of_place_are_usage_errors() {
 #[test]
 fn no_gps_and_pad_options_out_of_place_are_usage_errors() {
     const LINKS: [&str; 4] = ["--tcp", "127.0.0.1:9", "--gcs", "tcp:127.0.0.1:9"];
-    let cases: [(Vec<&str>, &[&str]); 5] = [
+    let cases: [(Vec<&str>, &[&str]); 9] = [
         (
             vec!["--tcp", "127.0.0.1:9", "--no-gps"],
             &["--no-gps needs --gcs"],
@@ -401,6 +401,29 @@ fn no_gps_and_pad_options_out_of_place_are_usage_errors() {
         (
             vec!["--pad", "round"],
             &["--pad: no design `round`", "nested-rest"],
+        ),
+        // A moving pad against a running SITL: only with the ground station, which starts it
+        // with the LAND; never heaving or rolling (the SITL's ground is still), never without
+        // GPS (the board's position is against the pad).
+        (
+            vec!["--tcp", "127.0.0.1:9", "--pad-velocity", "1,0"],
+            &["moving pad", "needs --gcs"],
+        ),
+        (
+            [
+                &LINKS[..],
+                &["--pad-velocity", "1,0", "--deck-heave", "0.3@6"],
+            ]
+            .concat(),
+            &["--deck-heave", "for the model"],
+        ),
+        (
+            [&LINKS[..], &["--pad-velocity", "1,0", "--no-gps"]].concat(),
+            &["--no-gps", "moving pad"],
+        ),
+        (
+            vec!["--pad-turn-rate", "5"],
+            &["--pad-turn-rate", "--pad-velocity too"],
         ),
     ];
     for (args, needles) in cases {
