@@ -724,7 +724,7 @@ pub(super) fn run(
             .threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
         // Its clock starts with the LAND ([`fly`] sets it).
-        pad_motion: args.pad_motion.motion(0.0)?,
+        pad_motion: motion,
         ..LandingConfig::issue_15(args.seed)
     };
     let config = ConnectConfig {
