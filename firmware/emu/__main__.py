@@ -43,6 +43,9 @@ def parse(argv):
     parser.add_argument("--power-cycle", action="store_true",
                         help="after FIL: set a parameter over MAVLink, power-cycle the chip "
                              "(its flash kept), read it back (power_cycle.py)")
+    parser.add_argument("--signing", action="store_true",
+                        help="after FIL: a signing key and signed, unsigned and replayed "
+                             "PARAM_SETs, a power cycle, the same checks again (signing.py)")
     parser.add_argument("--camera", choices=("qvga", "vga"), default="qvga",
                         help="FIL: the build's frame size (feature camera-vga)")
     parser.add_argument("--frame", default=None,
@@ -68,6 +71,9 @@ def main(argv=None):
     if fil and args.power_cycle and not problems:
         from .power_cycle import PowerCycle
         problems += PowerCycle(fil, elf, board, args).run(machine)
+    if fil and args.signing and not problems:
+        from .signing import Signing
+        problems += Signing(fil, elf, board, args).run(machine)
     problems += report_stack(machine)
     taken = dict(sorted(machine.exc.taken.items()))
     print(f"  {machine.instructions} instructions, {machine.time_ns / 1e6:.1f} ms emulated, "
