@@ -15,7 +15,7 @@ use touchdown_core::companion::mavlink::dialects::common::{
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader, Message};
 use touchdown_core::companion::{Companion, CompanionConfig, MAX_FRAME_LEN};
-use touchdown_core::params::{ParamSet, SigningSecret, PARAMS, PARAM_COUNT};
+use touchdown_core::params::{ParamId, ParamSet, SigningSecret, PARAMS, PARAM_COUNT};
 use touchdown_core::sha256::Sha256;
 
 use crate::input::Input;
@@ -125,13 +125,16 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
     let mut last_write: Option<Vec<u8>> = None;
     let mut seq = 0u8;
     let mut applied = 0u32;
+    // Writes sent but maybe not handled yet: the parser waits for the whole frame a false
+    // start in earlier bytes announced, and hands the write out with later bytes. Each with
+    // the key it was signed with (`None`: unsigned).
+    let mut pending: Vec<Option<[u8; 32]>> = Vec::new();
     while !input.is_empty() {
         let before: ParamSet = *companion.params();
         let in_force = before.signing_secret().key().copied();
         let locked = companion.flight_locked();
         // Whether this operation's write is one the board may take.
         let mut may_change = false;
-        let mut lock_exempt = false;
         seq = seq.wrapping_add(1);
         match input.below(6) {
             op @ (0 | 1) => {
@@ -145,7 +148,6 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
                 };
                 let msg = if op == 0 {
                     let def = &PARAMS[input.below(PARAM_COUNT)];
-                    lock_exempt = def.name == "TD_LOCK";
                     MavMessage::PARAM_SET(PARAM_SET_DATA {
                         param_value: input.f32(),
                         target_system: 1,
@@ -176,6 +178,7 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
                     _ => None,
                 };
                 let bytes = frame(&msg, (255, 190), seq, sign_with, 0, their_ts);
+                pending.push(sign_with.copied());
                 // Signed with the key in force (an old timestamp may still be its stream's
                 // first, within the window: "may" change, not "must").
                 may_change =
@@ -215,6 +218,13 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
                 }
             }
         }
+        // A write handled only now counts with the key in force now.
+        may_change |= pending
+            .iter()
+            .any(|k| in_force.is_none() || (k.is_some() && *k == in_force));
+        if companion.receive_buffered() == 0 {
+            pending.clear();
+        }
         let after = *companion.params();
         if after != before {
             applied += 1;
@@ -223,7 +233,9 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
                 "changed by a write not signed with the key in force: {before:?} -> {after:?}"
             );
             if locked {
-                assert!(lock_exempt, "changed while armed with TD_LOCK 1");
+                let mut unlocked = after;
+                let _ = unlocked.set(ParamId::Lock, before.get(ParamId::Lock));
+                assert_eq!(unlocked, before, "changed while armed with TD_LOCK 1");
                 assert_eq!(after.signing_secret(), before.signing_secret());
             }
         }
