@@ -132,7 +132,10 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
     while !input.is_empty() {
         let before: ParamSet = *companion.params();
         let in_force = before.signing_secret().key().copied();
-        let locked = companion.flight_locked();
+        // The lock is judged only where nothing but this operation's own write can reach the
+        // companion: raw bytes may hold whole frames (libFuzzer solves the CRC comparison), a
+        // disarming HEARTBEAT among them, and bytes held behind a false start come out later.
+        let mut locked = companion.flight_locked() && companion.receive_buffered() == 0;
         // Whether this operation's write is one the board may take.
         let mut may_change = false;
         seq = seq.wrapping_add(1);
@@ -206,6 +209,10 @@ pub fn signed_stream(data: &[u8]) -> (u32, u32) {
             3 => {
                 let len = input.below(301);
                 companion.receive(input.bytes(len), now_us);
+                // Unsigned frames in them (a signature cannot be forged) may write when no
+                // key is in force.
+                may_change = in_force.is_none();
+                locked = false;
             }
             4 => {
                 now_us = now_us.saturating_add(u64::from(input.u32() % 5_000_001));
