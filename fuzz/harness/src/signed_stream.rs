@@ -15,6 +15,7 @@ use touchdown_core::companion::mavlink::dialects::common::{
 };
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader, Message};
 use touchdown_core::companion::{Companion, CompanionConfig, MAX_FRAME_LEN};
+use touchdown_core::crc::crc16_x25;
 use touchdown_core::params::{ParamId, ParamSet, SigningSecret, PARAMS, PARAM_COUNT};
 use touchdown_core::sha256::Sha256;
 
@@ -48,8 +49,8 @@ pub fn frame(
     // Set the signed flag and recompute the checksum over the changed header.
     bytes[2] |= 1;
     let len = bytes.len();
-    let mut crc = x25(0xFFFF, &bytes[1..len - 2]);
-    crc = x25(crc, &[msg_extra_crc(msg)]);
+    let mut crc = crc16_x25(0xFFFF, &bytes[1..len - 2]);
+    crc = crc16_x25(crc, &[msg_extra_crc(msg)]);
     bytes[len - 2..].copy_from_slice(&crc.to_le_bytes());
     bytes.push(link_id);
     bytes.extend_from_slice(&timestamp.to_le_bytes()[..6]);
@@ -60,16 +61,6 @@ pub fn frame(
 
 fn msg_extra_crc(msg: &MavMessage) -> u8 {
     MavMessage::extra_crc(msg.message_id())
-}
-
-fn x25(mut crc: u16, bytes: &[u8]) -> u16 {
-    for &b in bytes {
-        let mut tmp = b ^ (crc & 0xFF) as u8;
-        tmp ^= tmp << 4;
-        let t = u16::from(tmp);
-        crc = (crc >> 8) ^ (t << 8) ^ (t << 3) ^ (t >> 4);
-    }
-    crc
 }
 
 /// The 6-byte signature of `signed` (a frame up to and including its link id and timestamp).
