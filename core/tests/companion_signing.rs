@@ -419,4 +419,14 @@ fn a_signed_write_is_not_taken_again_after_a_reboot() {
     assert_eq!(c.stats().replayed_frames, 2);
     feed(&mut c, &writes[2], 20_000);
     assert_eq!(c.params().get(ParamId::RateHz), 25.0, "a newer write");
+    // The same key set up again with an older initial timestamp keeps the newer floor.
+    let again = pymavlink_frames(Some(&KEY), &[setup_signing(&KEY, T0, T0 + 400)]).unwrap();
+    feed(&mut c, &again[0], 30_000);
+    assert_eq!(c.params().signing_secret().timestamp(), T0 + 301);
+    let r = feed(&mut c, &writes[1], 40_000);
+    assert_eq!(
+        r.values,
+        vec![("TD_RATE_HZ".to_string(), 25.0)],
+        "still refused"
+    );
 }

@@ -256,7 +256,15 @@ impl State {
         if !self.may_write(Write::SigningKey, authenticity, now_us) {
             return;
         }
-        let secret = SigningSecret::new(key, initial_timestamp);
+        // The same key again (a ground station's set-up repeated) keeps its saved timestamp
+        // when that is newer: lowering it would let the writes since be taken again.
+        let current = *self.params.signing_secret();
+        let initial = if current.key() == Some(&key) {
+            initial_timestamp.max(current.timestamp())
+        } else {
+            initial_timestamp
+        };
+        let secret = SigningSecret::new(key, initial);
         self.set_signing_secret(secret, now_us);
         self.stats.signing_setups = self.stats.signing_setups.saturating_add(1);
         let text = if secret.is_set() {
