@@ -65,3 +65,4 @@ pub mod params;
 pub mod pipeline;
 pub mod pose;
 pub mod sensor;
+pub mod sha256;

@@ -57,6 +57,9 @@ fn ardupilot_profile_pymavlink() {
         (2_000_000, ParamAction::RequestList),
         (3_000_000, ParamAction::ReadName("TD_RATE_HZ")),
         (3_100_000, ParamAction::ReadIndex(2)),
+        // The flight is armed: the flight lock holds the parameters until it is off.
+        (3_800_000, ParamAction::Set("TD_TAG_SIZE", 0.4)),
+        (3_900_000, ParamAction::Set("TD_LOCK", 0.0)),
         (4_000_000, ParamAction::Set("TD_RATE_HZ", 1.0e9)),
         (4_100_000, ParamAction::Set("TD_TAG_SIZE", f32::NAN)),
         (4_200_000, ParamAction::Set("TD_MAX_HAMMING", 1.5)),
@@ -117,6 +120,9 @@ fn ardupilot_profile_pymavlink() {
     assert_eq!(by_time(3_000_000)[0]["param_id"], "TD_RATE_HZ");
     assert_eq!(by_time(3_100_000)[0]["param_id"], "TD_TAG_SIZE");
     // Absurd values: answered with the old value.
+    let r = by_time(3_800_000);
+    assert_eq!(f(r[0], "param_value"), 0.0, "locked in flight: {}", r[0]);
+    assert_eq!(f(by_time(3_900_000)[0], "param_value"), 0.0, "TD_LOCK off");
     let r = by_time(4_000_000);
     assert_eq!(
         (r[0]["param_id"].clone(), f(r[0], "param_value")),
@@ -134,7 +140,8 @@ fn ardupilot_profile_pymavlink() {
     );
     assert!(by_time(4_400_000).is_empty(), "unknown names get no answer");
     assert_eq!(run.stats.param_sets_rejected, 3);
-    assert_eq!(run.stats.param_sets_accepted, 1);
+    assert_eq!(run.stats.param_sets_accepted, 2, "TD_LOCK and TD_TAG_SIZE");
+    assert_eq!(run.stats.writes_refused_locked, 1);
     // VISION_POSITION_ESTIMATE: the vehicle in the pad-centred NED frame, with covariance.
     let vpe: Vec<&Value> = msgs
         .iter()

@@ -49,9 +49,9 @@
 //! not as another frame. A valid frame found inside that stretch is handed out as usual and
 //! ends it.
 //!
-//! Signed MAVLink 2 frames are accepted without checking the signature (the link is a wire
-//! between two boards); frames with unknown incompatibility flags are dropped, as the
-//! MAVLink 2 specification requires.
+//! A signed MAVLink 2 frame is handed out with its signature ([`Signature`]): whether it
+//! counts is the companion's decision (`signing`), not the parser's. Frames with unknown
+//! incompatibility flags are dropped, as the MAVLink 2 specification requires.
 
 use crate::crc::crc16_x25;
 use mavlink::dialects::common::MavMessage;
@@ -68,9 +68,9 @@ pub const V2_HEADER_LEN: usize = 10;
 /// MAVLink 1 header length, start marker included.
 pub const V1_HEADER_LEN: usize = 6;
 /// MAVLink 2 incompatibility flag: the frame is signed (13 more bytes).
-const IFLAG_SIGNED: u8 = 0x01;
-/// Length of a MAVLink 2 signature.
-const SIGNATURE_LEN: usize = 13;
+pub(super) const IFLAG_SIGNED: u8 = 0x01;
+/// Length of a MAVLink 2 signature: link id (1), timestamp (6), signature (6).
+pub(super) const SIGNATURE_LEN: usize = 13;
 
 /// Largest MAVLink payload.
 const MAX_PAYLOAD_LEN: usize = 255;
@@ -84,8 +84,23 @@ const BUF_LEN: usize = MAX_FRAME_LEN + 1;
 /// produces for an 8-bit system id, but with every length visible to the optimiser: the
 /// mavlink crate's header and checksum slicing keeps panic paths in the firmware, and the
 /// no-panic link check (nopanic/) needs none.
+#[cfg(test)]
 pub fn write_v2_frame<D: MessageData>(
     out: &mut [u8],
+    sequence: u8,
+    system_id: u8,
+    component_id: u8,
+    data: &D,
+) -> Option<usize> {
+    write_v2_frame_flagged(out, 0, sequence, system_id, component_id, data)
+}
+
+/// [`write_v2_frame`] with the incompatibility flags `incompat` in the header (the signed
+/// flag, [`IFLAG_SIGNED`], for a frame the caller then signs): the length without a
+/// signature.
+pub(super) fn write_v2_frame_flagged<D: MessageData>(
+    out: &mut [u8],
+    incompat: u8,
     sequence: u8,
     system_id: u8,
     component_id: u8,
@@ -99,7 +114,7 @@ pub fn write_v2_frame<D: MessageData>(
     let header: [u8; V2_HEADER_LEN] = [
         STX_V2,
         len as u8,
-        0, // incompatibility flags: unsigned, 8-bit system id
+        incompat,
         0, // compatibility flags
         sequence,
         system_id,
@@ -135,6 +150,22 @@ pub struct RawFrame<'a> {
     pub message_id: u32,
     /// Payload as sent (MAVLink 2 trims trailing zeros; decoding pads them back).
     pub payload: &'a [u8],
+    /// The MAVLink 2 signature, when the frame is signed (not yet checked).
+    pub signature: Option<Signature<'a>>,
+}
+
+/// A signed frame's signature, and the bytes it signs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Signature<'a> {
+    /// The sender's link id.
+    pub link_id: u8,
+    /// The sender's timestamp, 10 µs units since 2015-01-01 UTC (48 bits).
+    pub timestamp: u64,
+    /// The first 6 bytes of the SHA-256 the sender computed.
+    pub tag: [u8; 6],
+    /// The frame's header, payload and CRC: what the signature covers besides the key, the
+    /// link id and the timestamp.
+    pub covered: &'a [u8],
 }
 
 impl RawFrame<'_> {
@@ -343,6 +374,30 @@ impl FrameParser {
             MavlinkVersion::V2 => (self.byte(4)?, self.byte(5)?, self.byte(6)?),
             MavlinkVersion::V1 => (self.byte(2)?, self.byte(3)?, self.byte(4)?),
         };
+        let signed = version == MavlinkVersion::V2 && self.byte(2)? & IFLAG_SIGNED != 0;
+        let signature = if signed {
+            let covered_len = header_len + payload_len + 2;
+            let covered = self.buf.get(..covered_len)?;
+            let sig = self.buf.get(covered_len..covered_len + SIGNATURE_LEN)?;
+            let (&link_id, rest) = sig.split_first()?;
+            let (stamp, tag) = rest.split_first_chunk::<6>()?;
+            let mut ts = [0u8; 8];
+            for (d, s) in ts.iter_mut().zip(stamp) {
+                *d = *s;
+            }
+            let mut t = [0u8; 6];
+            for (d, s) in t.iter_mut().zip(tag) {
+                *d = *s;
+            }
+            Some(Signature {
+                link_id,
+                timestamp: u64::from_le_bytes(ts),
+                tag: t,
+                covered,
+            })
+        } else {
+            None
+        };
         Some(RawFrame {
             version,
             sequence,
@@ -350,6 +405,7 @@ impl FrameParser {
             component_id,
             message_id,
             payload: self.buf.get(header_len..header_len + payload_len)?,
+            signature,
         })
     }
 }

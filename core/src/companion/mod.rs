@@ -106,11 +106,13 @@
 
 mod bearing;
 mod framing;
+mod guard;
 mod mount;
 mod pad_motion;
 mod profile;
 mod receive;
 mod shift;
+mod signing;
 mod state;
 mod stats;
 mod target;
@@ -121,20 +123,22 @@ mod vision;
 
 pub use mavlink;
 
-pub use framing::{FrameParser, ParserStats, RawFrame, MAX_FRAME_LEN};
+pub use framing::{FrameParser, ParserStats, RawFrame, Signature, MAX_FRAME_LEN};
+pub use guard::REFUSAL_TEXT_PERIOD_US;
 pub use mavlink::dialects::common::MavSeverity;
 pub use pad_motion::PadMotionSetting;
 pub use profile::{Profile, ProfileSetting};
 pub use shift::{px4_mode_lands_on_target, PadShift, ShiftConfig, ShiftMeasurement};
+pub use signing::{Authenticity, MAX_SIGNING_STREAMS, NEW_STREAM_WINDOW};
 pub use stats::{CompanionStats, TargetLatency, TargetOutcome};
 pub use timesync::{TimeSource, TimeSync};
 pub use vision::{mount_known_for_take_off, TAKE_OFF_MOUNT_SIGMA_DEG};
 
 use crate::filter::{FrameEstimate, VehicleState};
-use crate::params::{ParamError, ParamId, ParamSet};
+use crate::params::{ParamError, ParamId, ParamSet, SigningSecret};
 use heapless::Deque;
 use mavlink::dialects::common::{
-    MavCmd, LANDING_TARGET_DATA, ODOMETRY_DATA, VISION_POSITION_ESTIMATE_DATA,
+    MavCmd, MavResult, LANDING_TARGET_DATA, ODOMETRY_DATA, VISION_POSITION_ESTIMATE_DATA,
     VISION_SPEED_ESTIMATE_DATA,
 };
 use mavlink::MessageData;
@@ -268,6 +272,7 @@ enum Pending {
     },
     CommandAck {
         command: MavCmd,
+        result: MavResult,
         target: (u8, u8),
     },
     ParamValue(ParamId),
@@ -393,6 +398,10 @@ struct State {
     pad_motion: pad_motion::PadMotionWatch,
     /// The auto profile last announced by STATUSTEXT.
     announced: Option<Profile>,
+    /// MAVLink signing: our timestamp and the senders' (the key is in `params`).
+    signing: signing::Signing,
+    /// The next refused write may be said by STATUSTEXT from then on (`guard`).
+    next_refusal_text_us: u64,
     next_heartbeat_us: u64,
     next_timesync_us: u64,
     streams: heapless::Vec<Stream, MAX_STREAMS>,
@@ -456,6 +465,8 @@ impl Companion {
                 shift: PadShift::new(),
                 pad_motion: pad_motion::PadMotionWatch::default(),
                 announced: None,
+                signing: signing::Signing::new(params.signing_secret().timestamp(), 0),
+                next_refusal_text_us: 0,
                 next_heartbeat_us: 0,
                 next_timesync_us: 0,
                 streams: own_streams(&config),
@@ -526,9 +537,23 @@ impl Companion {
         &self.state.params
     }
 
-    /// Sets a parameter locally (as a PARAM_SET would, without a reply).
+    /// Sets a parameter locally (as a PARAM_SET would, without a reply, and without the
+    /// signing check or the flight lock: this is the caller's own process, not the link).
     pub fn set_param(&mut self, id: ParamId, value: f32) -> Result<(), ParamError> {
         self.state.set_param(id, value)
+    }
+
+    /// Sets the signing key locally (as an accepted SETUP_SIGNING would, without its
+    /// checks): a host tool that holds the owner's key signs with it and checks by it.
+    /// [`SigningSecret::NONE`] turns signing off.
+    pub fn set_signing_secret(&mut self, secret: SigningSecret, now_us: u64) {
+        self.state.set_signing_secret(secret, now_us);
+    }
+
+    /// Whether a signing key is set: writes then need signed frames, and every frame sent is
+    /// signed.
+    pub fn signing(&self) -> bool {
+        self.state.params.signing_secret().is_set()
     }
 
     /// The profile in force: TD_PROFILE's forced one, or with TD_PROFILE auto the one the

@@ -6,14 +6,18 @@
 //! and the clock offset; a gimbal or a ground station on the same link never does.
 
 use super::framing::RawFrame;
+use super::guard::Write;
 use super::profile::Profile;
+use super::signing::Authenticity;
 use super::{
     Pending, State, MAV_COMP_ID_AUTOPILOT1, MAX_STAMP_DISAGREEMENT_US, MSG_ATTITUDE_QUATERNION,
 };
 use crate::filter::Attitude;
 use crate::filter::PositionSample;
-use crate::params::{self, ParamId};
-use mavlink::dialects::common::{MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult};
+use crate::params::{self, ParamId, SigningSecret};
+use mavlink::dialects::common::{
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavResult, MavSeverity,
+};
 use nalgebra::Vector3;
 
 impl State {
@@ -53,6 +57,7 @@ impl State {
         if frame.system_id == self.sysid() && frame.component_id == self.compid() {
             return; // our own echo (a UDP router may reflect it)
         }
+        let authenticity = self.authenticate(frame, now_us);
         if self.is_from_autopilot(frame) {
             // The stream is arriving, whatever its content: asking again would not mend a
             // malformed sample, and a message outside the common dialect (ArduPilot's
@@ -125,6 +130,7 @@ impl State {
             MavMessage::SYSTEM_TIME(s) if from_autopilot => {
                 self.check_clock(s.time_boot_ms, now_us);
                 self.timesync.on_system_time(s.time_boot_ms, now_us);
+                self.signing.advance_to_unix(s.time_unix_usec, now_us);
             }
             MavMessage::TIMESYNC(t) => {
                 if t.tc1 == 0 {
@@ -156,11 +162,23 @@ impl State {
             MavMessage::COMMAND_LONG(c)
                 if c.target_system == self.sysid() && c.target_component == self.compid() =>
             {
-                // No command is implemented: say so rather than leave the sender retrying.
+                // No command is implemented: say so rather than leave the sender retrying;
+                // with a key set, an unsigned one is told it was denied.
+                let result = if self.may_write(Write::Command, authenticity, now_us) {
+                    MavResult::MAV_RESULT_UNSUPPORTED
+                } else {
+                    MavResult::MAV_RESULT_DENIED
+                };
                 self.enqueue(Pending::CommandAck {
                     command: c.command,
+                    result,
                     target: (frame.system_id, frame.component_id),
                 });
+            }
+            MavMessage::SETUP_SIGNING(s)
+                if self.addressed_to_us(s.target_system, s.target_component) =>
+            {
+                self.on_setup_signing(s.secret_key, s.initial_timestamp, authenticity, now_us);
             }
             MavMessage::PARAM_REQUEST_LIST(r)
                 if self.addressed_to_us(r.target_system, r.target_component) =>
@@ -184,12 +202,14 @@ impl State {
                 if self.addressed_to_us(s.target_system, s.target_component) =>
             {
                 if let Some(id) = ParamId::from_name(params::name_str(&s.param_id[..])) {
-                    match self.set_param(id, s.param_value) {
-                        Ok(()) => {
+                    let allowed = self.may_write(Write::Param(id), authenticity, now_us);
+                    match allowed.then(|| self.set_param(id, s.param_value)) {
+                        None => {}
+                        Some(Ok(())) => {
                             self.stats.param_sets_accepted =
                                 self.stats.param_sets_accepted.saturating_add(1)
                         }
-                        Err(_) => {
+                        Some(Err(_)) => {
                             self.stats.param_sets_rejected =
                                 self.stats.param_sets_rejected.saturating_add(1)
                         }
@@ -205,6 +225,51 @@ impl State {
             // Samples stamped with the old (or no) offset are not comparable with new ones.
             self.vehicle.clear_samples();
         }
+    }
+
+    /// Checks `frame`'s signature (with a key set) and counts what it proved.
+    fn authenticate(&mut self, frame: &RawFrame<'_>, now_us: u64) -> Authenticity {
+        let key = self.params.signing_secret().key().copied();
+        let a = self.signing.check(key.as_ref(), frame, now_us);
+        let counter = match a {
+            Authenticity::Signed => &mut self.stats.signed_frames,
+            Authenticity::BadSignature => &mut self.stats.bad_signatures,
+            Authenticity::Replayed => &mut self.stats.replayed_frames,
+            Authenticity::Unsigned => return a,
+        };
+        *counter = counter.saturating_add(1);
+        a
+    }
+
+    /// A SETUP_SIGNING addressed to us: the key (all zeros: none) and its initial timestamp,
+    /// applied when the guard allows it, and said by STATUSTEXT.
+    fn on_setup_signing(
+        &mut self,
+        key: [u8; params::KEY_LEN],
+        initial_timestamp: u64,
+        authenticity: Authenticity,
+        now_us: u64,
+    ) {
+        if !self.may_write(Write::SigningKey, authenticity, now_us) {
+            return;
+        }
+        let secret = SigningSecret::new(key, initial_timestamp);
+        self.set_signing_secret(secret, now_us);
+        self.stats.signing_setups = self.stats.signing_setups.saturating_add(1);
+        let text = if secret.is_set() {
+            "touchdown: signing on"
+        } else {
+            "touchdown: signing off"
+        };
+        self.queue_status_text(MavSeverity::MAV_SEVERITY_NOTICE, text);
+    }
+
+    /// Takes `secret` as the key (a new key's streams start afresh) and runs our timestamp
+    /// from its initial one if that is newer.
+    pub(super) fn set_signing_secret(&mut self, secret: SigningSecret, now_us: u64) {
+        self.params.set_signing_secret(secret);
+        self.signing.forget_streams();
+        self.signing.advance_to(secret.timestamp(), now_us);
     }
 
     fn mark_stream(&mut self, message_id: u32, now_us: u64) {

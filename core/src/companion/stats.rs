@@ -104,6 +104,19 @@ pub struct CompanionStats {
     /// Times TD_PAD_MOTION auto decided that the pad moves or stands still again (each
     /// announced by STATUSTEXT).
     pub pad_motion_changes: u32,
+    /// Frames received with a valid signature under our key.
+    pub signed_frames: u32,
+    /// Signed frames whose signature did not match our key (treated as unsigned).
+    pub bad_signatures: u32,
+    /// Frames signed with our key but not newer than their stream's last (replays; treated
+    /// as unsigned).
+    pub replayed_frames: u32,
+    /// Writes (PARAM_SET, SETUP_SIGNING, COMMAND_LONG) refused for want of a valid signature.
+    pub writes_refused_unsigned: u32,
+    /// Writes refused by the flight lock (TD_LOCK) while armed.
+    pub writes_refused_locked: u32,
+    /// SETUP_SIGNING messages applied (a key set, changed or cleared).
+    pub signing_setups: u32,
 }
 
 /// Delay from a frame's exposure to the moment its LANDING_TARGET is handed to the link for

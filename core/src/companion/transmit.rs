@@ -18,7 +18,7 @@ use super::{
 };
 use crate::params::{ParamId, PARAM_COUNT};
 use mavlink::dialects::common::{
-    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
+    MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavSeverity, MavState,
     MavSysStatusSensor, MavSysStatusSensorExtended, MavType, COMMAND_ACK_DATA, COMMAND_LONG_DATA,
     HEARTBEAT_DATA, NAMED_VALUE_FLOAT_DATA, PARAM_VALUE_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
     TIMESYNC_DATA,
@@ -123,7 +123,7 @@ impl State {
         if let Some(p) = self.timesync_reply.take() {
             self.stats.timesync_answers = self.stats.timesync_answers.saturating_add(1);
             let msg = self.message(p);
-            return self.emit(&msg, out);
+            return self.emit(now_us, &msg, out);
         }
         let latency = self.config.max_target_latency_us;
         while let Some(p) = self.target.take() {
@@ -133,12 +133,12 @@ impl State {
             }
             self.stats.landing_targets = self.stats.landing_targets.saturating_add(1);
             self.record_target_latency(now_us.saturating_sub(p.exposure_us));
-            return self.emit(&MavMessage::LANDING_TARGET(p.data), out);
+            return self.emit(now_us, &MavMessage::LANDING_TARGET(p.data), out);
         }
         if let Some(p) = self.vpe.take() {
             if now_us.saturating_sub(p.created_us) <= latency {
                 self.stats.vision_estimates = self.stats.vision_estimates.saturating_add(1);
-                return self.emit(&MavMessage::VISION_POSITION_ESTIMATE(p.data), out);
+                return self.emit(now_us, &MavMessage::VISION_POSITION_ESTIMATE(p.data), out);
             }
         }
         if let Some(p) = self.velocity.take() {
@@ -148,7 +148,7 @@ impl State {
                     VelocityMessage::Odometry(d) => MavMessage::ODOMETRY(d),
                     VelocityMessage::Speed(d) => MavMessage::VISION_SPEED_ESTIMATE(d),
                 };
-                return self.emit(&msg, out);
+                return self.emit(now_us, &msg, out);
             }
         }
         if let Some(s) = self.status.pop_front() {
@@ -158,14 +158,14 @@ impl State {
                 text: s.text.into(),
                 ..STATUSTEXT_DATA::DEFAULT
             });
-            return self.emit(&msg, out);
+            return self.emit(now_us, &msg, out);
         }
         let p = self.queue.pop_front()?;
         let msg = self.message(p);
         if let Pending::ParamValue(_) = p {
             self.stats.param_values = self.stats.param_values.saturating_add(1);
         }
-        self.emit(&msg, out)
+        self.emit(now_us, &msg, out)
     }
 
     fn message(&self, p: Pending) -> MavMessage {
@@ -224,9 +224,13 @@ impl State {
                 target_component: target.1,
                 ..COMMAND_LONG_DATA::DEFAULT
             }),
-            Pending::CommandAck { command, target } => MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+            Pending::CommandAck {
                 command,
-                result: MavResult::MAV_RESULT_UNSUPPORTED,
+                result,
+                target,
+            } => MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+                command,
+                result,
                 target_system: target.0,
                 target_component: target.1,
                 ..COMMAND_ACK_DATA::DEFAULT
@@ -284,32 +288,65 @@ impl State {
         self.queue_status_text(MavSeverity::MAV_SEVERITY_INFO, &text);
     }
 
-    fn emit(&mut self, msg: &MavMessage, out: &mut [u8]) -> Option<usize> {
+    fn emit(&mut self, now_us: u64, msg: &MavMessage, out: &mut [u8]) -> Option<usize> {
         let (seq, sys, comp) = (self.sequence, self.sysid(), self.compid());
+        // With a key, every frame goes out signed (`signing`): the flag is in the header, so
+        // in the CRC, and the signature is appended after it.
+        let key = self.params.signing_secret().key().copied();
+        let flags = if key.is_some() {
+            framing::IFLAG_SIGNED
+        } else {
+            0
+        };
         // Serialise through the concrete payload type. `serialize_message(&MavMessage)` would
         // link the serialiser of every message of the common dialect (~110 KB of flash in the
         // firmware) although the companion only ever sends these. Framed by
         // `framing::write_v2_frame` (same bytes as `MAVLinkV2MessageRaw`, without its panic
         // paths; see nopanic/).
         let written = match msg {
-            MavMessage::HEARTBEAT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::SYS_STATUS(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::TIMESYNC(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::COMMAND_LONG(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::COMMAND_ACK(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::PARAM_VALUE(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::LANDING_TARGET(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::VISION_POSITION_ESTIMATE(d) => {
-                framing::write_v2_frame(out, seq, sys, comp, d)
+            MavMessage::HEARTBEAT(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
             }
-            MavMessage::ODOMETRY(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::VISION_SPEED_ESTIMATE(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::STATUSTEXT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
-            MavMessage::NAMED_VALUE_FLOAT(d) => framing::write_v2_frame(out, seq, sys, comp, d),
+            MavMessage::SYS_STATUS(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::TIMESYNC(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::COMMAND_LONG(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::COMMAND_ACK(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::PARAM_VALUE(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::LANDING_TARGET(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::VISION_POSITION_ESTIMATE(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::ODOMETRY(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::VISION_SPEED_ESTIMATE(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::STATUSTEXT(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
+            MavMessage::NAMED_VALUE_FLOAT(d) => {
+                framing::write_v2_frame_flagged(out, flags, seq, sys, comp, d)
+            }
             _ => return None,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let len = written?;
+        let mut len = written?;
+        if let Some(key) = key {
+            len = self.signing.sign(&key, out, len, now_us)?;
+        }
         self.stats.tx_frames = self.stats.tx_frames.saturating_add(1);
         self.stats.tx_bytes = self.stats.tx_bytes.saturating_add(len as u64);
         Some(len)

@@ -37,6 +37,7 @@
 use crate::crc::crc16_x25;
 
 mod persist;
+mod secret;
 mod settings;
 
 pub use persist::{
@@ -44,6 +45,7 @@ pub use persist::{
     SlotKey, Store, ERASED, SAVE_DEBOUNCE_US, SECTORS, SLOT_LEN,
 };
 
+pub use secret::{SigningSecret, KEY_LEN};
 pub use settings::{PipelineSettings, VPE_POSITION, VPE_VELOCITY};
 
 /// Longest parameter name (MAVLink's `param_id`, not NUL-terminated when exactly 16).
@@ -138,10 +140,13 @@ pub enum ParamId {
     /// Whether the pad moves: 0 at rest, 1 moving (a deck, a roof, a dock), 2 auto (decided
     /// from its velocity over the ground, `companion::pad_motion`).
     PadMotion,
+    /// The flight lock: 1, while the autopilot reports armed, every parameter but this one is
+    /// refused over the link (and the signing key cannot change); 0 off.
+    Lock,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 22;
+pub const PARAM_COUNT: usize = 23;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -368,6 +373,18 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "the pad moves: 0 no, 1 yes (no vision estimates, no mount calibration applied), 2 auto (from its velocity over the ground)",
     },
+    // On by default: a parameter written in flight (a ground station's whole-file write, or
+    // anyone the autopilot routes to the link) changes the geometry under a landing without a
+    // sign; the owner who means it sets 0 first.
+    ParamDef {
+        name: "TD_LOCK",
+        kind: ParamKind::Int,
+        default: 1.0,
+        min: 0.0,
+        max: 1.0,
+        zero_is_unset: false,
+        help: "flight lock: 1 the other parameters and the signing key refuse writes while the autopilot is armed, 0 off",
+    },
 ];
 
 impl ParamId {
@@ -395,6 +412,7 @@ impl ParamId {
         ParamId::Px4OuterLoopAlt,
         ParamId::PadYaw,
         ParamId::PadMotion,
+        ParamId::Lock,
     ];
 
     /// The id at table `index`.
@@ -467,20 +485,22 @@ const FORMAT_VERSION: u8 = 1;
 const HEADER_LEN: usize = 8;
 /// One record: name (16, NUL-padded) + value (f32 little-endian).
 const RECORD_LEN: usize = PARAM_NAME_LEN + 4;
-/// Bytes [`ParamSet::export`] needs.
-pub const EXPORT_LEN: usize = HEADER_LEN + PARAM_COUNT * RECORD_LEN;
-const _: () = assert!(PARAM_COUNT <= u8::MAX as usize);
+/// Bytes [`ParamSet::export`] needs: the table's records and the signing secret's.
+pub const EXPORT_LEN: usize = HEADER_LEN + (PARAM_COUNT + secret::RECORDS) * RECORD_LEN;
+const _: () = assert!(PARAM_COUNT + secret::RECORDS <= u8::MAX as usize);
 
-/// The parameter values.
+/// The parameter values, and the signing secret saved with them ([`SigningSecret`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ParamSet {
     values: [f32; PARAM_COUNT],
+    secret: SigningSecret,
 }
 
 impl Default for ParamSet {
     fn default() -> Self {
         ParamSet {
             values: PARAMS.map(|p| p.default),
+            secret: SigningSecret::NONE,
         }
     }
 }
@@ -533,39 +553,62 @@ impl ParamSet {
         Ok(id)
     }
 
-    /// Writes the values into `out` for flash; returns the bytes written (0 when `out` is
-    /// shorter than [`EXPORT_LEN`]).
-    pub fn export(&self, out: &mut [u8]) -> usize {
-        self.export_records(PARAM_COUNT, out)
+    /// The signing secret (not a parameter: see [`SigningSecret`]).
+    pub fn signing_secret(&self) -> &SigningSecret {
+        &self.secret
     }
 
-    /// [`ParamSet::export`] of the first `records` parameters of the table only: the blob a
-    /// firmware whose table ended there wrote (the tests' older firmware). Returns the bytes
-    /// written (0 when `out` is too short); `records` is capped at [`PARAM_COUNT`].
+    /// Replaces the signing secret (the companion's SETUP_SIGNING; a host tool's own key).
+    pub fn set_signing_secret(&mut self, secret: SigningSecret) {
+        self.secret = secret;
+    }
+
+    /// Writes the values and the signing secret into `out` for flash; returns the bytes
+    /// written (0 when `out` is shorter than [`EXPORT_LEN`]).
+    pub fn export(&self, out: &mut [u8]) -> usize {
+        self.export_with(PARAM_COUNT, true, out)
+    }
+
+    /// [`ParamSet::export`] of the first `records` parameters of the table only, without the
+    /// secret: the blob a firmware whose table ended there wrote (the tests' older firmware).
+    /// Returns the bytes written (0 when `out` is too short); `records` is capped at
+    /// [`PARAM_COUNT`].
+    #[cfg(test)]
     pub(crate) fn export_records(&self, records: usize, out: &mut [u8]) -> usize {
-        let count = records.min(PARAM_COUNT);
+        self.export_with(records, false, out)
+    }
+
+    fn export_with(&self, records: usize, with_secret: bool, out: &mut [u8]) -> usize {
+        let table = records.min(PARAM_COUNT);
+        let secret = if with_secret { secret::RECORDS } else { 0 };
+        let count = table + secret;
         let len = HEADER_LEN + count * RECORD_LEN;
         let Some(out) = out.get_mut(..len) else {
             return 0;
         };
         let (header, records) = out.split_at_mut(HEADER_LEN);
-        for ((record, def), value) in records
-            .chunks_exact_mut(RECORD_LEN)
-            .zip(PARAMS.iter())
+        let table_records = PARAMS
+            .iter()
             .zip(self.values.iter())
+            .take(table)
+            .map(|(def, value)| (def.name, value.to_le_bytes()));
+        let secret_records = self.secret.records().into_iter().take(secret);
+        for (record, (name_str, value)) in records
+            .chunks_exact_mut(RECORD_LEN)
+            .zip(table_records.chain(secret_records))
         {
             let (name, val) = record.split_at_mut(PARAM_NAME_LEN);
             name.fill(0);
-            for (dst, src) in name.iter_mut().zip(def.name.as_bytes()) {
+            for (dst, src) in name.iter_mut().zip(name_str.as_bytes()) {
                 *dst = *src;
             }
-            val.copy_from_slice(&value.to_le_bytes());
+            val.copy_from_slice(&value);
         }
         let crc = crc16_x25(0xFFFF, records);
         let mut h = [0u8; HEADER_LEN];
         h[..4].copy_from_slice(&MAGIC);
         h[4] = FORMAT_VERSION;
-        // PARAM_COUNT fits a byte (checked below).
+        // The record count fits a byte (checked where EXPORT_LEN is defined).
         h[5] = count as u8;
         h[6..8].copy_from_slice(&crc.to_le_bytes());
         header.copy_from_slice(&h);
@@ -595,11 +638,15 @@ impl ParamSet {
         }
         let mut report = ImportReport::default();
         let mut next = *self;
+        let mut secret = secret::SecretRecords::default();
         for record in records.chunks_exact(RECORD_LEN) {
             let (name, val) = record.split_at(PARAM_NAME_LEN);
             let name = name_str(name);
             let mut v = [0u8; 4];
             v.copy_from_slice(val);
+            if secret.take(name, v) {
+                continue;
+            }
             match ParamId::from_name(name) {
                 None => report.unknown = report.unknown.saturating_add(1),
                 Some(id) => match next.set(id, f32::from_le_bytes(v)) {
@@ -607,6 +654,9 @@ impl ParamSet {
                     Err(_) => report.rejected = report.rejected.saturating_add(1),
                 },
             }
+        }
+        if let Some(secret) = secret.finish() {
+            next.secret = secret;
         }
         *self = next;
         Ok(report)

@@ -139,16 +139,16 @@ mod tests {
     /// The slot size the module documentation's save count is worked out from.
     #[test]
     fn slot_size_of_the_current_table() {
-        assert_eq!(EXPORT_LEN, 8 + crate::params::PARAM_COUNT * 20);
+        assert_eq!(EXPORT_LEN, 8 + (crate::params::PARAM_COUNT + 10) * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 22 parameters (TD_PAD_MOTION
-        // appended to the 21 of the pad bearing's firmware, whose 480-byte slots still read
-        // back, like the 20 parameters' 480-byte, the 19 parameters' 448-byte, the 16
-        // parameters' 384-byte and the 13 parameters' 320-byte ones) take 16 words: 255 slots
-        // per sector after the first boot's free word.
-        assert_eq!(SLOT_LEN, 512);
-        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 255);
+        // Format 2: a header word and the sequence number more; 23 parameters (TD_LOCK
+        // appended to the 22 of the moving pad's firmware, whose 512-byte slots still read
+        // back, like the 21 and 20 parameters' 480-byte, the 19 parameters' 448-byte, the 16
+        // parameters' 384-byte and the 13 parameters' 320-byte ones) and the signing secret's
+        // 10 records take 23 words: 178 slots per sector after the first boot's free word.
+        assert_eq!(SLOT_LEN, 736);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 178);
     }
 
     /// A format-2 slot of an older firmware whose table ended after `records` parameters, in
@@ -204,6 +204,46 @@ mod tests {
         let mut want = saved;
         want.set(ParamId::PadMotion, 2.0).unwrap();
         assert_eq!(p, want);
+    }
+
+    #[test]
+    fn a_slot_of_the_twenty_two_parameter_firmware_imports_locked_and_without_a_key() {
+        use crate::params::{ParamId, SigningSecret};
+        let mut saved = values(9);
+        saved.set(ParamId::PadMotion, 0.0).unwrap();
+        saved.set(ParamId::Lock, 0.0).unwrap();
+        saved.set_signing_secret(SigningSecret::new([7; 32], 5));
+        // 22 records (448 bytes) took 16 words (512 bytes); no secret records.
+        let slot = older_slot(&saved, 14, 22, 16);
+        let slot = &slot[..512];
+        let (seq, p, report) = check_v2(slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied, report.unknown), (14, 22, 0));
+        let mut want = saved;
+        want.set(ParamId::Lock, 1.0).unwrap();
+        want.set_signing_secret(SigningSecret::NONE);
+        assert_eq!(p, want);
+    }
+
+    #[test]
+    fn the_signing_secret_is_saved_in_the_slot_and_restored() {
+        use crate::params::SigningSecret;
+        let mut saved = values(3);
+        let key: [u8; 32] = core::array::from_fn(|i| (i * 37 + 1) as u8);
+        saved.set_signing_secret(SigningSecret::new(key, 0x0123_4567_89AB));
+        let mut slot = [0u8; SLOT_LEN];
+        encode_v2(&saved, 21, &mut slot);
+        let (seq, p, report) = check_v2(&slot, &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.unknown), (21, 0));
+        assert_eq!(p.signing_secret().key(), Some(&key));
+        assert_eq!(p.signing_secret().timestamp(), 0x0123_4567_89AB);
+        assert_eq!(p, saved);
+        // A blob with the key cleared clears it: the records are always written.
+        saved.set_signing_secret(SigningSecret::NONE);
+        encode_v2(&saved, 22, &mut slot);
+        let mut base = ParamSet::default();
+        base.set_signing_secret(SigningSecret::new(key, 1));
+        let (_, p, _) = check_v2(&slot, &base).unwrap();
+        assert!(!p.signing_secret().is_set());
     }
 
     #[test]
@@ -263,14 +303,14 @@ mod tests {
 
     #[test]
     fn slot_layout() {
-        assert_eq!(SLOT_LEN, 512);
+        assert_eq!(SLOT_LEN, 736);
         let mut slot = [0u8; SLOT_LEN];
         encode_v2(&values(3), 0x0102_0304, &mut slot);
         let mut other = [0u8; SLOT_LEN];
         encode_v2(&values(4), 7, &mut other);
         // The first word is the same in every slot (see the module documentation).
         assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
-        assert_eq!(&slot[..6], b"TDSL\x02\x10");
+        assert_eq!(&slot[..6], b"TDSL\x02\x17");
         assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
         assert_eq!(slot[32..36], [4, 3, 2, 1]);
         // The export blob starts mid-word, so it can never pass for a format-1 slot.
