@@ -30,11 +30,13 @@ def parse(argv):
                         help="reads of one register from one pc without a change that count "
                              "as a hang")
     parser.add_argument("--inject",
-                        choices=("no-pll1rdy", "no-camera", "fixed-exposure", "volatile-flash"),
+                        choices=("no-pll1rdy", "no-camera", "fixed-exposure", "volatile-flash",
+                                 "pad-lost"),
                         help="break the chip model on purpose (shows the test can fail): "
                              "PLL1 never locks / nothing answers on the SCCB bus / the sensor "
                              "ignores its exposure and gain registers / the power cycle loses "
-                             "what the firmware wrote to flash")
+                             "what the firmware wrote to flash / (--soak) the pad never comes "
+                             "back into view after the first disturbance")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
     parser.add_argument("--autopilot", choices=("ardupilot", "ardupilot-4.7", "px4"),
