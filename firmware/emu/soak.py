@@ -5,7 +5,7 @@ Why: the two-second FIL shows that the firmware lands on a clean line once. A fl
 minutes long, and on the way the line to the autopilot picks up noise, the autopilot
 reboots, a ground station floods the parameter protocol, the camera drops frames and the
 supply browns out. What must hold after each of those: the LANDING_TARGETs come back within
-`RESUME_FRAMES` camera frames and agree with the truth, nothing piles up (no queue grows, the
+a few camera frames and agree with the truth, nothing piles up (no queue grows, the
 stack's high-water mark settles), and no parameter that was saved is lost. Only a long run
 with everything mixed shows a queue that grows by one per disturbance, or a save that a
 power cut at the wrong moment destroys.
@@ -42,7 +42,8 @@ first frame with the pad again, and after a brown-out the later of the first HEA
 arrival after the boot (the firmware chooses its profile from it) and the start of the
 first frame's exposure after the boot. The count is the camera frames with the pad that
 ended after that point up to and including the one that ended before the first LANDING_TARGET
-that agrees with the truth: 1 means the target of the first frame that could have one.
+that agrees with the truth: 1 means the target of the first frame that could have one. At
+most `RESUME_FRAMES`, after a brown-out `COLD_RESUME_FRAMES` (a new track must be confirmed).
 
 Throughout: every LANDING_TARGET agrees with the truth (fil.py's tolerances); the board's
 HEARTBEAT keeps its 1 Hz; TIMESYNC requests (every `TIMESYNC_PROBE_NS`, exact matching by
@@ -52,8 +53,8 @@ deque whose overflow drops, so a queue that grows shows as answers that come lat
 the firmware's own count of events dropped because the link's channel was full
 (`DROPPED_LINK_EVENTS`, read through its ELF symbol) stays where it was once the link ran;
 the stack's high-water mark (the emulator paints the stack) after the warm-up (the first
-minute, or the first half of a shorter run) stays within `STACK_GROWTH_BOUND` of the mark
-before it.
+minute, or the first round of a shorter run) stays within `STACK_GROWTH_BOUND` of the mark
+before it. The soak stops at the first failure.
 """
 
 import hashlib
@@ -202,6 +203,22 @@ def resume_frames(deliveries, targets_ok, t_end):
         return None, None
     frames = sum(1 for end, _, kind in deliveries if kind == "pad" and t_end < end <= first)
     return frames, first - t_end
+
+
+def signature_status(key, frame, newest):
+    """("sig_ok" | "unsigned" | "bad_sig" | "behind", timestamp) of a MAVLink frame (bytes)
+    checked against `key`: MAVLink 2's signature is the first 6 bytes of SHA-256 over the key
+    and the frame up to the signature's last 6 bytes (link id and timestamp included);
+    "behind" is a valid signature whose timestamp is not newer than `newest`, which a
+    receiver applying the replay rule drops."""
+    if frame[0] != 0xFD or not frame[2] & 1:
+        return "unsigned", None
+    timestamp = int.from_bytes(frame[-12:-6], "little")
+    if hashlib.sha256(key + frame[:-6]).digest()[:6] != frame[-6:]:
+        return "bad_sig", timestamp
+    if timestamp <= newest:
+        return "behind", timestamp
+    return "sig_ok", timestamp
 
 
 class SoakFailure(Exception):
@@ -910,19 +927,13 @@ class Soak:
         earlier one: a receiver applying the replay rule (the autopilot) drops it otherwise."""
         if self.key is None:
             return True
-        buf = bytes(m.get_msgbuf())
-        if buf[0] != 0xFD or not buf[2] & 1:
-            self.signed["unsigned"] += 1
-            return False
-        timestamp = int.from_bytes(buf[-12:-6], "little")
-        if hashlib.sha256(self.key + buf[:-6]).digest()[:6] != buf[-6:]:
-            self.signed["bad_sig"] += 1
-            return False
-        if timestamp <= self.board_timestamp:
-            self.signed["behind"] += 1
+        status, timestamp = signature_status(self.key, bytes(m.get_msgbuf()),
+                                             self.board_timestamp)
+        self.signed[status] += 1
+        if status == "behind":
             self.behind_until = g
+        if status != "sig_ok":
             return False
-        self.signed["sig_ok"] += 1
         self.board_timestamp = timestamp
         return True
 
@@ -1174,5 +1185,7 @@ class Soak:
         saves = len(self.saves)
         print(f"  flash: {saves} save(s), {self.words_per_save} flash words each")
         if self.key is not None:
-            print(f"  signing: board frames signed {self.signed['sig_ok']}, unsigned "
-                  f"{self.signed['unsigned']} (since the key was set)")
+            sigs = self.signed
+            print(f"  signing: the board's frames since the key: {sigs['sig_ok']} signed, "
+                  f"{sigs['unsigned']} unsigned, {sigs['bad_sig']} with a bad signature, "
+                  f"{sigs['behind']} signed behind an earlier timestamp (after brown-outs)")
