@@ -41,13 +41,16 @@ readonly SOAK_SECONDS="${EMU_SOAK_SECONDS:-15}"
 # - `--line-noise`: the autopilot line carries garbage before a quarter of its messages
 #   (autopilot.py): the firmware must resynchronise and land as on a clean line;
 # - `--autopilot ardupilot-4.7`: an ArduPilot 4.7 that sets TD_PROFILE 3, LANDING_TARGETs in
-#   LOCAL_FRD, levelled with the attitude.
+#   LOCAL_FRD, levelled with the attitude;
+# - `--signing`: a signing key set over MAVLink, signed, unsigned and replayed PARAM_SETs, a
+#   power cycle, the key and the checks again (firmware/emu/signing.py).
 # The other variants differ only in the camera and the clock.
 declare -rA FIL_EXTRAS=(
     [nucleo-qvga]="--power-cycle"
     [openmv-qvga]="--power-cycle"
     [nucleo-qvga-480]="--line-noise"
     [openmv-vga]="--autopilot ardupilot-4.7"
+    [nucleo-vga]="--signing"
 )
 # name board MHz camera cargo-features...
 readonly VARIANTS=(

@@ -47,6 +47,9 @@ def parse(argv):
     parser.add_argument("--power-cycle", action="store_true",
                         help="after FIL: set a parameter over MAVLink, power-cycle the chip "
                              "(its flash kept), read it back (power_cycle.py)")
+    parser.add_argument("--signing", action="store_true",
+                        help="after FIL: a signing key and signed, unsigned and replayed "
+                             "PARAM_SETs, a power cycle, the same checks again (signing.py)")
     parser.add_argument("--soak", action="store_true",
                         help="FIL as a soak: line noise, autopilot reboots, parameter floods, "
                              "dropped frames and brown-outs on a seeded schedule, each "
@@ -68,7 +71,8 @@ def main(argv=None):
     if (args.soak or args.soak_signing) and not args.fil:
         print("--soak needs --fil SECONDS", file=sys.stderr)
         return 2
-    if args.soak and (args.power_cycle or args.line_noise or args.autopilot != "ardupilot"):
+    if args.soak and (args.power_cycle or args.signing or args.line_noise or
+                      args.autopilot != "ardupilot"):
         print("--soak runs against the plain ArduPilot (it adds its own noise and power "
               "cycles)", file=sys.stderr)
         return 2
@@ -92,6 +96,9 @@ def main(argv=None):
     if fil and args.power_cycle and not problems:
         from .power_cycle import PowerCycle
         problems += PowerCycle(fil, elf, board, args).run(machine)
+    if fil and args.signing and not problems:
+        from .signing import Signing
+        problems += Signing(fil, elf, board, args).run(machine)
     problems += report_stack(machine)
     taken = dict(sorted(machine.exc.taken.items()))
     print(f"  {machine.instructions} instructions, {machine.time_ns / 1e6:.1f} ms emulated, "

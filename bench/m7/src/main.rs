@@ -21,6 +21,12 @@
 //! - `encode`: draining [`Companion::poll_transmit`] into a UART buffer (MAVLink 2 framing,
 //!   CRC), as the link task does after each frame.
 //!
+//! After the frames, the link's signing ([`signing_regions`]): `signing: param-set-unsigned`
+//! and `signing: param-set-signed` receive one PARAM_SET (a frame pymavlink built, unsigned,
+//! and signed with a key the companion holds), so their difference is the cost of checking a
+//! signature; `signing: encode-unsigned` and `signing: encode-signed` drain a fresh
+//! companion's first frames (HEARTBEAT, TIMESYNC, stream requests) without and with a key.
+//!
 //! Frames without a detection run `target` and `encode` too (the estimate without a fix is
 //! what the firmware posts then).
 //!
@@ -55,7 +61,7 @@ use touchdown_core::family::tables;
 use touchdown_core::filter::VehicleState;
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout, PadMarker};
-use touchdown_core::params::PipelineSettings;
+use touchdown_core::params::{ParamId, PipelineSettings, SigningSecret};
 use touchdown_core::pipeline::{FramePipeline, FrameReport, PipelineConfig};
 
 use frames::{FrameBuffer, Source};
@@ -473,6 +479,69 @@ fn report(
     }
 }
 
+/// The key of [`SIGNED_PARAM_SET`]: bytes 1, 2, ..., 32 as two-digit decimal in hex digits.
+const SIGNING_KEY: [u8; 32] = [
+    0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08, 0x09, 0x10, 0x11, 0x12, 0x13, 0x14, 0x15, 0x16,
+    0x17, 0x18, 0x19, 0x20, 0x21, 0x22, 0x23, 0x24, 0x25, 0x26, 0x27, 0x28, 0x29, 0x30, 0x31, 0x32,
+];
+/// PARAM_SET TD_TAG_SIZE 0.5 to (1, 191) from (255, 190), signed by pymavlink with
+/// [`SIGNING_KEY`] at timestamp 1000 (`scripts/mavlink_signing.py sign`).
+const SIGNED_PARAM_SET: [u8; 48] = [
+    0xfd, 0x17, 0x01, 0x00, 0x00, 0xff, 0xbe, 0x17, 0x00, 0x00, 0x00, 0x00, 0x00, 0x3f, 0x01, 0xbf,
+    0x54, 0x44, 0x5f, 0x54, 0x41, 0x47, 0x5f, 0x53, 0x49, 0x5a, 0x45, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x09, 0xb7, 0xdd, 0x00, 0xe8, 0x03, 0x00, 0x00, 0x00, 0x00, 0xef, 0xfd, 0x71, 0x0a, 0xa9, 0x2f,
+];
+/// The same PARAM_SET unsigned.
+const UNSIGNED_PARAM_SET: [u8; 35] = [
+    0xfd, 0x17, 0x00, 0x00, 0x00, 0xff, 0xbe, 0x17, 0x00, 0x00, 0x00, 0x00, 0x00, 0x3f, 0x01, 0xbf,
+    0x54, 0x44, 0x5f, 0x54, 0x41, 0x47, 0x5f, 0x53, 0x49, 0x5a, 0x45, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x09, 0xd5, 0xaa,
+];
+
+/// The signing regions (see the module docs); `false` when a PARAM_SET was not applied.
+fn signing_regions() -> bool {
+    let keyed = || {
+        let mut config = CompanionConfig::with_profile(Profile::ArduPilot);
+        config
+            .params
+            .set_signing_secret(SigningSecret::new(SIGNING_KEY, 0));
+        Companion::new(config)
+    };
+    let mut ok = true;
+    for (stage, mut companion, frame) in [
+        (
+            "param-set-unsigned",
+            Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)),
+            &UNSIGNED_PARAM_SET[..],
+        ),
+        ("param-set-signed", keyed(), &SIGNED_PARAM_SET[..]),
+    ] {
+        region("signing", stage, || companion.receive(frame, 1_000));
+        let applied = companion.params().get(ParamId::TagSize) == 0.5;
+        hprintln!("  applied {}", applied);
+        ok &= applied;
+    }
+    for (stage, mut companion) in [
+        (
+            "encode-unsigned",
+            Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)),
+        ),
+        ("encode-signed", keyed()),
+    ] {
+        let mut uart = [0u8; MAX_FRAME_LEN];
+        let (messages, bytes) = region("signing", stage, || {
+            let (mut messages, mut bytes) = (0u32, 0usize);
+            while let Some(n) = companion.poll_transmit(2_000, &mut uart) {
+                messages += 1;
+                bytes += n;
+            }
+            (messages, bytes)
+        });
+        hprintln!("  sent {} messages, {} bytes", messages, bytes);
+    }
+    ok
+}
+
 #[entry]
 fn main() -> ! {
     // SAFETY: `main` runs once, without interrupts; each static is borrowed exactly once here
@@ -510,6 +579,7 @@ fn main() -> ! {
         };
         ok &= run_frame(&mut bench, frame, &image);
     }
+    ok &= signing_regions();
     hprintln!("m7bench: {}", if ok { "done" } else { "FAILED" });
     debug::exit(if ok {
         debug::EXIT_SUCCESS

@@ -550,6 +550,12 @@ impl Companion {
         self.state.set_signing_secret(secret, now_us);
     }
 
+    /// Whether the flight lock holds: TD_LOCK 1 and the latched autopilot's last HEARTBEAT
+    /// said armed (parameters but TD_LOCK, and the key, refuse writes from the link).
+    pub fn flight_locked(&self) -> bool {
+        self.state.flight_locked()
+    }
+
     /// Whether a signing key is set: writes then need signed frames, and every frame sent is
     /// signed.
     pub fn signing(&self) -> bool {

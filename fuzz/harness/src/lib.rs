@@ -17,6 +17,7 @@
 //! | [`config_toml`] | text | an accepted camera validates, an accepted pad builds its layout |
 //! | [`recording`] | selector, `frames.csv` text or PGM bytes | accepted rows and frames are consistent |
 //! | [`mavlink_stream`] | a script of link bytes, frames, params, time steps | every emitted frame is valid MAVLink, targets finite, draining ends |
+//! | [`signed_stream`] | a key, then signed / wrongly signed / unsigned / replayed writes, armed HEARTBEATs, bytes, time steps | only writes signed with the key in force change anything, none but TD_LOCK while locked; every frame sent signed and valid, timestamps rising |
 
 mod config_toml;
 mod detect;
@@ -24,6 +25,7 @@ mod family_file;
 mod input;
 mod mavlink_stream;
 mod recording;
+mod signed_stream;
 
 pub use config_toml::config_toml;
 pub use detect::{
@@ -33,3 +35,4 @@ pub use family_file::family_file;
 pub use input::Input;
 pub use mavlink_stream::{check_emitted, drain, mavlink_frame, mavlink_stream, Op};
 pub use recording::recording;
+pub use signed_stream::{frame as signed_frame, signed_stream};

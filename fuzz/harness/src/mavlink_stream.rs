@@ -180,19 +180,22 @@ fn pad_fix(input: &mut Input<'_>) -> PadFix {
     }
 }
 
-/// Parses one emitted frame back with the mavlink crate; panics unless it is a complete,
-/// unsigned MAVLink 2 frame with a valid checksum whose payload parses, and unless a
+/// Parses one emitted frame back with the mavlink crate; panics unless it is a complete
+/// MAVLink 2 frame, unsigned or signed (a script may set a key; the signature itself is
+/// `signed_stream`'s to check), with a valid checksum whose payload parses, and unless a
 /// LANDING_TARGET / VISION_POSITION_ESTIMATE carries finite numbers.
 pub fn check_emitted(bytes: &[u8]) -> MavMessage {
     assert!(bytes.len() >= 12, "frame of {} bytes", bytes.len());
     assert_eq!(bytes[0], 0xFD, "not a MAVLink 2 frame: {bytes:02x?}");
     let incompat = bytes[2];
-    assert_eq!(incompat, 0, "unexpected incompatibility flags (signing?)");
+    assert!(incompat <= 1, "unexpected incompatibility flags {incompat}");
+    let signature = if incompat == 1 { 13 } else { 0 };
     assert_eq!(
         bytes.len(),
-        10 + usize::from(bytes[1]) + 2,
+        10 + usize::from(bytes[1]) + 2 + signature,
         "length field vs frame size"
     );
+    let bytes = &bytes[..bytes.len() - signature];
     let mut raw = MAVLinkV2MessageRaw::new();
     raw.as_mut_slice()[..bytes.len()].copy_from_slice(bytes);
     assert!(

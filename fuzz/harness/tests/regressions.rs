@@ -21,12 +21,13 @@ use touchdown_core::companion::mavlink::dialects::common::{
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_fuzz_harness as harness;
 
-const TARGETS: [&str; 5] = [
+const TARGETS: [&str; 6] = [
     "detect",
     "family_file",
     "config_toml",
     "recording",
     "mavlink_stream",
+    "signed_stream",
 ];
 
 /// `fuzz/`, this crate's parent directory.
@@ -56,6 +57,9 @@ fn run(target: &str, data: &[u8], state: &mut harness::DetectState) {
         "recording" => harness::recording(data),
         "mavlink_stream" => {
             harness::mavlink_stream(data);
+        }
+        "signed_stream" => {
+            harness::signed_stream(data);
         }
         _ => unreachable!("unknown target {target}"),
     }
@@ -143,6 +147,76 @@ fn mavlink_seeds_reach_landing_targets() {
             assert!(stats.param_sets_rejected > 0, "{name}: {stats:?}");
         }
         assert_eq!(stats.decode_errors, 0, "{name}: {stats:?}");
+    }
+}
+
+/// The `signed_stream` seeds: a key and writes signed with it, unsigned, replayed, locked
+/// in flight, TD_LOCK off, the key cleared; no key and a first key set unsigned.
+fn signed_seeds() -> Vec<(&'static str, Vec<u8>)> {
+    // A PARAM_SET: op 0, signing choice (0 key, 1 other key, 2 unsigned, 3 old timestamp),
+    // timestamp step, parameter index, value.
+    fn param_set(s: &mut Vec<u8>, choice: u8, index: u8, value: f32) {
+        s.extend_from_slice(&[0, choice]);
+        s.extend_from_slice(&10u16.to_le_bytes());
+        s.push(index);
+        s.extend_from_slice(&value.to_le_bytes());
+    }
+    // A SETUP_SIGNING: op 1, signing choice, step, fill byte, first byte, zero flag, initial.
+    fn setup(s: &mut Vec<u8>, choice: u8, fill: u8, zero: bool) {
+        s.extend_from_slice(&[1, choice]);
+        s.extend_from_slice(&10u16.to_le_bytes());
+        s.extend_from_slice(&[fill, fill, if zero { 0 } else { 1 }]);
+        s.extend_from_slice(&500u32.to_le_bytes());
+    }
+    let lock = touchdown_core::params::ParamId::Lock as u8;
+    let tag = touchdown_core::params::ParamId::TagSize as u8;
+    let mut keyed = vec![7u8; 32];
+    keyed.extend_from_slice(&1000u32.to_le_bytes());
+    keyed.extend_from_slice(&2000u32.to_le_bytes());
+    param_set(&mut keyed, 0, tag, 0.5); // applied
+    param_set(&mut keyed, 2, tag, 0.7); // unsigned: refused
+    keyed.push(5); // the same bytes again: refused
+    keyed.extend_from_slice(&[2, 0]); // armed
+    param_set(&mut keyed, 0, tag, 0.6); // locked: refused
+    param_set(&mut keyed, 0, lock, 0.0); // applied
+    keyed.extend_from_slice(&[4, 0x40, 0x42, 0x0F, 0]); // a second
+    setup(&mut keyed, 0, 0, true); // key cleared
+    param_set(&mut keyed, 2, tag, 0.8); // unsigned, no key: applied
+    let mut first = vec![0u8; 32];
+    first.extend_from_slice(&0u32.to_le_bytes());
+    first.extend_from_slice(&0u32.to_le_bytes());
+    setup(&mut first, 2, 9, false); // the first key, unsigned: applied
+    param_set(&mut first, 2, tag, 0.5); // unsigned: refused
+    param_set(&mut first, 1, tag, 0.5); // another key: refused
+    vec![("keyed-writes", keyed), ("first-key", first)]
+}
+
+/// The signing seeds apply the writes signed with the key in force and refuse the rest.
+#[test]
+fn signed_seeds_apply_signed_writes_and_refuse_the_rest() {
+    for (name, want) in [("keyed-writes", (4, 3)), ("first-key", (1, 2))] {
+        let data = std::fs::read(fuzz_dir().join("corpus/signed_stream").join(name)).unwrap();
+        assert_eq!(
+            signed_seeds().iter().find(|(n, _)| *n == name).unwrap().1,
+            data,
+            "{name}: regenerate with write_signed_seeds"
+        );
+        assert_eq!(
+            harness::signed_stream(&data),
+            want,
+            "{name}: (applied, refused)"
+        );
+    }
+}
+
+/// Regenerates `fuzz/corpus/signed_stream/` (run on demand).
+#[test]
+#[ignore]
+fn write_signed_seeds() {
+    let dir = fuzz_dir().join("corpus/signed_stream");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (name, bytes) in signed_seeds() {
+        std::fs::write(dir.join(name), bytes).unwrap();
     }
 }
 

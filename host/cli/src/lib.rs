@@ -23,6 +23,7 @@ pub mod pad_motion;
 pub mod plot;
 pub mod renderer;
 pub mod replay;
+pub mod signing_key;
 pub mod simulate;
 pub mod sitl;
 

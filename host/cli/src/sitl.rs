@@ -299,6 +299,13 @@ pub struct SitlArgs {
     )]
     pub no_gps: bool,
 
+    /// With --gcs on ArduPilot SITL: MAVLink 2 signing (docs/signing.md). KEY is 64 hex
+    /// digits, or a passphrase (its SHA-256, as MAVProxy derives keys). The ground station
+    /// sets it on the autopilot with SETUP_SIGNING and the board holds it and signs every
+    /// frame; ArduPilot then drops unsigned frames on the board's port
+    #[arg(long, value_name = "KEY", help_heading = "A running SITL")]
+    pub signing_key: Option<String>,
+
     /// With --gcs: how long a refused connection to the ground-station port is tried again,
     /// seconds (a SITL just launched opens its port a few seconds later)
     #[arg(long, value_name = "S", default_value_t = gcs::CONNECT_PATIENCE.as_secs_f64(), value_parser = parse_timeout, help_heading = "A running SITL")]
@@ -645,10 +652,10 @@ pub fn run(args: &SitlArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
              --tcp, --udp or --udp-listen",
         ));
     }
-    if args.gps_loss_height.is_some() || args.no_gps {
+    if args.gps_loss_height.is_some() || args.no_gps || args.signing_key.is_some() {
         return Err(CliError::new(
-            "--gps-loss-height and --no-gps are for a running SITL flown with --gcs: give the \
-             board's link too, --tcp, --udp or --udp-listen",
+            "--gps-loss-height, --no-gps and --signing-key are for a running SITL flown with \
+             --gcs: give the board's link too, --tcp, --udp or --udp-listen",
         ));
     }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());

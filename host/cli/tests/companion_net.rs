@@ -511,3 +511,68 @@ fn a_missing_link_is_one_clear_line() {
         "{stderr}"
     );
 }
+
+/// `--signing-key`: every frame the command sends is signed, and pymavlink, given the key (a
+/// passphrase's SHA-256), accepts every signature; a bad key is one line before any link
+/// opens.
+#[test]
+fn signing_key_signs_every_frame() {
+    let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
+    let addr = listener.local_addr().unwrap().to_string();
+    let child = touchdown()
+        .args(["companion", "--recording"])
+        .arg(recording())
+        .args(["--tcp", &addr, "--lead", "0.5", "--linger", "0.3"])
+        .args(["--signing-key", "touchdown test"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn touchdown companion");
+    let (stream, _) = listener.accept().expect("touchdown connects");
+    let bytes = play_autopilot_on_stream(stream, &[]);
+    let output = finish(child);
+    assert_success(&output);
+    assert_targets_arrived(&bytes);
+    let mut parser = FrameParser::new();
+    let mut frames = 0;
+    parser.push(&bytes, |frame| {
+        frames += 1;
+        assert!(frame.signature.is_some(), "unsigned frame {}", frame.message_id);
+    });
+    assert!(frames > 5);
+    // pymavlink's verdict (scripts/mavlink_signing.py), with the passphrase's key.
+    let key: String = touchdown_cli::signing_key::parse("touchdown test")
+        .unwrap()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    let path = std::env::temp_dir().join(format!("touchdown-signed-{}.bin", std::process::id()));
+    std::fs::write(&path, &bytes).unwrap();
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scripts/mavlink_signing.py");
+    let verdict = Command::new("python3")
+        .arg(script)
+        .args(["verify", &key])
+        .arg(&path)
+        .output();
+    let _ = std::fs::remove_file(&path);
+    match verdict {
+        Ok(v) if v.status.code() == Some(3) => println!("skipping: pymavlink not installed"),
+        Ok(v) => {
+            let text = String::from_utf8_lossy(&v.stdout);
+            assert!(v.status.success(), "pymavlink refused a frame: {text}");
+            assert!(text.contains(&format!("\"good\": {frames}")), "{text}");
+        }
+        Err(e) => println!("skipping: pymavlink not installed (python3: {e})"),
+    }
+
+    let output = touchdown()
+        .args(["companion", "--recording"])
+        .arg(recording())
+        .args(["--tcp-listen", "127.0.0.1:9", "--signing-key", &"0".repeat(64)])
+        .output()
+        .unwrap();
+    assert_eq!(output.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("--signing-key: all zeros"), "{err}");
+}

@@ -22,7 +22,7 @@ use touchdown_core::companion::{
     Companion, CompanionConfig, Profile, TargetOutcome, MAX_FRAME_LEN,
 };
 use touchdown_core::family::Family;
-use touchdown_core::params::PipelineSettings;
+use touchdown_core::params::{PipelineSettings, SigningSecret};
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 
 use super::{CliError, Outcome};
@@ -137,6 +137,12 @@ pub struct CompanionArgs {
         default_value_t = 1.0
     )]
     pub linger: f64,
+
+    /// MAVLink 2 signing (docs/signing.md): hold KEY, 64 hex digits or a passphrase (its
+    /// SHA-256, as MAVProxy derives keys), as the board holds a key set by SETUP_SIGNING:
+    /// every frame sent is signed, writes are taken only when signed with it
+    #[arg(long, value_name = "KEY")]
+    pub signing_key: Option<String>,
 }
 
 /// `--profile`.
@@ -212,6 +218,16 @@ pub fn run(
     let views: Vec<Family<'_>> = selected.iter().map(SelectedFamily::family).collect();
     let family_refs: Vec<&Family<'_>> = views.iter().collect();
 
+    // Checked before the endpoint opens (a server waits there for its peer).
+    let signing = args
+        .signing_key
+        .as_deref()
+        .map(|text| {
+            crate::signing_key::parse(text)
+                .map(|key| SigningSecret::new(key, crate::signing_key::timestamp_now()))
+                .map_err(|e| CliError(format!("--signing-key: {e}")))
+        })
+        .transpose()?;
     let endpoint_name = spec.describe();
     interrupt::install().map_err(|e| CliError(format!("signal handlers: {e}")))?;
     let mut endpoint =
@@ -224,6 +240,9 @@ pub fn run(
         ProfileArg::ArdupilotLocalFrd => CompanionConfig::with_profile(Profile::ArduPilotLocalFrd),
     };
     let mut companion = Companion::new(config);
+    if let Some(secret) = signing {
+        companion.set_signing_secret(secret, 0);
+    }
     // The camera board's per-frame path, with the parameters applied between frames exactly
     // as its vision task applies them (TD_TAG_SIZE, TD_MAX_HAMMING, TD_CAM_YAW over MAVLink
     // included, and TD_CAM_ROLL/TD_CAM_PITCH when the companion adopts the estimator's mount

@@ -43,6 +43,7 @@ use touchdown_core::companion::mavlink::dialects::common::MavMessage;
 use touchdown_core::companion::{mount_known_for_take_off, FrameParser, Profile, MAX_FRAME_LEN};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
+use touchdown_core::params::SigningSecret;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 use touchdown_eval::closed_loop::{self, LandingConfig};
 use touchdown_eval::flight::{board_companion, TrueState, TruthSource, TruthTable, NED_FROM_PAD};
@@ -114,6 +115,8 @@ pub struct ConnectConfig {
     pub pad_at: Option<[f64; 3]>,
     /// Give up after this long, seconds (with a rehearsal: after the landing command).
     pub max_time_s: f64,
+    /// MAVLink 2 signing (`--signing-key`): the board's key and initial timestamp.
+    pub signing: Option<([u8; 32], u64)>,
 }
 
 /// A whole rehearsal: the ground station's link and the flight it flies.
@@ -255,6 +258,9 @@ pub fn fly(
     let family_refs: Vec<_> = views.iter().collect();
 
     let mut companion = board_companion(&config.landing.params).map_err(CliError)?;
+    if let Some((key, timestamp)) = config.signing {
+        companion.set_signing_secret(SigningSecret::new(key, timestamp), 0);
+    }
     let settings = PipelineSettings::from_params(companion.params());
     let mut pipeline = FramePipeline::new(
         &family_refs,
@@ -650,6 +656,7 @@ fn plan(args: &super::SitlArgs, extra: Vec<(String, f32)>, vision_velocity: bool
         no_gps: args.no_gps,
         vision_velocity,
         moving_pad: args.pad_motion.any_given(),
+        signing: None,
         patience: gcs::Patience {
             connect: std::time::Duration::from_secs_f64(args.connect_timeout),
             param_try: std::time::Duration::from_secs_f64(args.param_timeout),
@@ -727,11 +734,24 @@ pub(super) fn run(
         pad_motion: motion,
         ..LandingConfig::issue_15(args.seed)
     };
+    let signing = match args.signing_key.as_deref() {
+        None => None,
+        Some(_) if args.gcs.is_none() => {
+            return Err(CliError::new(
+                "--signing-key needs --gcs: the ground station sets the key on the autopilot",
+            ))
+        }
+        Some(text) => Some((
+            crate::signing_key::parse(text).map_err(|e| CliError(format!("--signing-key: {e}")))?,
+            crate::signing_key::timestamp_now(),
+        )),
+    };
     let config = ConnectConfig {
         endpoint: endpoint.clone(),
         landing,
         pad_at: args.pad_at,
         max_time_s: args.max_time,
+        signing,
     };
     let mut rehearsal = None;
     let mut prepared = gcs::Prepared::default();
@@ -743,7 +763,8 @@ pub(super) fn run(
                 "--autopilot-params: `{name}` is not a parameter name (1-16 characters)"
             )));
         }
-        let plan = plan(args, extra, vpe_en & 2 != 0);
+        let mut plan = plan(args, extra, vpe_en & 2 != 0);
+        plan.signing = signing;
         let (link, p) = gcs::prepare(spec, &plan, err)?;
         prepared = p;
         rehearsal = Some(Rehearsal {

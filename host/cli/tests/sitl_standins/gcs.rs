@@ -384,7 +384,20 @@ fn gps_loss_options_out_of_place_are_usage_errors() {
 #[test]
 fn no_gps_and_pad_options_out_of_place_are_usage_errors() {
     const LINKS: [&str; 4] = ["--tcp", "127.0.0.1:9", "--gcs", "tcp:127.0.0.1:9"];
-    let cases: [(Vec<&str>, &[&str]); 9] = [
+    let cases: [(Vec<&str>, &[&str]); 12] = [
+        // Signing: the ground station sets the key on the autopilot, so only with it.
+        (
+            vec!["--tcp", "127.0.0.1:9", "--signing-key", "secret"],
+            &["--signing-key needs --gcs"],
+        ),
+        (
+            vec!["--signing-key", "secret"],
+            &["--signing-key", "running SITL"],
+        ),
+        (
+            [&LINKS[..], &["--signing-key", ""]].concat(),
+            &["--signing-key: empty"],
+        ),
         (
             vec!["--tcp", "127.0.0.1:9", "--no-gps"],
             &["--no-gps needs --gcs"],

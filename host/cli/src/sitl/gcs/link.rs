@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use touchdown_core::companion::mavlink::dialects::common::{
     MavAutopilot, MavCmd, MavMessage, MavModeFlag, MavParamType, MavResult, MavSeverity, MavState,
     MavType, COMMAND_LONG_DATA, HEARTBEAT_DATA, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
+    SETUP_SIGNING_DATA,
 };
 use touchdown_core::companion::mavlink::error::ParserError;
 use touchdown_core::companion::mavlink::{
@@ -636,6 +637,26 @@ pub fn prepare(
         }
         (Some(_), Autopilot::ArduPilot) => Some(find_gps_switch(&mut link, err)?),
     };
+    if let Some((key, timestamp)) = plan.signing {
+        if link.autopilot == Autopilot::Px4 {
+            return Err(CliError::new(
+                "--signing-key: not supported on PX4 yet (ArduPilot SITL only)",
+            ));
+        }
+        // To the autopilot itself (component 1): a broadcast would be forwarded to the
+        // board's link too, unsigned.
+        link.send(&MavMessage::SETUP_SIGNING(SETUP_SIGNING_DATA {
+            initial_timestamp: timestamp,
+            target_system: link.system_id,
+            target_component: 1,
+            secret_key: key,
+        }))?;
+        let _ = writeln!(
+            err,
+            "{}: signing key set on the autopilot (SETUP_SIGNING); the board signs with it",
+            link.describe()
+        );
+    }
     let settings = recipe(link.autopilot, plan);
     let mut prepared = Prepared::default();
     let mut reboot = false;

@@ -142,6 +142,9 @@ pub struct Plan {
     /// The pad moves (`--pad-velocity`): ArduPilot's precision landing tracks a moving target
     /// (PLND_OPTIONS bit 0, docs/setup-ardupilot.md, "A moving pad").
     pub moving_pad: bool,
+    /// MAVLink 2 signing (`--signing-key`): the key the ground station sets on the autopilot
+    /// with SETUP_SIGNING, and its initial timestamp.
+    pub signing: Option<([u8; 32], u64)>,
     /// How long the ground station waits for the SITL.
     pub patience: Patience,
 }
@@ -353,6 +356,7 @@ mod tests {
             no_gps: false,
             vision_velocity: false,
             moving_pad: false,
+            signing: None,
             patience: Patience::default(),
         }
     }
@@ -407,6 +411,7 @@ mod tests {
             Autopilot::ArduPilot,
             &Plan {
                 moving_pad: true,
+                signing: None,
                 ..plain_plan()
             },
         );
