@@ -247,10 +247,8 @@ class Soak:
         self.base = 0.0  # global ns at the current machine's time 0
         self.boots = 1
         self.fed_until = 0.0
+        self.recent_sends = []  # (g, bytes, tag) fed lately (see `_feed`)
         self.next_hb = self.next_state = self.next_ts_probe = self.next_param_probe = 0.0
-        # A time of one HEARTBEAT and one state message of the autopilot: their schedules'
-        # phases (an autopilot reboot moves them).
-        self.hb_phase = self.state_phase = 0.0
         self.silent = []  # (g0, g1): the autopilot sends nothing
         self.noisy = []  # (g0, g1): garbage before every autopilot message
         self.frame_plan = []  # (g0, g1, "skip" | "blank" | "sparse")
@@ -377,17 +375,6 @@ class Soak:
             return build(*args)
         return pack
 
-    def _rewind(self, g):
-        """Restarts the schedules from `g` (after a brown-out, the old chip took what was
-        fed beyond the cut with it)."""
-        def next_slot(phase, period):
-            return phase + math.ceil((g - phase) / period) * period
-        self.next_hb = next_slot(self.hb_phase, HEARTBEAT_PERIOD_NS)
-        self.next_state = next_slot(self.state_phase, STATE_PERIOD_NS)
-        self.next_ts_probe = next_slot(self.start + 0.35e9, TIMESYNC_PROBE_NS)
-        self.next_param_probe = next_slot(self.start + 0.55e9, PARAM_PROBE_NS)
-        self.fed_until = g
-
     def _pack(self, message, mav=None, keep=None, corrupt=None):
         """`message` to be packed when it is fed at global time g (`_feed` calls the result
         with g): by `mav`, or the ground station (signed once the board has a key, as a
@@ -407,18 +394,25 @@ class Soak:
     def _writer(self):
         return self.signer if self.key is not None else self.gcs
 
-    def _feed(self, until_g, extra=()):
-        """Puts everything sent in [fed_until, until_g) on the board's receive line."""
+    def _feed(self, until_g, extra=(), sent=()):
+        """Puts everything sent in [fed_until, until_g) on the board's receive line, and
+        `sent` (g, bytes, tag), sent already (`_brown_out`), as it is."""
         sends = self._autopilot_messages(self.fed_until, until_g) + list(extra)
+        sends = [(g, data, tag, False) for g, data, tag in sends] + \
+            [(g, data, tag, True) for g, data, tag in sent]
         sends.sort(key=lambda s: s[0])
         uart = self.machine.uart
-        for g, data, tag in sends:
-            if callable(data):
-                data = data(g)
-            # Garbage goes before the autopilot's own messages and the broken frames, not
-            # before the probes, which measure the queues, not the noise.
-            if self._in(self.noisy, g) and tag in (None, "hb"):
-                data = self._garbage() + data
+        for g, data, tag, as_sent in sends:
+            if not as_sent:
+                if callable(data):
+                    data = data(g)
+                # Garbage goes before the autopilot's own messages and the broken frames,
+                # not before the probes, which measure the queues, not the noise.
+                if self._in(self.noisy, g) and tag in (None, "hb"):
+                    data = self._garbage() + data
+                # Kept while the board could still lose them to a brown-out: a frame is
+                # packed (and signed) when it is fed, which is ahead of the board's time.
+                self.recent_sends.append((g, data, tag))
             uart.feed(data, max(g - self.base, self.machine.time_ns))
             arrival = self.base + uart.line[-1][0] if uart.line else g
             if tag == "hb":
@@ -431,6 +425,9 @@ class Soak:
             elif isinstance(tag, str):
                 self.arrivals[tag] = arrival
         self.fed_until = max(self.fed_until, until_g)
+        horizon = self.now() - 0.1e9
+        if self.recent_sends and self.recent_sends[0][0] < horizon:
+            self.recent_sends = [s for s in self.recent_sends if s[0] >= horizon]
 
     def _advance(self, until_g, extra=(), stop=None):
         """Runs the board to global time `until_g` with the line fed; `stop()` may end it
@@ -524,7 +521,7 @@ class Soak:
         self._attach(machine)
         self.start = self.now()
         self.fed_until = self.start
-        self.next_hb = self.next_state = self.hb_phase = self.state_phase = self.start + 0.1e9
+        self.next_hb = self.next_state = self.start + 0.1e9
         self.next_ts_probe = self.start + 0.35e9
         self.next_param_probe = self.start + 0.55e9
         end = self.start + self.seconds * 1e9
@@ -672,8 +669,8 @@ class Soak:
         # Its clock restarts: at the end of the pause it reads the pause's length or less.
         self.ap.booted_before_ms = -int((g0 + rng.uniform(0, 0.9) * pause) / 1e6)
         # Its schedule restarts with it: the first HEARTBEAT right after the pause.
-        self.next_hb = self.hb_phase = g0 + pause
-        self.next_state = self.state_phase = g0 + pause + 5e6
+        self.next_hb = g0 + pause
+        self.next_state = g0 + pause + 5e6
         before = len(self.hb_arrivals)
         self._advance(g0 + pause + 0.6e9)
         result["end"] = next((a for a in self.hb_arrivals[before:] if a >= g0 + pause), self.now())
@@ -878,12 +875,16 @@ class Soak:
         if problems:
             raise SoakFailure(f"brown-out at {g_cut / 1e9:.2f} s: the boot: {problems}")
         self._attach(new)
-        # The line starts over with the new chip: what was fed to the old one beyond the cut
-        # is sent again on the autopilot's schedule.
-        self._rewind(self.now())
         hb_before = len(self.hb_arrivals)
         behind_before = self.signed["behind"]
         boot_g = self.now()
+        # What was fed to the old chip for after the cut was sent all the same: what was sent
+        # while the board was off or booting is lost, the rest reaches the new chip (the
+        # frames as they were, signatures and all: re-making them would give the autopilot's
+        # signing clock a second pass over the same time).
+        resend = [s for s in self.recent_sends if s[0] >= boot_g]
+        self.recent_sends = []
+        self._feed(self.fed_until, sent=resend)
         self._advance(self.now() + 1.0e9)
         first_hb = next((a for a in self.hb_arrivals[hb_before:]), self.now())
         first_frame = next((start for end, start, k in self.deliveries if start >= self.base),
