@@ -65,8 +65,7 @@ import time
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from .autopilot import (AUTOPILOT_SYSID, FIRMWARE_COMPID, FIRMWARE_SYSID, HEARTBEAT_PERIOD_NS,
-                        STATE_PERIOD_NS)
+from .autopilot import FIRMWARE_COMPID, FIRMWARE_SYSID, HEARTBEAT_PERIOD_NS, STATE_PERIOD_NS
 from .boot import run_boot
 from .chip import build_chip
 from .fil import ANGLE_TOLERANCE, position_problems
@@ -429,9 +428,9 @@ class Soak:
         if self.recent_sends and self.recent_sends[0][0] < horizon:
             self.recent_sends = [s for s in self.recent_sends if s[0] >= horizon]
 
-    def _advance(self, until_g, extra=(), stop=None):
-        """Runs the board to global time `until_g` with the line fed; `stop()` may end it
-        early (returns True when it did)."""
+    def _advance(self, until_g, extra=()):
+        """Runs the board to global time `until_g` with the line fed; True when a brown-out
+        (`_brown_out`'s flash hook) ended it early."""
         self._feed(until_g, extra)
         machine = self.machine
         while self.now() < until_g:
