@@ -54,7 +54,7 @@
 
 pub mod camera;
 pub mod companion;
-mod crc;
+pub mod crc;
 pub mod detect;
 pub mod family;
 pub mod filter;

@@ -169,12 +169,12 @@ fn only_writes_signed_with_the_key_change_the_board_and_its_frames_are_signed() 
             "target_system": 1, "target_component": 191, "param_id": "TD_TAG_SIZE",
             "param_index": -1}}), // 6: reading stays open
         unsigned(setup_signing(&OTHER_KEY, T0, 0)), // 7: refused
-        param_set("TD_TAG_SIZE", 0.8, T0 - 5_000_000), // 8: another stream's, within a minute
+        param_set("TD_TAG_SIZE", 0.8, T0 + 250), // 8: another stream's first, older than 3
     ];
     let Some(mut frames) = pymavlink_frames(Some(&KEY), &specs) else {
         return;
     };
-    // 9: signed with another key; 10: from a new stream more than a minute old.
+    // 9: signed with another key; 10: from a new stream, older than the last write applied.
     let Some(more) = pymavlink_frames(Some(&OTHER_KEY), &[param_set("TD_TAG_SIZE", 0.9, T0 + 300)])
     else {
         return;
@@ -239,7 +239,7 @@ fn only_writes_signed_with_the_key_change_the_board_and_its_frames_are_signed() 
     assert_eq!(tag(&c), 0.8, "another key");
     signed_out.extend(r.bytes);
     let r = step(&mut c, 10);
-    assert_eq!(tag(&c), 0.8, "a new stream over a minute old");
+    assert_eq!(tag(&c), 0.8, "a new stream older than the last write");
     signed_out.extend(r.bytes);
     // The periodic frames (heartbeat, TIMESYNC, stream requests) are signed too.
     signed_out.extend(drain(&mut c, now + 2_000_000).bytes);
@@ -379,4 +379,44 @@ fn the_key_is_never_listed_among_the_parameters() {
         !format!("{:?}", c.params()).contains("58"),
         "the key in a debug print"
     );
+}
+
+#[test]
+fn a_signed_write_is_not_taken_again_after_a_reboot() {
+    let Some(first) = pymavlink_frames(None, &[unsigned(setup_signing(&KEY, T0, 0))]) else {
+        return;
+    };
+    let writes = pymavlink_frames(
+        Some(&KEY),
+        &[
+            param_set("TD_RATE_HZ", 15.0, T0 + 100),
+            param_set("TD_RATE_HZ", 20.0, T0 + 200),
+            param_set("TD_RATE_HZ", 25.0, T0 + 300),
+        ],
+    )
+    .unwrap();
+    let mut c = Companion::new(CompanionConfig::default());
+    feed(&mut c, &first[0], 1_000);
+    feed(&mut c, &writes[0], 2_000);
+    feed(&mut c, &writes[1], 3_000);
+    assert_eq!(c.params().get(ParamId::RateHz), 20.0);
+    // The saved timestamp moved past the last write: what the flash keeps.
+    assert_eq!(c.params().signing_secret().timestamp(), T0 + 201);
+    // A reboot: the parameters (and the secret) as saved, the streams forgotten.
+    let config = CompanionConfig {
+        params: *c.params(),
+        ..CompanionConfig::default()
+    };
+    let mut c = Companion::new(config);
+    for (i, w) in writes[..2].iter().enumerate() {
+        let r = feed(&mut c, w, 10_000 + i as u64);
+        assert_eq!(
+            r.values,
+            vec![("TD_RATE_HZ".to_string(), 20.0)],
+            "write {i} again"
+        );
+    }
+    assert_eq!(c.stats().replayed_frames, 2);
+    feed(&mut c, &writes[2], 20_000);
+    assert_eq!(c.params().get(ParamId::RateHz), 25.0, "a newer write");
 }

@@ -16,8 +16,10 @@ LANDING_TARGETs after it are at half the truth's distance, as in power_cycle.py;
 15 then 20); TD_RATE_HZ 10 signed with an older timestamp, and the TD_RATE_HZ 15 frame sent
 again, refused (20 holds); every frame the firmware sent from the key on signed and
 accepted by pymavlink; flash programmed. After the power cycle: the boot test passes;
-the frames are signed from the first; an unsigned PARAM_SET of TD_RATE_HZ is refused, a
-signed one applied; the targets at half distance.
+the frames are signed from the first; an unsigned PARAM_SET of TD_RATE_HZ is refused, as is
+the TD_RATE_HZ 20 frame sent once more (the board forgot its senders at the power cycle, not
+the timestamp saved past its last write), a new signed one applied; the targets at half
+distance.
 """
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -128,12 +130,13 @@ class Signing:
         t0 = machine.time_ns
         ts = INITIAL_TIMESTAMP
         rate_15 = g.param_set("TD_RATE_HZ", 15.0, ts + 200)
+        self.rate_20 = g.param_set("TD_RATE_HZ", 20.0, ts + 300)
         writes = [
             (0.10, "SETUP_SIGNING", g.setup_signing()),
             (0.30, "unsigned TD_TAG_SIZE", g.param_set("TD_TAG_SIZE", self.half)),
             (0.50, "signed TD_TAG_SIZE", g.param_set("TD_TAG_SIZE", self.half, ts + 100)),
             (0.70, "signed TD_RATE_HZ 15", rate_15),
-            (0.90, "signed TD_RATE_HZ 20", g.param_set("TD_RATE_HZ", 20.0, ts + 300)),
+            (0.90, "signed TD_RATE_HZ 20", self.rate_20),
             (1.10, "older TD_RATE_HZ 10", g.param_set("TD_RATE_HZ", 10.0, ts + 250)),
             (1.30, "replayed TD_RATE_HZ 15", rate_15),
         ]
@@ -185,12 +188,15 @@ class Signing:
             return [f"after the power cycle: {p}" for p in problems]
         g = self.ground
         start = machine.time_ns
-        unsigned_at, signed_at = start + 0.3e9, start + 0.6e9
+        unsigned_at, replay_at, signed_at = start + 0.3e9, start + 0.45e9, start + 0.6e9
         end = start + AFTER_BOOT_NS
         machine.stop_at_first_idle = False
         machine.finished = None
         self.autopilot.feed(machine, start + 0.05e9, end, [
             (unsigned_at, g.param_set("TD_RATE_HZ", 5.0)),
+            # The last write before the power cycle, sent again: the board forgot its senders
+            # but not the timestamp saved past that write.
+            (replay_at, self.rate_20),
             (signed_at, g.param_set("TD_RATE_HZ", 25.0, INITIAL_TIMESTAMP + 400)),
         ])
         machine.run(end, machine.pc())
@@ -201,6 +207,8 @@ class Signing:
         timed = timed_messages(machine)
         problems += value_after(messages_since(timed, unsigned_at), "TD_RATE_HZ",
                                 "unsigned PARAM_SET after the power cycle", 20.0)
+        problems += value_after(messages_since(timed, replay_at), "TD_RATE_HZ",
+                                "replayed PARAM_SET after the power cycle", 20.0)
         problems += value_after(messages_since(timed, signed_at), "TD_RATE_HZ",
                                 "signed PARAM_SET after the power cycle", 25.0)
         problems += self._check_targets(messages_since(timed, start + 0.3e9),

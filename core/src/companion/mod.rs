@@ -517,6 +517,13 @@ impl Companion {
         self.state.queue_status_text(severity, text)
     }
 
+    /// Bytes the receive parser holds: the start of a frame still arriving (or of a false
+    /// start whose announced length has not arrived). 0 once everything received so far has
+    /// been handled.
+    pub fn receive_buffered(&self) -> usize {
+        self.parser.buffered()
+    }
+
     /// Counters and link state.
     pub fn stats(&self) -> CompanionStats {
         let mut s = self.state.stats;

@@ -203,6 +203,9 @@ impl State {
             {
                 if let Some(id) = ParamId::from_name(params::name_str(&s.param_id[..])) {
                     let allowed = self.may_write(Write::Param(id), authenticity, now_us);
+                    if allowed {
+                        self.note_applied_write(frame);
+                    }
                     match allowed.then(|| self.set_param(id, s.param_value)) {
                         None => {}
                         Some(Ok(())) => {
@@ -268,8 +271,19 @@ impl State {
     /// from its initial one if that is newer.
     pub(super) fn set_signing_secret(&mut self, secret: SigningSecret, now_us: u64) {
         self.params.set_signing_secret(secret);
-        self.signing.forget_streams();
+        self.signing.restart(secret.timestamp());
         self.signing.advance_to(secret.timestamp(), now_us);
+    }
+
+    /// A write in `frame` was applied: with a key, the saved timestamp moves past the frame's
+    /// (`signing`: it is then never taken again, a reboot included).
+    fn note_applied_write(&mut self, frame: &RawFrame<'_>) {
+        let secret = *self.params.signing_secret();
+        if let (true, Some(signature)) = (secret.is_set(), frame.signature) {
+            let next = secret.after_write(signature.timestamp);
+            self.params.set_signing_secret(next);
+            self.signing.raise_floor(next.timestamp());
+        }
     }
 
     fn mark_stream(&mut self, message_id: u32, now_us: u64) {

@@ -15,12 +15,17 @@
 //! [`Signing::check`] recomputes it and applies the specification's replay rules, per stream
 //! (sender system, component and link id): a timestamp must be newer than the stream's last,
 //! and a stream not seen before may be at most [`NEW_STREAM_WINDOW`] behind our own
-//! timestamp. Our timestamp runs with our clock from the newest of: the key's initial
-//! timestamp (saved), any valid signed frame received, and the autopilot's GPS time
-//! (SYSTEM_TIME); each frame we sign takes a newer one. After a reboot the saved timestamp
-//! may be older than what the autopilot last saw from us: our first frames are then refused
-//! there until the autopilot's first signed frame (its HEARTBEAT, within a second) brings our
-//! timestamp up to date.
+//! timestamp. Our timestamp runs with our clock from the newest of: the key's saved timestamp,
+//! any valid signed frame received, and the autopilot's GPS time (SYSTEM_TIME); each frame we
+//! sign takes a newer one. After a reboot the saved timestamp may be older than what the
+//! autopilot last saw from us: our first frames are then refused there until the
+//! autopilot's first signed frame (its HEARTBEAT, within a second) brings our timestamp up to
+//! date.
+//!
+//! The streams are forgotten at a reboot, and the one-minute window alone would then let a
+//! recorded write be played again. So the saved timestamp is also a floor: no signed frame
+//! older than it counts, and every signed write the board applies moves it past that write's
+//! timestamp (saved with the write: [`crate::params::SigningSecret::after_write`]).
 
 use super::framing::{RawFrame, SIGNATURE_LEN};
 use crate::params::KEY_LEN;
@@ -68,6 +73,8 @@ struct Stream {
 /// parameters', passed in).
 #[derive(Debug, Clone)]
 pub(super) struct Signing {
+    /// No signed frame older than this counts (the key's saved timestamp).
+    floor: u64,
     /// Our timestamp at `base_us` on our clock.
     base: u64,
     base_us: u64,
@@ -80,6 +87,7 @@ impl Signing {
     /// Starts our timestamp from `initial` (the saved key's) at `now_us`.
     pub(super) fn new(initial: u64, now_us: u64) -> Self {
         Signing {
+            floor: initial,
             base: initial.min(TIMESTAMP_LIMIT - 1),
             base_us: now_us,
             last_sent: 0,
@@ -112,9 +120,16 @@ impl Signing {
         }
     }
 
-    /// Forgets the streams (a new key: their timestamps were under the old one).
-    pub(super) fn forget_streams(&mut self) {
+    /// Forgets the streams (a new key: their timestamps were under the old one) and takes
+    /// `floor` as the oldest timestamp that counts.
+    pub(super) fn restart(&mut self, floor: u64) {
         self.streams.clear();
+        self.floor = floor;
+    }
+
+    /// Raises the floor to `floor` (a write applied, see the module documentation).
+    pub(super) fn raise_floor(&mut self, floor: u64) {
+        self.floor = self.floor.max(floor);
     }
 
     /// What `frame`'s signature proves under `key`; a valid signature moves its stream and
@@ -138,6 +153,9 @@ impl Signing {
             return Authenticity::BadSignature;
         }
         let ts = signature.timestamp;
+        if ts < self.floor {
+            return Authenticity::Replayed;
+        }
         let ours = self.timestamp(now_us);
         let stream = self.streams.iter_mut().find(|s| {
             (s.system_id, s.component_id, s.link_id)
@@ -216,4 +234,91 @@ fn signature_tag(key: &[u8; KEY_LEN], covered: &[u8], link_id: u8, timestamp: u6
         *t = d;
     }
     tag
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::companion::framing::{write_v2_frame_flagged, FrameParser, IFLAG_SIGNED};
+    use mavlink::dialects::common::HEARTBEAT_DATA;
+
+    const KEY: [u8; KEY_LEN] = [9; KEY_LEN];
+
+    /// A HEARTBEAT from system `sys` signed with `key` at timestamp `ts` (link 0).
+    fn signed(sys: u8, ts: u64, key: &[u8; KEY_LEN]) -> ([u8; 280], usize) {
+        let mut out = [0u8; 280];
+        let n = write_v2_frame_flagged(&mut out, IFLAG_SIGNED, 0, sys, 1, &HEARTBEAT_DATA::DEFAULT)
+            .unwrap();
+        let n = Signing::new(ts - 1, 0).sign(key, &mut out, n, 0).unwrap();
+        (out, n)
+    }
+
+    /// What `board` makes of `frame` at `now_us`.
+    fn judge(board: &mut Signing, frame: &[u8], now_us: u64) -> Authenticity {
+        let mut parser = FrameParser::new();
+        let mut verdict = None;
+        parser.push(frame, |raw| {
+            verdict = Some(board.check(Some(&KEY), raw, now_us))
+        });
+        verdict.unwrap()
+    }
+
+    #[test]
+    fn replay_rules_per_stream_window_and_floor() {
+        let mut board = Signing::new(1_000, 0);
+        let now = 120_000_000; // two minutes on: our timestamp 12,001,000
+        assert_eq!(board.timestamp(now), 12_001_000);
+        let (f, n) = signed(5, 5_000_000, &KEY);
+        assert_eq!(
+            judge(&mut board, &f[..n], now),
+            Authenticity::Replayed,
+            "7 s over a minute behind"
+        );
+        let (f, n) = signed(6, 7_000_000, &KEY);
+        assert_eq!(
+            judge(&mut board, &f[..n], now),
+            Authenticity::Signed,
+            "within the minute"
+        );
+        assert_eq!(
+            judge(&mut board, &f[..n], now),
+            Authenticity::Replayed,
+            "the same again"
+        );
+        let (f, n) = signed(6, 7_000_001, &KEY);
+        assert_eq!(judge(&mut board, &f[..n], now), Authenticity::Signed);
+        let (f, n) = signed(6, 7_000_002, &[8; KEY_LEN]);
+        assert_eq!(judge(&mut board, &f[..n], now), Authenticity::BadSignature);
+        // Under the floor, even as a new stream at the start.
+        let mut fresh = Signing::new(1_000, 0);
+        let (f, n) = signed(7, 999, &KEY);
+        assert_eq!(judge(&mut fresh, &f[..n], 0), Authenticity::Replayed);
+        let (f, n) = signed(7, 1_000, &KEY);
+        assert_eq!(judge(&mut fresh, &f[..n], 0), Authenticity::Signed);
+        // A valid frame from further on moves our timestamp there.
+        let (f, n) = signed(8, 50_000_000, &KEY);
+        assert_eq!(judge(&mut fresh, &f[..n], 0), Authenticity::Signed);
+        assert_eq!(fresh.timestamp(0), 50_000_000);
+    }
+
+    #[test]
+    fn the_timestamps_we_sign_with_rise_by_one_at_least() {
+        let mut s = Signing::new(100, 0);
+        let mut last = 0;
+        let mut out = [0u8; 280];
+        for i in 0..50u64 {
+            let n =
+                write_v2_frame_flagged(&mut out, IFLAG_SIGNED, 0, 1, 191, &HEARTBEAT_DATA::DEFAULT)
+                    .unwrap();
+            // The clock stands still for the first 25, then runs.
+            let now = if i < 25 { 0 } else { i * 1_000 };
+            let n = s.sign(&KEY, &mut out, n, now).unwrap();
+            let mut ts = [0u8; 8];
+            ts[..6].copy_from_slice(&out[n - 12..n - 6]);
+            let ts = u64::from_le_bytes(ts);
+            assert!(ts > last, "{ts} after {last}");
+            last = ts;
+        }
+        assert!(last >= 100 + 49 * 100, "{last}");
+    }
 }

@@ -72,9 +72,20 @@ impl SigningSecret {
         self.is_set().then_some(&self.key)
     }
 
-    /// The timestamp the key was set with.
+    /// The timestamp saved with the key: the one it was set with, or past the last signed
+    /// write the board applied ([`SigningSecret::after_write`]). No signed frame older counts.
     pub fn timestamp(&self) -> u64 {
         self.timestamp
+    }
+
+    /// The secret once a write signed at `timestamp` has been applied: its saved timestamp past
+    /// that write's, so that the write cannot be played again after a reboot (when the
+    /// board's record of its senders is gone).
+    pub fn after_write(&self, timestamp: u64) -> SigningSecret {
+        SigningSecret {
+            key: self.key,
+            timestamp: self.timestamp.max(timestamp.saturating_add(1)),
+        }
     }
 
     /// The records: name and 4 bytes each, in [`NAMES`] order.

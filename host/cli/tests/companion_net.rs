@@ -537,7 +537,11 @@ fn signing_key_signs_every_frame() {
     let mut frames = 0;
     parser.push(&bytes, |frame| {
         frames += 1;
-        assert!(frame.signature.is_some(), "unsigned frame {}", frame.message_id);
+        assert!(
+            frame.signature.is_some(),
+            "unsigned frame {}",
+            frame.message_id
+        );
     });
     assert!(frames > 5);
     // pymavlink's verdict (scripts/mavlink_signing.py), with the passphrase's key.
@@ -568,7 +572,12 @@ fn signing_key_signs_every_frame() {
     let output = touchdown()
         .args(["companion", "--recording"])
         .arg(recording())
-        .args(["--tcp-listen", "127.0.0.1:9", "--signing-key", &"0".repeat(64)])
+        .args([
+            "--tcp-listen",
+            "127.0.0.1:9",
+            "--signing-key",
+            &"0".repeat(64),
+        ])
         .output()
         .unwrap();
     assert_eq!(output.status.code(), Some(2));

@@ -56,6 +56,7 @@ fn sigint_returns_the_outcome_after_the_summary() {
         lead: 0.2,
         // Far longer than the test: only the signal ends the run.
         linger: 120.0,
+        signing_key: None,
     };
     // The autopilot: its first datagram (a HEARTBEAT) comes after the handlers are
     // installed; answer it, let the run go on a moment, then Ctrl-C.
