@@ -247,6 +247,7 @@ class Soak:
         self.boots = 1
         self.fed_until = 0.0
         self.recent_sends = []  # (g, bytes, tag) fed lately (see `_feed`)
+        self.signed_writes = []  # (g, frame, name, value) of the last signed PARAM_SETs
         self.next_hb = self.next_state = self.next_ts_probe = self.next_param_probe = 0.0
         self.silent = []  # (g0, g1): the autopilot sends nothing
         self.noisy = []  # (g0, g1): garbage before every autopilot message
@@ -279,6 +280,8 @@ class Soak:
         self.first_round_end = None
         self.results_from = None  # the first disturbance's start
         self.stopped = False
+        # (cut g, name, taken, its save completed) of each replay after a brown-out.
+        self.replays = []
 
     # --- global time, the line, the board's output -------------------------------------
 
@@ -387,6 +390,11 @@ class Soak:
             data = message.pack(writer)
             if keep is not None:
                 keep.append(data)
+            if writer is getattr(self, "signer", None) and message.get_type() == "PARAM_SET":
+                name = message.param_id
+                name = (name.decode() if isinstance(name, bytes) else name).rstrip("\0")
+                self.signed_writes = self.signed_writes[-20:] + [
+                    (g, data, name, message.param_value)]
             return corrupt(data) if corrupt else data
         return pack
 
@@ -689,7 +697,9 @@ class Soak:
             if r < 0.45:
                 name = rng.choice(FLOOD_SETTABLE)
                 value = a_valid_value(rng, name)
-                if valid_value(name, value) != model.get(name):
+                # With a key every signed write the board applies also moves the key's saved
+                # timestamp on (a parameter change: the debounce starts again).
+                if valid_value(name, value) != model.get(name) or self.key is not None:
                     changed_at_index = i
                 model[name] = valid_value(name, value)
                 kind = "valid"
@@ -697,6 +707,8 @@ class Soak:
                 name = rng.choice(sorted(PARAM_RANGES))
                 value = invalid_value(rng, name)
                 kind = "refused"
+                if self.key is not None:
+                    changed_at_index = i
             elif r < 0.72:
                 name = rng.choice(("TD_NOPE", "TD_PROFILE_", "SYSID_THISMAV", "TD_RATE_H"))
                 value = 1.0
@@ -891,7 +903,8 @@ class Soak:
         result["end"] = max(first_hb, first_frame)
         got = self._read_all("after the brown-out")
         if self.key is not None:
-            got[KEY] = self._check_still_signed(g_cut, boot_g)
+            saved_from = complete[-1][0] if complete else None
+            got[KEY] = self._check_still_signed(g_cut, boot_g, saved_from)
         names = sorted(set(options[0][1]) | set(got))
         matched = None
         for label, want in options:
@@ -1043,10 +1056,13 @@ class Soak:
             ", flight lock (armed)"
         result["answer_ns"] = answer_ns
 
-    def _check_still_signed(self, g_cut, boot_g):
+    def _check_still_signed(self, g_cut, boot_g, saved_from):
         """After a brown-out with the key saved: the board signs every frame, an unsigned
-        PARAM_SET is refused, a signed one applies. Returns the board's value of KEY as seen:
-        the key when every frame since the boot was signed with it, None when none was."""
+        PARAM_SET is refused; the last signed PARAM_SET before the cut, sent again (a
+        replay the board's forgotten streams cannot recognise; the key's saved timestamp
+        must), is refused if a save from `saved_from` on held it, and said either way.
+        Returns the board's value of KEY as seen: the key when every frame since the boot
+        was signed with it, None when none was."""
         since = self._rx_since(boot_g)
         unsigned = sum(1 for _, m in since if not bytes(m.get_msgbuf())[2] & 1)
         if since and unsigned == len(since):
@@ -1054,6 +1070,7 @@ class Soak:
         if unsigned:
             self.problems.append(f"brown-out at {g_cut / 1e9:.2f} s: {unsigned} of "
                                  f"{len(since)} frames unsigned after the boot")
+        self._replay_after_boot(g_cut, saved_from)
         name = FLOOD_SETTABLE[0]
         old = self.values.get(name)
         value = 2.0 if old != 2.0 else 1.0
@@ -1065,6 +1082,28 @@ class Soak:
                                  f"PARAM_SET of {name} was not refused "
                                  f"({answers[-1][1] if answers else 'no answer'})")
         return self.key
+
+    def _replay_after_boot(self, g_cut, saved_from):
+        """The last signed PARAM_SET sent before the cut, sent again as it was, first thing
+        after the boot (its stream is new to the board, whose streams a reboot forgets): a
+        refusal says so by STATUSTEXT (the first refusal after a boot is never held back by
+        the texts' rate limit)."""
+        writes = [w for w in self.signed_writes if w[0] < g_cut and w[2] in FLOOD_SETTABLE]
+        if not writes:
+            return
+        sent_at, frame, name, _ = writes[-1]
+        g = self.now()
+        self._advance(g + 0.1e9, [(g, lambda _g: frame, "replay")])
+        arrival = self.arrivals.pop("replay")
+        texts = [m.text for _, m in self._rx_since(arrival) if m.get_type() == "STATUSTEXT"]
+        taken = not any("refused" in t for t in texts)
+        held = saved_from is not None and sent_at < saved_from
+        self.replays.append((g_cut, name, taken, held))
+        if taken and held:
+            self.problems.append(f"brown-out at {g_cut / 1e9:.2f} s: the signed PARAM_SET of "
+                                 f"{name} sent {(g_cut - sent_at) / 1e9:.2f} s before the cut, "
+                                 "whose save completed, was taken again when sent again after "
+                                 "the boot")
 
     # --- the end ------------------------------------------------------------------------
 
@@ -1184,6 +1223,12 @@ class Soak:
               f"{self.stack_after} after")
         saves = len(self.saves)
         print(f"  flash: {saves} save(s), {self.words_per_save} flash words each")
+        if self.replays:
+            held = [r for r in self.replays if r[3]]
+            lost = [r for r in self.replays if not r[3]]
+            print(f"  replays after a brown-out of the last signed PARAM_SET: {len(held)} whose "
+                  f"save completed, {sum(r[2] for r in held)} taken; {len(lost)} whose save "
+                  f"the cut lost, {sum(r[2] for r in lost)} taken")
         if self.key is not None:
             sigs = self.signed
             print(f"  signing: the board's frames since the key: {sigs['sig_ok']} signed, "
