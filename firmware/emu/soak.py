@@ -72,6 +72,13 @@ from .fil import ANGLE_TOLERANCE, position_problems
 from . import memmap
 
 FRAME_NS = 1e9 / 30
+# The firmware's own budget for a camera restart (firmware/src/vision.rs, "Settling and
+# faults": three failed captures, power cycle, set-up, settling): from the last finished
+# frame to the first after the restart, "about 0.7 s"; allowed here: that and three frame
+# periods. A sensor that stalls long enough for three captures to fail is restarted, and no
+# frame is taken before that is done.
+CAMERA_RESTART_NS = 0.8e9
+RESTART_TEXT = "camera capture failing, restarting it"
 # Targets must be back within this many camera frames with the pad after a disturbance
 # (issue 42)...
 RESUME_FRAMES = 2
@@ -186,13 +193,14 @@ def a_valid_value(rng, name):
     return float(round(value)) if integer else round(value, 3)
 
 
-def resume_frames(deliveries, targets_ok, t_end):
+def resume_frames(deliveries, targets_ok, t_end, period=FRAME_NS):
     """(frames, ns) from `t_end` to the first good target of a frame that ended after it:
-    `deliveries` (end ns, start ns, kind) of the camera's frames, `targets_ok` the send times
-    of the LANDING_TARGETs that agree with the truth. A target sent before the first frame
-    with the pad ended after `t_end` is an older frame's and does not count; frames counts
-    the frames with the pad that ended after `t_end` up to the target (see the module docs).
-    (None, None) if none came."""
+    `deliveries` (end ns, start ns, kind) of the frames the camera delivered, `targets_ok` the
+    send times of the LANDING_TARGETs that agree with the truth. A target sent before the
+    first frame with the pad delivered after `t_end` ended is an older frame's and does not
+    count. frames counts the sensor's frame periods that ended after `t_end` up to the
+    target, on the grid of that first frame, whether the firmware captured them or not (a
+    frame it missed is a frame late). (None, None) if none came."""
     first_frame = next((end for end, _, kind in deliveries if kind == "pad" and end > t_end),
                        None)
     if first_frame is None:
@@ -200,8 +208,9 @@ def resume_frames(deliveries, targets_ok, t_end):
     first = next((t for t in targets_ok if t >= first_frame), None)
     if first is None:
         return None, None
-    frames = sum(1 for end, _, kind in deliveries if kind == "pad" and t_end < end <= first)
-    return frames, first - t_end
+    # The first frame end of the sensor's grid after t_end.
+    grid_end = first_frame - math.floor((first_frame - t_end) / period - 1e-9) * period
+    return math.floor((first - grid_end) / period) + 1, first - t_end
 
 
 def signature_status(key, frame, newest):
@@ -280,6 +289,9 @@ class Soak:
         self.first_round_end = None
         self.results_from = None  # the first disturbance's start
         self.stopped = False
+        self.stack_peak = 0
+        self.stack_rises = []  # (g, new peak, the disturbance under way or None)
+        self.current_kind = None
         # (cut g, name, taken, its save completed) of each replay after a brown-out.
         self.replays = []
 
@@ -488,7 +500,11 @@ class Soak:
                 self.saves.append([g, g, 1])
         self._flash_pos = len(machine.flash.programmed)
         g = self.now()
-        self.stack_marks.append((g, self.boots, machine.stack_high_water()))
+        mark = machine.stack_high_water()
+        if mark > self.stack_peak:
+            self.stack_peak = mark
+            self.stack_rises.append((g, mark, self.current_kind))
+        self.stack_marks.append((g, self.boots, mark))
         if self._dropped_addr is not None:
             count = int.from_bytes(machine.uc.mem_read(self._dropped_addr, 4), "little")
             self.dropped_events.append((g, self.boots, count))
@@ -582,7 +598,9 @@ class Soak:
             self.results_from = g0
         stack_before = max(m for _, _, m in self.stack_marks[-1:]) if self.stack_marks else 0
         result = {"kind": kind, "start": g0, "note": ""}
+        self.current_kind = kind
         getattr(self, "_" + kind.replace("-", "_"))(result)
+        self.current_kind = None
         result["stack"] = max((m for g, _, m in self.stack_marks if g >= g0), default=0)
         result["stack_before"] = stack_before
         frames, ns = resume_frames(self.deliveries, self.good_targets, result["end"])
@@ -825,10 +843,31 @@ class Soak:
         length = rng.uniform(0.2, 0.8) * 1e9
         self.frame_plan.append((g0, g0 + length, kind))
         self._advance(g0 + length + 0.4e9)
-        result["end"] = next((start for end, start, k in self.deliveries
-                              if start >= g0 + length and k == "pad"), self.now())
+        # From the sensor delivering the pad again: the start of its first frame that
+        # starts after the window (on the grid of the frames before it)...
+        ref = max((start for _, start, _ in self.deliveries if start < g0), default=g0)
+        result["end"] = ref + math.ceil((g0 + length - ref) / FRAME_NS) * FRAME_NS
         result["note"] = {"skip": "no frames", "sparse": "every other frame dropped",
                           "blank": "frames without the pad"}[kind] + f" for {length / 1e9:.2f} s"
+        restart = next((g for g, m in self._rx_since(g0) if m.get_type() == "STATUSTEXT"
+                        and RESTART_TEXT in m.text), None)
+        if restart is not None:
+            # ...but a stall that made the firmware restart the camera is counted from the
+            # first frame after the restart; the restart itself must keep to its budget.
+            self._advance(restart + CAMERA_RESTART_NS + 0.4e9)
+            last = max((end for end, _, k in self.deliveries if end < g0), default=g0)
+            first = next((end for end, _, k in self.deliveries if end > restart), None)
+            result["end"] = first - FRAME_NS if first is not None else self.now()
+            taken = (first - last) / 1e6 if first is not None else math.inf
+            result["note"] += (f"; the camera restarted: {taken:.0f} ms from the last frame "
+                               "before the stall to the first after the restart")
+            # Due by the later of the budget and two frames after the sensor is back.
+            due = max(last + CAMERA_RESTART_NS, g0 + length + 2 * FRAME_NS)
+            if first is None or first > due:
+                self.problems.append(f"dropped frames at {g0 / 1e9:.2f} s: the camera restart "
+                                     f"took {taken:.0f} ms from the last frame to the next "
+                                     f"(budget {CAMERA_RESTART_NS / 1e6:.0f} ms, or two frames "
+                                     "after the sensor is back)")
 
     def _brown_out(self, result):
         rng = self.rng
@@ -1220,7 +1259,8 @@ class Soak:
         print(f"  board HEARTBEAT: longest gap {self.hb_gap / 1e9:.2f} s (outside brown-outs); "
               f"link events dropped: {self.dropped_summary}")
         print(f"  stack high-water: {self.stack_before} bytes before the warm-up's end, "
-              f"{self.stack_after} after")
+              f"{self.stack_after} after; new peaks (s: bytes, during): "
+              + ", ".join(f"{g / 1e9:.1f}: {m} ({k or 'quiet'})" for g, m, k in self.stack_rises))
         saves = len(self.saves)
         print(f"  flash: {saves} save(s), {self.words_per_save} flash words each")
         if self.replays:

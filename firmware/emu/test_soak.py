@@ -51,11 +51,16 @@ class Resume(unittest.TestCase):
         early = 3.6 * PERIOD  # sent after the end, but before a frame after it ended
         self.assertEqual(resume_frames(self.frames, [early, 3.9 * PERIOD + 1e6], end)[0], 1)
 
-    def test_frames_without_the_pad_are_not_counted_and_no_target_is_none(self):
+    def test_frames_without_the_pad_do_not_end_it_and_no_target_is_none(self):
         frames = [(e, s, "blank" if k < 5 else "pad") for k, (e, s, _) in
                   enumerate(self.frames)]
-        self.assertEqual(resume_frames(frames, [5.9 * PERIOD + 1e6], 0.0)[0], 1)
+        self.assertEqual(resume_frames(frames, [5.9 * PERIOD + 1e6], 5 * PERIOD)[0], 1)
         self.assertEqual(resume_frames(frames, [], 0.0), (None, None))
+
+    def test_frames_the_camera_did_not_deliver_count(self):
+        # The sensor is back at 2.5 periods; the firmware takes its first frame at 6.9.
+        frames = [f for f in self.frames if not 2 <= f[1] / PERIOD < 6]
+        self.assertEqual(resume_frames(frames, [6.9 * PERIOD + 1e6], 2.5 * PERIOD)[0], 5)
 
 
 class Signatures(unittest.TestCase):
