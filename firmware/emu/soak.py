@@ -37,13 +37,16 @@ round always runs whole, so a short run still has one of each):
   `_signed_flood`.
 
 "Resume" is measured from the disturbance's end: the last byte of the noise or of the flood
-arriving, the rebooted autopilot's first HEARTBEAT arriving, the start of exposure of the
-first frame with the pad again, and after a brown-out the later of the first HEARTBEAT's
-arrival after the boot (the firmware chooses its profile from it) and the start of the
-first frame's exposure after the boot. The count is the camera frames with the pad that
-ended after that point up to and including the one that ended before the first LANDING_TARGET
-that agrees with the truth: 1 means the target of the first frame that could have one. At
-most `RESUME_FRAMES`, after a brown-out `COLD_RESUME_FRAMES` (a new track must be confirmed).
+arriving, the rebooted autopilot's first HEARTBEAT arriving, the start of the sensor's first
+frame after the dropped-frames window, and after a brown-out the later of the first
+HEARTBEAT's arrival after the boot (the firmware chooses its profile from it) and the start of
+the first frame's exposure after the boot. The count is the sensor's frame periods that ended
+after that point up to the first LANDING_TARGET that agrees with the truth (`resume_frames`;
+frames the firmware did not capture count): 1 means the target of the first frame that could
+have one. At most `RESUME_FRAMES`, after a brown-out `COLD_RESUME_FRAMES` (a new track must be
+confirmed). A stall that makes the firmware restart the camera is counted from the first
+frame after the restart, which must come within the firmware's own budget
+(`CAMERA_RESTART_NS`).
 
 Throughout: every LANDING_TARGET agrees with the truth (fil.py's tolerances); the board's
 HEARTBEAT keeps its 1 Hz; TIMESYNC requests (every `TIMESYNC_PROBE_NS`, exact matching by
