@@ -19,7 +19,8 @@
 //! reachability nor cache maintenance comes into it; at the few kB/s a MAVLink telemetry
 //! port carries the interrupt load is small.
 //!
-//! Parameter changes (PARAM_SET from a ground station) are saved to flash once they have been
+//! Parameter changes (PARAM_SET from a ground station, and the signing key a SETUP_SIGNING
+//! set, which lives in the same `ParamSet`) are saved to flash once they have been
 //! stable for two seconds ([`SaveDebounce`]): the link signals [`SAVE`] to the
 //! parameter store task. So are TD_CAM_ROLL and TD_CAM_PITCH when the companion adopts the
 //! mount calibration that came with a frame's estimate (in [`Companion::on_estimate`]: the

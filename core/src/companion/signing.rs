@@ -174,19 +174,12 @@ impl Signing {
                     link_id: signature.link_id,
                     timestamp: ts,
                 };
-                if self.streams.is_full() {
-                    // Forget the stalest sender.
-                    if let Some(i) = self
-                        .streams
-                        .iter()
-                        .enumerate()
-                        .min_by_key(|(_, s)| s.timestamp)
-                        .map(|(i, _)| i)
-                    {
-                        self.streams.swap_remove(i);
+                // When full, the stalest sender's place is taken.
+                if let Err(new) = self.streams.push(new) {
+                    if let Some(stalest) = self.streams.iter_mut().min_by_key(|s| s.timestamp) {
+                        *stalest = new;
                     }
                 }
-                let _ = self.streams.push(new);
             }
         }
         self.advance_to(ts, now_us);
@@ -299,6 +292,23 @@ mod tests {
         let (f, n) = signed(8, 50_000_000, &KEY);
         assert_eq!(judge(&mut fresh, &f[..n], 0), Authenticity::Signed);
         assert_eq!(fresh.timestamp(0), 50_000_000);
+    }
+
+    #[test]
+    fn a_full_table_forgets_its_stalest_sender() {
+        let mut board = Signing::new(0, 0);
+        let frames: [_; MAX_SIGNING_STREAMS + 1] =
+            core::array::from_fn(|i| signed(i as u8 + 1, 1_000 + i as u64, &KEY));
+        for (f, n) in &frames {
+            assert_eq!(judge(&mut board, &f[..*n], 0), Authenticity::Signed);
+        }
+        assert_eq!(board.streams.len(), MAX_SIGNING_STREAMS);
+        // The newest sender is remembered; the first, the stalest, was forgotten, so its frame
+        // is judged as a new stream's again (within the window, above the floor).
+        let (f, n) = &frames[MAX_SIGNING_STREAMS];
+        assert_eq!(judge(&mut board, &f[..*n], 0), Authenticity::Replayed);
+        let (f, n) = &frames[0];
+        assert_eq!(judge(&mut board, &f[..*n], 0), Authenticity::Signed);
     }
 
     #[test]
