@@ -5,15 +5,20 @@
 # for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
 # checking the LANDING_TARGETs it sends to an emulated ArduPilot (and, for the VGA build, to
 # an emulated PX4); on one variant per board FIL ends with a parameter set over MAVLink, a
-# power cycle and the parameter read back. Before them, the emulator's
-# own unit tests; after them, four self-tests that must fail: a PLL that never locks (the
+# power cycle and the parameter read back. The default build also runs the short soak
+# (firmware/emu/soak.py: line noise, an autopilot reboot, parameter floods signed and
+# unsigned, dropped frames and a brown-out during a save, each followed by checks; the
+# 10-minute one is measured in firmware/emu/README.md). Before them, the emulator's
+# own unit tests; after them, five self-tests that must fail: a PLL that never locks (the
 # boot), a camera that never answers (the watchdog must reset the board), a sensor deaf to
-# its exposure registers (the frames stay clipped) and a power cycle that loses the flash
-# (the parameter is gone).
+# its exposure registers (the frames stay clipped), a power cycle that loses the flash
+# (the parameter is gone) and, in the soak, a pad that never comes back into view (the
+# targets do not resume).
 #
 # Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
 # EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
-# the boot test only.
+# the boot test only; EMU_SOAK_SECONDS (default 15) is the short soak's emulated time (its
+# first round of disturbances always runs whole), 0 skips it.
 #
 # The builds share one target directory, one after the other: the NUCLEO variants first (the
 # default build is usually there already), then the OpenMV ones (another chip feature, so
@@ -28,6 +33,7 @@ readonly TARGET_DIR="${CARGO_TARGET_DIR:-target}"
 readonly OUT="${TARGET_DIR}/emu"
 
 readonly FIL_SECONDS="${EMU_FIL_SECONDS:-2}"
+readonly SOAK_SECONDS="${EMU_SOAK_SECONDS:-15}"
 
 # What a variant's FIL does beyond landing against an emulated ArduPilot on a clean line:
 # - `--power-cycle`: ends with the parameter power cycle (firmware/emu/power_cycle.py), on
@@ -121,6 +127,13 @@ if [ -f "${VGA_ELF}" ] && [ "${FIL_SECONDS}" != 0 ] && selected nucleo-vga "$@";
     emulate "${VGA_ELF}" --board nucleo --fil "${FIL_SECONDS}" --camera vga --autopilot px4 \
         --line-noise --label "nucleo-vga, PX4, line noise" || failed=1
 fi
+if [ -f "${DEFAULT_ELF}" ] && [ "${FIL_SECONDS}" != 0 ] && [ "${SOAK_SECONDS}" != 0 ] &&
+    selected nucleo-qvga "$@"; then
+    # The short soak: one of each disturbance (the signed flood sets a signing key), then more
+    # while the time lasts; about a minute of wall time.
+    emulate "${DEFAULT_ELF}" --board nucleo --fil "${SOAK_SECONDS}" --camera qvga --soak \
+        --soak-signing --label "nucleo-qvga, soak" || failed=1
+fi
 if [ -f "${DEFAULT_ELF}" ]; then
     expect_failure "nucleo-qvga, PLL1RDY stuck at 0" "${DEFAULT_ELF}" --board nucleo \
         --inject no-pll1rdy --spin-bound 20000 || failed=1
@@ -130,5 +143,10 @@ if [ -f "${DEFAULT_ELF}" ]; then
         --board nucleo --inject fixed-exposure --fil 1 || failed=1
     expect_failure "nucleo-qvga, a power cycle that loses the flash" "${DEFAULT_ELF}" \
         --board nucleo --inject volatile-flash --fil 1 --power-cycle || failed=1
+    if [ "${SOAK_SECONDS}" != 0 ]; then
+        expect_failure "nucleo-qvga, soak: the pad never comes back after the first disturbance" \
+            "${DEFAULT_ELF}" --board nucleo --inject pad-lost --fil 4 --camera qvga --soak \
+            --soak-seed 4 || failed=1
+    fi
 fi
 exit "${failed}"

@@ -1,10 +1,12 @@
 """Runs one touchdown firmware ELF on the emulated STM32H743 and prints a summary.
 
-    python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS [--power-cycle]]
+    python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS [--power-cycle]
+        | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
 
 Without --fil: the boot test (boot.py). With --fil: the boot test, then firmware-in-the-loop
 (fil.py) for SECONDS of emulated time; with --power-cycle also a parameter set over MAVLink,
-kept through a power cycle (power_cycle.py). Exit status 0 when every check passed, 1 on a failure
+kept through a power cycle (power_cycle.py); with --soak, FIL under a seeded schedule of
+disturbances for SECONDS instead (soak.py). Exit status 0 when every check passed, 1 on a failure
 (the message names the pc, the function and the address), 2 on bad usage.
 """
 
@@ -28,11 +30,13 @@ def parse(argv):
                         help="reads of one register from one pc without a change that count "
                              "as a hang")
     parser.add_argument("--inject",
-                        choices=("no-pll1rdy", "no-camera", "fixed-exposure", "volatile-flash"),
+                        choices=("no-pll1rdy", "no-camera", "fixed-exposure", "volatile-flash",
+                                 "pad-lost"),
                         help="break the chip model on purpose (shows the test can fail): "
                              "PLL1 never locks / nothing answers on the SCCB bus / the sensor "
                              "ignores its exposure and gain registers / the power cycle loses "
-                             "what the firmware wrote to flash")
+                             "what the firmware wrote to flash / (--soak) the pad never comes "
+                             "back into view after the first disturbance")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
     parser.add_argument("--autopilot", choices=("ardupilot", "ardupilot-4.7", "px4"),
@@ -46,6 +50,14 @@ def parse(argv):
     parser.add_argument("--signing", action="store_true",
                         help="after FIL: a signing key and signed, unsigned and replayed "
                              "PARAM_SETs, a power cycle, the same checks again (signing.py)")
+    parser.add_argument("--soak", action="store_true",
+                        help="FIL as a soak: line noise, autopilot reboots, parameter floods, "
+                             "dropped frames and brown-outs on a seeded schedule, each "
+                             "followed by checks (soak.py)")
+    parser.add_argument("--soak-seed", type=int, default=1, help="the soak's schedule")
+    parser.add_argument("--soak-signing", action="store_true",
+                        help="the soak also sets a MAVLink 2 signing key and floods signed "
+                             "and unsigned PARAM_SETs (firmware with signing only)")
     parser.add_argument("--camera", choices=("qvga", "vga"), default="qvga",
                         help="FIL: the build's frame size (feature camera-vga)")
     parser.add_argument("--frame", default=None,
@@ -56,6 +68,14 @@ def parse(argv):
 
 def main(argv=None):
     args = parse(argv)
+    if (args.soak or args.soak_signing) and not args.fil:
+        print("--soak needs --fil SECONDS", file=sys.stderr)
+        return 2
+    if args.soak and (args.power_cycle or args.signing or args.line_noise or
+                      args.autopilot != "ardupilot"):
+        print("--soak runs against the plain ArduPilot (it adds its own noise and power "
+              "cycles)", file=sys.stderr)
+        return 2
     board = BOARDS[args.board]
     t0 = time.monotonic()
     elf = ElfImage(args.elf)
@@ -66,7 +86,12 @@ def main(argv=None):
     machine = build_chip(elf, board, args, **(fil.chip_options() if fil else {}))
     print(f"== {args.label or args.elf} ({board.name}, {args.cpu_mhz} MHz)")
     problems = run_boot(machine, board, args)
-    if fil and not problems:
+    if fil and args.soak and not problems:
+        from .soak import Soak
+        soak = Soak(fil, elf, board, args)
+        problems += soak.run(machine)
+        machine = soak.machine  # after brown-outs, the last chip
+    elif fil and not problems:
         problems += fil.run(machine)
     if fil and args.power_cycle and not problems:
         from .power_cycle import PowerCycle

@@ -86,6 +86,10 @@ class Autopilot:
         self.fed, self.garbled, self.garbage_bytes = 0, 0, 0
         self.truth = truth
         self.mav = mavlink.MAVLink(None, srcSystem=AUTOPILOT_SYSID, srcComponent=1)
+        # Its clock at the schedule's time 0, ms (a reboot sets it so that the clock restarts
+        # from zero), and whether its HEARTBEAT says armed (soak.py changes both).
+        self.booted_before_ms = BOOTED_BEFORE_MS
+        self.armed = False
         # PX4's TIMESYNC requests: (emulated time ns it sent one, its ts1).
         self.timesync_requests = []
         turn = (math.cos(WORLD_YAW / 2), 0.0, 0.0, math.sin(WORLD_YAW / 2))
@@ -98,9 +102,12 @@ class Autopilot:
     def heartbeat(self):
         autopilot = mavlink.MAV_AUTOPILOT_PX4 if self.kind == "px4" else \
             mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+        base_mode = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if self.armed:
+            base_mode |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         return self.mav.heartbeat_encode(
-            mavlink.MAV_TYPE_QUADROTOR, autopilot, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-            0, mavlink.MAV_STATE_ACTIVE).pack(self.mav)
+            mavlink.MAV_TYPE_QUADROTOR, autopilot, base_mode, 0,
+            mavlink.MAV_STATE_ACTIVE).pack(self.mav)
 
     def sets_parameters(self):
         """Whether this autopilot changes a parameter of the firmware (which the firmware then
@@ -156,9 +163,8 @@ class Autopilot:
         self.garbage_bytes += len(garbage)
         return bytes(garbage)
 
-    @staticmethod
-    def _boot_ms(t_ns):
-        return int(t_ns / 1e6) + BOOTED_BEFORE_MS
+    def _boot_ms(self, t_ns):
+        return int(t_ns / 1e6) + self.booted_before_ms
 
     def _attitude(self, t_ns):
         w, x, y, z = self.attitude

@@ -347,6 +347,14 @@ class Dcmi(Block):
         self.overruns = 0
         self.reference = None  # exposure x gain at which a frame file is delivered as it is
         self.scales = []  # the brightness of each delivered frame (1.0: the file as it is)
+        # What the sensor does with the frame starting at a time (soak.py's dropped frames):
+        # `schedule(start_ns)` returns None (the frame as usual), "skip" (no frame: the
+        # sensor drops it and the capture waits for the next) or "blank" (a frame without
+        # the pad, `blank_frame`). None: every frame as usual.
+        self.schedule = None
+        self.blank_frame = None
+        # (end ns, start ns, "pad" or "blank") of each frame delivered.
+        self.deliveries = []
 
     def brightness(self, start_ns):
         """The scale of a frame that started exposing at `start_ns` (see the module docs):
@@ -394,7 +402,15 @@ class Dcmi(Block):
     def advance(self, now_ns):
         if self.armed_at is None or now_ns < self._frame_end():
             return
-        width, height, pixels = self.frames[self.delivered % len(self.frames)]
+        kind = self.schedule(self._frame_start()) if self.schedule else None
+        if kind == "skip":
+            # Nothing arrives: the capture stays armed for the frame after this one.
+            self.armed_at = self._frame_end()
+            return
+        width, height, pixels = (self.blank_frame if kind == "blank" else
+                                 self.frames[self.delivered % len(self.frames)])
+        self.deliveries.append((self._frame_end(), self._frame_start(),
+                                "blank" if kind == "blank" else "pad"))
         self.delivered += 1
         scale = self.brightness(self._frame_start())
         self.scales.append(scale)

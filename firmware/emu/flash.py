@@ -220,6 +220,25 @@ class Flash(Block):
         bank.operation = ("program", word, data)
         bank.busy_until = self.machine.time_ns + PROGRAM_NS
 
+    # --- power cut ----------------------------------------------------------------------
+
+    def kept_at_power_off(self):
+        """The whole flash as a power cut now leaves it (soak.py's brown-outs): what the
+        memory holds, except a flash word whose program had not completed: its write buffer
+        still filling, or its programming under way. Those keep their content from before
+        (the buffer is volatile; a word cut while it programs could also come out half
+        written, with an ECC error on read, which this model does not produce). An erase
+        under way leaves its sector as it was (the model erases at the end)."""
+        image = bytearray(self.machine.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size))
+        for bank in self.banks:
+            word = bank.buffer_word
+            if word is None and bank.operation is not None and bank.operation[0] == "program":
+                word = bank.operation[1]
+            if word is not None:
+                offset = word - memmap.FLASH.base
+                image[offset:offset + FLASH_WORD] = bank.before
+        return bytes(image)
+
     # --- time ---------------------------------------------------------------------------
 
     def advance(self, now_ns):

@@ -145,5 +145,41 @@ class Program(unittest.TestCase):
         self.assertEqual(len(machine.failures), 1)
 
 
+class PowerCut(unittest.TestCase):
+    """`kept_at_power_off`: what a brown-out (soak.py) leaves in flash."""
+
+    def setUp(self):
+        self.flash, self.machine = flash_on_machine()
+        unlock(self.flash)
+        self.flash.write_reg(CR2, PG | PSIZE_32 | EOPIE)
+        self.word = BANK2 + 6 * SECTOR_SIZE + 0x40
+
+    def kept(self, word):
+        offset = word - memmap.FLASH.base
+        return self.flash.kept_at_power_off()[offset:offset + 32]
+
+    def test_a_programmed_word_is_kept(self):
+        program(self.flash, self.machine, self.word, range(1, 9))
+        finish(self.flash, self.machine)
+        self.assertEqual(self.kept(self.word),
+                         b"".join(v.to_bytes(4, "little") for v in range(1, 9)))
+
+    def test_a_word_still_in_the_write_buffer_is_lost(self):
+        program(self.flash, self.machine, self.word, range(1, 5))
+        self.assertEqual(self.kept(self.word), b"\xff" * 32)
+
+    def test_a_word_cut_while_it_programs_is_lost(self):
+        program(self.flash, self.machine, self.word, range(1, 9))
+        self.assertEqual(self.flash.read_reg(SR2) & SR_QW, SR_QW)
+        self.assertEqual(self.kept(self.word), b"\xff" * 32)
+
+    def test_an_erase_cut_short_leaves_the_sector(self):
+        sector = BANK2 + 7 * SECTOR_SIZE
+        self.machine.uc.mem_write(sector, b"slot" * 8)
+        self.flash.write_reg(CR2, SER | (7 << 8))
+        self.flash.write_reg(CR2, SER | (7 << 8) | START)
+        self.assertEqual(self.kept(sector), b"slot" * 8)
+
+
 if __name__ == "__main__":
     unittest.main()
