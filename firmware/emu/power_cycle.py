@@ -49,6 +49,34 @@ def half_pad_size():
     return max(m["size"] for m in layout["marker"]) / 2
 
 
+def power_cycled(fil, elf, board, args, image):
+    """A new chip, all else back to reset, whose flash holds `image` (the old chip's flash as
+    the power cut left it; None: as flashed), booted: (machine, boot problems), the machine
+    set to run on past its first idle."""
+    machine = build_chip(elf, board, args, **fil.chip_options())
+    if image is not None:
+        machine.uc.mem_write(memmap.FLASH.base, image)
+    problems = run_boot(machine, board, args)
+    machine.stop_at_first_idle = False
+    machine.finished = None
+    return machine, problems
+
+
+def half_size_target_problems(autopilot, messages, when):
+    """The last LANDING_TARGET of `messages` against the truth for the pad printed at half
+    size (TD_TAG_SIZE at half the built marker)."""
+    targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
+    if not targets:
+        return [f"no LANDING_TARGET {when}"]
+    want = autopilot.expected_target(scale=0.5)
+    last = targets[-1]
+    print(f"  LANDING_TARGET x{len(targets)} {when}, last: distance {last.distance:.2f} m "
+          f"(for the pad at half size: {want['distance']:.2f} m), x {last.x:.2f} "
+          f"y {last.y:.2f} z {last.z:.2f} (expected {want['x']:.2f} {want['y']:.2f} "
+          f"{want['z']:.2f})")
+    return position_problems(last, want, when=f" {when} (the pad printed at half size)")
+
+
 class PowerCycle:
     """The stage: `run` takes the machine FIL ran on and returns the problems found."""
 
@@ -97,21 +125,18 @@ class PowerCycle:
 
     def _after_power_cycle(self, old):
         """A new chip with the old one's flash (all else back to reset), booted and run."""
-        machine = build_chip(self.elf, self.board, self.args, **self.fil.chip_options())
         if self.args.inject != "volatile-flash":
-            machine.uc.mem_write(memmap.FLASH.base,
-                                 bytes(old.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size)))
+            image = bytes(old.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size))
             print("  power cycle: a new chip with the old flash")
         else:
+            image = None
             print("  power cycle: a new chip, its flash as flashed (--inject volatile-flash)")
-        problems = run_boot(machine, self.board, self.args)
+        machine, problems = power_cycled(self.fil, self.elf, self.board, self.args, image)
         if problems:
             return [f"after the power cycle: {p}" for p in problems]
         start = machine.time_ns
         read_at = start + 0.3e9
         end = start + AFTER_BOOT_NS
-        machine.stop_at_first_idle = False
-        machine.finished = None
         self.autopilot.feed(machine, start + 0.05e9, end, [(
             read_at, self.mav.param_request_read_encode(
                 FIRMWARE_SYSID, FIRMWARE_COMPID, PARAM.encode(), -1).pack(self.mav))])
@@ -140,13 +165,4 @@ class PowerCycle:
         return []
 
     def _check_targets(self, messages, when):
-        targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
-        if not targets:
-            return [f"no LANDING_TARGET {when}"]
-        want = self.autopilot.expected_target(scale=0.5)
-        last = targets[-1]
-        print(f"  LANDING_TARGET x{len(targets)} {when}, last: distance {last.distance:.2f} m "
-              f"(for the pad at half size: {want['distance']:.2f} m), x {last.x:.2f} "
-              f"y {last.y:.2f} z {last.z:.2f} (expected {want['x']:.2f} {want['y']:.2f} "
-              f"{want['z']:.2f})")
-        return position_problems(last, want, when=f" {when} (the pad printed at half size)")
+        return half_size_target_problems(self.autopilot, messages, when)

@@ -26,10 +26,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from . import memmap
 from .autopilot import FIRMWARE_COMPID, FIRMWARE_SYSID
-from .boot import report_stack, run_boot
-from .chip import build_chip
-from .fil import messages_since, position_problems, timed_messages
-from .power_cycle import SAVE_WAIT_NS, half_pad_size
+from .boot import report_stack
+from .fil import messages_since, timed_messages
+from .power_cycle import (SAVE_WAIT_NS, half_pad_size, half_size_target_problems,
+                          power_cycled)
 
 # The ground station's key (any 32 bytes) and its initial timestamp (2026, 10 us units since
 # 2015-01-01).
@@ -169,7 +169,7 @@ class Signing:
         for label, want in [("signed TD_RATE_HZ 15", 15.0), ("signed TD_RATE_HZ 20", 20.0),
                             ("older TD_RATE_HZ 10", 20.0), ("replayed TD_RATE_HZ 15", 20.0)]:
             problems += value_after(since(label), "TD_RATE_HZ", label, want)
-        problems += self._check_targets(messages_since(timed, at["signed TD_TAG_SIZE"] + 0.5e9),
+        problems += half_size_target_problems(self.autopilot, messages_since(timed, at["signed TD_TAG_SIZE"] + 0.5e9),
                                         "after the signed TD_TAG_SIZE")
         # Frames started 50 ms after the SETUP_SIGNING reached the line: the key is in force.
         problems += signature_problems(frames_from(machine, at["SETUP_SIGNING"] + 0.05e9),
@@ -179,19 +179,15 @@ class Signing:
         return problems
 
     def _after_power_cycle(self, old):
-        machine = build_chip(self.elf, self.board, self.args, **self.fil.chip_options())
-        machine.uc.mem_write(memmap.FLASH.base,
-                             bytes(old.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size)))
+        image = bytes(old.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size))
         print("  power cycle: a new chip with the old flash")
-        problems = run_boot(machine, self.board, self.args)
+        machine, problems = power_cycled(self.fil, self.elf, self.board, self.args, image)
         if problems:
             return [f"after the power cycle: {p}" for p in problems]
         g = self.ground
         start = machine.time_ns
         unsigned_at, replay_at, signed_at = start + 0.3e9, start + 0.45e9, start + 0.6e9
         end = start + AFTER_BOOT_NS
-        machine.stop_at_first_idle = False
-        machine.finished = None
         self.autopilot.feed(machine, start + 0.05e9, end, [
             (unsigned_at, g.param_set("TD_RATE_HZ", 5.0)),
             # The last write before the power cycle, sent again: the board forgot its senders
@@ -211,18 +207,8 @@ class Signing:
                                 "replayed PARAM_SET after the power cycle", 20.0)
         problems += value_after(messages_since(timed, signed_at), "TD_RATE_HZ",
                                 "signed PARAM_SET after the power cycle", 25.0)
-        problems += self._check_targets(messages_since(timed, start + 0.3e9),
+        problems += half_size_target_problems(self.autopilot, messages_since(timed, start + 0.3e9),
                                         "after the power cycle")
         problems += signature_problems(frames_from(machine, start), "after the power cycle")
         problems += [f"after the power cycle: {p}" for p in report_stack(machine)]
         return problems
-
-    def _check_targets(self, messages, when):
-        targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]
-        if not targets:
-            return [f"no LANDING_TARGET {when}"]
-        want = self.autopilot.expected_target(scale=0.5)
-        last = targets[-1]
-        print(f"  LANDING_TARGET x{len(targets)} {when}, last: distance {last.distance:.2f} m "
-              f"(expected {want['distance']:.2f} m)")
-        return position_problems(last, want, when=f" {when} (the pad printed at half size)")

@@ -69,10 +69,8 @@ import time
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from .autopilot import FIRMWARE_COMPID, FIRMWARE_SYSID, HEARTBEAT_PERIOD_NS, STATE_PERIOD_NS
-from .boot import run_boot
-from .chip import build_chip
+from .power_cycle import power_cycled
 from .fil import ANGLE_TOLERANCE, position_problems
-from . import memmap
 
 FRAME_NS = 1e9 / 30
 # The firmware's own budget for a camera restart (firmware/src/vision.rs, "Settling and
@@ -921,12 +919,9 @@ class Soak:
         image = machine.flash.kept_at_power_off()
         if self.args.inject == "volatile-flash":
             image = None
-        new = build_chip(self.elf, self.board, self.args, **self.fil.chip_options())
-        if image is not None:
-            new.uc.mem_write(memmap.FLASH.base, image)
+        new, problems = power_cycled(self.fil, self.elf, self.board, self.args, image)
         self.boots += 1
         self.base = g_cut + POWER_OFF_NS
-        problems = run_boot(new, self.board, self.args)
         if problems:
             raise SoakFailure(f"brown-out at {g_cut / 1e9:.2f} s: the boot: {problems}")
         self._attach(new)
