@@ -5,7 +5,8 @@
 # for EMU_FIL_SECONDS (default 2) of emulated time against the emulated camera and autopilot,
 # checking the LANDING_TARGETs it sends to an emulated ArduPilot (and, for the VGA build, to
 # an emulated PX4); on one variant per board FIL ends with a parameter set over MAVLink, a
-# power cycle and the parameter read back. The default build also runs the short soak
+# power cycle and the parameter read back; on the default build it first streams frames to
+# `touchdown view --record` over RTT. The default build also runs the short soak
 # (firmware/emu/soak.py: line noise, an autopilot reboot, parameter floods signed and
 # unsigned, dropped frames and a brown-out during a save, each followed by checks; the
 # 10-minute one is measured in firmware/emu/README.md). Before them, the emulator's
@@ -43,10 +44,14 @@ readonly SOAK_SECONDS="${EMU_SOAK_SECONDS:-15}"
 # - `--autopilot ardupilot-4.7`: an ArduPilot 4.7 that sets TD_PROFILE 3, LANDING_TARGETs in
 #   LOCAL_FRD, levelled with the attitude;
 # - `--signing`: a signing key set over MAVLink, signed, unsigned and replayed PARAM_SETs, a
-#   power cycle, the key and the checks again (firmware/emu/signing.py).
+#   power cycle, the key and the checks again (firmware/emu/signing.py);
+# - `--view TOUCHDOWN`: the frame stream over RTT channel 1 served on a TCP port, recorded
+#   by `touchdown view --record` and replayed by `touchdown detect` (firmware/emu/view.py);
+#   TOUCHDOWN is the test step's debug build (built here when missing).
 # The other variants differ only in the camera and the clock.
+readonly VIEWER="${TOUCHDOWN:-${TARGET_DIR}/debug/touchdown}"
 declare -rA FIL_EXTRAS=(
-    [nucleo-qvga]="--power-cycle"
+    [nucleo-qvga]="--power-cycle --view ${VIEWER}"
     [openmv-qvga]="--power-cycle"
     [nucleo-qvga-480]="--line-noise"
     [openmv-vga]="--autopilot ardupilot-4.7"
@@ -101,6 +106,9 @@ expect_failure() {
 
 mkdir -p "${OUT}"
 failed=0
+if [ "${FIL_SECONDS}" != 0 ] && [ ! -x "${VIEWER}" ]; then
+    cargo build --quiet -p touchdown-cli --bin touchdown || exit 1
+fi
 echo "emulator unit tests (firmware/emu/test_*.py)"
 python3 -m unittest discover --quiet -s firmware/emu -t firmware || failed=1
 for variant in "${VARIANTS[@]}"; do

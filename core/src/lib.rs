@@ -58,6 +58,7 @@ pub mod crc;
 pub mod detect;
 pub mod family;
 pub mod filter;
+pub mod frame_stream;
 pub mod geometry;
 pub mod image;
 pub mod pad;

@@ -1,11 +1,12 @@
 """Runs one touchdown firmware ELF on the emulated STM32H743 and prints a summary.
 
     python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS [--power-cycle]
-        | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
+        [--view TOUCHDOWN] | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
 
 Without --fil: the boot test (boot.py). With --fil: the boot test, then firmware-in-the-loop
 (fil.py) for SECONDS of emulated time; with --power-cycle also a parameter set over MAVLink,
-kept through a power cycle (power_cycle.py); with --soak, FIL under a seeded schedule of
+kept through a power cycle (power_cycle.py); with --view, the frame stream recorded by
+`touchdown view` and replayed (view.py); with --soak, FIL under a seeded schedule of
 disturbances for SECONDS instead (soak.py). Exit status 0 when every check passed, 1 on a failure
 (the message names the pc, the function and the address), 2 on bad usage.
 """
@@ -50,6 +51,10 @@ def parse(argv):
     parser.add_argument("--signing", action="store_true",
                         help="after FIL: a signing key and signed, unsigned and replayed "
                              "PARAM_SETs, a power cycle, the same checks again (signing.py)")
+    parser.add_argument("--view", metavar="TOUCHDOWN",
+                        help="after FIL: serve RTT channel 1 on a TCP port and record frames "
+                             "from it with this touchdown binary's `view --record`, then replay "
+                             "them with its `detect` (view.py)")
     parser.add_argument("--soak", action="store_true",
                         help="FIL as a soak: line noise, autopilot reboots, parameter floods, "
                              "dropped frames and brown-outs on a seeded schedule, each "
@@ -68,6 +73,9 @@ def parse(argv):
 
 def main(argv=None):
     args = parse(argv)
+    if args.view and (args.soak or not args.fil):
+        print("--view needs --fil SECONDS and no --soak", file=sys.stderr)
+        return 2
     if (args.soak or args.soak_signing) and not args.fil:
         print("--soak needs --fil SECONDS", file=sys.stderr)
         return 2
@@ -93,6 +101,9 @@ def main(argv=None):
         machine = soak.machine  # after brown-outs, the last chip
     elif fil and not problems:
         problems += fil.run(machine)
+    if fil and args.view and not problems:
+        from .view import View
+        problems += View(fil, elf, board, args).run(machine)
     if fil and args.power_cycle and not problems:
         from .power_cycle import PowerCycle
         problems += PowerCycle(fil, elf, board, args).run(machine)

@@ -12,6 +12,10 @@
 //!   vision ◄───────────── PIPELINE_SETTINGS (Signal<PipelineSettings>) ──────┤
 //!   vision ◄───────────── VEHICLE (Mutex<VehicleState>, newest copy) ────────┘
 //!
+//!   vision ── VIEW_READY (Signal<&mut ViewFrame>) ──► view ──► RTT up channel (to the probe)
+//!   vision ◄─ VIEW_FREE (Signal<&mut ViewFrame>) ───── view ◄── RTT down channel
+//!   vision ◄─ VIEW_REQUEST (Mutex, newest request) ─── view
+//!
 //!   vision ── FRAMES_DONE ──┐
 //!                           ├──► watchdog ──► IWDG1 (petted while both counters move)
 //!   link ──── LINK_LOOPS ───┘
@@ -41,6 +45,11 @@
 //! - [`SAVE`]: the whole parameter set to write to flash, from the link (after its debounce)
 //!   to the parameter store. A signal: each set is complete, so a newer one supersedes an
 //!   unsaved older one while a slow erase is in progress.
+//! - [`VIEW_READY`] / [`VIEW_FREE`]: the one frame record for a host viewer, handed to the view
+//!   task to send and back to the vision task to fill (signals: there is one buffer, so at
+//!   most one hand-over is pending each way). [`VIEW_REQUEST`]: the newest request from the
+//!   viewer with its time, which the vision task reads before each frame (a mutex around one
+//!   copy: only the newest matters, and nobody waits for it).
 //! - [`frame_done`] / [`link_alive`]: progress counters the watchdog compares between its
 //!   pets (atomics: nobody waits on them, and a counter cannot fill up).
 //!
@@ -49,7 +58,7 @@
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
@@ -57,7 +66,10 @@ use embassy_sync::signal::Signal;
 use embassy_sync::blocking_mutex::Mutex;
 use touchdown_core::companion::MavSeverity;
 use touchdown_core::filter::{FrameEstimate, VehicleState};
+use touchdown_core::frame_stream::ViewRequest;
 use touchdown_core::params::{ParamSet, PipelineSettings};
+
+use crate::view::ViewFrame;
 
 /// What the other tasks send the link. (A frame's estimate is a few hundred bytes, a status
 /// ~12; boxing the larger variant is not an option without a heap.)
@@ -125,4 +137,22 @@ pub fn frame_done() {
 /// Reports one pass of the MAVLink loop (called by the link task).
 pub fn link_alive() {
     LINK_LOOPS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// The frame record, filled by the vision task, for the view task to send.
+pub static VIEW_READY: Signal<CriticalSectionRawMutex, &'static mut ViewFrame> = Signal::new();
+/// The frame record, sent, back to the vision task.
+pub static VIEW_FREE: Signal<CriticalSectionRawMutex, &'static mut ViewFrame> = Signal::new();
+/// The newest viewer request and when it came, board µs.
+pub static VIEW_REQUEST: Mutex<CriticalSectionRawMutex, Cell<Option<(ViewRequest, u64)>>> =
+    Mutex::new(Cell::new(None));
+
+/// Records a viewer request received at `now_us` (called by the view task).
+pub fn request_view(request: ViewRequest, now_us: u64) {
+    VIEW_REQUEST.lock(|shared| shared.set(Some((request, now_us))));
+}
+
+/// The newest viewer request and its time (called by the vision task).
+pub fn view_request() -> Option<(ViewRequest, u64)> {
+    VIEW_REQUEST.lock(Cell::get)
 }

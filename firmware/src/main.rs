@@ -50,11 +50,11 @@ mod sccb;
 // (see families.rs), type-checked in every build.
 #[cfg_attr(not(feature = "user-family"), allow(dead_code))]
 mod user_family;
+mod view;
 mod vision;
 mod watchdog;
 
 use defmt::{info, unwrap, warn};
-use defmt_rtt as _;
 use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -102,6 +102,20 @@ unsafe fn SPDIF_RX() {
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // RTT first, so that no log line is lost: up channel 0 carries defmt's logs, channel 1
+    // the frames for a host viewer both ways (frames up, the viewer's requests down; one
+    // number, because a debugger's RTT server serves a channel number both ways; see `view`).
+    let rtt = rtt_target::rtt_init! {
+        up: {
+            0: { size: 1024, name: "defmt" }
+            1: { size: view::RTT_BUFFER, mode: rtt_target::ChannelMode::NoBlockTrim, name: "frames" }
+        }
+        down: {
+            0: { }
+            1: { size: 64, name: "frames" }
+        }
+    };
+    rtt_target::set_defmt_channel(rtt.up.0);
     let p = embassy_stm32::init(clocks::config());
     info!(
         "touchdown firmware {=str} on {=str}: core clock {} MHz",
@@ -130,6 +144,8 @@ async fn main(spawner: Spawner) {
     };
     let workspace: &'static mut Workspace = unwrap!(axisram_static!(Workspace = Workspace::new()));
     let bounce: &'static mut Bounce = unwrap!(axisram_static!(Bounce = Bounce::new()));
+    let view_frame: &'static mut view::ViewFrame =
+        unwrap!(axisram_static!(view::ViewFrame = view::ViewFrame::new()));
 
     // Parameters from flash, then the UART at the stored baud rate.
     let mut flash = board.flash;
@@ -169,6 +185,7 @@ async fn main(spawner: Spawner) {
     // its pool busy.
     spawner.spawn(unwrap!(watchdog::task(board.watchdog)));
     spawner.spawn(unwrap!(heartbeat::task(board.led)));
+    spawner.spawn(unwrap!(view::task(rtt.up.1, rtt.down.1, view_frame)));
     spawner.spawn(unwrap!(param_store::task(flash, store)));
     LINK_IRQ.set_priority(LINK_PRIORITY);
     let link_spawner = LINK_EXECUTOR.start(LINK_IRQ);

@@ -77,6 +77,7 @@ use embassy_time::{Delay, Duration, Instant, Timer};
 use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::MavSeverity;
 use touchdown_core::filter::{EstimatorConfig, PadEstimator, VehicleState};
+use touchdown_core::frame_stream::{self, FrameMeta, StreamSwitch, StreamedFix};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
@@ -88,6 +89,7 @@ use crate::channels::{self, LinkEvent, PIPELINE_SETTINGS};
 use crate::config;
 use crate::families::SEARCHED;
 use crate::sccb::{Sccb, SccbError};
+use crate::view::{ViewFrame, VIEW_PIXELS};
 use crate::Workspace;
 
 /// Capture errors in a row that trigger a camera re-initialisation.
@@ -242,6 +244,11 @@ pub async fn task(
         config::PAD.name()
     );
 
+    let mut view = ViewOffer {
+        switch: StreamSwitch::new(),
+        frame: None,
+        index: 0,
+    };
     let mut summary = Summary::default();
     let mut next_summary = Instant::now() + SUMMARY_PERIOD;
     loop {
@@ -312,6 +319,7 @@ pub async fn task(
                     &mut pipeline,
                     &vehicle,
                     workspace,
+                    &mut view,
                 );
                 if let Some(setting) = exposure.update_metered(&processed.metering) {
                     write_exposure(&mut sensor.camera, setting).await;
@@ -399,6 +407,7 @@ fn process(
     pipeline: &mut FramePipeline<'static>,
     vehicle: &VehicleState,
     workspace: &mut Workspace,
+    view: &mut ViewOffer,
 ) -> Processed {
     // The frame's time: the captured image's middle row at mid-exposure.
     let before_end_us = timing.mid_exposure_before_frame_end_us(
@@ -427,11 +436,116 @@ fn process(
     }
     let has_fix = report.fix.is_some();
     channels::post_to_link(LinkEvent::Frame(report.estimate));
+    view.offer(
+        frame,
+        exposure_at,
+        timing,
+        exposure,
+        pipeline,
+        &report,
+        detect,
+    );
     Processed {
         markers: u32::try_from(report.markers).unwrap_or(u32::MAX),
         fix: has_fix,
         detect,
         metering: report.metering,
+    }
+}
+
+/// The vision task's side of the frame stream to a host viewer ([`crate::view`]).
+struct ViewOffer {
+    /// Whether a viewer asks, and for which frames.
+    switch: StreamSwitch,
+    /// The record, while the view task has handed it back.
+    frame: Option<&'static mut ViewFrame>,
+    /// Frames processed, the record's frame counter.
+    index: u32,
+}
+
+impl ViewOffer {
+    /// Fills the record with this frame and hands it to the view task, when a viewer asks for
+    /// this frame and the record is back from sending the last one; otherwise does nothing
+    /// (never waits).
+    #[allow(clippy::too_many_arguments)]
+    fn offer(
+        &mut self,
+        frame: &FrameBuffer,
+        exposure_at: u64,
+        timing: &FrameTiming,
+        exposure: &AutoExposure,
+        pipeline: &FramePipeline<'static>,
+        report: &touchdown_core::pipeline::FrameReport,
+        detect: Duration,
+    ) {
+        self.index = self.index.wrapping_add(1);
+        if let Some((request, at)) = channels::view_request() {
+            self.switch.requested(request, at);
+        }
+        let Some(scale) = self.switch.take(Instant::now().as_micros()) else {
+            return;
+        };
+        if self.frame.is_none() {
+            self.frame = channels::VIEW_FREE.try_take();
+        }
+        let Some(record) = self.frame.take() else {
+            return;
+        };
+        // Full resolution only when it fits the record (QVGA); a VGA frame goes halved.
+        let scale = if WIDTH * HEIGHT > VIEW_PIXELS {
+            2
+        } else {
+            scale
+        };
+        let pixels = frame.pixels();
+        let (width, height) = if scale == 1 {
+            match record.pixels.get_mut(..pixels.len()) {
+                Some(out) => {
+                    out.copy_from_slice(pixels);
+                    (WIDTH, HEIGHT)
+                }
+                None => (0, 0),
+            }
+        } else {
+            frame_stream::halve(pixels, WIDTH, HEIGHT, &mut record.pixels).unwrap_or((0, 0))
+        };
+        record.pixel_len = width * height;
+        let setting = exposure.setting();
+        let mut names = [""; 8];
+        for (name, family) in names.iter_mut().zip(SEARCHED.iter()) {
+            *name = family.name;
+        }
+        let settings = pipeline.settings();
+        let meta = FrameMeta {
+            index: self.index,
+            t_us: exposure_at,
+            width: width as u16,
+            height: height as u16,
+            scale,
+            exposure_us: (u64::from(setting.lines) * u64::from(timing.line_ns) / 1000) as u32,
+            gain_x16: setting.gain.0,
+            process_us: u32::try_from(detect.as_micros()).unwrap_or(u32::MAX),
+            camera: pipeline.camera(),
+            families: &names[..SEARCHED.len().min(names.len())],
+            pad_name: pipeline.pad().name(),
+            pad_scale: settings.pad_scale(config::PAD),
+            detections: pipeline.detector().detections(),
+            fix: report.fix.as_ref().map(|fix| {
+                let c = fix.camera_position();
+                StreamedFix {
+                    camera_position: [c.x, c.y, c.z],
+                    markers_used: fix.markers_used,
+                    reprojection_rms_px: fix.reprojection_rms_px,
+                }
+            }),
+        };
+        match frame_stream::encode_head(&meta, &mut record.head) {
+            Ok(len) if record.pixel_len > 0 => {
+                record.head_len = len;
+                channels::VIEW_READY.signal(record);
+            }
+            _ => self.frame = Some(record),
+        }
     }
 }
 

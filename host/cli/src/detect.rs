@@ -131,6 +131,9 @@ pub enum MethodArg {
     Robust,
     /// The paper's pipeline with its fixed choices (exact template match, no refinement).
     Paper,
+    /// touchdown's detector with the camera board's bound on the work per frame (what the
+    /// board finds in the frame; `robust` searches a cluttered photo to the end).
+    Board,
 }
 
 impl MethodArg {
@@ -139,6 +142,7 @@ impl MethodArg {
         match self {
             MethodArg::Robust => DetectorConfig::offline(),
             MethodArg::Paper => DetectorConfig::paper(),
+            MethodArg::Board => DetectorConfig::default(),
         }
     }
 }

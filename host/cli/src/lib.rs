@@ -26,6 +26,7 @@ pub mod replay;
 pub mod signing_key;
 pub mod simulate;
 pub mod sitl;
+pub mod view;
 
 use std::fmt;
 use std::io::{self, Write};
@@ -79,6 +80,10 @@ pub enum Command {
     /// autopilot model).
     #[command(long_about = sitl::LONG_HELP)]
     Sitl(sitl::SitlArgs),
+    /// Show what the camera board sees (its frames, markers and pad fix, streamed over the
+    /// debug probe) and record it.
+    #[command(long_about = view::LONG_HELP)]
+    View(view::ViewArgs),
 }
 
 /// `--board-params` of `replay` and `sitl`: `NAME=VALUE` pairs, comma-separated, in order
@@ -153,6 +158,7 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
         Command::Companion(args) => companion::run(&args, out, err),
         Command::Calibrate(args) => calibrate::run(&args, out, err),
         Command::Sitl(args) => sitl::run(&args, out, err),
+        Command::View(args) => view::run(&args, out, err),
     }
 }
 

@@ -6,7 +6,8 @@
 //! - [`recording`]: a recording directory (`frames.csv`, `setpoints.csv`, the frames);
 //! - [`pgm`]: the 8-bit binary PGM frames of a recording;
 //! - [`image_io`]: image files in general (PNG, PGM, JPEG; colour read as grey);
-//! - [`families`]: marker families from disk (a shipped table by name, or a family file).
+//! - [`families`]: marker families from disk (a shipped table by name, or a family file);
+//! - [`frame_stream`]: the board's frame stream to a viewer (`touchdown view`).
 //!
 //! The formats themselves are the contract's (`docs/interfaces.md`); these modules implement
 //! them and say only what the contract leaves to the implementation. The TOML files share
@@ -20,6 +21,7 @@
 
 pub mod camera;
 pub mod families;
+pub mod frame_stream;
 pub mod image_io;
 pub mod pad;
 pub mod pgm;
