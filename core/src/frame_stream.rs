@@ -182,8 +182,9 @@ fn short_text(w: &mut Writer<'_>, text: &str, max: usize) {
     while !text.is_char_boundary(end) {
         end -= 1;
     }
-    w.u8(end as u8);
-    w.bytes(&text.as_bytes()[..end]);
+    let bytes = text.as_bytes().get(..end).unwrap_or_default();
+    w.u8(bytes.len() as u8);
+    w.bytes(bytes);
 }
 
 /// Writes a record's preamble and metadata into `out` and returns their length; the record
@@ -275,7 +276,9 @@ pub fn encode_head(meta: &FrameMeta<'_>, out: &mut [u8]) -> Result<usize, Stream
     }
     let len = w.at;
     let meta_len = (len - PREAMBLE_LEN) as u16;
-    w.out[6..8].copy_from_slice(&meta_len.to_le_bytes());
+    if let Some(slot) = w.out.get_mut(6..8) {
+        slot.copy_from_slice(&meta_len.to_le_bytes());
+    }
     Ok(len)
 }
 
@@ -324,27 +327,24 @@ impl RequestParser {
     pub fn push(&mut self, bytes: &[u8]) -> Option<ViewRequest> {
         let mut found = None;
         for &byte in bytes {
-            if self.len < 4 && byte != REQUEST_MAGIC[self.len] {
-                // Restart, possibly at this byte.
-                self.len = usize::from(byte == REQUEST_MAGIC[0]);
-                if self.len == 1 {
+            if let Some(&want) = REQUEST_MAGIC.get(self.len) {
+                if byte != want {
+                    // Restart, possibly at this byte.
+                    self.len = usize::from(byte == REQUEST_MAGIC[0]);
                     self.buf[0] = byte;
+                    continue;
                 }
-                continue;
             }
-            self.buf[self.len] = byte;
+            if let Some(slot) = self.buf.get_mut(self.len) {
+                *slot = byte;
+            }
             self.len += 1;
-            if self.len == REQUEST_LEN {
+            if self.len >= REQUEST_LEN {
                 self.len = 0;
-                let crc = crate::crc::crc16_x25(0xFFFF, &self.buf[..6]);
-                let request = ViewRequest {
-                    every: self.buf[4],
-                    scale: self.buf[5],
-                };
-                if crc.to_le_bytes() == [self.buf[6], self.buf[7]]
-                    && request.every >= 1
-                    && matches!(request.scale, 1 | 2)
-                {
+                let [m0, m1, m2, m3, every, scale, c0, c1] = self.buf;
+                let crc = crate::crc::crc16_x25(0xFFFF, &[m0, m1, m2, m3, every, scale]);
+                let request = ViewRequest { every, scale };
+                if crc.to_le_bytes() == [c0, c1] && every >= 1 && matches!(scale, 1 | 2) {
                     found = Some(request);
                 }
             }
@@ -383,7 +383,9 @@ impl StreamSwitch {
             return None;
         }
         self.frames = self.frames.wrapping_add(1);
-        (self.frames % u32::from(request.every.max(1)) == 0).then_some(request.scale)
+        self.frames
+            .is_multiple_of(u32::from(request.every.max(1)))
+            .then_some(request.scale)
     }
 
     /// Whether a host asked within the lifetime (as of the last [`StreamSwitch::take`]).
@@ -400,14 +402,15 @@ pub fn halve(pixels: &[u8], width: usize, height: usize, out: &mut [u8]) -> Opti
     if pixels.len() < width * height || out.len() < w2 * h2 {
         return None;
     }
-    for (y, out_row) in out.chunks_exact_mut(w2).take(h2).enumerate() {
-        let top = &pixels[2 * y * width..][..width];
-        let bottom = &pixels[(2 * y + 1) * width..][..width];
-        for (x, o) in out_row.iter_mut().enumerate() {
-            let sum = u16::from(top[2 * x])
-                + u16::from(top[2 * x + 1])
-                + u16::from(bottom[2 * x])
-                + u16::from(bottom[2 * x + 1]);
+    let rows = pixels.chunks_exact(width).take(2 * h2);
+    let mut pairs = rows.clone().step_by(2).zip(rows.skip(1).step_by(2));
+    for out_row in out.chunks_exact_mut(w2.max(1)).take(h2) {
+        let Some((top, bottom)) = pairs.next() else {
+            break;
+        };
+        let blocks = top.chunks_exact(2).zip(bottom.chunks_exact(2));
+        for (o, (t, b)) in out_row.iter_mut().zip(blocks) {
+            let sum: u16 = t.iter().chain(b).map(|&p| u16::from(p)).sum();
             *o = ((sum + 2) / 4) as u8;
         }
     }

@@ -138,7 +138,7 @@ class View:
         port = listener.getsockname()[1]
         command = [self.touchdown, "view", f"tcp:127.0.0.1:{port}", "--record",
                    os.path.join(work, "rec"), "--frames", str(FRAMES), "--image",
-                   os.path.join(work, "view.png"), "--timeout", "60", "--quiet"]
+                   os.path.join(work, "view.png"), "--timeout", "60"]
         viewer = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         conn, to_host, up_bytes = None, b"", 0
         start = machine.time_ns
@@ -198,6 +198,9 @@ class View:
         if machine.finished:
             problems.append(f"view stage stopped early: {machine.finished}")
         summary = err.decode(errors="replace").strip().splitlines()
+        lines = out.decode(errors="replace").strip().splitlines()
+        if lines:
+            print(f"  view: the viewer's last line: {lines[-1]}")
         print(f"  view: {up_bytes} bytes from RTT channel 1 in {(end - start) / 1e6:.0f} ms "
               f"emulated; viewer: {summary[-1] if summary else '(nothing)'}")
         if viewer.returncode != 0:

@@ -399,6 +399,8 @@ struct Processed {
 
 /// Runs the frame through the pipeline and posts the result to the link. Runs on the CPU
 /// without yielding (the capture of the next frame proceeds by DMA meanwhile).
+// Each argument is a separate piece of the task's state, borrowed for this frame only.
+#[allow(clippy::too_many_arguments)]
 fn process(
     frame: &FrameBuffer,
     frame_end: Instant,

@@ -273,10 +273,12 @@ impl Recorder {
         if self.writer.is_none() {
             let pad = match self.pad.clone().or_else(|| Self::board_pad(frame)) {
                 Some(pad) => pad,
-                None => return Err(CliError(format!(
+                None => {
+                    return Err(CliError(format!(
                     "the board's pad '{}' is not a shipped design: give its pad.toml with --pad",
                     frame.pad_name
-                ))),
+                )))
+                }
             };
             let camera = frame.sent_camera();
             let writer =
