@@ -21,6 +21,12 @@
 //! - `encode`: draining [`Companion::poll_transmit`] into a UART buffer (MAVLink 2 framing,
 //!   CRC), as the link task does after each frame.
 //!
+//! On `qvga-landing-1` only, after `encode`, the vision task's part of the frame stream to a
+//! host viewer while one is attached (`firmware/src/vision.rs`, `ViewOffer::offer`):
+//! `view-head` encodes the record's head (the frame's detections and fix), `view-copy` copies
+//! the frame into the record, `view-halve` halves it instead (`--half`); and the view task's
+//! `view-checksum`, the Adler-32 over the head and the pixels as it sends them.
+//!
 //! After the frames, the link's signing ([`signing_regions`]): `signing: param-set-unsigned`
 //! and `signing: param-set-signed` receive one PARAM_SET (a frame pymavlink built, unsigned,
 //! and signed with a key the companion holds), so their difference is the cost of checking a
@@ -58,6 +64,7 @@ use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::{Companion, CompanionConfig, Profile, MAX_FRAME_LEN};
 use touchdown_core::detect::{DetectStats, QvgaWorkspace, VgaWorkspace};
 use touchdown_core::family::tables;
+use touchdown_core::frame_stream;
 use touchdown_core::filter::VehicleState;
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout, PadMarker};
@@ -294,6 +301,8 @@ static mut VGA_WORKSPACE: VgaWorkspace = VgaWorkspace::new();
 /// The pipeline lives in static storage in the firmware too (the vision task's future). Each
 /// frame is its own scene (camera, pad), so each gets a new pipeline, written here.
 static mut PIPELINE: MaybeUninit<FramePipeline<'static>> = MaybeUninit::uninit();
+/// The viewer's frame record's pixels (the firmware's `view::ViewFrame`).
+static mut VIEW_PIXELS: [u8; 320 * 240] = [0; 320 * 240];
 
 /// Runs `f` as one counted region labelled `<frame>: <stage>`, with the stack below the
 /// current stack pointer painted first, and prints the stack depth `f` reached.
@@ -325,18 +334,21 @@ struct Bench {
     qvga: &'static mut QvgaWorkspace,
     vga: &'static mut VgaWorkspace,
     companion: Companion,
+    /// The viewer's record's pixels.
+    view: &'static mut [u8; 320 * 240],
     /// Frame time, µs (33 ms per frame).
     now_us: u64,
 }
 
 /// The per-frame path on one frame: one region per stage. Returns false when the frame's
 /// detections differ from what it contains.
-fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
+fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>, pixels: &[u8]) -> bool {
     let Bench {
         pipeline: pipeline_slot,
         qvga,
         vga,
         companion,
+        view,
         now_us,
     } = bench;
     // Set up outside the regions, as the vision task does before its first frame.
@@ -404,11 +416,67 @@ fn run_frame(bench: &mut Bench, frame: &Frame, image: &GrayImage<'_>) -> bool {
         messages,
         bytes
     );
+    if frame.name == "qvga-landing-1" {
+        view_regions(frame, pixels, pipeline, fix.as_ref(), view, t);
+    }
     let fix_expected = frame.expected.is_none_or(|n| (n > 0) == fix.is_some());
     if !fix_expected {
         hprintln!("  MISMATCH: pad fix {}", fix.is_some());
     }
     ok && fix_expected
+}
+
+/// The frame stream's regions on one QVGA frame (see the module docs).
+fn view_regions(
+    frame: &Frame,
+    pixels: &[u8],
+    pipeline: &FramePipeline<'static>,
+    fix: Option<&touchdown_core::pose::PadFix>,
+    view: &mut [u8; 320 * 240],
+    t: u64,
+) {
+    let mut head = [0u8; frame_stream::MAX_HEAD_LEN];
+    let len = region(frame.name, "view-head", || {
+        let meta = frame_stream::FrameMeta {
+            index: 1,
+            t_us: t,
+            width: frame.width as u16,
+            height: frame.height as u16,
+            scale: 1,
+            exposure_us: 4000,
+            gain_x16: 16,
+            process_us: 9000,
+            camera: pipeline.camera(),
+            families: &["tag36h11", "aruco_4x4_50"],
+            pad_name: pipeline.pad().name(),
+            pad_scale: 1.0,
+            detections: pipeline.detector().detections(),
+            fix: fix.map(|f| {
+                let c = f.camera_position();
+                frame_stream::StreamedFix {
+                    camera_position: [c.x, c.y, c.z],
+                    markers_used: f.markers_used,
+                    reprojection_rms_px: f.reprojection_rms_px,
+                }
+            }),
+        };
+        frame_stream::encode_head(&meta, &mut head).unwrap_or(0)
+    });
+    region(frame.name, "view-copy", || {
+        if let Some(out) = view.get_mut(..pixels.len()) {
+            out.copy_from_slice(pixels);
+        }
+    });
+    region(frame.name, "view-halve", || {
+        frame_stream::halve(pixels, frame.width, frame.height, &mut view[..])
+    });
+    let sum = region(frame.name, "view-checksum", || {
+        let mut sum = frame_stream::Adler32::new();
+        sum.update(head.get(..len).unwrap_or_default());
+        sum.update(pixels);
+        sum.value()
+    });
+    hprintln!("  head {} bytes, checksum {:08x}", len, sum);
 }
 
 /// Prints the detections and statistics of a frame (outside every region); false when the
@@ -553,6 +621,7 @@ fn main() -> ! {
                 qvga: &mut *addr_of_mut!(QVGA_WORKSPACE),
                 vga: &mut *addr_of_mut!(VGA_WORKSPACE),
                 companion: Companion::new(CompanionConfig::with_profile(Profile::ArduPilot)),
+                view: &mut *addr_of_mut!(VIEW_PIXELS),
                 now_us: 0,
             },
             &mut *addr_of_mut!(FRAME),
@@ -577,7 +646,7 @@ fn main() -> ! {
                 continue;
             }
         };
-        ok &= run_frame(&mut bench, frame, &image);
+        ok &= run_frame(&mut bench, frame, &image, pixels);
     }
     ok &= signing_regions();
     hprintln!("m7bench: {}", if ok { "done" } else { "FAILED" });
