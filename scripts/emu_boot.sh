@@ -10,11 +10,12 @@
 # (firmware/emu/soak.py: line noise, an autopilot reboot, parameter floods signed and
 # unsigned, dropped frames and a brown-out during a save, each followed by checks; the
 # 10-minute one is measured in firmware/emu/README.md). Before them, the emulator's
-# own unit tests; after them, five self-tests that must fail: a PLL that never locks (the
+# own unit tests; after them, six self-tests that must fail: a PLL that never locks (the
 # boot), a camera that never answers (the watchdog must reset the board), a sensor deaf to
 # its exposure registers (the frames stay clipped), a power cycle that loses the flash
-# (the parameter is gone) and, in the soak, a pad that never comes back into view (the
-# targets do not resume).
+# (the parameter is gone), a viewer whose requests never reach the board (the board, which
+# streams only when asked, sends nothing) and, in the soak, a pad that never comes back into
+# view (the targets do not resume).
 #
 # Usage: scripts/emu_boot.sh [VARIANT...]   (default: all; names below)
 # EMU_SKIP_BUILD=1 reuses the ELFs already in $CARGO_TARGET_DIR/emu/; EMU_FIL_SECONDS=0 runs
@@ -151,6 +152,11 @@ if [ -f "${DEFAULT_ELF}" ]; then
         --board nucleo --inject fixed-exposure --fil 1 || failed=1
     expect_failure "nucleo-qvga, a power cycle that loses the flash" "${DEFAULT_ELF}" \
         --board nucleo --inject volatile-flash --fil 1 --power-cycle || failed=1
+    if [ "${FIL_SECONDS}" != 0 ]; then
+        expect_failure "nucleo-qvga, a viewer whose requests never reach the board" \
+            "${DEFAULT_ELF}" --board nucleo --inject view-unasked --fil 1 --view "${VIEWER}" ||
+            failed=1
+    fi
     if [ "${SOAK_SECONDS}" != 0 ]; then
         expect_failure "nucleo-qvga, soak: the pad never comes back after the first disturbance" \
             "${DEFAULT_ELF}" --board nucleo --inject pad-lost --fil 4 --camera qvga --soak \

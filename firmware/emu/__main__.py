@@ -32,12 +32,13 @@ def parse(argv):
                              "as a hang")
     parser.add_argument("--inject",
                         choices=("no-pll1rdy", "no-camera", "fixed-exposure", "volatile-flash",
-                                 "pad-lost"),
+                                 "pad-lost", "view-unasked"),
                         help="break the chip model on purpose (shows the test can fail): "
                              "PLL1 never locks / nothing answers on the SCCB bus / the sensor "
                              "ignores its exposure and gain registers / the power cycle loses "
                              "what the firmware wrote to flash / (--soak) the pad never comes "
-                             "back into view after the first disturbance")
+                             "back into view after the first disturbance / (--view) the "
+                             "viewer's requests never reach the board")
     parser.add_argument("--fil", type=float, metavar="SECONDS",
                         help="after the boot, run firmware-in-the-loop this long (emulated)")
     parser.add_argument("--autopilot", choices=("ardupilot", "ardupilot-4.7", "px4"),

@@ -31,8 +31,9 @@ from .fil import timed_messages
 
 # Frames the viewer records.
 FRAMES = 3
-# Longest emulated time the stage may take (a QVGA record is 77 KB through an 8 KB channel).
-MAX_EMULATED_NS = 8e9
+# Longest emulated time the stage may take (three QVGA records, 77 KB each through an 8 KB
+# channel, take about 0.6 s).
+MAX_EMULATED_NS = 4e9
 # Emulated time between two looks at the RTT channels: a debugger polling every 10 ms.
 POLL_NS = 10e6
 # How far ahead of the emulation the autopilot's messages are put on the line.
@@ -110,6 +111,9 @@ class View:
         self.fil = fil
         self.elf = elf
         self.touchdown = args.view
+        # `--inject view-unasked`: the requests are dropped, so the board, which streams only
+        # when asked, must send nothing and the stage must fail.
+        self.deaf = args.inject == "view-unasked"
         self.fil_start_ns = None
 
     def run(self, machine):
@@ -166,7 +170,7 @@ class View:
                         continue
                 try:
                     asked = conn.recv(4096)
-                    if asked:
+                    if asked and not self.deaf:
                         rtt.fill_down(1, asked)
                 except BlockingIOError:
                     pass
