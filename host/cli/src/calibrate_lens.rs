@@ -204,7 +204,12 @@ struct Search<'a> {
 impl Search<'_> {
     /// The pad markers of one frame (a marker found twice in one frame is dropped: which one
     /// is the pad's cannot be told).
-    fn observe(&mut self, frame: usize, image: &GrayFrame, name: &str) -> Result<Observation, CliError> {
+    fn observe(
+        &mut self,
+        frame: usize,
+        image: &GrayFrame,
+        name: &str,
+    ) -> Result<Observation, CliError> {
         let views: Vec<Family<'_>> = self.selected.iter().map(SelectedFamily::family).collect();
         let refs: Vec<&Family<'_>> = views.iter().collect();
         let view = image.view();
@@ -303,7 +308,10 @@ fn solve(
     let mut poses = Vec::new();
     for (o, h) in observations.iter().zip(&homographies) {
         let earlier = start.and_then(|(_, poses)| {
-            poses.iter().find(|(frame, _)| *frame == o.frame).map(|p| p.1)
+            poses
+                .iter()
+                .find(|(frame, _)| *frame == o.frame)
+                .map(|p| p.1)
         });
         let pose = earlier
             .or_else(|| h.as_ref().and_then(|h| lens_fit::initial_pose(h, &camera)))
@@ -311,8 +319,8 @@ fn solve(
         poses.push(pose);
     }
     let mut rejected = 0;
-    let mut fit = lens_fit::fit(&views, camera, poses, free)
-        .map_err(|e| not_converged(&format!("{e:?}")))?;
+    let mut fit =
+        lens_fit::fit(&views, camera, poses, free).map_err(|e| not_converged(&format!("{e:?}")))?;
     for _ in 0..OUTLIER_ROUNDS {
         // Per marker: RMS of its four corners' residuals.
         let mut marker_rms: Vec<Vec<f64>> = Vec::new();
@@ -320,7 +328,9 @@ fn solve(
             marker_rms.push(
                 residuals
                     .chunks(4)
-                    .map(|c| (c.iter().map(|r| r[0] * r[0] + r[1] * r[1]).sum::<f64>() / 4.0).sqrt())
+                    .map(|c| {
+                        (c.iter().map(|r| r[0] * r[0] + r[1] * r[1]).sum::<f64>() / 4.0).sqrt()
+                    })
                     .collect(),
             );
         }
@@ -493,16 +503,15 @@ pub fn run(
             inputs.sources.push(FrameSource::Image(path.clone()));
         }
     }
-    let pad: PadConfig = match (&args.pad, inputs.readers.first()) {
-        (Some(path), _) => touchdown_formats::pad::load_pad(path).map_err(CliError::new)?,
-        (None, Some(reader)) => reader.pad.clone(),
-        (None, None) => {
-            return Err(CliError::new(
+    let pad: PadConfig =
+        match (&args.pad, inputs.readers.first()) {
+            (Some(path), _) => touchdown_formats::pad::load_pad(path).map_err(CliError::new)?,
+            (None, Some(reader)) => reader.pad.clone(),
+            (None, None) => return Err(CliError::new(
                 "no pad layout: give --pad pad.toml (images carry none; a recording's pad.toml \
                  is used when one is given)",
-            ))
-        }
-    };
+            )),
+        };
     let layout = pad
         .layout()
         .map_err(|e| CliError(format!("pad layout: {e:?}")))?;
@@ -610,7 +619,16 @@ pub fn run(
         )));
     }
 
-    let report = build_report(&solved, &inputs.names, size, camera, frames, usable_views, passes, args);
+    let report = build_report(
+        &solved,
+        &inputs.names,
+        size,
+        camera,
+        frames,
+        usable_views,
+        passes,
+        args,
+    );
     if let Some(path) = &args.out {
         std::fs::write(path, &report.camera_toml)
             .map_err(|e| CliError(format!("{}: cannot write: {e}", path.display())))?;
@@ -664,7 +682,10 @@ fn build_report(
     let mut ninths = [[0usize; 3]; 3];
     let mut corners = 0;
     for ((o, residuals), pose) in solved.kept.iter().zip(&fit.residuals).zip(&fit.poses) {
-        let squares: Vec<f64> = residuals.iter().map(|r| r[0] * r[0] + r[1] * r[1]).collect();
+        let squares: Vec<f64> = residuals
+            .iter()
+            .map(|r| r[0] * r[0] + r[1] * r[1])
+            .collect();
         let rms = (squares.iter().sum::<f64>() / squares.len().max(1) as f64).sqrt();
         views.push(ViewReport {
             source: names.get(o.frame).cloned().unwrap_or_default(),
@@ -692,7 +713,10 @@ fn build_report(
     let max_tilt = views.iter().map(|v| v.tilt_deg).fold(0.0, f64::max);
     let mut advice = Vec::new();
     if views.len() < ADVISED_VIEWS {
-        advice.push(format!("more views: {} of at least {ADVISED_VIEWS}", views.len()));
+        advice.push(format!(
+            "more views: {} of at least {ADVISED_VIEWS}",
+            views.len()
+        ));
     }
     if span < ADVISED_TILT_SPAN_DEG {
         advice.push(format!(
@@ -704,7 +728,9 @@ fn build_report(
     for (row, names) in ninths.iter().zip(NINTHS) {
         for (&count, name) in row.iter().zip(names) {
             if count == 0 {
-                advice.push(format!("fill the corners: no corners in the {name} ninth of the image"));
+                advice.push(format!(
+                    "fill the corners: no corners in the {name} ninth of the image"
+                ));
             } else if count < few {
                 advice.push(format!(
                     "fill the corners: only {count} corners in the {name} ninth of the image"

@@ -263,7 +263,17 @@ fn normalising_transform(points: &[[f64; 2]]) -> Option<Matrix3<f64>> {
         return None;
     }
     let s = std::f64::consts::SQRT_2 / mean;
-    Some(Matrix3::new(s, 0.0, -s * mx, 0.0, s, -s * my, 0.0, 0.0, 1.0))
+    Some(Matrix3::new(
+        s,
+        0.0,
+        -s * mx,
+        0.0,
+        s,
+        -s * my,
+        0.0,
+        0.0,
+        1.0,
+    ))
 }
 
 /// Zhang's closed-form focal lengths from per-view homographies, with zero skew and the
@@ -272,7 +282,11 @@ fn normalising_transform(points: &[[f64; 2]]) -> Option<Matrix3<f64>> {
 /// views). Falls back to square pixels (`fx = fy`) when the two focal lengths are not both
 /// determined (views tilted about one axis only). `None` when neither gives a positive focal
 /// length.
-pub fn initial_intrinsics(homographies: &[Matrix3<f64>], width: f64, height: f64) -> Option<Intrinsics> {
+pub fn initial_intrinsics(
+    homographies: &[Matrix3<f64>],
+    width: f64,
+    height: f64,
+) -> Option<Intrinsics> {
     let (cx, cy) = (0.5 * (width - 1.0), 0.5 * (height - 1.0));
     // Pixels moved to the principal point and scaled by the width, so that the unknowns
     // (width / f)^2 are of order one.
@@ -371,7 +385,11 @@ pub fn initial_pose(h: &Matrix3<f64>, camera: &Intrinsics) -> Option<Pose> {
     }
     let rotation = Rotation3::from_matrix_unchecked(r).scaled_axis();
     let translation = m3 * lambda;
-    (rotation.iter().chain(translation.iter()).all(|v| v.is_finite())).then_some(Pose {
+    (rotation
+        .iter()
+        .chain(translation.iter())
+        .all(|v| v.is_finite()))
+    .then_some(Pose {
         rotation,
         translation,
     })
@@ -744,8 +762,14 @@ mod tests {
         let fit = fit(&views, start, poses, free).unwrap();
         let c = fit.intrinsics;
         assert!(fit.rms_px < 1e-6, "rms {}", fit.rms_px);
-        assert!((c.fx - camera.fx).abs() < 1e-4 && (c.fy - camera.fy).abs() < 1e-4, "{c:?}");
-        assert!((c.cx - camera.cx).abs() < 1e-4 && (c.cy - camera.cy).abs() < 1e-4, "{c:?}");
+        assert!(
+            (c.fx - camera.fx).abs() < 1e-4 && (c.fy - camera.fy).abs() < 1e-4,
+            "{c:?}"
+        );
+        assert!(
+            (c.cx - camera.cx).abs() < 1e-4 && (c.cy - camera.cy).abs() < 1e-4,
+            "{c:?}"
+        );
         for (a, b) in c.k.iter().zip(camera.k) {
             assert!((a - b).abs() < 1e-6, "{c:?}");
         }
