@@ -347,7 +347,7 @@ fn solve(
                 .iter()
                 .zip(rms)
                 .filter(|(_, &r)| r <= threshold)
-                .map(|(m, _)| m.clone())
+                .map(|(m, _)| *m)
                 .collect();
             dropped += o.markers.len() - markers.len();
             if markers.len() >= MIN_VIEW_MARKERS {

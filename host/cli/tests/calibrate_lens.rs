@@ -141,7 +141,7 @@ fn view_pose(k: usize, focal_px: f64) -> ([f64; 3], Mat3) {
     let board_w = COLUMNS as f64 * PITCH;
     let board_h = ROWS as f64 * PITCH;
     let angle = (k as f64 * 77.0).to_radians();
-    let reach = if k % 4 == 0 { 0.1 } else { 0.5 };
+    let reach = if k.is_multiple_of(4) { 0.1 } else { 0.5 };
     let aim = [
         reach * 0.5 * board_w * angle.cos(),
         reach * 0.5 * board_h * angle.sin(),
