@@ -789,20 +789,24 @@ fn build_report(
     }
 }
 
+/// `n` and the word in its number.
+fn plural(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
 fn write_text(out: &mut dyn Write, r: &Report, with_file: bool) -> std::io::Result<()> {
     let c = &r.camera;
     let s = &r.sigma;
     writeln!(
         out,
-        "touchdown calibrate-lens: {} frames, {} usable views, {} used ({} corners), {} markers \
-         dropped as outliers, {} detection pass{}",
+        "touchdown calibrate-lens: {} frames, {} usable views, {} used ({} corners), {} dropped \
+         as outliers, {}",
         r.frames,
         r.usable_views,
         r.coverage.views,
         r.corners,
-        r.rejected_markers,
-        r.passes,
-        if r.passes == 1 { "" } else { "es" }
+        plural(r.rejected_markers, "marker", "markers"),
+        plural(r.passes, "detection pass", "detection passes"),
     )?;
     writeln!(
         out,

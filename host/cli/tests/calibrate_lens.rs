@@ -148,6 +148,12 @@ fn view_pose(k: usize, focal_px: f64) -> ([f64; 3], Mat3) {
         0.0,
     ];
     let distance = focal_px * board_w / f64::from(WIDTH) * (0.85 + 0.3 * unit(s + 3));
+    look_at(aim, tilt, azimuth, roll, distance)
+}
+
+/// A camera `distance` from `aim` on the pad, its axis `tilt` from the pad's normal toward
+/// `azimuth`, the image turned by `roll` (radians): position and camera-to-pad rotation.
+fn look_at(aim: [f64; 3], tilt: f64, azimuth: f64, roll: f64, distance: f64) -> ([f64; 3], Mat3) {
     let position = [
         aim[0] + distance * tilt.sin() * azimuth.cos(),
         aim[1] + distance * tilt.sin() * azimuth.sin(),
@@ -560,4 +566,56 @@ fn bad_inputs_are_one_line_errors() {
     .unwrap();
     let line = refused(&[Path::new("--pad"), &board, &images[0], &small]);
     assert!(line.contains("one image size"), "{line}");
+}
+
+#[test]
+fn views_square_on_in_the_middle_get_advice() {
+    // Four views of the board small in the middle of the frame, tilted 8 degrees: a camera
+    // comes out, with the advice to tilt more and to fill the frame's corners.
+    let dir = scratch("advice");
+    let board_toml = write_board(&dir);
+    let camera = lens(70.0, -0.2);
+    let mut sim = simulator(camera, Renderer::Warp, 9);
+    let distance = 3.0 * f64::from(camera.fx) * COLUMNS as f64 * PITCH / f64::from(WIDTH);
+    let mut images = Vec::new();
+    for k in 0..4 {
+        let azimuth = (90.0 * k as f64).to_radians();
+        let (position, rotation) = look_at([0.0; 3], 8f64.to_radians(), azimuth, 0.2, distance);
+        sim.scenario.trajectory = hold(position);
+        sim.scenario.mount = CameraMount {
+            rotation: mul(&NED_TO_PAD, &rotation),
+        };
+        let path = dir.join(format!("flat-{k}.pgm"));
+        touchdown_formats::pgm::save_pgm(&path, &sim.render(k).unwrap().image).unwrap();
+        images.push(path);
+    }
+    let mut args = vec!["--pad", board_toml.to_str().unwrap()];
+    args.extend(images.iter().map(|p| p.to_str().unwrap()));
+    let report = calibrate(&args);
+    let advice: Vec<&str> = report["advice"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert!(
+        advice.contains(&"more views: 4 of at least 15"),
+        "{advice:?}"
+    );
+    assert!(
+        advice
+            .iter()
+            .any(|a| a.starts_with("tilt the pad more: views span ")
+                && a.ends_with("degrees, want at least 40")),
+        "{advice:?}"
+    );
+    for corner in ["top-left", "top-right", "bottom-left", "bottom-right"] {
+        let ninth = format!(" corners in the {corner} ninth of the image");
+        assert!(
+            advice
+                .iter()
+                .any(|a| a.starts_with("fill the corners: ") && a.ends_with(&ninth)),
+            "{advice:?}"
+        );
+    }
 }
