@@ -18,8 +18,8 @@
 //! straight), which moves the corners of wide lenses' border markers by up to a pixel, and the
 //! fit is repeated from the first one.
 //!
-//! A recording's camera.toml gives the line time only: its intrinsics are what is being
-//! measured, so they are never used. Nothing the user gave is written to: `--out` must be new
+//! A recording's camera.toml, when it has one, gives the line time only: its intrinsics are
+//! what is being measured, so they are never used. Nothing the user gave is written to: `--out` must be new
 //! unless `--force`.
 
 use std::io::Write;
@@ -40,7 +40,7 @@ use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
 use touchdown_formats::image_io::{load_gray, GrayFrame};
 use touchdown_formats::pad::PadConfig;
-use touchdown_formats::recording::{frame_path, RecordingReader};
+use touchdown_formats::recording::{frame_path, parse_frames_csv_columns};
 
 /// A view is usable with at least this many of the pad's markers (8 corners: a homography
 /// from 4 would fit any four points exactly and say nothing about the lens).
@@ -68,9 +68,10 @@ pub const LONG_HELP: &str = "\
 Estimate a camera's intrinsics (fx, fy, cx, cy) and Brown-Conrady distortion [k1, k2, p1, \
 p2, k3] (OpenCV's order) from views of the printed pad, and write them as a CAMERA.toml.
 
-Inputs: recording directories (frames/, frames.csv, pad.toml, camera.toml: only its line \
-time is used, never its intrinsics) and/or image files (PNG, PGM, JPEG; colour is converted \
-to grey), all of one size. The pad layout is --pad, else the first recording's pad.toml. \
+Inputs: recording directories (frames.csv and frames/; pad.toml and camera.toml if \
+present, of which only the line time is used, never the intrinsics) and/or image files (PNG, \
+PGM, JPEG; colour is converted to grey), all of one size. The pad layout is --pad, else the \
+first recording's pad.toml. \
 Every pad marker found gives its four corners; a view is usable with at least 2 of the \
 pad's markers, and at most --max-views usable views are used (evenly spaced).
 
@@ -145,13 +146,6 @@ pub struct CalibrateLensArgs {
     pub max_views: u16,
 }
 
-/// Where a frame comes from.
-#[derive(Debug, Clone)]
-enum FrameSource {
-    Image(PathBuf),
-    Recording { reader: usize, k: usize },
-}
-
 /// One frame's pad markers: layout index and the four corners, pixels.
 #[derive(Debug, Clone)]
 struct Observation {
@@ -159,25 +153,62 @@ struct Observation {
     markers: Vec<(usize, [[f64; 2]; 4])>,
 }
 
-/// Everything the frames are read with.
+/// A recording's files besides its frames, each optional here: a recording made to calibrate
+/// a new lens may have no camera.toml yet, and `--pad` may stand in for its pad.toml.
+struct RecordingFiles {
+    pad: Option<PadConfig>,
+    line_time_us: Option<f32>,
+}
+
+/// Everything the frames are read with: each frame is an image file (a recording's frames
+/// are its `frames/NNNNNN.pgm` in frames.csv's order).
 struct Inputs {
     names: Vec<String>,
-    sources: Vec<FrameSource>,
-    readers: Vec<RecordingReader>,
+    paths: Vec<PathBuf>,
+    recordings: Vec<RecordingFiles>,
     size: Option<(usize, usize)>,
 }
 
 impl Inputs {
-    fn load(&mut self, frame: usize) -> Result<GrayFrame, CliError> {
-        let image = match &self.sources[frame] {
-            FrameSource::Image(path) => load_gray(path).map_err(CliError::new)?,
-            FrameSource::Recording { reader, k } => {
-                self.readers[*reader]
-                    .frame(*k)
+    /// Adds a recording's frames; its pad.toml and camera.toml's line time when present.
+    fn add_recording(&mut self, dir: &Path) -> Result<(), CliError> {
+        let csv = dir.join("frames.csv");
+        let text = std::fs::read_to_string(&csv).map_err(|e| {
+            CliError(format!(
+                "{}: not a recording (frames.csv: {e})",
+                dir.display()
+            ))
+        })?;
+        let (_, entries) = parse_frames_csv_columns(&text).map_err(|(line, reason)| {
+            CliError(format!("{}: line {line}: {reason}", csv.display()))
+        })?;
+        let camera = dir.join("camera.toml");
+        let line_time_us = if camera.exists() {
+            Some(
+                touchdown_formats::camera::load_camera(&camera)
                     .map_err(CliError::new)?
-                    .image
-            }
+                    .line_time_us,
+            )
+        } else {
+            None
         };
+        let pad_path = dir.join("pad.toml");
+        let pad = if pad_path.exists() {
+            Some(touchdown_formats::pad::load_pad(&pad_path).map_err(CliError::new)?)
+        } else {
+            None
+        };
+        for entry in &entries {
+            let path = frame_path(dir, entry.index);
+            self.names.push(path.display().to_string());
+            self.paths.push(path);
+        }
+        self.recordings.push(RecordingFiles { pad, line_time_us });
+        Ok(())
+    }
+
+    fn load(&mut self, frame: usize) -> Result<GrayFrame, CliError> {
+        let image = load_gray(&self.paths[frame]).map_err(CliError::new)?;
         match self.size {
             None => self.size = Some((image.width, image.height)),
             Some((w, h)) if (w, h) != (image.width, image.height) => {
@@ -483,30 +514,23 @@ pub fn run(
     }
     let mut inputs = Inputs {
         names: Vec::new(),
-        sources: Vec::new(),
-        readers: Vec::new(),
+        paths: Vec::new(),
+        recordings: Vec::new(),
         size: None,
     };
     for path in &args.inputs {
         if path.is_dir() {
-            let reader = RecordingReader::open(path).map_err(CliError::new)?;
-            let r = inputs.readers.len();
-            for (k, entry) in reader.entries.iter().enumerate() {
-                inputs
-                    .names
-                    .push(frame_path(path, entry.index).display().to_string());
-                inputs.sources.push(FrameSource::Recording { reader: r, k });
-            }
-            inputs.readers.push(reader);
+            inputs.add_recording(path)?;
         } else {
             inputs.names.push(path.display().to_string());
-            inputs.sources.push(FrameSource::Image(path.clone()));
+            inputs.paths.push(path.clone());
         }
     }
+    let recorded_pad = inputs.recordings.iter().find_map(|r| r.pad.clone());
     let pad: PadConfig =
-        match (&args.pad, inputs.readers.first()) {
+        match (&args.pad, recorded_pad) {
             (Some(path), _) => touchdown_formats::pad::load_pad(path).map_err(CliError::new)?,
-            (None, Some(reader)) => reader.pad.clone(),
+            (None, Some(pad)) => pad,
             (None, None) => return Err(CliError::new(
                 "no pad layout: give --pad pad.toml (images carry none; a recording's pad.toml \
                  is used when one is given)",
@@ -524,7 +548,7 @@ pub fn run(
     }
     let line_time_us = args
         .line_time_us
-        .or_else(|| inputs.readers.first().map(|r| r.camera.line_time_us))
+        .or_else(|| inputs.recordings.iter().find_map(|r| r.line_time_us))
         .unwrap_or(0.0);
     let free = FreeTerms {
         radial: true,
@@ -540,14 +564,14 @@ pub fn run(
         layout: &layout,
     };
     let mut usable = Vec::new();
-    for frame in 0..inputs.sources.len() {
+    for frame in 0..inputs.paths.len() {
         let image = inputs.load(frame)?;
         let o = search.observe(frame, &image, &inputs.names[frame])?;
         if o.markers.len() >= MIN_VIEW_MARKERS {
             usable.push(o);
         }
     }
-    let frames = inputs.sources.len();
+    let frames = inputs.paths.len();
     let usable_views = usable.len();
     if usable_views < MIN_VIEWS {
         return Err(CliError(format!(

@@ -47,11 +47,16 @@ const ROWS: usize = 6;
 const EDGE: f64 = 0.08;
 const PITCH: f64 = 0.11;
 
+/// The scratch directory `name` under the target directory.
+fn scratch_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("calibrate_lens")
+        .join(name)
+}
+
 /// A fresh scratch directory (created empty) under the target directory.
 fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("calibrate_lens")
-        .join(name);
+    let dir = scratch_path(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -329,6 +334,14 @@ fn a_70_degree_lens_on_the_raster_model() {
     let m = run_lens("raster70", lens(70.0, -0.2), Renderer::Raster, 11);
     assert_eq!(m.views, VIEWS as u64);
     assert_within("raster70", &m);
+    // A recording made for a new lens may have no camera.toml yet: the same answer, with the
+    // line time given.
+    let recording = scratch_path("raster70").join("recording");
+    std::fs::remove_file(recording.join("camera.toml")).unwrap();
+    let report = calibrate(&["--line-time-us", "30", recording.to_str().unwrap()]);
+    let again = measure(&report, &lens(70.0, -0.2));
+    assert_eq!(again.focal_error, m.focal_error);
+    assert_eq!(report["camera"]["line_time_us"].as_f64(), Some(30.0));
 }
 
 #[test]
