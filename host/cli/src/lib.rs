@@ -1,5 +1,6 @@
 //! The `touchdown` command-line tool: argument parsing, the subcommands (`detect`, `simulate`,
-//! `replay`, `pad`, `companion`) and the figures of `replay` ([`plot`]).
+//! `replay`, `pad`, `companion`, `calibrate`, `calibrate-lens`, `sitl`) and the figures of
+//! `replay` ([`plot`]).
 //!
 //! Every failure the user can cause (a bad option, an unreadable file) is reported as one
 //! line on stderr, prefixed `error: ` like clap's own messages, with exit status 2; nothing
@@ -14,9 +15,11 @@
 //! harness, the tests and the examples build on.
 
 pub mod calibrate;
+pub mod calibrate_lens;
 pub mod companion;
 pub mod detect;
 pub mod effects;
+pub mod lens_fit;
 pub mod overlay;
 pub mod pad;
 pub mod pad_motion;
@@ -76,6 +79,10 @@ pub enum Command {
     /// recording of a hover over the pad.
     #[command(long_about = calibrate::LONG_HELP)]
     Calibrate(calibrate::CalibrateArgs),
+    /// Estimate a camera's intrinsics and lens distortion from views of the printed pad, and
+    /// write its CAMERA.toml.
+    #[command(name = "calibrate-lens", long_about = calibrate_lens::LONG_HELP)]
+    CalibrateLens(calibrate_lens::CalibrateLensArgs),
     /// Closed-loop landings: the vehicle flies on the targets touchdown sends (against the
     /// autopilot model).
     #[command(long_about = sitl::LONG_HELP)]
@@ -157,6 +164,7 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
         Command::Pad(args) => pad::run(&args, out, err),
         Command::Companion(args) => companion::run(&args, out, err),
         Command::Calibrate(args) => calibrate::run(&args, out, err),
+        Command::CalibrateLens(args) => calibrate_lens::run(&args, out, err),
         Command::Sitl(args) => sitl::run(&args, out, err),
         Command::View(args) => view::run(&args, out, err),
     }
