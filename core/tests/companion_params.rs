@@ -106,6 +106,8 @@ fn camera_params_are_range_checked_applied_and_persisted() {
             cam_pitch_deg: 0.0,
             mount_calibration: MountCalibrationMode::Report,
             view_margin: false,
+            lens: Default::default(),
+            pad_design: 0,
         }
     );
     assert_eq!(

@@ -1,12 +1,13 @@
 """Runs one touchdown firmware ELF on the emulated STM32H743 and prints a summary.
 
     python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS [--power-cycle]
-        [--view TOUCHDOWN] | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
+        [--view TOUCHDOWN] [--lens] | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
 
 Without --fil: the boot test (boot.py). With --fil: the boot test, then firmware-in-the-loop
 (fil.py) for SECONDS of emulated time; with --power-cycle also a parameter set over MAVLink,
 kept through a power cycle (power_cycle.py); with --view, the frame stream recorded by
-`touchdown view` and replayed (view.py); with --soak, FIL under a seeded schedule of
+`touchdown view` and replayed (view.py); with --lens, a lens and a pad design set over MAVLink
+and kept through a power cycle (lens.py); with --soak, FIL under a seeded schedule of
 disturbances for SECONDS instead (soak.py). Exit status 0 when every check passed, 1 on a failure
 (the message names the pc, the function and the address), 2 on bad usage.
 """
@@ -56,6 +57,10 @@ def parse(argv):
                         help="after FIL: serve RTT channel 1 on a TCP port and record frames "
                              "from it with this touchdown binary's `view --record`, then replay "
                              "them with its `detect` (view.py)")
+    parser.add_argument("--lens", action="store_true",
+                        help="after FIL: a longer lens (TD_CAM_FX, TD_CAM_FY) and the pad's "
+                             "design (TD_PAD) set over MAVLink, a power cycle, the lens read "
+                             "back (lens.py)")
     parser.add_argument("--soak", action="store_true",
                         help="FIL as a soak: line noise, autopilot reboots, parameter floods, "
                              "dropped frames and brown-outs on a seeded schedule, each "
@@ -105,6 +110,9 @@ def main(argv=None):
     if fil and args.view and not problems:
         from .view import View
         problems += View(fil, elf, board, args).run(machine)
+    if fil and args.lens and not problems:
+        from .lens import Lens
+        problems += Lens(fil, elf, board, args).run(machine)
     if fil and args.power_cycle and not problems:
         from .power_cycle import PowerCycle
         problems += PowerCycle(fil, elf, board, args).run(machine)

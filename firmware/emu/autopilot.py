@@ -176,10 +176,11 @@ class Autopilot:
         return self.mav.local_position_ned_encode(
             self._boot_ms(t_ns), north, east, down, 0.0, 0.0, 0.0).pack(self.mav)
 
-    def expected_target(self, scale=1.0):
+    def expected_target(self, scale=1.0, depth_scale=1.0):
         """The pad centre as the firmware should report it (the pad printed at `scale` times
-        its built size: the pad, as the firmware sees it, `scale` times as far), with the
-        frame it should use and the pad's distance.
+        its built size: the pad, as the firmware sees it, `scale` times as far; through a lens
+        `depth_scale` times longer than the frame's: `depth_scale` times as deep along the
+        optical axis, unmoved across it), with the frame it should use and the pad's distance.
 
         Through the nominal camera mount (looking down, image top toward the nose): body x
         forward = -camera y, body y right = camera x, body z down = camera z; angle_x/angle_y
@@ -188,6 +189,7 @@ class Autopilot:
         (with `scale` 1, the pad's own position, LOCAL_ORIGIN_NED, up to rounding)."""
         truth = self.truth
         cx, cy, cz = (scale * truth[k] for k in ("pad_cam_x", "pad_cam_y", "pad_cam_z"))
+        cz *= depth_scale
         body = (-cy, cx, cz)
         want = {"frame": mavlink.MAV_FRAME_BODY_FRD, "x": body[0], "y": body[1], "z": body[2],
                 "distance": math.sqrt(cx * cx + cy * cy + cz * cz),

@@ -142,10 +142,11 @@ pub const fn camera_model(model: Model) -> &'static CameraModel {
 /// whole layout is scaled to it), no rebuild.
 pub const PAD: &PadLayout<'static> = designs::RECOMMENDED;
 
-/// The size `settings` (TD_TAG_SIZE) scales [`PAD`] to, in whole percent of its built size
-/// (for logs and STATUSTEXT; saturates, NaN gives 0).
+/// The size `settings` (TD_TAG_SIZE) scales the pad in force ([`PAD`], or the design TD_PAD
+/// chose) to, in whole percent of its built size (for logs and STATUSTEXT; saturates, NaN
+/// gives 0).
 pub fn pad_scale_percent(settings: &PipelineSettings) -> u32 {
-    (settings.pad_scale(PAD) * 100.0 + 0.5) as u32
+    (settings.pad_scale(&settings.built_pad(PAD)) * 100.0 + 0.5) as u32
 }
 
 /// Default UART baud rate; TD_BAUD overrides it at boot.

@@ -19,16 +19,18 @@
 //! line and frame timing the driver reports ([`FrameTiming`]: exposure units, readout time
 //! for the time stamp) differ between them.
 //!
-//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, the mount's TD_CAM_YAW,
-//! TD_CAM_ROLL, TD_CAM_PITCH and TD_CAM_CAL, TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) arrive
+//! Settings from the MAVLink parameters (TD_MAX_HAMMING, TD_TAG_SIZE, TD_PAD, the lens's
+//! TD_CAM_FX ... TD_CAM_K3, the mount's TD_CAM_YAW, TD_CAM_ROLL, TD_CAM_PITCH and TD_CAM_CAL,
+//! TD_EXP_MAX_US, TD_GAIN_MAX, TD_EXP_TARGET) arrive
 //! as a [`PipelineSettings`]: at boot as the task's argument (from the parameters restored
 //! from flash, before the first frame), afterwards through [`PIPELINE_SETTINGS`], which the
 //! link task signals whenever the parameters changed them: a ground station's PARAM_SET, or
 //! the companion adopting the estimator's mount calibration (which arrives with a frame's
 //! estimate, [`touchdown_core::filter::FrameEstimate::mount_correction`], posted to the link
 //! like every estimate). They are taken before a frame is processed, never during it: the detector's
-//! correction cap, the pad (the built [`config::PAD`], scaled to TD_TAG_SIZE) and the camera
-//! mount, all by [`FramePipeline::apply`],
+//! correction cap, the pad (the built [`config::PAD`] or TD_PAD's design, scaled to
+//! TD_TAG_SIZE), the lens (over the sensor's built model) and the camera mount, all by
+//! [`FramePipeline::apply`],
 //! and the exposure limits ([`AutoExposure::set_limits`], written to the sensor at once when the
 //! current exposure is outside them). No restart, no lost frame.
 //!
@@ -80,7 +82,7 @@ use touchdown_core::filter::{EstimatorConfig, PadEstimator, VehicleState};
 use touchdown_core::frame_stream::{self, FrameMeta, StreamSwitch, StreamedFix};
 use touchdown_core::image::GrayImage;
 use touchdown_core::params::PipelineSettings;
-use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
+use touchdown_core::pipeline::{FramePipeline, PipelineConfig, SettingsError};
 use touchdown_core::sensor::{AutoExposure, ExposureSetting, FrameTiming, Metering};
 use touchdown_sensors::any::{self, Camera};
 
@@ -190,15 +192,27 @@ struct Summary {
 /// they do.
 fn apply_settings(pipeline: &mut FramePipeline<'static>, settings: PipelineSettings) {
     if let Err(e) = pipeline.apply(settings) {
-        // Only an empty built pad cannot be scaled, and a test keeps the shipped pads
-        // non-empty; the pipeline then searches the pad as built.
-        warn!("vision: pad '{}' not scaled: {}", config::PAD.name(), e);
+        // Only an empty pad cannot be scaled (a test keeps the shipped pads non-empty), and
+        // the parameters' ranges leave few lenses that make no camera; the pipeline then
+        // searches the pad as built, or through the build's lens.
+        warn!("vision: settings not all taken: {}", e);
+        if matches!(e, SettingsError::Camera(_)) {
+            channels::post_to_link(LinkEvent::Status(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "touchdown: TD_CAM_* make no usable camera, using the built lens",
+            ));
+        }
     }
     info!(
-        "vision: max hamming {}, pad '{}' at {} % of its built size, camera yaw {} roll {} pitch {} deg (calibration {}), exposure {}",
+        "vision: max hamming {}, pad '{}' at {} % of its built size, lens fx {} fy {} cx {} cy {} k1 {}, camera yaw {} roll {} pitch {} deg (calibration {}), exposure {}",
         settings.max_hamming,
         pipeline.pad().name(),
         config::pad_scale_percent(&settings),
+        pipeline.camera().fx,
+        pipeline.camera().fy,
+        pipeline.camera().cx,
+        pipeline.camera().cy,
+        pipeline.camera().distortion[0],
         settings.cam_yaw_deg,
         settings.cam_roll_deg,
         settings.cam_pitch_deg,
@@ -530,7 +544,7 @@ impl ViewOffer {
             camera: pipeline.camera(),
             families: &names[..SEARCHED.len().min(names.len())],
             pad_name: pipeline.pad().name(),
-            pad_scale: settings.pad_scale(config::PAD),
+            pad_scale: settings.pad_scale(pipeline.built_pad()),
             detections: pipeline.detector().detections(),
             fix: report.fix.as_ref().map(|fix| {
                 let c = fix.camera_position();

@@ -143,10 +143,31 @@ pub enum ParamId {
     /// The flight lock: 1, while the autopilot reports armed, every parameter but this one is
     /// refused over the link (and the signing key cannot change); 0 off.
     Lock,
+    /// The lens's focal length along x, pixels of the board's frames (0: the build's lens).
+    CamFx,
+    /// The focal length along y, pixels (0: the build's lens).
+    CamFy,
+    /// The principal point's x, pixels (0: the build's lens).
+    CamCx,
+    /// The principal point's y, pixels (0: the build's lens).
+    CamCy,
+    /// Radial distortion k1 (OpenCV's Brown-Conrady order).
+    CamK1,
+    /// Radial distortion k2.
+    CamK2,
+    /// Tangential distortion p1.
+    CamP1,
+    /// Tangential distortion p2.
+    CamP2,
+    /// Radial distortion k3.
+    CamK3,
+    /// The pad searched for: 0 the build's, 1-4 a shipped design
+    /// ([`PipelineSettings::pad_design`]).
+    Pad,
 }
 
 /// Number of parameters.
-pub const PARAM_COUNT: usize = 23;
+pub const PARAM_COUNT: usize = 33;
 
 /// The table (index = [`ParamId`] as usize).
 pub const PARAMS: [ParamDef; PARAM_COUNT] = [
@@ -385,7 +406,48 @@ pub const PARAMS: [ParamDef; PARAM_COUNT] = [
         zero_is_unset: false,
         help: "flight lock: 1 the other parameters and the signing key refuse writes while the autopilot is armed, 0 off",
     },
+    // The lens (appended; PipelineSettings::lens): a calibrated camera without rebuilding the
+    // firmware. Each of the four intrinsics left at 0 keeps the build's value, so the board
+    // runs as built until they are set, and a half-set lens is still a whole camera.
+    lens_param("TD_CAM_FX", 1.0, 20_000.0, true, "lens focal length along x, pixels of the board's frames (0 = the build's lens)"),
+    lens_param("TD_CAM_FY", 1.0, 20_000.0, true, "lens focal length along y, pixels (0 = the build's lens)"),
+    lens_param("TD_CAM_CX", 1.0, 20_000.0, true, "lens principal point x, pixels ((0, 0) = the top-left pixel's centre; 0 = the build's lens)"),
+    lens_param("TD_CAM_CY", 1.0, 20_000.0, true, "lens principal point y, pixels (0 = the build's lens)"),
+    lens_param("TD_CAM_K1", -5.0, 5.0, false, "lens radial distortion k1 (OpenCV's order)"),
+    lens_param("TD_CAM_K2", -5.0, 5.0, false, "lens radial distortion k2"),
+    lens_param("TD_CAM_P1", -1.0, 1.0, false, "lens tangential distortion p1"),
+    lens_param("TD_CAM_P2", -1.0, 1.0, false, "lens tangential distortion p2"),
+    lens_param("TD_CAM_K3", -5.0, 5.0, false, "lens radial distortion k3"),
+    // The pad (appended; PipelineSettings::pad_design): a shipped design without rebuilding.
+    ParamDef {
+        name: "TD_PAD",
+        kind: ParamKind::Int,
+        default: 0.0,
+        min: 0.0,
+        max: 4.0,
+        zero_is_unset: false,
+        help: "pad searched for: 0 the build's, 1 nested-field, 2 nested-rest, 3 nested, 4 paper-single (then scaled by TD_TAG_SIZE)",
+    },
 ];
+
+/// A real lens parameter, 0 by default.
+const fn lens_param(
+    name: &'static str,
+    min: f32,
+    max: f32,
+    zero_is_unset: bool,
+    help: &'static str,
+) -> ParamDef {
+    ParamDef {
+        name,
+        kind: ParamKind::Real,
+        default: 0.0,
+        min,
+        max,
+        zero_is_unset,
+        help,
+    }
+}
 
 impl ParamId {
     /// All ids in table order.
@@ -413,6 +475,16 @@ impl ParamId {
         ParamId::PadYaw,
         ParamId::PadMotion,
         ParamId::Lock,
+        ParamId::CamFx,
+        ParamId::CamFy,
+        ParamId::CamCx,
+        ParamId::CamCy,
+        ParamId::CamK1,
+        ParamId::CamK2,
+        ParamId::CamP1,
+        ParamId::CamP2,
+        ParamId::CamK3,
+        ParamId::Pad,
     ];
 
     /// The id at table `index`.
@@ -576,6 +648,13 @@ impl ParamSet {
     #[cfg(test)]
     pub(crate) fn export_records(&self, records: usize, out: &mut [u8]) -> usize {
         self.export_with(records, false, out)
+    }
+
+    /// [`ParamSet::export_records`] with the secret after them: the blob of a firmware with
+    /// signing whose table ended after `records` parameters.
+    #[cfg(test)]
+    pub(crate) fn export_records_with_secret(&self, records: usize, out: &mut [u8]) -> usize {
+        self.export_with(records, true, out)
     }
 
     fn export_with(&self, records: usize, with_secret: bool, out: &mut [u8]) -> usize {

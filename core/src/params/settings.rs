@@ -25,8 +25,20 @@
 //! is exactly what printing the pad at another scale does. For a single-marker pad it is
 //! simply that marker's edge. 0 (the default) keeps the pad as built, so a build whose pad
 //! matches the print needs no parameter.
+//!
+//! # The lens and the pad design (TD_CAM_FX ... TD_CAM_K3, TD_PAD)
+//!
+//! A builder who changes the lens, or prints another shipped pad, should not have to rebuild
+//! the firmware: the lens's intrinsics and distortion and the choice of design are
+//! parameters, saved and restored with the others. Each of TD_CAM_FX, TD_CAM_FY, TD_CAM_CX and
+//! TD_CAM_CY left at 0 keeps the build's value, so a board runs with the build's lens until
+//! they are set, and a ground station writing them one by one never gives the pipeline half a
+//! camera; the distortion replaces the build's as soon as any coefficient is set. The frame
+//! size is the build's: the values are in pixels of the board's frames, as `touchdown view
+//! --record` records them at full resolution.
 
 use super::{ParamId, ParamSet};
+use crate::camera::{CameraError, CameraModel};
 use crate::detect::DetectorConfig;
 use crate::filter::{CameraMount, MountCalibrationMode};
 use crate::pad::{PadError, PadLayout, PadMarker, MAX_PAD_MARKERS};
@@ -55,7 +67,36 @@ pub struct PipelineSettings {
     /// vision estimates carry it (TD_VPE_EN bit 0), so the per-frame path spends nothing on it
     /// otherwise.
     pub view_margin: bool,
+    /// The lens parameters as set (TD_CAM_FX ... TD_CAM_K3; see [`PipelineSettings::camera`]).
+    pub lens: LensSettings,
+    /// The pad searched for (TD_PAD): 0 the build's, 1 nested-field, 2 nested-rest, 3
+    /// nested, 4 paper-single ([`PipelineSettings::built_pad`]).
+    pub pad_design: u8,
 }
+
+/// The lens parameters as set: 0 for each intrinsic the build's value stands for.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LensSettings {
+    /// TD_CAM_FX, pixels.
+    pub fx: f32,
+    /// TD_CAM_FY, pixels.
+    pub fy: f32,
+    /// TD_CAM_CX, pixels.
+    pub cx: f32,
+    /// TD_CAM_CY, pixels.
+    pub cy: f32,
+    /// TD_CAM_K1, TD_CAM_K2, TD_CAM_P1, TD_CAM_P2, TD_CAM_K3.
+    pub distortion: [f32; 5],
+}
+
+/// The shipped designs TD_PAD 1 to 4 choose, in that order.
+pub const PAD_DESIGNS: [&PadLayout<'static>; 4] = [
+    &crate::pad::designs::NESTED_FIELD,
+    &crate::pad::designs::NESTED_REST,
+    &crate::pad::designs::NESTED,
+    &crate::pad::designs::PAPER_SINGLE,
+];
 
 /// TD_VPE_EN bit 0: VISION_POSITION_ESTIMATE (and with it the view margin).
 pub const VPE_POSITION: i32 = 1;
@@ -94,6 +135,54 @@ impl PipelineSettings {
             cam_pitch_deg: params.get(ParamId::CamPitch),
             mount_calibration: MountCalibrationMode::from_param(params.get_int(ParamId::CamCal)),
             view_margin: params.get_int(ParamId::VpeEnable) & VPE_POSITION != 0,
+            lens: LensSettings {
+                fx: params.get(ParamId::CamFx),
+                fy: params.get(ParamId::CamFy),
+                cx: params.get(ParamId::CamCx),
+                cy: params.get(ParamId::CamCy),
+                distortion: [
+                    params.get(ParamId::CamK1),
+                    params.get(ParamId::CamK2),
+                    params.get(ParamId::CamP1),
+                    params.get(ParamId::CamP2),
+                    params.get(ParamId::CamK3),
+                ],
+            },
+            pad_design: u8::try_from(params.get_int(ParamId::Pad)).unwrap_or(0),
+        }
+    }
+
+    /// The camera in force for the `built` one: each intrinsic the lens parameters set (not
+    /// 0) replaces the build's, the distortion replaces the build's when any coefficient is
+    /// set; the frame size and line time stay the build's. An error when the result is not a
+    /// usable camera ([`CameraModel::validate`]: e.g. a principal point off the frame).
+    pub fn camera(&self, built: &CameraModel) -> Result<CameraModel, CameraError> {
+        let l = &self.lens;
+        let or_built = |set: f32, built: f32| if set != 0.0 { set } else { built };
+        let camera = CameraModel {
+            fx: or_built(l.fx, built.fx),
+            fy: or_built(l.fy, built.fy),
+            cx: or_built(l.cx, built.cx),
+            cy: or_built(l.cy, built.cy),
+            distortion: if l.distortion.iter().any(|&k| k != 0.0) {
+                l.distortion
+            } else {
+                built.distortion
+            },
+            ..*built
+        };
+        camera.validate().map(|()| camera)
+    }
+
+    /// The pad searched for before TD_TAG_SIZE scales it: `build`'s own, or the shipped design
+    /// TD_PAD names ([`PAD_DESIGNS`]).
+    pub fn built_pad<'a>(&self, build: &PadLayout<'a>) -> PadLayout<'a> {
+        match usize::from(self.pad_design)
+            .checked_sub(1)
+            .and_then(|i| PAD_DESIGNS.get(i))
+        {
+            Some(design) => **design,
+            None => *build,
         }
     }
 

@@ -167,14 +167,29 @@ const LOOK_AGAIN_MIN_MARGIN_PX: f32 = 16.0;
 /// `R_ned_from_level`: the level frame of [`level_pad_fix`] (x north, y west, z up) in NED.
 const NED_FROM_LEVEL: Matrix3<f32> = Matrix3::new(1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0);
 
+/// Why settings were not all taken ([`FramePipeline::apply`]); the others were.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SettingsError {
+    /// The pad could not be scaled: searched as built.
+    Pad(PadError),
+    /// The lens parameters make no usable camera: the built camera is used.
+    Camera(crate::camera::CameraError),
+}
+
 /// The detector, the pad, the camera and the estimator, applied to one frame after another.
 #[derive(Debug)]
 pub struct FramePipeline<'a> {
     detector: Detector,
     config: PipelineConfig,
     families: &'a [&'a Family<'a>],
+    /// The pad the pipeline was built with (TD_PAD 0).
+    build_pad: PadLayout<'a>,
+    /// The pad in force before TD_TAG_SIZE scales it (TD_PAD's choice).
     built_pad: PadLayout<'a>,
     pad: PadLayout<'a>,
+    /// The camera the pipeline was built with (the lens parameters at 0).
+    build_camera: CameraModel,
     camera: CameraModel,
     settings: PipelineSettings,
     estimator: PadEstimator,
@@ -355,8 +370,10 @@ impl<'a> FramePipeline<'a> {
             detector: Detector::new(config.detector),
             config,
             families,
+            build_pad: *built_pad,
             built_pad: *built_pad,
             pad: *built_pad,
+            build_camera: camera,
             camera,
             settings,
             estimator,
@@ -377,10 +394,24 @@ impl<'a> FramePipeline<'a> {
     /// scaled to TD_TAG_SIZE, the whole mount (turned by TD_CAM_YAW, tilted by TD_CAM_ROLL
     /// and TD_CAM_PITCH: [`PipelineSettings::mount`]; a changed yaw restarts the estimator, a
     /// changed tilt does not, see [`PadEstimator::set_mount`]) and whether the mount is
-    /// calibrated in flight (TD_CAM_CAL). If the pad cannot be scaled, the pad as built is
-    /// searched and the error returned; the other settings apply either way.
-    pub fn apply(&mut self, settings: PipelineSettings) -> Result<(), PadError> {
+    /// calibrated in flight (TD_CAM_CAL), the lens (TD_CAM_FX ... TD_CAM_K3, over the camera
+    /// the pipeline was built with: [`PipelineSettings::camera`]; a changed lens restarts the
+    /// estimator, whose tracks were measured through the other one) and the pad's design
+    /// (TD_PAD). If the lens makes no usable camera, the built camera is used and the error
+    /// returned; if the pad cannot be scaled, the pad as built is searched and the error
+    /// returned; the other settings apply either way.
+    pub fn apply(&mut self, settings: PipelineSettings) -> Result<(), SettingsError> {
         self.settings = settings;
+        let (camera, camera_result) = match settings.camera(&self.build_camera) {
+            Ok(camera) => (camera, Ok(())),
+            Err(e) => (self.build_camera, Err(SettingsError::Camera(e))),
+        };
+        if camera != self.camera {
+            self.camera = camera;
+            self.detector.set_camera(Some(camera));
+            self.reset();
+        }
+        self.built_pad = settings.built_pad(&self.build_pad);
         self.detector
             .set_config(settings.detector_config(self.config.detector));
         self.estimator.set_mount(
@@ -393,11 +424,11 @@ impl<'a> FramePipeline<'a> {
         match settings.pad(&self.built_pad) {
             Ok(pad) => {
                 self.pad = pad;
-                Ok(())
+                camera_result
             }
             Err(e) => {
                 self.pad = self.built_pad;
-                Err(e)
+                Err(SettingsError::Pad(e))
             }
         }
     }
@@ -408,7 +439,7 @@ impl<'a> FramePipeline<'a> {
     /// itself (the host's companion, replay and sitl loops) hands them over the same way.
     /// The firmware does not call this: its link task owns the parameters and sends the
     /// settings to the vision task, which calls [`FramePipeline::apply`].
-    pub fn follow_params(&mut self, params: &ParamSet) -> Result<bool, PadError> {
+    pub fn follow_params(&mut self, params: &ParamSet) -> Result<bool, SettingsError> {
         let settings = PipelineSettings::from_params(params);
         if settings == self.settings {
             return Ok(false);
@@ -612,12 +643,12 @@ impl<'a> FramePipeline<'a> {
         &self.pad
     }
 
-    /// The pad as built (what TD_TAG_SIZE scales).
+    /// The pad as built, or the design TD_PAD chose (what TD_TAG_SIZE scales).
     pub fn built_pad(&self) -> &PadLayout<'a> {
         &self.built_pad
     }
 
-    /// The camera model.
+    /// The camera model in force (the built one, or the lens parameters').
     pub fn camera(&self) -> &CameraModel {
         &self.camera
     }
@@ -708,6 +739,43 @@ mod tests {
         // Back to the pad as built.
         assert_eq!(pipeline.apply(PipelineSettings::default()), Ok(()));
         assert_eq!(*pipeline.pad(), designs::NESTED);
+        assert_eq!(*pipeline.built_pad(), designs::NESTED);
+    }
+
+    #[test]
+    fn the_lens_and_pad_parameters_replace_the_build_s() {
+        let mut pipeline = nested_pipeline();
+        let built = *pipeline.camera();
+        let mut params = ParamSet::default();
+        // Half a lens: the focal lengths set, the principal point still the build's.
+        params.set(ParamId::CamFx, 300.0).unwrap();
+        params.set(ParamId::CamFy, 301.0).unwrap();
+        params.set(ParamId::CamK1, -0.2).unwrap();
+        params.set(ParamId::CamK2, 0.05).unwrap();
+        params.set(ParamId::Pad, 3.0).unwrap();
+        params.set(ParamId::TagSize, 0.625).unwrap();
+        assert_eq!(pipeline.follow_params(&params), Ok(true));
+        let camera = *pipeline.camera();
+        assert_eq!((camera.fx, camera.fy, camera.cx, camera.cy), (300.0, 301.0, 159.5, 119.5));
+        assert_eq!(camera.distortion, [-0.2, 0.05, 0.0, 0.0, 0.0]);
+        assert_eq!((camera.width, camera.height), (built.width, built.height));
+        // TD_PAD 3: the shipped `nested`, scaled by TD_TAG_SIZE as a built pad is.
+        assert_eq!(*pipeline.built_pad(), designs::NESTED);
+        params.set(ParamId::Pad, 1.0).unwrap();
+        assert_eq!(pipeline.follow_params(&params), Ok(true));
+        assert_eq!(*pipeline.built_pad(), designs::NESTED_FIELD);
+        assert_eq!(pipeline.pad().name(), "nested-field");
+        assert_eq!(pipeline.pad().markers()[0].size, 0.625);
+        // A principal point off the frame makes no camera: the build's, and the error.
+        params.set(ParamId::CamCx, 5000.0).unwrap();
+        assert!(matches!(
+            pipeline.follow_params(&params),
+            Err(SettingsError::Camera(_))
+        ));
+        assert_eq!(*pipeline.camera(), built);
+        // All back at 0: the build's lens and pad.
+        assert_eq!(pipeline.apply(PipelineSettings::default()), Ok(()));
+        assert_eq!(*pipeline.camera(), built);
         assert_eq!(*pipeline.built_pad(), designs::NESTED);
     }
 

@@ -142,13 +142,14 @@ mod tests {
         assert_eq!(EXPORT_LEN, 8 + (crate::params::PARAM_COUNT + 10) * 20);
         assert_eq!(LEGACY_SLOT_LEN, 288);
         assert_eq!(128 * 1024 / LEGACY_SLOT_LEN, 455);
-        // Format 2: a header word and the sequence number more; 23 parameters (TD_LOCK
-        // appended to the 22 of the moving pad's firmware, whose 512-byte slots still read
-        // back, like the 21 and 20 parameters' 480-byte, the 19 parameters' 448-byte, the 16
-        // parameters' 384-byte and the 13 parameters' 320-byte ones) and the signing secret's
-        // 10 records take 23 words: 178 slots per sector after the first boot's free word.
-        assert_eq!(SLOT_LEN, 736);
-        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 178);
+        // Format 2: a header word and the sequence number more; 33 parameters (the lens's
+        // nine and TD_PAD appended to the 23 of the signing firmware, whose 736-byte slots
+        // still read back, like the 22 parameters' 512-byte, the 21 and 20 parameters'
+        // 480-byte, the 19 parameters' 448-byte, the 16 parameters' 384-byte and the 13
+        // parameters' 320-byte ones) and the signing secret's 10 records take 29 words: 141
+        // slots per sector after the first boot's free word.
+        assert_eq!(SLOT_LEN, 928);
+        assert_eq!((128 * 1024 - FLASH_WORD) / SLOT_LEN, 141);
     }
 
     /// A format-2 slot of an older firmware whose table ended after `records` parameters, in
@@ -302,15 +303,48 @@ mod tests {
     }
 
     #[test]
+    fn a_slot_of_the_signing_firmware_imports_with_the_build_lens_and_pad_and_its_key() {
+        use crate::params::{ParamId, SigningSecret};
+        let mut saved = values(10);
+        saved.set(ParamId::Lock, 0.0).unwrap();
+        // Set here, but not in the older firmware's table: they come back at their defaults.
+        saved.set(ParamId::CamFx, 300.0).unwrap();
+        saved.set(ParamId::CamK1, -0.2).unwrap();
+        saved.set(ParamId::Pad, 2.0).unwrap();
+        saved.set_signing_secret(SigningSecret::new([9; 32], 77));
+        // 23 records and the secret's 10 (668 bytes) took 23 words (736 bytes).
+        let mut slot = older_slot(&saved, 15, 23, 23);
+        let mut blob = [0u8; 736 - SLOT_HEADER_LEN - SLOT_TRAILER_LEN];
+        let n = saved.export_records_with_secret(23, &mut blob);
+        assert_eq!(n, 668);
+        slot[SLOT_HEADER_LEN..SLOT_HEADER_LEN + blob.len()].copy_from_slice(&blob);
+        slot[736 - 8..736 - 4].copy_from_slice(&TRAILER_MAGIC);
+        let crc = crc32(&slot[..736 - 4]);
+        slot[736 - 4..736].copy_from_slice(&crc.to_le_bytes());
+        let (seq, p, report) = check_v2(&slot[..736], &ParamSet::default()).unwrap();
+        assert_eq!((seq, report.applied, report.unknown), (15, 23, 0));
+        assert_eq!(p.signing_secret().key(), Some(&[9; 32]));
+        let mut want = saved;
+        for id in [ParamId::CamFx, ParamId::CamFy, ParamId::CamCx, ParamId::CamCy] {
+            want.set(id, 0.0).unwrap();
+        }
+        for id in [ParamId::CamK1, ParamId::CamK2, ParamId::CamP1, ParamId::CamP2, ParamId::CamK3] {
+            want.set(id, 0.0).unwrap();
+        }
+        want.set(ParamId::Pad, 0.0).unwrap();
+        assert_eq!(p, want);
+    }
+
+    #[test]
     fn slot_layout() {
-        assert_eq!(SLOT_LEN, 736);
+        assert_eq!(SLOT_LEN, 928);
         let mut slot = [0u8; SLOT_LEN];
         encode_v2(&values(3), 0x0102_0304, &mut slot);
         let mut other = [0u8; SLOT_LEN];
         encode_v2(&values(4), 7, &mut other);
         // The first word is the same in every slot (see the module documentation).
         assert_eq!(slot[..FLASH_WORD], other[..FLASH_WORD]);
-        assert_eq!(&slot[..6], b"TDSL\x02\x17");
+        assert_eq!(&slot[..6], b"TDSL\x02\x1d");
         assert!(slot[6..FLASH_WORD].iter().all(|&b| b == 0));
         assert_eq!(slot[32..36], [4, 3, 2, 1]);
         // The export blob starts mid-word, so it can never pass for a format-1 slot.

@@ -179,12 +179,12 @@ fn a_failed_erase_is_retried_by_the_next_save_and_spares_the_newest_slot() {
     assert_eq!(TwoSectors::open(&m).0, values(i));
 }
 
-/// The firmware's geometry: 128 KiB sectors of 178 slots, after the boot's guard word as once
+/// The firmware's geometry: 128 KiB sectors of 141 slots, after the boot's guard word as once
 /// erased.
 #[test]
-fn real_sectors_hold_178_slots_each_and_alternate() {
+fn real_sectors_hold_141_slots_each_and_alternate() {
     const SECTOR: u32 = 128 * 1024;
-    const SLOTS: usize = 178;
+    const SLOTS: usize = 141;
     assert_eq!((SECTOR as usize - FLASH_WORD) / SLOT_LEN, SLOTS);
     assert_eq!(SECTOR as usize / SLOT_LEN, SLOTS);
     let mut m = Model::new(SECTOR as usize);
@@ -199,7 +199,7 @@ fn real_sectors_hold_178_slots_each_and_alternate() {
     }
     // Sector 0 (after the boot's guard word), sector 1, sector 0 again, then sector 1 again.
     // An erased sector has no guard word, but the word it saves does not make room for
-    // another 736-byte slot.
+    // another 928-byte slot.
     assert_eq!(erased_at, vec![(2 * SLOTS, 0), (3 * SLOTS, 1)]);
     let (p, _, boot) = TwoSectors::open(&m);
     assert_eq!(p, values(saves - 1));

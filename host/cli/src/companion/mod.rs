@@ -323,7 +323,7 @@ pub fn run(
         if let Err(e) = pipeline.follow_params(companion.params()) {
             let _ = writeln!(
                 err,
-                "warning: pad not scaled ({e:?}): searching it as built"
+                "warning: board settings not all taken ({e:?}): the pad as built or the built camera in their place"
             );
         }
         if let Some(entry) = reader.entries.get(counts.frames) {

@@ -386,7 +386,7 @@ pub fn fly(
         if let Err(e) = pipeline.follow_params(companion.params()) {
             let _ = writeln!(
                 err,
-                "warning: pad not scaled ({e:?}): searching it as built"
+                "warning: board settings not all taken ({e:?}): the pad as built or the built camera in their place"
             );
         }
         // The landing's state from the newest truth.
