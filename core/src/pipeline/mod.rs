@@ -756,7 +756,10 @@ mod tests {
         params.set(ParamId::TagSize, 0.625).unwrap();
         assert_eq!(pipeline.follow_params(&params), Ok(true));
         let camera = *pipeline.camera();
-        assert_eq!((camera.fx, camera.fy, camera.cx, camera.cy), (300.0, 301.0, 159.5, 119.5));
+        assert_eq!(
+            (camera.fx, camera.fy, camera.cx, camera.cy),
+            (300.0, 301.0, 159.5, 119.5)
+        );
         assert_eq!(camera.distortion, [-0.2, 0.05, 0.0, 0.0, 0.0]);
         assert_eq!((camera.width, camera.height), (built.width, built.height));
         // TD_PAD 3: the shipped `nested`, scaled by TD_TAG_SIZE as a built pad is.

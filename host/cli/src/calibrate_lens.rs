@@ -158,6 +158,39 @@ struct Observation {
 struct RecordingFiles {
     pad: Option<PadConfig>,
     line_time_us: Option<f32>,
+    /// Sensor pixels per recorded pixel, when the recording is `touchdown view --record`'s
+    /// (board.csv's `scale`): the board's parameters are in its own frames' pixels.
+    board_scale: Option<u8>,
+}
+
+/// The scale of a `touchdown view` recording's frames (board.csv's `scale`, one for all its
+/// rows); `None` for a recording without board.csv.
+fn board_scale(dir: &Path) -> Result<Option<u8>, CliError> {
+    let path = dir.join("board.csv");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(None);
+    };
+    let bad = |why: &str| CliError(format!("{}: {why}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let column = header
+        .iter()
+        .position(|&c| c == "scale")
+        .ok_or_else(|| bad("no `scale` column"))?;
+    let mut scale = None;
+    for line in lines.filter(|l| !l.trim().is_empty()) {
+        let value: u8 = line
+            .split(',')
+            .nth(column)
+            .and_then(|v| v.trim().parse().ok())
+            .filter(|v| matches!(v, 1 | 2))
+            .ok_or_else(|| bad("a `scale` that is not 1 or 2"))?;
+        if scale.is_some_and(|s| s != value) {
+            return Err(bad("frames of two scales: record again at one"));
+        }
+        scale = Some(value);
+    }
+    Ok(scale)
 }
 
 /// Everything the frames are read with: each frame is an image file (a recording's frames
@@ -203,7 +236,12 @@ impl Inputs {
             self.names.push(path.display().to_string());
             self.paths.push(path);
         }
-        self.recordings.push(RecordingFiles { pad, line_time_us });
+        let board_scale = board_scale(dir)?;
+        self.recordings.push(RecordingFiles {
+            pad,
+            line_time_us,
+            board_scale,
+        });
         Ok(())
     }
 
@@ -481,6 +519,50 @@ struct Report {
     advice: Vec<String>,
     out: Option<String>,
     camera_toml: String,
+    board: Option<BoardParameters>,
+}
+
+/// The lens as the board's parameters (TD_CAM_*), in the pixels of its own frames: the
+/// calibration scaled back by the recording's scale when it came from `touchdown view
+/// --record` of halved frames.
+#[derive(Debug, Serialize)]
+struct BoardParameters {
+    /// The board's frame size the values are for.
+    width: u32,
+    height: u32,
+    /// `(name, value)` in the parameter table's order.
+    parameters: Vec<(String, f64)>,
+}
+
+impl BoardParameters {
+    fn new(camera: &CameraModel, scale: u8) -> Self {
+        let s = f64::from(scale);
+        let centre = |c: f32| (f64::from(c) + 0.5) * s - 0.5;
+        let names = [
+            "TD_CAM_K1",
+            "TD_CAM_K2",
+            "TD_CAM_P1",
+            "TD_CAM_P2",
+            "TD_CAM_K3",
+        ];
+        let mut parameters = vec![
+            ("TD_CAM_FX".to_string(), f64::from(camera.fx) * s),
+            ("TD_CAM_FY".to_string(), f64::from(camera.fy) * s),
+            ("TD_CAM_CX".to_string(), centre(camera.cx)),
+            ("TD_CAM_CY".to_string(), centre(camera.cy)),
+        ];
+        parameters.extend(
+            names
+                .iter()
+                .zip(camera.distortion)
+                .map(|(n, k)| (n.to_string(), f64::from(k))),
+        );
+        BoardParameters {
+            width: camera.width * u32::from(scale),
+            height: camera.height * u32::from(scale),
+            parameters,
+        }
+    }
 }
 
 /// The names of the image's ninths, rows top to bottom.
@@ -643,7 +725,7 @@ pub fn run(
         )));
     }
 
-    let report = build_report(
+    let mut report = build_report(
         &solved,
         &inputs.names,
         size,
@@ -653,6 +735,15 @@ pub fn run(
         passes,
         args,
     );
+    // The board's parameters when the frames are one board's: recordings of `touchdown view`
+    // at one scale, or images (taken to be the board's frames at full size).
+    let scales: Vec<Option<u8>> = inputs.recordings.iter().map(|r| r.board_scale).collect();
+    let scale = match scales.first() {
+        None => Some(1),
+        Some(first) if scales.iter().all(|s| s == first) => Some(first.unwrap_or(1)),
+        Some(_) => None,
+    };
+    report.board = scale.map(|s| BoardParameters::new(&camera, s));
     if let Some(path) = &args.out {
         std::fs::write(path, &report.camera_toml)
             .map_err(|e| CliError(format!("{}: cannot write: {e}", path.display())))?;
@@ -810,6 +901,7 @@ fn build_report(
         advice,
         out: args.out.as_deref().map(|p: &Path| p.display().to_string()),
         camera_toml: touchdown_formats::camera::camera_toml(&camera),
+        board: None,
     }
 }
 
@@ -865,6 +957,21 @@ fn write_text(out: &mut dyn Write, r: &Report, with_file: bool) -> std::io::Resu
     }
     for line in &r.advice {
         writeln!(out, "advice: {line}")?;
+    }
+    if let Some(b) = &r.board {
+        let values: Vec<String> = b
+            .parameters
+            .iter()
+            .map(|(name, value)| format!("{name} {value:.6}"))
+            .collect();
+        writeln!(
+            out,
+            "board parameters, for a board whose frames are {}x{} (set them from the ground \
+             station; docs/first-light.md): {}",
+            b.width,
+            b.height,
+            values.join("  ")
+        )?;
     }
     match &r.out {
         Some(path) => writeln!(out, "wrote {path}")?,

@@ -342,6 +342,29 @@ fn a_70_degree_lens_on_the_raster_model() {
     let again = measure(&report, &lens(70.0, -0.2));
     assert_eq!(again.focal_error, m.focal_error);
     assert_eq!(report["camera"]["line_time_us"].as_f64(), Some(30.0));
+    // The board's parameters: the calibration itself for frames at full size...
+    let fx = report["camera"]["fx"].as_f64().unwrap();
+    let cx = report["camera"]["cx"].as_f64().unwrap();
+    let board = &report["board"];
+    assert_eq!(
+        (board["width"].as_u64(), board["height"].as_u64()),
+        (Some(640), Some(480))
+    );
+    assert_eq!(board["parameters"][0][0], "TD_CAM_FX");
+    assert!((board["parameters"][0][1].as_f64().unwrap() - fx).abs() < 1e-3);
+    // ... and doubled for `touchdown view --record`'s halved frames of a 1280x960 board.
+    std::fs::write(
+        recording.join("board.csv"),
+        "index,board_index,t_us,scale,exposure_us,gain,process_us,markers,fix_x,fix_y,fix_z,fix_markers,fix_rms_px\n\
+         0,5,100,2,4000,1,9000,3,,,,,\n",
+    )
+    .unwrap();
+    let report = calibrate(&[recording.to_str().unwrap()]);
+    let board = &report["board"];
+    assert_eq!(board["width"].as_u64(), Some(1280));
+    assert!((board["parameters"][0][1].as_f64().unwrap() - 2.0 * fx).abs() < 1e-3);
+    assert!((board["parameters"][2][1].as_f64().unwrap() - ((cx + 0.5) * 2.0 - 0.5)).abs() < 1e-3);
+    assert_eq!(board["parameters"][4][0], "TD_CAM_K1");
 }
 
 #[test]

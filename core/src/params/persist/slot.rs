@@ -325,10 +325,21 @@ mod tests {
         assert_eq!((seq, report.applied, report.unknown), (15, 23, 0));
         assert_eq!(p.signing_secret().key(), Some(&[9; 32]));
         let mut want = saved;
-        for id in [ParamId::CamFx, ParamId::CamFy, ParamId::CamCx, ParamId::CamCy] {
+        for id in [
+            ParamId::CamFx,
+            ParamId::CamFy,
+            ParamId::CamCx,
+            ParamId::CamCy,
+        ] {
             want.set(id, 0.0).unwrap();
         }
-        for id in [ParamId::CamK1, ParamId::CamK2, ParamId::CamP1, ParamId::CamP2, ParamId::CamK3] {
+        for id in [
+            ParamId::CamK1,
+            ParamId::CamK2,
+            ParamId::CamP1,
+            ParamId::CamP2,
+            ParamId::CamK3,
+        ] {
             want.set(id, 0.0).unwrap();
         }
         want.set(ParamId::Pad, 0.0).unwrap();
