@@ -46,7 +46,7 @@ pub use persist::{
 };
 
 pub use secret::{SigningSecret, KEY_LEN};
-pub use settings::{PipelineSettings, VPE_POSITION, VPE_VELOCITY};
+pub use settings::{LensSettings, PipelineSettings, PAD_DESIGNS, VPE_POSITION, VPE_VELOCITY};
 
 /// Longest parameter name (MAVLink's `param_id`, not NUL-terminated when exactly 16).
 pub const PARAM_NAME_LEN: usize = 16;

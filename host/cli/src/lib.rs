@@ -14,6 +14,7 @@
 //! embedded font, rustix for the serial port) stay here, out of the libraries the fuzz
 //! harness, the tests and the examples build on.
 
+pub mod board;
 pub mod calibrate;
 pub mod calibrate_lens;
 pub mod companion;
@@ -87,6 +88,9 @@ pub enum Command {
     /// autopilot model).
     #[command(long_about = sitl::LONG_HELP)]
     Sitl(sitl::SitlArgs),
+    /// Set the board's lens or pad from a file over MAVLink, and read it back.
+    #[command(long_about = board::LONG_HELP)]
+    Board(board::BoardArgs),
     /// Show what the camera board sees (its frames, markers and pad fix, streamed over the
     /// debug probe) and record it.
     #[command(long_about = view::LONG_HELP)]
@@ -167,6 +171,7 @@ pub fn run(cli: Cli, out: &mut dyn Write, err: &mut dyn Write) -> Result<Outcome
         Command::CalibrateLens(args) => calibrate_lens::run(&args, out, err),
         Command::Sitl(args) => sitl::run(&args, out, err),
         Command::View(args) => view::run(&args, out, err),
+        Command::Board(args) => board::run(&args, out, err),
     }
 }
 
