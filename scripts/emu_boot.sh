@@ -46,17 +46,17 @@ readonly SOAK_SECONDS="${EMU_SOAK_SECONDS:-15}"
 #   LOCAL_FRD, levelled with the attitude;
 # - `--signing`: a signing key set over MAVLink, signed, unsigned and replayed PARAM_SETs, a
 #   power cycle, the key and the checks again (firmware/emu/signing.py);
-# - `--lens`: a longer lens (TD_CAM_FX, TD_CAM_FY) and the pad's design (TD_PAD) set over
-#   MAVLink, a power cycle and the lens read back (firmware/emu/lens.py);
+# - `--lens TOUCHDOWN`: a longer lens and the pad's design set by `touchdown board` over the
+#   UART, a power cycle and both read back (firmware/emu/lens.py);
 # - `--view TOUCHDOWN`: the frame stream over RTT channel 1 served on a TCP port, recorded
 #   by `touchdown view --record` and replayed by `touchdown detect` (firmware/emu/view.py);
-#   TOUCHDOWN is the test step's debug build (built here when missing).
+#   TOUCHDOWN (here and for --lens) is the test step's debug build (built here when missing).
 # The other variants differ only in the camera and the clock.
 readonly VIEWER="${TOUCHDOWN:-${TARGET_DIR}/debug/touchdown}"
 declare -rA FIL_EXTRAS=(
     [nucleo-qvga]="--power-cycle --view ${VIEWER}"
     [openmv-qvga]="--power-cycle"
-    [nucleo-qvga-480]="--line-noise --lens"
+    [nucleo-qvga-480]="--line-noise --lens ${VIEWER}"
     [openmv-vga]="--autopilot ardupilot-4.7"
     [nucleo-vga]="--signing"
 )

@@ -1,13 +1,13 @@
 """Runs one touchdown firmware ELF on the emulated STM32H743 and prints a summary.
 
     python3 -m emu ELF --board nucleo|openmv [--cpu-mhz 400|480] [--fil SECONDS [--power-cycle]
-        [--view TOUCHDOWN] [--lens] | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
+        [--view TOUCHDOWN] [--lens TOUCHDOWN] | --fil SECONDS --soak [--soak-seed N] [--soak-signing]]
 
 Without --fil: the boot test (boot.py). With --fil: the boot test, then firmware-in-the-loop
 (fil.py) for SECONDS of emulated time; with --power-cycle also a parameter set over MAVLink,
 kept through a power cycle (power_cycle.py); with --view, the frame stream recorded by
-`touchdown view` and replayed (view.py); with --lens, a lens and a pad design set over MAVLink
-and kept through a power cycle (lens.py); with --soak, FIL under a seeded schedule of
+`touchdown view` and replayed (view.py); with --lens, a lens and a pad design set by
+`touchdown board` and kept through a power cycle (lens.py); with --soak, FIL under a seeded schedule of
 disturbances for SECONDS instead (soak.py). Exit status 0 when every check passed, 1 on a failure
 (the message names the pc, the function and the address), 2 on bad usage.
 """
@@ -57,10 +57,10 @@ def parse(argv):
                         help="after FIL: serve RTT channel 1 on a TCP port and record frames "
                              "from it with this touchdown binary's `view --record`, then replay "
                              "them with its `detect` (view.py)")
-    parser.add_argument("--lens", action="store_true",
-                        help="after FIL: a longer lens (TD_CAM_FX, TD_CAM_FY) and the pad's "
-                             "design (TD_PAD) set over MAVLink, a power cycle, the lens read "
-                             "back (lens.py)")
+    parser.add_argument("--lens", metavar="TOUCHDOWN",
+                        help="after FIL: a longer lens and the pad's design set with this "
+                             "touchdown binary's `board` over the UART, a power cycle, both "
+                             "read back (lens.py)")
     parser.add_argument("--soak", action="store_true",
                         help="FIL as a soak: line noise, autopilot reboots, parameter floods, "
                              "dropped frames and brown-outs on a seeded schedule, each "
@@ -79,8 +79,8 @@ def parse(argv):
 
 def main(argv=None):
     args = parse(argv)
-    if args.view and (args.soak or not args.fil):
-        print("--view needs --fil SECONDS and no --soak", file=sys.stderr)
+    if (args.view or args.lens) and (args.soak or not args.fil):
+        print("--view and --lens need --fil SECONDS and no --soak", file=sys.stderr)
         return 2
     if (args.soak or args.soak_signing) and not args.fil:
         print("--soak needs --fil SECONDS", file=sys.stderr)

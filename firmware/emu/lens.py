@@ -1,33 +1,41 @@
-"""Stage `--lens`, the lens and the pad as board settings through a power cycle: after
-firmware-in-the-loop (fil.py) a ground station on the autopilot's line sets the lens's focal
-lengths (TD_CAM_FX, TD_CAM_FY: FOCAL_FACTOR times the build's) and the pad's design (TD_PAD 3,
-the shipped `nested`, none of whose markers the frame shows; then TD_PAD 1, `nested-field`,
-the frame's pad), the chip is powered off and on, and the lens is read back.
+"""Stage `--lens TOUCHDOWN`, the lens and the pad as board settings through a power cycle: after
+firmware-in-the-loop (fil.py) `touchdown board` on the board's UART (bridged over TCP beside
+the autopilot's messages, as a flight controller routes a ground station's: bridge.py) sets
+a lens from a CAMERA.toml with FOCAL_FACTOR times the build's focal length (`set-camera`),
+the pad's design (`set-pad nested`: TD_PAD 3, the shipped `nested`, none of whose markers the
+frame shows; then `set-pad nested-field`: TD_PAD 1, the frame's pad), the chip is powered
+off and on, and `touchdown board show` reads them back.
 
 Why: a builder who screws in another lens or prints another shipped pad sets them as
 parameters, without rebuilding; the values cross the link's PARAM_SET, the save to flash,
 the restore at boot and the vision task's pipeline, and only the LANDING_TARGETs show that
 the pipeline solves through the lens and searches for the pad the parameters name.
 
-Checked: PARAM_VALUE answers each PARAM_SET; with TD_PAD 3 no LANDING_TARGET carries a
-position (the frame holds no marker of `nested`); with TD_PAD 1 and the longer focal length
+Checked: each `touchdown board` ends with its values read back; with TD_PAD 3 no
+LANDING_TARGET carries a position (the frame holds no marker of `nested`); with TD_PAD 1 and the longer focal length
 the targets put the pad FOCAL_FACTOR times as deep along the optical axis and where it was
 across it (a marker of the same size in pixels through a longer lens is that much farther:
 x and y within fil.py's tolerance of the truth's, z of FOCAL_FACTOR times the truth's); after
-the power cycle PARAM_REQUEST_READ answers TD_CAM_FX with the value set and the targets are
-still those of the longer lens.
+the power cycle `touchdown board show` answers TD_CAM_FX and TD_PAD with the values set and
+the targets are still those of the longer lens.
 """
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
+import os
+import shutil
+import tempfile
 
-from .autopilot import FIRMWARE_COMPID, FIRMWARE_SYSID
+from . import memmap
+from .bridge import run_tool
 from .fil import messages_since, position_problems, timed_messages
 from .power_cycle import SAVE_WAIT_NS, power_cycled
 
 # The longer lens the ground station sets, times the build's focal length.
 FOCAL_FACTOR = 1.5
-# The build's focal length, pixels (firmware/src/config.rs), by frame size.
+# The build's focal length, pixels (firmware/src/config.rs), and frame size, by frame size.
 BUILT_FOCAL = {"qvga": 233.5, "vga": 467.0}
+FRAME_SIZE = {"qvga": (320, 240), "vga": (640, 400)}
+# Longest emulated time one run of `touchdown board` may take.
+TOOL_NS = 6e9
 # Emulated time after a PARAM_SET before the targets are looked at, and how long they are.
 SETTLE_NS = 0.4e9
 WATCH_NS = 0.5e9
@@ -40,33 +48,75 @@ class Lens:
     def __init__(self, fil, elf, board, args):
         self.fil, self.elf, self.board, self.args = fil, elf, board, args
         self.autopilot = fil.autopilot
-        self.mav = fil.autopilot.mav
+        self.touchdown = args.lens
         self.focal = FOCAL_FACTOR * BUILT_FOCAL[args.camera]
+        self.size = FRAME_SIZE[args.camera]
 
-    def _param_set(self, name, value):
-        return self.mav.param_set_encode(FIRMWARE_SYSID, FIRMWARE_COMPID, name.encode(), value,
-                                         mavlink.MAV_PARAM_TYPE_REAL32).pack(self.mav)
+    def _board(self, machine, action, name):
+        """`touchdown board --tcp ... ACTION` against the board's UART (bridge.py); its stdout,
+        or the problem."""
+        uart = machine.uart
+        sent_from = len(uart.sent)
+
+        def from_board():
+            nonlocal sent_from
+            data = bytes(b for _, b in uart.sent[sent_from:])
+            sent_from = len(uart.sent)
+            return data
+
+        def command(port):
+            return [self.touchdown, "board", "--tcp", f"127.0.0.1:{port}", "--timeout", "5"] + \
+                action
+
+        run = run_tool(machine, self.autopilot, command,
+                       lambda data: uart.feed(data, machine.time_ns), from_board, TOOL_NS)
+        print(f"  lens: touchdown board {' '.join(action[:1])} ({name}): exit {run.returncode} "
+              f"after {(run.end_ns - run.start_ns) / 1e9:.2f} s emulated")
+        if machine.failure:
+            return None, run, [machine.failure]
+        if run.returncode != 0 or run.timed_out:
+            return None, run, [f"touchdown board {' '.join(action)}: exit {run.returncode}: "
+                               f"{run.last_line(run.stderr)}"]
+        return run.stdout, run, []
+
+    def _idle(self, machine, ns):
+        start = machine.time_ns
+        self.autopilot.feed(machine, start, start + ns)
+        machine.run(start + ns, machine.pc())
 
     def run(self, machine):
-        start = machine.time_ns
-        pad_other_at = start + 0.1e9
-        pad_back_at = pad_other_at + SETTLE_NS + WATCH_NS
-        end = pad_back_at + SAVE_WAIT_NS
-        sets = [(pad_other_at, self._param_set("TD_CAM_FX", self.focal)),
-                (pad_other_at, self._param_set("TD_CAM_FY", self.focal)),
-                (pad_other_at, self._param_set("TD_PAD", 3.0)),
-                (pad_back_at, self._param_set("TD_PAD", 1.0))]
-        self.autopilot.feed(machine, start + 0.05e9, end, sets)
-        machine.run(end, machine.pc())
-        print(f"  lens: TD_CAM_FX = TD_CAM_FY = {self.focal:g} and TD_PAD 3 at 0.1 s, TD_PAD 1 "
-              f"at {(pad_back_at - start) / 1e9:.1f} s, ran {(end - start) / 1e9:.1f} s")
-        problems = [machine.failure] if machine.failure else []
-        if machine.finished:
-            problems.append(f"stopped early: {machine.finished}")
+        work = tempfile.mkdtemp(prefix="touchdown-emu-lens-")
+        try:
+            return self._run(machine, work)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+
+    def _run(self, machine, work):
+        w, h = self.size
+        camera = os.path.join(work, "camera.toml")
+        with open(camera, "w") as f:
+            f.write(f"width = {w}\nheight = {h}\nfx = {self.focal}\nfy = {self.focal}\n"
+                    f"cx = {(w - 1) / 2}\ncy = {(h - 1) / 2}\n")
+        out, _, problems = self._board(machine, ["set-camera", camera], "the longer lens")
+        if problems:
+            return problems
+        if f"TD_CAM_FX = {self.focal:g}" not in out:
+            return [f"touchdown board set-camera did not read back TD_CAM_FX {self.focal:g}: {out}"]
+        out, run, problems = self._board(machine, ["set-pad", "nested"], "TD_PAD 3")
+        if problems:
+            return problems
+        other_from = run.end_ns
+        self._idle(machine, SETTLE_NS + WATCH_NS)
+        other_to = machine.time_ns
+        out, run, problems = self._board(machine, ["set-pad", "nested-field"], "TD_PAD 1")
+        if problems:
+            return problems
+        back_from = run.end_ns
+        self._idle(machine, SAVE_WAIT_NS)
+        if machine.failure or machine.finished:
+            return [machine.failure or f"stopped early: {machine.finished}"]
         timed = timed_messages(machine)
-        for name, value in (("TD_CAM_FX", self.focal), ("TD_PAD", 3.0), ("TD_PAD", 1.0)):
-            problems += self._check_value(messages_since(timed, pad_other_at), name, value)
-        other = [m for t, m in timed if pad_other_at + SETTLE_NS <= t < pad_back_at
+        other = [m for t, m in timed if other_from + SETTLE_NS <= t < other_to
                  and m.get_type() == "LANDING_TARGET"]
         with_position = [m for m in other if m.position_valid]
         print(f"  lens: TD_PAD 3 (nested): {len(other)} LANDING_TARGETs, {len(with_position)} "
@@ -74,41 +124,29 @@ class Lens:
         if with_position:
             problems.append(f"{len(with_position)} LANDING_TARGETs with a position while TD_PAD "
                             "named a pad the frame does not show")
-        problems += self._check_targets(messages_since(timed, pad_back_at + SETTLE_NS),
+        problems += self._check_targets(messages_since(timed, back_from + SETTLE_NS),
                                         "with TD_PAD 1 and the longer lens")
         if problems:
             return problems
         return self._after_power_cycle(machine)
 
     def _after_power_cycle(self, old):
-        image = bytes(old.uc.mem_read(0x0800_0000, 2 * 1024 * 1024))
+        image = bytes(old.uc.mem_read(memmap.FLASH.base, memmap.FLASH.size))
         machine, problems = power_cycled(self.fil, self.elf, self.board, self.args, image)
         if problems:
             return [f"lens, after the power cycle: {p}" for p in problems]
-        start = machine.time_ns
-        read_at = start + 0.3e9
-        end = start + AFTER_BOOT_NS
-        self.autopilot.feed(machine, start + 0.05e9, end, [(
-            read_at, self.mav.param_request_read_encode(
-                FIRMWARE_SYSID, FIRMWARE_COMPID, b"TD_CAM_FX", -1).pack(self.mav))])
-        machine.run(end, machine.pc())
-        if machine.failure:
-            return [f"lens, after the power cycle: {machine.failure}"]
-        if machine.finished:
-            problems.append(f"lens, after the power cycle: stopped early: {machine.finished}")
+        out, run, problems = self._board(machine, ["show"], "after the power cycle")
+        if problems:
+            return [f"lens, after the power cycle: {p}" for p in problems]
+        for line in (f"TD_CAM_FX = {self.focal:g}", "TD_PAD = 1"):
+            if line not in out:
+                problems.append(f"after the power cycle `touchdown board show` lacks {line!r}: "
+                                f"{out.strip()}")
+        self._idle(machine, AFTER_BOOT_NS)
         timed = timed_messages(machine)
-        problems += self._check_value(messages_since(timed, read_at), "TD_CAM_FX", self.focal)
-        problems += self._check_targets(messages_since(timed, start + 0.3e9),
+        problems += self._check_targets(messages_since(timed, run.end_ns + SETTLE_NS),
                                         "after the power cycle")
         return problems
-
-    def _check_value(self, messages, name, value):
-        values = [m.param_value for m in messages if m.get_type() == "PARAM_VALUE"
-                  and m.param_id.rstrip("\0") == name]
-        if not any(abs(v - value) < 1e-3 for v in values):
-            return [f"no PARAM_VALUE {name} = {value:g} (got {values})"]
-        print(f"  lens: PARAM_VALUE {name} = {value:g}")
-        return []
 
     def _check_targets(self, messages, when):
         targets = [m for m in messages if m.get_type() == "LANDING_TARGET"]

@@ -1,8 +1,8 @@
 """Stage `--view TOUCHDOWN`, the frame stream to a host viewer end to end: after
 firmware-in-the-loop (fil.py) the emulator serves the firmware's RTT channel 1 on a TCP port
 on 127.0.0.1, both ways, as a debugger's RTT server does (OpenOCD's `rtt server start PORT 1`),
-draining the up channel and filling the down channel between slices of emulated time, and
-runs `touchdown view tcp:... --record DIR --frames N` against it.
+draining the up channel and filling the down channel between slices of emulated time
+(bridge.py), and runs `touchdown view tcp:... --record DIR --frames N` against it.
 
 Why: the stream crosses the firmware's vision task (which fills the record), its view task
 (which reads the viewer's requests from the down channel and trickles the record into the up
@@ -22,11 +22,11 @@ import csv
 import json
 import os
 import shutil
-import socket
 import struct
 import subprocess
 import tempfile
 
+from .bridge import run_tool
 from .fil import timed_messages
 
 # Frames the viewer records.
@@ -34,10 +34,6 @@ FRAMES = 3
 # Longest emulated time the stage may take (three QVGA records, 77 KB each through an 8 KB
 # channel, take about 0.6 s).
 MAX_EMULATED_NS = 4e9
-# Emulated time between two looks at the RTT channels: a debugger polling every 10 ms.
-POLL_NS = 10e6
-# How far ahead of the emulation the autopilot's messages are put on the line.
-FEED_AHEAD_NS = 0.2e9
 # Same detections: corners this close (pixels), ids and families equal.
 CORNER_TOLERANCE_PX = 0.01
 # The board's fix: the camera within this fraction of the range from where the truth has it.
@@ -114,7 +110,6 @@ class View:
         # `--inject view-unasked`: the requests are dropped, so the board, which streams only
         # when asked, must send nothing and the stage must fail.
         self.deaf = args.inject == "view-unasked"
-        self.fil_start_ns = None
 
     def run(self, machine):
         print(f"  view: touchdown view --record, {FRAMES} frames, over RTT channel 1")
@@ -135,83 +130,43 @@ class View:
         return problems
 
     def _stream(self, machine, rtt, work, rate_before):
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.bind(("127.0.0.1", 0))
-        listener.listen(1)
-        listener.setblocking(False)
-        port = listener.getsockname()[1]
-        command = [self.touchdown, "view", f"tcp:127.0.0.1:{port}", "--record",
-                   os.path.join(work, "rec"), "--frames", str(FRAMES), "--image",
-                   os.path.join(work, "view.png"), "--timeout", "60"]
-        viewer = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        conn, to_host, up_bytes = None, b"", 0
-        start = machine.time_ns
-        self.attached_ns = None
-        machine.stop_at_first_idle = False
-        machine.finished = None
+        up_bytes = 0
+
+        def to_board(data):
+            if not self.deaf:
+                rtt.fill_down(1, data)
+
+        def from_board():
+            nonlocal up_bytes
+            data = rtt.drain_up(1)
+            up_bytes += len(data)
+            return data
+
+        def command(port):
+            return [self.touchdown, "view", f"tcp:127.0.0.1:{port}", "--record",
+                    os.path.join(work, "rec"), "--frames", str(FRAMES), "--image",
+                    os.path.join(work, "view.png"), "--timeout", "60"]
+
+        run = run_tool(machine, self.fil.autopilot, command, to_board, from_board,
+                       MAX_EMULATED_NS)
         problems = []
-        fed_until = start + 0.05e9
-        try:
-            while machine.time_ns < start + MAX_EMULATED_NS and viewer.poll() is None:
-                # The autopilot's messages a little ahead of the emulation, so that a stage
-                # after this one finds the line as FIL leaves it.
-                if fed_until < machine.time_ns + FEED_AHEAD_NS:
-                    self.fil.autopilot.feed(machine, fed_until, fed_until + FEED_AHEAD_NS)
-                    fed_until += FEED_AHEAD_NS
-                machine.run(machine.time_ns + POLL_NS, machine.pc())
-                if machine.failure or machine.finished:
-                    break
-                if conn is None:
-                    try:
-                        conn, _ = listener.accept()
-                        conn.setblocking(False)
-                        self.attached_ns = machine.time_ns
-                    except BlockingIOError:
-                        continue
-                try:
-                    asked = conn.recv(4096)
-                    if asked and not self.deaf:
-                        rtt.fill_down(1, asked)
-                except BlockingIOError:
-                    pass
-                data = rtt.drain_up(1)
-                up_bytes += len(data)
-                to_host += data
-                while to_host:
-                    try:
-                        sent = conn.send(to_host)
-                    except BlockingIOError:
-                        break
-                    to_host = to_host[sent:]
-            end = machine.time_ns
-            # What was fed is consumed before the next stage feeds its own.
-            machine.run(fed_until, machine.pc())
-        finally:
-            if conn is not None:
-                conn.close()
-            listener.close()
-        try:
-            out, err = viewer.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            viewer.kill()
-            out, err = viewer.communicate()
+        if run.timed_out:
             problems.append(f"touchdown view did not end within {MAX_EMULATED_NS / 1e9:g} s "
                             "emulated")
         if machine.failure:
             problems.append(machine.failure)
         if machine.finished:
             problems.append(f"view stage stopped early: {machine.finished}")
-        summary = err.decode(errors="replace").strip().splitlines()
-        lines = out.decode(errors="replace").strip().splitlines()
-        if lines:
-            print(f"  view: the viewer's last line: {lines[-1]}")
-        print(f"  view: {up_bytes} bytes from RTT channel 1 in {(end - start) / 1e6:.0f} ms "
-              f"emulated; viewer: {summary[-1] if summary else '(nothing)'}")
-        if viewer.returncode != 0:
-            problems.append(f"touchdown view exited {viewer.returncode}: "
-                            f"{summary[-1] if summary else ''}")
-        if self.attached_ns is not None and end - self.attached_ns > 0.5e9:
-            rate = target_rate(machine, self.attached_ns, end)
+        if run.stdout.strip():
+            print(f"  view: the viewer's last line: {run.last_line(run.stdout)}")
+        summary = run.last_line(run.stderr)
+        print(f"  view: {up_bytes} bytes from RTT channel 1 in "
+              f"{(run.end_ns - run.start_ns) / 1e6:.0f} ms emulated; viewer: "
+              f"{summary or '(nothing)'}")
+        if run.returncode != 0:
+            problems.append(f"touchdown view exited {run.returncode}: {summary}")
+        if run.attached_ns is not None and run.end_ns - run.attached_ns > 0.5e9:
+            rate = target_rate(machine, run.attached_ns, run.end_ns)
             print(f"  view: LANDING_TARGETs {rate_before:.1f}/s before the viewer, {rate:.1f}/s "
                   "while it streamed")
             if rate < TARGET_RATE_KEPT * rate_before:
