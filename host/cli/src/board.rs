@@ -17,7 +17,7 @@ use touchdown_core::camera::CameraModel;
 use touchdown_core::companion::mavlink::dialects::common::{
     MavMessage, MavParamType, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
 };
-use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader, Message};
+use touchdown_core::companion::mavlink::Message;
 use touchdown_core::companion::FrameParser;
 use touchdown_core::crc::crc16_x25;
 use touchdown_core::params::{ParamId, PAD_DESIGNS};
@@ -25,7 +25,8 @@ use touchdown_core::sha256::Sha256;
 use touchdown_formats::camera::load_camera;
 use touchdown_formats::pad::{config_of_layout, load_pad, PadConfig};
 
-use super::companion::endpoint::{Endpoint, EndpointSpec, Received};
+use super::companion::endpoint::{Endpoint, EndpointSpec, LinkOptions, Received};
+use super::sitl::gcs::gcs_frame;
 use super::{signing_key, CliError, Outcome};
 
 /// `--help`'s long text.
@@ -112,9 +113,6 @@ const LENS: [ParamId; 9] = [
     ParamId::CamK3,
 ];
 
-/// Our identity: a ground station's.
-const GCS_SYSTEM_ID: u8 = 255;
-const GCS_COMPONENT_ID: u8 = 190;
 /// Tries per parameter.
 const TRIES: u32 = 3;
 
@@ -225,17 +223,8 @@ struct BoardLink {
 impl BoardLink {
     /// Sends `message`, signed when a key is held.
     fn send(&mut self, message: &MavMessage) -> Result<(), CliError> {
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message(
-            MavHeader {
-                system_id: GCS_SYSTEM_ID.into(),
-                component_id: GCS_COMPONENT_ID,
-                sequence: self.sequence,
-            },
-            message,
-        );
+        let mut frame = gcs_frame(self.sequence, message);
         self.sequence = self.sequence.wrapping_add(1);
-        let mut frame = raw.raw_bytes().to_vec();
         if let Some(key) = &self.key {
             self.timestamp += 1;
             frame = signed(&frame, message.message_id(), key, self.timestamp);
@@ -386,23 +375,14 @@ fn signed(frame: &[u8], message_id: u32, key: &[u8; 32], timestamp: u64) -> Vec<
 
 impl BoardArgs {
     fn endpoint(&self) -> Result<EndpointSpec, CliError> {
-        Ok(if let Some(path) = &self.serial {
-            EndpointSpec::Serial {
-                path: path.clone(),
-                baud: self.baud,
-            }
-        } else if let Some(addr) = &self.tcp {
-            EndpointSpec::TcpClient(addr.clone())
-        } else if let Some(remote) = &self.udp {
-            EndpointSpec::UdpClient {
-                remote: remote.clone(),
-                local_port: None,
-            }
-        } else {
-            return Err(CliError::new(
-                "no link to the board: give one of --udp, --tcp or --serial",
-            ));
-        })
+        LinkOptions {
+            serial: self.serial.as_deref().map(|path| (path, self.baud)),
+            tcp: self.tcp.as_deref(),
+            udp: self.udp.as_deref().map(|r| (r, None)),
+            ..LinkOptions::default()
+        }
+        .spec()
+        .ok_or_else(|| CliError::new("no link to the board: give one of --udp, --tcp or --serial"))
     }
 }
 

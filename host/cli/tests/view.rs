@@ -10,10 +10,9 @@ use std::process::{Command, Output};
 
 use touchdown_core::camera::CameraModel;
 use touchdown_core::detect::Detection;
-use touchdown_core::frame_stream::{
-    encode_head, Adler32, FrameMeta, RequestParser, StreamedFix, MAX_HEAD_LEN,
-};
+use touchdown_core::frame_stream::{FrameMeta, RequestParser, StreamedFix};
 use touchdown_core::geometry::Point;
+use touchdown_formats::frame_stream::encode_record;
 
 /// A fresh, empty scratch directory under the target directory.
 fn scratch(name: &str) -> PathBuf {
@@ -73,15 +72,7 @@ fn record(index: u32, width: u16, height: u16, scale: u8, pad: &str) -> Vec<u8> 
             reprojection_rms_px: 0.2,
         }),
     };
-    let mut head = [0u8; MAX_HEAD_LEN];
-    let len = encode_head(&meta, &mut head).expect("encodes");
-    let mut sum = Adler32::new();
-    sum.update(&head[..len]);
-    sum.update(&pixels);
-    let mut out = head[..len].to_vec();
-    out.extend_from_slice(&pixels);
-    out.extend_from_slice(&sum.value().to_le_bytes());
-    out
+    encode_record(&meta, &pixels).expect("encodes")
 }
 
 fn lines(path: &Path) -> Vec<String> {

@@ -8,10 +8,28 @@
 
 use touchdown_core::camera::CameraModel;
 use touchdown_core::frame_stream::{
-    Adler32, MAGIC, MAX_META_LEN, MAX_PIXELS, META_FIXED_LEN, PREAMBLE_LEN, TRAILER_LEN, VERSION,
+    encode_head, Adler32, FrameMeta, StreamError, MAGIC, MAX_HEAD_LEN, MAX_META_LEN, MAX_PIXELS,
+    META_FIXED_LEN, PREAMBLE_LEN, TRAILER_LEN, VERSION,
 };
 
 pub use touchdown_core::frame_stream::StreamedFix;
+
+/// A whole record as the board writes it (head, `pixels`, checksum): for tools and tests that
+/// stand in for a board. `pixels` must be `meta.width * meta.height` bytes.
+pub fn encode_record(meta: &FrameMeta<'_>, pixels: &[u8]) -> Result<Vec<u8>, StreamError> {
+    if pixels.len() != usize::from(meta.width) * usize::from(meta.height) {
+        return Err(StreamError::BadFrameSize);
+    }
+    let mut head = [0u8; MAX_HEAD_LEN];
+    let len = encode_head(meta, &mut head)?;
+    let mut sum = Adler32::new();
+    sum.update(&head[..len]);
+    sum.update(pixels);
+    let mut out = head[..len].to_vec();
+    out.extend_from_slice(pixels);
+    out.extend_from_slice(&sum.value().to_le_bytes());
+    Ok(out)
+}
 
 /// One detection as the board sent it (full-resolution pixels).
 #[derive(Debug, Clone, PartialEq)]
@@ -311,7 +329,6 @@ fn parse_record(record: &[u8], meta_len: usize, pixel_len: usize) -> Option<Stre
 mod tests {
     use super::*;
     use touchdown_core::detect::Detection;
-    use touchdown_core::frame_stream::{encode_head, FrameMeta, MAX_HEAD_LEN};
     use touchdown_core::geometry::Point;
 
     /// A record as the board writes it: head, pixels, checksum.
@@ -351,15 +368,7 @@ mod tests {
                 reprojection_rms_px: 0.3,
             }),
         };
-        let mut head = [0u8; MAX_HEAD_LEN];
-        let len = encode_head(&meta, &mut head).unwrap();
-        let mut sum = Adler32::new();
-        sum.update(&head[..len]);
-        sum.update(pixels);
-        let mut out = head[..len].to_vec();
-        out.extend_from_slice(pixels);
-        out.extend_from_slice(&sum.value().to_le_bytes());
-        out
+        encode_record(&meta, pixels).unwrap()
     }
 
     #[test]

@@ -45,6 +45,46 @@ pub enum EndpointSpec {
     },
 }
 
+/// The link options of a command line (clap lets at most one through; a command without one
+/// of them passes `None`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LinkOptions<'a> {
+    /// `--serial PATH` and `--baud N`.
+    pub serial: Option<(&'a Path, u32)>,
+    /// `--tcp HOST:PORT`.
+    pub tcp: Option<&'a str>,
+    /// `--tcp-listen ADDR:PORT`.
+    pub tcp_listen: Option<&'a str>,
+    /// `--udp-listen ADDR:PORT`.
+    pub udp_listen: Option<&'a str>,
+    /// `--udp HOST:PORT` and `--udp-local-port`.
+    pub udp: Option<(&'a str, Option<u16>)>,
+}
+
+impl LinkOptions<'_> {
+    /// The link the options name, if any.
+    pub fn spec(&self) -> Option<EndpointSpec> {
+        Some(if let Some((path, baud)) = self.serial {
+            EndpointSpec::Serial {
+                path: path.to_path_buf(),
+                baud,
+            }
+        } else if let Some(addr) = self.tcp {
+            EndpointSpec::TcpClient(addr.to_string())
+        } else if let Some(addr) = self.tcp_listen {
+            EndpointSpec::TcpListen(addr.to_string())
+        } else if let Some(addr) = self.udp_listen {
+            EndpointSpec::UdpListen(addr.to_string())
+        } else {
+            let (remote, local_port) = self.udp?;
+            EndpointSpec::UdpClient {
+                remote: remote.to_string(),
+                local_port,
+            }
+        })
+    }
+}
+
 impl EndpointSpec {
     /// The option as the user wrote it, for messages.
     pub fn describe(&self) -> String {

@@ -26,7 +26,7 @@ use touchdown_core::params::{PipelineSettings, SigningSecret};
 use touchdown_core::pipeline::{FramePipeline, PipelineConfig};
 
 use super::{CliError, Outcome};
-use endpoint::{Endpoint, EndpointSpec, Received, Sent};
+use endpoint::{Endpoint, EndpointSpec, LinkOptions, Received, Sent};
 use summary::{RunCounts, Stop};
 use touchdown_eval::workspace::HostWorkspace;
 use touchdown_formats::families::{self, SelectedFamily};
@@ -163,27 +163,19 @@ pub enum ProfileArg {
 impl CompanionArgs {
     /// The link the options name (clap lets at most one through).
     fn endpoint(&self) -> Result<EndpointSpec, CliError> {
-        Ok(if let Some(path) = &self.serial {
-            EndpointSpec::Serial {
-                path: path.clone(),
-                baud: self.baud,
-            }
-        } else if let Some(addr) = &self.tcp {
-            EndpointSpec::TcpClient(addr.clone())
-        } else if let Some(addr) = &self.tcp_listen {
-            EndpointSpec::TcpListen(addr.clone())
-        } else if let Some(addr) = &self.udp_listen {
-            EndpointSpec::UdpListen(addr.clone())
-        } else if let Some(remote) = &self.udp {
-            EndpointSpec::UdpClient {
-                remote: remote.clone(),
-                local_port: self.udp_local_port,
-            }
-        } else {
-            return Err(CliError::new(
+        LinkOptions {
+            serial: self.serial.as_deref().map(|path| (path, self.baud)),
+            tcp: self.tcp.as_deref(),
+            tcp_listen: self.tcp_listen.as_deref(),
+            udp_listen: self.udp_listen.as_deref(),
+            udp: self.udp.as_deref().map(|r| (r, self.udp_local_port)),
+        }
+        .spec()
+        .ok_or_else(|| {
+            CliError::new(
                 "no link to the autopilot: give one of --udp, --udp-listen, --tcp, --tcp-listen \
                  or --serial (examples: touchdown companion --help)",
-            ));
+            )
         })
     }
 }

@@ -265,18 +265,10 @@ impl GcsLink {
     }
 
     pub(super) fn send(&mut self, message: &MavMessage) -> Result<(), CliError> {
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message(
-            MavHeader {
-                system_id: GCS_SYSTEM_ID.into(),
-                component_id: GCS_COMPONENT_ID,
-                sequence: self.sequence,
-            },
-            message,
-        );
+        let frame = gcs_frame(self.sequence, message);
         self.sequence = self.sequence.wrapping_add(1);
         self.endpoint
-            .send(raw.raw_bytes())
+            .send(&frame)
             .map(|_| ())
             .map_err(|e| CliError(format!("{}: {e}", self.describe())))
     }
@@ -473,6 +465,20 @@ impl GcsLink {
         }
         Ok(None)
     }
+}
+
+/// `message` as a ground station (255/190) sends it: an unsigned MAVLink 2 frame.
+pub(crate) fn gcs_frame(sequence: u8, message: &MavMessage) -> Vec<u8> {
+    let mut raw = MAVLinkV2MessageRaw::new();
+    raw.serialize_message(
+        MavHeader {
+            system_id: GCS_SYSTEM_ID.into(),
+            component_id: GCS_COMPONENT_ID,
+            sequence,
+        },
+        message,
+    );
+    raw.raw_bytes().to_vec()
 }
 
 /// A parameter's value on the wire: ArduPilot casts integers to the float

@@ -31,6 +31,7 @@ mod flight;
 mod link;
 
 pub use flight::{BoardPosition, Flight, FlightEnd, FlightLog, PX4_TIMESYNC_ANSWERS};
+pub(crate) use link::gcs_frame;
 pub use link::{prepare, GcsLink, GpsSwitch, Prepared, Status, CONNECT_PATIENCE, PARAM_TRY};
 
 /// The autopilot at the other end, from its HEARTBEAT.
