@@ -399,13 +399,13 @@ impl StreamSwitch {
 /// sizes do not match `pixels`.
 pub fn halve(pixels: &[u8], width: usize, height: usize, out: &mut [u8]) -> Option<(usize, usize)> {
     let (w2, h2) = (width / 2, height / 2);
-    if pixels.len() < width * height || out.len() < w2 * h2 {
+    let whole = width.checked_mul(height)?;
+    if w2 == 0 || h2 == 0 || pixels.len() < whole || out.len() < w2 * h2 {
         return None;
     }
-    let rows = pixels.chunks_exact(width).take(2 * h2);
-    let mut pairs = rows.clone().step_by(2).zip(rows.skip(1).step_by(2));
-    for out_row in out.chunks_exact_mut(w2.max(1)).take(h2) {
-        let Some((top, bottom)) = pairs.next() else {
+    let mut rows = pixels.chunks_exact(width.max(2));
+    for out_row in out.chunks_exact_mut(w2).take(h2) {
+        let (Some(top), Some(bottom)) = (rows.next(), rows.next()) else {
             break;
         };
         let blocks = top.chunks_exact(2).zip(bottom.chunks_exact(2));
@@ -541,5 +541,7 @@ mod tests {
             ]
         );
         assert_eq!(halve(&pixels, 5, 3, &mut out), None);
+        assert_eq!(halve(&pixels, 1, 10, &mut out), None);
+        assert_eq!(halve(&pixels, 0, 0, &mut out), None);
     }
 }

@@ -9,7 +9,9 @@
 //! companion's MAVLink parse (any received bytes), its LANDING_TARGET and encode (draining
 //! `poll_transmit`), the vision task's exposure loop (`AutoExposure::set_limits` included)
 //! and its frame timing (`FrameTiming`: exposure time stamp, capture timeout, settling,
-//! skipped frames). Also, off the firmware's path but public and run by the host tools:
+//! skipped frames), and the frame stream to a host viewer (the request parser on any bytes,
+//! the switch, the record's head, the halving, the checksum). Also, off the firmware's path
+//! but public and run by the host tools:
 //! single-marker pose (IPPE + refinement).
 //!
 //! Not covered: `PoseMethod::PaperHomography`, the paper's homography decomposition, which
@@ -36,6 +38,9 @@ use touchdown_core::companion::{Companion, CompanionConfig, MAX_FRAME_LEN};
 use touchdown_core::detect::QvgaWorkspace;
 use touchdown_core::family::{tables, Family};
 use touchdown_core::filter::{FrameEstimate, VehicleState};
+use touchdown_core::frame_stream::{
+    encode_head, halve, Adler32, FrameMeta, RequestParser, StreamSwitch, MAX_HEAD_LEN,
+};
 use touchdown_core::image::GrayImage;
 use touchdown_core::pad::{designs, PadLayout};
 use touchdown_core::params::PipelineSettings;
@@ -63,6 +68,8 @@ struct Pipeline<'a> {
     workspace: &'a mut QvgaWorkspace,
     companion: Companion,
     exposure: AutoExposure,
+    /// The view task's switch (whether a host viewer asks).
+    view: StreamSwitch,
 }
 
 /// One frame: the per-frame pipeline (detection, pad fix, estimator) with the vehicle state
@@ -145,6 +152,43 @@ fn per_frame(pipeline: &mut Pipeline<'_>, pixels: &[u8], rx: &[u8], now_us: u64)
     let _ = black_box(timing.capture_timeout_us());
     let _ = black_box(timing.settling_time_us());
     let _ = black_box(timing.frames_skipped(black_box(now_us)));
+    // The frame stream to a host viewer: the request parser on any bytes the debugger wrote,
+    // the switch, the record's head with the frame's detections and fix, and the halving.
+    let mut requests = RequestParser::new();
+    if let Some(request) = requests.push(black_box(rx)) {
+        pipeline.view.requested(request, now_us);
+    }
+    if let Some(scale) = pipeline.view.take(black_box(now_us)) {
+        let fix = black_box(None);
+        let meta = FrameMeta {
+            index: black_box(1),
+            t_us: exposure_us,
+            width: black_box(WIDTH as u16),
+            height: black_box(HEIGHT as u16),
+            scale,
+            exposure_us: black_box(4000),
+            gain_x16: black_box(16),
+            process_us: black_box(9000),
+            camera: pipeline.vision.camera(),
+            families: black_box(&["tag36h11"]),
+            pad_name: pipeline.vision.pad().name(),
+            pad_scale: black_box(1.0),
+            detections: pipeline.vision.detector().detections(),
+            fix,
+        };
+        let mut head = [0u8; MAX_HEAD_LEN];
+        let _ = black_box(encode_head(&meta, &mut head));
+        let mut half = [0u8; WIDTH * HEIGHT / 4];
+        let _ = black_box(halve(
+            pixels,
+            black_box(WIDTH),
+            black_box(HEIGHT),
+            &mut half,
+        ));
+        let mut sum = Adler32::new();
+        sum.update(black_box(&head));
+        black_box(sum.value());
+    }
 }
 
 /// The entry point (lld's default `_start`): builds the pipeline and runs frames forever.
@@ -190,6 +234,7 @@ pub extern "C" fn _start() -> ! {
         workspace,
         companion,
         exposure,
+        view: StreamSwitch::new(),
     };
     let mut now_us = 0u64;
     loop {

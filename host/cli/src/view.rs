@@ -514,7 +514,7 @@ pub fn run(args: &ViewArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             ended = "time up";
             break;
         }
-        if n == 0 && last_frame_at.elapsed() > timeout {
+        if last_frame_at.elapsed() > timeout {
             return Err(CliError(format!(
                 "{}: no frame for {} s (is the firmware running, and the RTT channel 1 served there?)",
                 args.source, args.timeout
