@@ -17,11 +17,13 @@
 //! | [`config_toml`] | text | an accepted camera validates, an accepted pad builds its layout |
 //! | [`recording`] | selector, `frames.csv` text or PGM bytes | accepted rows and frames are consistent |
 //! | [`mavlink_stream`] | a script of link bytes, frames, params, time steps | every emitted frame is valid MAVLink, targets finite, draining ends |
+//! | [`frame_stream`] | chunk size, bytes | the viewer's reader returns whole, consistent records; the board's request parser only sensible requests |
 //! | [`signed_stream`] | a key, then signed / wrongly signed / unsigned / replayed writes, armed HEARTBEATs, bytes, time steps | only writes signed with the key in force change anything, none but TD_LOCK while locked; every frame sent signed and valid, timestamps rising |
 
 mod config_toml;
 mod detect;
 mod family_file;
+mod frame_stream;
 mod input;
 mod mavlink_stream;
 mod recording;
@@ -32,6 +34,7 @@ pub use detect::{
     check_detections, detect, DetectState, DETECT_MAX_HEIGHT, DETECT_MAX_WIDTH, FAMILY_SETS,
 };
 pub use family_file::family_file;
+pub use frame_stream::frame_stream;
 pub use input::Input;
 pub use mavlink_stream::{check_emitted, drain, mavlink_frame, mavlink_stream, Op};
 pub use recording::recording;

@@ -21,13 +21,14 @@ use touchdown_core::companion::mavlink::dialects::common::{
 use touchdown_core::companion::mavlink::{MAVLinkV2MessageRaw, MavHeader};
 use touchdown_fuzz_harness as harness;
 
-const TARGETS: [&str; 6] = [
+const TARGETS: [&str; 7] = [
     "detect",
     "family_file",
     "config_toml",
     "recording",
     "mavlink_stream",
     "signed_stream",
+    "frame_stream",
 ];
 
 /// `fuzz/`, this crate's parent directory.
@@ -61,6 +62,7 @@ fn run(target: &str, data: &[u8], state: &mut harness::DetectState) {
         "signed_stream" => {
             harness::signed_stream(data);
         }
+        "frame_stream" => harness::frame_stream(data),
         _ => unreachable!("unknown target {target}"),
     }
 }
@@ -394,4 +396,91 @@ fn mavlink_seeds() -> Vec<(&'static str, Vec<u8>)> {
     s.wait(10_000);
     seeds.push(("params-absurd", s.0));
     seeds
+}
+
+/// The `frame_stream` seeds: records as the board writes them (a small frame with a marker
+/// and a fix, then one joined half-way before a whole one) and a viewer's request, each after
+/// a chunk-size byte.
+fn frame_stream_seeds() -> Vec<(&'static str, Vec<u8>)> {
+    use touchdown_core::frame_stream::{FrameMeta, StreamedFix, ViewRequest};
+    use touchdown_formats::frame_stream::encode_record;
+    let camera = touchdown_core::camera::CameraModel::pinhole(320, 240, 233.5, 233.5, 159.5, 119.5);
+    let p = |x, y| touchdown_core::geometry::Point::new(x, y);
+    let detections = [touchdown_core::detect::Detection {
+        family: 0,
+        id: 36,
+        hamming: 0,
+        corners: [p(4.0, 2.0), p(12.0, 2.0), p(12.0, 10.0), p(4.0, 10.0)],
+        center: p(8.0, 6.0),
+        decision_margin: 1.0,
+        contrast: 90.0,
+    }];
+    let pixels: Vec<u8> = (0..16 * 12).map(|i| (i * 7 % 256) as u8).collect();
+    let record = |index| {
+        encode_record(
+            &FrameMeta {
+                index,
+                t_us: 1_000_000,
+                width: 16,
+                height: 12,
+                scale: 2,
+                exposure_us: 4000,
+                gain_x16: 16,
+                process_us: 9000,
+                camera: &camera,
+                families: &["tag36h11"],
+                pad_name: "nested-field",
+                pad_scale: 1.0,
+                detections: &detections,
+                fix: Some(StreamedFix {
+                    camera_position: [0.1, 0.2, 3.0],
+                    markers_used: 1,
+                    reprojection_rms_px: 0.2,
+                }),
+            },
+            &pixels,
+        )
+        .unwrap()
+    };
+    let one = record(1);
+    let mut joined = vec![63u8];
+    joined.extend_from_slice(&one[one.len() / 2..]);
+    joined.extend_from_slice(&record(2));
+    let mut whole = vec![255u8];
+    whole.extend_from_slice(&one);
+    let mut request = vec![0u8, b'T', b'D'];
+    request.extend_from_slice(&ViewRequest { every: 2, scale: 1 }.encode());
+    vec![
+        ("record", whole),
+        ("joined-mid-record", joined),
+        ("request", request),
+    ]
+}
+
+/// Regenerates `fuzz/corpus/frame_stream/` (run on demand).
+#[test]
+#[ignore]
+fn write_frame_stream_seeds() {
+    let dir = fuzz_dir().join("corpus/frame_stream");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (name, bytes) in frame_stream_seeds() {
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+}
+
+/// The frame-stream seeds hold what they say: the whole record and the one after a cut are
+/// read, the request is found.
+#[test]
+fn frame_stream_seeds_decode() {
+    for (name, bytes) in frame_stream_seeds() {
+        let mut reader = touchdown_formats::frame_stream::StreamReader::new();
+        reader.push(&bytes[1..]);
+        let frames = std::iter::from_fn(|| reader.next_frame()).count();
+        let requests = touchdown_core::frame_stream::RequestParser::new().push(&bytes[1..]);
+        match name {
+            "request" => assert!(requests.is_some() && frames == 0, "{name}"),
+            _ => assert_eq!(frames, 1, "{name}"),
+        }
+        harness::frame_stream(&bytes);
+    }
 }
