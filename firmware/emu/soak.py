@@ -142,6 +142,10 @@ PARAM_RANGES = {
 FLOOD_SETTABLE = ("TD_TIME_BASE", "TD_CAM_POS_X", "TD_CAM_POS_Y", "TD_CAM_POS_Z",
                   "TD_PX4_OL_ALT", "TD_PAD_YAW")
 
+# How long a PARAM_REQUEST_LIST's answers take to go out: the board's 33 parameters, one
+# every 20 ms (core's param_stream_interval_us), and room for the line.
+PARAM_LIST_NS = 1.0e9
+
 KINDS = ("line-noise", "autopilot-reboot", "param-flood", "dropped-frames", "brown-out")
 # The signing clock (10 µs units since 2015-01-01) at the soak's start: a fixed date, so that
 # a seed gives the same bytes; the autopilot and the ground station run it on with the
@@ -766,8 +770,8 @@ class Soak:
         extra.append((g1, b"", "flood-end"))
         # While the flood's answers and list streams go out, a probe's PARAM_VALUE could be
         # another's: the flood's own read-back stands for them.
-        self.no_param_probe.append((g0, g1 + 0.6e9))
-        self._advance(g1 + 0.6e9, extra)
+        self.no_param_probe.append((g0, g1 + PARAM_LIST_NS))
+        self._advance(g1 + PARAM_LIST_NS, extra)
         result["end"] = self.arrivals["flood-end"]
         changed_at = self.arrivals.get("change") if changed_at_index is not None else None
         self.arrivals.pop("change", None)
@@ -822,7 +826,7 @@ class Soak:
     def _read_all(self, when):
         """PARAM_REQUEST_LIST: every parameter, as the board now has it; returns the values."""
         g = self.now()
-        self._advance(g + 0.6e9, [(g, self._pack(self.gcs.param_request_list_encode(
+        self._advance(g + PARAM_LIST_NS, [(g, self._pack(self.gcs.param_request_list_encode(
             FIRMWARE_SYSID, FIRMWARE_COMPID), self.gcs), "list")])
         asked = self.arrivals.pop("list")
         got = {}
