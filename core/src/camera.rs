@@ -60,6 +60,13 @@ pub const MAX_READOUT_US: f32 = 1.0e6;
 /// Largest accepted ratio between `fx` and `fy` (either way round).
 pub const MAX_ASPECT: f32 = 4.0;
 
+/// A pixel coordinate in a frame resampled `factor` new pixels per old pixel: pixel centres
+/// are at whole coordinates, so a block's centre maps to the new pixel's (the contract's
+/// convention: (0, 0) is the centre of the top-left pixel).
+pub fn resampled_coordinate(x: f32, factor: f32) -> f32 {
+    (x + 0.5) * factor - 0.5
+}
+
 /// A calibrated camera. Lengths in pixels; see the module documentation for the model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -99,6 +106,24 @@ impl CameraModel {
             cy,
             distortion: [0.0; 5],
             line_time_us: 0.0,
+        }
+    }
+
+    /// The same lens for the same scene resampled `factor` new pixels per old pixel along
+    /// each axis (0.5: a frame halved by averaging 2x2 blocks; 2: the other way), into a
+    /// `width x height` frame: focal lengths scale, the principal point moves with the pixel
+    /// centres ([`resampled_coordinate`]), the distortion (on normalised coordinates) stays,
+    /// and a row takes `1 / factor` times as long to read out.
+    pub fn resampled(&self, factor: f32, width: u32, height: u32) -> CameraModel {
+        CameraModel {
+            width,
+            height,
+            fx: self.fx * factor,
+            fy: self.fy * factor,
+            cx: resampled_coordinate(self.cx, factor),
+            cy: resampled_coordinate(self.cy, factor),
+            distortion: self.distortion,
+            line_time_us: self.line_time_us / factor,
         }
     }
 
@@ -268,6 +293,22 @@ impl CameraModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn resampling_moves_the_principal_point_with_the_pixel_centres() {
+        let camera = CameraModel {
+            line_time_us: 60.0,
+            ..CameraModel::pinhole(640, 480, 500.0, 502.0, 319.5, 239.5)
+        };
+        let half = camera.resampled(0.5, 320, 240);
+        assert_eq!(
+            (half.fx, half.fy, half.cx, half.cy),
+            (250.0, 251.0, 159.5, 119.5)
+        );
+        assert_eq!(half.line_time_us, 120.0);
+        assert_eq!(half.resampled(2.0, 640, 480), camera);
+        assert_eq!(resampled_coordinate(0.0, 0.5), -0.25);
+    }
 
     fn strong() -> CameraModel {
         CameraModel {

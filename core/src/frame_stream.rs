@@ -17,6 +17,7 @@
 
 use crate::camera::CameraModel;
 use crate::detect::Detection;
+use crate::family::Family;
 
 /// First bytes of every frame record.
 pub const MAGIC: [u8; 4] = *b"TDVF";
@@ -96,7 +97,7 @@ pub struct FrameMeta<'a> {
     /// The camera model the board solves with (at full resolution).
     pub camera: &'a CameraModel,
     /// Families searched, in the order [`Detection::family`] indexes them.
-    pub families: &'a [&'a str],
+    pub families: &'a [&'a Family<'a>],
     /// The pad's name (a shipped design's).
     pub pad_name: &'a str,
     /// The pad's size against its built size (TD_TAG_SIZE's scale).
@@ -242,8 +243,8 @@ pub fn encode_head(meta: &FrameMeta<'_>, out: &mut [u8]) -> Result<usize, Stream
     // The variable parts: families, pad name, detections.
     let mut families_len = 0usize;
     let mut families_count = 0u8;
-    for name in meta.families {
-        let extra = name.len() + usize::from(families_len > 0);
+    for family in meta.families {
+        let extra = family.name.len() + usize::from(families_len > 0);
         if families_len + extra > MAX_FAMILIES_LEN {
             break;
         }
@@ -253,7 +254,7 @@ pub fn encode_head(meta: &FrameMeta<'_>, out: &mut [u8]) -> Result<usize, Stream
     w.u8(families_count);
     w.u8(families_len as u8);
     w.u16(0);
-    for (i, name) in meta
+    for (i, family) in meta
         .families
         .iter()
         .take(usize::from(families_count))
@@ -262,7 +263,7 @@ pub fn encode_head(meta: &FrameMeta<'_>, out: &mut [u8]) -> Result<usize, Stream
         if i > 0 {
             w.u8(b',');
         }
-        w.bytes(name.as_bytes());
+        w.bytes(family.name.as_bytes());
     }
     short_text(&mut w, meta.pad_name, MAX_PAD_NAME_LEN);
     for d in meta.detections.iter().take(markers) {
@@ -420,6 +421,7 @@ pub fn halve(pixels: &[u8], width: usize, height: usize, out: &mut [u8]) -> Opti
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::family::tables;
     use crate::geometry::Point;
 
     fn camera() -> CameraModel {
@@ -469,7 +471,7 @@ mod tests {
             gain_x16: 16,
             process_us: 9000,
             camera: &cam,
-            families: &["tag36h11", "aruco_4x4_50"],
+            families: &[&tables::TAG36H11, &tables::ARUCO_4X4_50],
             pad_name: "nested-field",
             pad_scale: 1.0,
             detections: &detections,

@@ -82,6 +82,10 @@ def main(argv=None):
     if (args.view or args.lens) and (args.soak or not args.fil):
         print("--view and --lens need --fil SECONDS and no --soak", file=sys.stderr)
         return 2
+    if args.lens and (args.power_cycle or args.signing):
+        print("--lens leaves a longer lens set on the board, which --power-cycle and --signing "
+              "do not expect: run them apart", file=sys.stderr)
+        return 2
     if (args.soak or args.soak_signing) and not args.fil:
         print("--soak needs --fil SECONDS", file=sys.stderr)
         return 2

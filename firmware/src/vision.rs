@@ -333,8 +333,8 @@ pub async fn task(
                     &mut pipeline,
                     &vehicle,
                     workspace,
-                    &mut view,
                 );
+                view.offer(front, &processed, &timing, &exposure, &pipeline);
                 if let Some(setting) = exposure.update_metered(&processed.metering) {
                     write_exposure(&mut sensor.camera, setting).await;
                 }
@@ -345,7 +345,7 @@ pub async fn task(
             if let Some(p) = processed {
                 summary.frames += 1;
                 summary.markers += p.markers;
-                summary.fixes += u32::from(p.fix);
+                summary.fixes += u32::from(p.fix.is_some());
                 summary.total_detect += p.detect;
                 summary.max_detect = summary.max_detect.max(p.detect);
                 channels::frame_done();
@@ -405,16 +405,17 @@ fn count_error(summary: &mut Summary, e: CaptureError) {
 
 /// What processing one frame gave.
 struct Processed {
+    /// The frame's time (middle row at mid-exposure), µs.
+    exposure_at: u64,
     markers: u32,
-    fix: bool,
+    /// The pad fix, as a viewer is sent it.
+    fix: Option<StreamedFix>,
     detect: Duration,
     metering: Metering,
 }
 
 /// Runs the frame through the pipeline and posts the result to the link. Runs on the CPU
 /// without yielding (the capture of the next frame proceeds by DMA meanwhile).
-// Each argument is a separate piece of the task's state, borrowed for this frame only.
-#[allow(clippy::too_many_arguments)]
 fn process(
     frame: &FrameBuffer,
     frame_end: Instant,
@@ -423,7 +424,6 @@ fn process(
     pipeline: &mut FramePipeline<'static>,
     vehicle: &VehicleState,
     workspace: &mut Workspace,
-    view: &mut ViewOffer,
 ) -> Processed {
     // The frame's time: the captured image's middle row at mid-exposure.
     let before_end_us = timing.mid_exposure_before_frame_end_us(
@@ -438,8 +438,9 @@ fn process(
     let Ok(image) = GrayImage::new(frame.pixels(), WIDTH, HEIGHT) else {
         // Unreachable: the buffer has exactly WIDTH x HEIGHT bytes.
         return Processed {
+            exposure_at,
             markers: 0,
-            fix: false,
+            fix: None,
             detect: Duration::from_ticks(0),
             metering: Metering::mean_only(0),
         };
@@ -450,20 +451,18 @@ fn process(
     if let Some(e) = report.detect_error {
         debug!("vision: detect failed: {}", e);
     }
-    let has_fix = report.fix.is_some();
     channels::post_to_link(LinkEvent::Frame(report.estimate));
-    view.offer(
-        frame,
-        exposure_at,
-        timing,
-        exposure,
-        pipeline,
-        &report,
-        detect,
-    );
     Processed {
+        exposure_at,
         markers: u32::try_from(report.markers).unwrap_or(u32::MAX),
-        fix: has_fix,
+        fix: report.fix.as_ref().map(|fix| {
+            let c = fix.camera_position();
+            StreamedFix {
+                camera_position: [c.x, c.y, c.z],
+                markers_used: fix.markers_used,
+                reprojection_rms_px: fix.reprojection_rms_px,
+            }
+        }),
         detect,
         metering: report.metering,
     }
@@ -483,16 +482,13 @@ impl ViewOffer {
     /// Fills the record with this frame and hands it to the view task, when a viewer asks for
     /// this frame and the record is back from sending the last one; otherwise does nothing
     /// (never waits).
-    #[allow(clippy::too_many_arguments)]
     fn offer(
         &mut self,
         frame: &FrameBuffer,
-        exposure_at: u64,
+        processed: &Processed,
         timing: &FrameTiming,
         exposure: &AutoExposure,
         pipeline: &FramePipeline<'static>,
-        report: &touchdown_core::pipeline::FrameReport,
-        detect: Duration,
     ) {
         self.index = self.index.wrapping_add(1);
         if let Some((request, at)) = channels::view_request() {
@@ -527,33 +523,22 @@ impl ViewOffer {
         };
         record.pixel_len = width * height;
         let setting = exposure.setting();
-        let mut names = [""; 8];
-        for (name, family) in names.iter_mut().zip(SEARCHED.iter()) {
-            *name = family.name;
-        }
         let settings = pipeline.settings();
         let meta = FrameMeta {
             index: self.index,
-            t_us: exposure_at,
+            t_us: processed.exposure_at,
             width: width as u16,
             height: height as u16,
             scale,
             exposure_us: (u64::from(setting.lines) * u64::from(timing.line_ns) / 1000) as u32,
             gain_x16: setting.gain.0,
-            process_us: u32::try_from(detect.as_micros()).unwrap_or(u32::MAX),
+            process_us: u32::try_from(processed.detect.as_micros()).unwrap_or(u32::MAX),
             camera: pipeline.camera(),
-            families: &names[..SEARCHED.len().min(names.len())],
+            families: SEARCHED,
             pad_name: pipeline.pad().name(),
             pad_scale: settings.pad_scale(pipeline.built_pad()),
             detections: pipeline.detector().detections(),
-            fix: report.fix.as_ref().map(|fix| {
-                let c = fix.camera_position();
-                StreamedFix {
-                    camera_position: [c.x, c.y, c.z],
-                    markers_used: fix.markers_used,
-                    reprojection_rms_px: fix.reprojection_rms_px,
-                }
-            }),
+            fix: processed.fix,
         };
         match frame_stream::encode_head(&meta, &mut record.head) {
             Ok(len) if record.pixel_len > 0 => {

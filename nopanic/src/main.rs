@@ -170,7 +170,7 @@ fn per_frame(pipeline: &mut Pipeline<'_>, pixels: &[u8], rx: &[u8], now_us: u64)
             gain_x16: black_box(16),
             process_us: black_box(9000),
             camera: pipeline.vision.camera(),
-            families: black_box(&["tag36h11"]),
+            families: black_box(tables::DEFAULT),
             pad_name: pipeline.vision.pad().name(),
             pad_scale: black_box(1.0),
             detections: pipeline.vision.detector().detections(),

@@ -447,7 +447,7 @@ fn view_regions(
             gain_x16: 16,
             process_us: 9000,
             camera: pipeline.camera(),
-            families: &["tag36h11", "aruco_4x4_50"],
+            families: tables::DEFAULT,
             pad_name: pipeline.pad().name(),
             pad_scale: 1.0,
             detections: pipeline.detector().detections(),

@@ -428,7 +428,7 @@ fn frame_stream_seeds() -> Vec<(&'static str, Vec<u8>)> {
                 gain_x16: 16,
                 process_us: 9000,
                 camera: &camera,
-                families: &["tag36h11"],
+                families: &[&touchdown_core::family::tables::TAG36H11],
                 pad_name: "nested-field",
                 pad_scale: 1.0,
                 detections: &detections,

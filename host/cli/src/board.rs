@@ -116,11 +116,18 @@ const LENS: [ParamId; 9] = [
 /// Tries per parameter.
 const TRIES: u32 = 3;
 
-/// The board's frame sizes a camera file may have, and the factor to the board's own pixels.
-const FRAME_SIZES: [((u32, u32), f32, &str); 3] = [
-    ((320, 240), 1.0, "a QVGA board"),
-    ((640, 400), 1.0, "a VGA board"),
-    ((320, 200), 2.0, "a VGA board's halved frames"),
+/// A frame size, width and height.
+type Size = (u32, u32);
+
+/// The frame sizes a camera file may have, the factor to the board's own pixels, and the
+/// board's frame size.
+const FRAME_SIZES: [(Size, f32, Size); 3] = [
+    // A QVGA board.
+    ((320, 240), 1.0, (320, 240)),
+    // A VGA board (the sensor's middle 400 rows).
+    ((640, 400), 1.0, (640, 400)),
+    // A VGA board's halved frames, as `touchdown view --record` records them.
+    ((320, 200), 2.0, (640, 400)),
 ];
 
 /// The lens parameters a camera file means for the board.
@@ -129,21 +136,14 @@ pub fn lens_values(camera: &CameraModel) -> Result<Vec<(ParamId, f32)>, String> 
         .validate()
         .map_err(|e| format!("not a usable camera ({e:?})"))?;
     let size = (camera.width, camera.height);
-    let Some((_, scale, _)) = FRAME_SIZES.iter().find(|(s, _, _)| *s == size) else {
+    let Some((_, scale, board_size)) = FRAME_SIZES.iter().find(|(s, _, _)| *s == size) else {
         return Err(format!(
             "the camera is {}x{}; the board's frames are 320x240 (QVGA) or 640x400 (VGA; 320x200 \
              halved): calibrate on frames recorded from the board (touchdown view --record)",
             size.0, size.1
         ));
     };
-    let s = *scale;
-    let mut values = vec![
-        (ParamId::CamFx, camera.fx * s),
-        (ParamId::CamFy, camera.fy * s),
-        (ParamId::CamCx, (camera.cx + 0.5) * s - 0.5),
-        (ParamId::CamCy, (camera.cy + 0.5) * s - 0.5),
-    ];
-    values.extend(LENS[4..].iter().copied().zip(camera.distortion));
+    let values = lens_parameters(&camera.resampled(*scale, board_size.0, board_size.1));
     for &(id, value) in &values {
         let def = id.def();
         // 0 would mean "the build's": a principal point on the top-left pixel is not a lens.
@@ -154,7 +154,17 @@ pub fn lens_values(camera: &CameraModel) -> Result<Vec<(ParamId, f32)>, String> 
             ));
         }
     }
-    Ok(values)
+    Ok(values.to_vec())
+}
+
+/// The lens parameters (TD_CAM_*, in the table's order) of `camera`, which must already be
+/// in the pixels of the board's frames.
+pub fn lens_parameters(camera: &CameraModel) -> [(ParamId, f32); 9] {
+    let [k1, k2, p1, p2, k3] = camera.distortion;
+    let values = [
+        camera.fx, camera.fy, camera.cx, camera.cy, k1, k2, p1, p2, k3,
+    ];
+    core::array::from_fn(|i| (LENS[i], values[i]))
 }
 
 /// TD_PAD (and TD_TAG_SIZE) for a design's name or a pad.toml that is a shipped design.

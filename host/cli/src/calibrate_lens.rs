@@ -536,31 +536,18 @@ struct BoardParameters {
 
 impl BoardParameters {
     fn new(camera: &CameraModel, scale: u8) -> Self {
-        let s = f64::from(scale);
-        let centre = |c: f32| (f64::from(c) + 0.5) * s - 0.5;
-        let names = [
-            "TD_CAM_K1",
-            "TD_CAM_K2",
-            "TD_CAM_P1",
-            "TD_CAM_P2",
-            "TD_CAM_K3",
-        ];
-        let mut parameters = vec![
-            ("TD_CAM_FX".to_string(), f64::from(camera.fx) * s),
-            ("TD_CAM_FY".to_string(), f64::from(camera.fy) * s),
-            ("TD_CAM_CX".to_string(), centre(camera.cx)),
-            ("TD_CAM_CY".to_string(), centre(camera.cy)),
-        ];
-        parameters.extend(
-            names
-                .iter()
-                .zip(camera.distortion)
-                .map(|(n, k)| (n.to_string(), f64::from(k))),
+        let (width, height) = (
+            camera.width * u32::from(scale),
+            camera.height * u32::from(scale),
         );
+        let board = camera.resampled(f32::from(scale), width, height);
         BoardParameters {
-            width: camera.width * u32::from(scale),
-            height: camera.height * u32::from(scale),
-            parameters,
+            width,
+            height,
+            parameters: crate::board::lens_parameters(&board)
+                .iter()
+                .map(|&(id, value)| (id.def().name.to_string(), f64::from(value)))
+                .collect(),
         }
     }
 }

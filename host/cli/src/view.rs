@@ -255,7 +255,7 @@ impl Recorder {
         Some(config)
     }
 
-    fn push(&mut self, frame: &StreamedFrame) -> Result<(), CliError> {
+    fn push(&mut self, frame: &StreamedFrame, image: &GrayFrame) -> Result<(), CliError> {
         let size = (frame.width, frame.height);
         if let Some(first) = self.size {
             if first != size {
@@ -304,14 +304,9 @@ impl Recorder {
             self.size = Some(size);
         }
         let index = self.frames;
-        let image = GrayFrame {
-            width: frame.width,
-            height: frame.height,
-            pixels: frame.pixels.clone(),
-        };
         if let Some(writer) = &mut self.writer {
             writer
-                .push(frame.t_us, None, None, &image)
+                .push(frame.t_us, None, None, image)
                 .map_err(CliError::new)?;
         }
         let board_path = self.dir.join("board.csv");
@@ -345,16 +340,11 @@ impl Recorder {
         }
         let markers_path = self.dir.join("board_markers.csv");
         if let Some(w) = &mut self.markers {
-            let s = f32::from(frame.scale.max(1));
             for m in &frame.markers {
                 let mut row = format!("{index},{},{},{}", m.family, m.id, m.hamming);
-                for c in m.corners {
-                    // Into the recorded (possibly halved) frame's pixels.
-                    row.push_str(&format!(
-                        ",{},{}",
-                        (c[0] + 0.5) / s - 0.5,
-                        (c[1] + 0.5) / s - 0.5
-                    ));
+                // In the recorded (possibly halved) frame's pixels.
+                for [x, y] in frame.sent_corners(m) {
+                    row.push_str(&format!(",{x},{y}"));
                 }
                 writeln!(w, "{row}").map_err(|e| csv_error(&markers_path, e))?;
             }
@@ -374,27 +364,18 @@ impl Recorder {
 
 /// Writes the frame, markers drawn, to `path` through a temporary file and a rename, so a
 /// viewer never reads half a picture.
-fn write_picture(path: &Path, frame: &StreamedFrame) -> Result<(), CliError> {
-    let image = GrayFrame {
-        width: frame.width,
-        height: frame.height,
-        pixels: frame.pixels.clone(),
-    };
-    let s = f32::from(frame.scale.max(1));
+fn write_picture(path: &Path, frame: &StreamedFrame, image: &GrayFrame) -> Result<(), CliError> {
     let quads: Vec<[[f32; 2]; 4]> = frame
         .markers
         .iter()
-        .map(|m| {
-            m.corners
-                .map(|c| [(c[0] + 0.5) / s - 0.5, (c[1] + 0.5) / s - 0.5])
-        })
+        .map(|m| frame.sent_corners(m))
         .collect();
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "view.png".to_string());
     let tmp = path.with_file_name(format!(".{name}.tmp.png"));
-    super::overlay::write_png(&tmp, &image, &quads, 1).map_err(CliError)?;
+    super::overlay::write_png(&tmp, image, &quads, 1).map_err(CliError)?;
     std::fs::rename(&tmp, path)
         .map_err(|e| CliError(format!("{}: cannot replace: {e}", path.display())))
 }
@@ -481,7 +462,7 @@ pub fn run(args: &ViewArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             break;
         };
         reader.push(&buf[..n]);
-        while let Some(frame) = reader.next_frame() {
+        while let Some(mut frame) = reader.next_frame() {
             frames += 1;
             last_frame_at = Instant::now();
             rate_window.push(last_frame_at);
@@ -494,9 +475,14 @@ pub fn run(args: &ViewArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<
             };
             let sharp = sharpness(&frame.pixels, frame.width, frame.height);
             best = best.max(sharp);
-            write_picture(&args.image, &frame)?;
+            let image = GrayFrame {
+                width: frame.width,
+                height: frame.height,
+                pixels: std::mem::take(&mut frame.pixels),
+            };
+            write_picture(&args.image, &frame, &image)?;
             if let Some(recorder) = &mut recorder {
-                recorder.push(&frame)?;
+                recorder.push(&frame, &image)?;
             }
             if !args.quiet {
                 writeln!(out, "{}", frame_line(&frame, sharp, best, fps))

@@ -62,7 +62,7 @@ fn record(index: u32, width: u16, height: u16, scale: u8, pad: &str) -> Vec<u8> 
         gain_x16: 24,
         process_us: 8000,
         camera: &camera,
-        families: &["tag36h11"],
+        families: &[&touchdown_core::family::tables::TAG36H11],
         pad_name: pad,
         pad_scale: 0.5,
         detections: &detections,

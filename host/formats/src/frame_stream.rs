@@ -6,7 +6,7 @@
 //! counted, so a viewer that attaches half-way shows the next whole frame and says how many
 //! bytes it could not use.
 
-use touchdown_core::camera::CameraModel;
+use touchdown_core::camera::{resampled_coordinate, CameraModel};
 use touchdown_core::frame_stream::{
     encode_head, Adler32, FrameMeta, StreamError, MAGIC, MAX_HEAD_LEN, MAX_META_LEN, MAX_PIXELS,
     META_FIXED_LEN, PREAMBLE_LEN, TRAILER_LEN, VERSION,
@@ -80,21 +80,23 @@ pub struct StreamedFrame {
 }
 
 impl StreamedFrame {
+    /// Sent pixels per board pixel (1, or 0.5 for halved frames).
+    fn factor(&self) -> f32 {
+        1.0 / f32::from(self.scale.max(1))
+    }
+
     /// The camera model of the pixels as sent: the board's, scaled down with them.
     pub fn sent_camera(&self) -> CameraModel {
-        let s = f32::from(self.scale.max(1));
-        let c = &self.camera;
-        // Pixel centres: sent pixel i covers sensor pixels s*i .. s*i+s-1.
-        CameraModel {
-            width: self.width as u32,
-            height: self.height as u32,
-            fx: c.fx / s,
-            fy: c.fy / s,
-            cx: (c.cx + 0.5) / s - 0.5,
-            cy: (c.cy + 0.5) / s - 0.5,
-            distortion: c.distortion,
-            line_time_us: c.line_time_us * s,
-        }
+        self.camera
+            .resampled(self.factor(), self.width as u32, self.height as u32)
+    }
+
+    /// A marker's corners (the board's full-resolution pixels) in the pixels as sent.
+    pub fn sent_corners(&self, marker: &StreamedMarker) -> [[f32; 2]; 4] {
+        let f = self.factor();
+        marker
+            .corners
+            .map(|[x, y]| [resampled_coordinate(x, f), resampled_coordinate(y, f)])
     }
 }
 
@@ -329,6 +331,7 @@ fn parse_record(record: &[u8], meta_len: usize, pixel_len: usize) -> Option<Stre
 mod tests {
     use super::*;
     use touchdown_core::detect::Detection;
+    use touchdown_core::family::tables;
     use touchdown_core::geometry::Point;
 
     /// A record as the board writes it: head, pixels, checksum.
@@ -358,7 +361,7 @@ mod tests {
             gain_x16: 32,
             process_us: 7000,
             camera: &camera,
-            families: &["tag36h11", "aruco_4x4_50"],
+            families: &[&tables::TAG36H11, &tables::ARUCO_4X4_50],
             pad_name: "nested-field",
             pad_scale: 0.5,
             detections: &detections,
